@@ -1,0 +1,91 @@
+"""The FastAPI application: routers, lifespan, body-size limit and error shapes."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator
+
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from service.api import health, info, sim, worlds, ws
+from service.runtime import Runtime
+from service.settings import Settings
+
+DESCRIPTION = """
+Many simulated UR10e + Robotiq 2F-140 worlds stepped together by MuJoCo Warp.
+Commands (increments, JointState-shaped targets, resets) are applied at the next control-tick
+boundary, all or nothing; every reply says at which `tick` it takes effect.
+
+WebSocket streams (not listed by OpenAPI):
+* `/v1/ws/worlds/{world}?rate=30`: `{"op": "state", ...}` frames with the fields of
+  `GET /v1/worlds/{world}/state`; send `{"op": "increment", "joint": "elbow_joint",
+  "delta": 0.1, "id": 1}`, `{"op": "set_targets", "name": [...], "position": [...], "id": 2}`
+  or `{"op": "reset", "id": 3}`; replies `{"op": "ack", "id", "tick", "target", "clamped"}` or
+  `{"op": "error", "id", "detail"}`.
+* `/v1/ws?worlds=0-63&rate=10`: `{"op": "states", ...}` frames, column-wise over the listed
+  worlds; commands carry `"world"`.
+"""
+
+
+class BodySizeLimit:
+    """413 for request bodies over the limit, whether or not Content-Length is sent."""
+
+    def __init__(self, app: ASGIApp, max_bytes: int):
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        too_large = HTTPException(413, f"request body over the limit of {self.max_bytes} bytes")
+        length = dict(scope["headers"]).get(b"content-length")
+        if length is not None and length.isdigit() and int(length) > self.max_bytes:
+            response = JSONResponse({"detail": too_large.detail}, status_code=413)
+            return await response(scope, receive, send)
+        seen = 0
+
+        async def limited() -> Message:
+            nonlocal seen
+            message = await receive()
+            seen += len(message.get("body", b""))
+            if seen > self.max_bytes:
+                raise too_large
+            return message
+
+        await self.app(scope, limited, send)
+
+
+async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+    # FastAPI's default echoes the offending input, which may be NaN and unserialisable.
+    detail = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]} for e in exc.errors()]
+    return JSONResponse({"detail": detail}, status_code=422)
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
+    runtime = Runtime(settings)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        starting = asyncio.create_task(runtime.start())
+        yield
+        with contextlib.suppress(BaseException):
+            await asyncio.wait_for(starting, timeout=120)
+        runtime.stop()
+
+    app = FastAPI(
+        title="armfleet",
+        version="0.1.0",
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        exception_handlers={RequestValidationError: _validation_error},
+    )
+    app.state.runtime = runtime
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    for module in (health, info, worlds, sim, ws):
+        app.include_router(module.router)
+    return app

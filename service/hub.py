@@ -1,0 +1,112 @@
+"""StreamHub: fans snapshots out to WebSocket subscribers with latest-state delivery.
+
+Each subscription holds at most one undelivered snapshot (a newer one replaces it) plus its
+queue of command acks, which are never dropped. A slow reader therefore costs one snapshot of
+memory and delays nobody else; a fast one gets every frame it asked for, at most one per tick.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+
+import numpy as np
+
+from service.loop import SnapshotSink
+from service.types import Snapshot
+
+
+class Subscription:
+    """One WebSocket's interest: which worlds, how often, and its outbox."""
+
+    def __init__(
+        self, worlds: np.ndarray, rate: float | None, render: Callable[[Snapshot], bytes], kind: str
+    ):
+        self.worlds = worlds
+        # Sockets with the same kind of frame over the same worlds share one serialisation.
+        self.key = (kind, worlds.tobytes())
+        self.period = 1.0 / rate if rate else 0.0  # 0: every tick
+        self.render = render
+        self.next_due = 0.0
+        self.latest: Snapshot | None = None
+        self.acks: deque[bytes] = deque()
+        self.ready = asyncio.Event()
+        self.dropped = 0  # snapshots replaced before this reader took them
+
+    def due(self, now: float) -> bool:
+        # A little slack so that a 30 Hz stream on a 60 Hz loop really gets every other tick.
+        return now >= self.next_due - 0.1 * self.period
+
+    def offer(self, snap: Snapshot, now: float) -> None:
+        if self.latest is not None:
+            self.dropped += 1
+        self.latest = snap
+        self.next_due = max(self.next_due + self.period, now) if self.period else now
+        self.ready.set()
+
+    def push_ack(self, message: bytes) -> None:
+        self.acks.append(message)
+        self.ready.set()
+
+
+class StreamHub(SnapshotSink):
+    """The loop's snapshot sink: decides demand on the sim thread, delivers on the event loop."""
+
+    def __init__(self, aio_loop: asyncio.AbstractEventLoop):
+        self._aio = aio_loop
+        self._subs: tuple[Subscription, ...] = ()  # replaced, never mutated: read from two threads
+        self._lock = threading.Lock()
+        self._incoming: Snapshot | None = None
+        self._scheduled = False
+        self._frame_cache: dict[tuple[int, tuple[str, bytes]], bytes] = {}
+
+    def add(self, sub: Subscription) -> None:
+        self._subs = (*self._subs, sub)
+
+    def remove(self, sub: Subscription) -> None:
+        self._subs = tuple(s for s in self._subs if s is not sub)
+
+    @property
+    def subscribers(self) -> int:
+        return len(self._subs)
+
+    # -- sim thread -------------------------------------------------------------------------
+
+    def wants_snapshot(self, now: float) -> bool:
+        return any(s.due(now) for s in self._subs)
+
+    def publish(self, snapshot: Snapshot) -> None:
+        if not self._subs:
+            return
+        with self._lock:
+            self._incoming = snapshot  # a newer snapshot supersedes one not yet delivered
+            if self._scheduled:
+                return
+            self._scheduled = True
+        self._aio.call_soon_threadsafe(self._deliver)
+
+    # -- event loop -------------------------------------------------------------------------
+
+    def _deliver(self) -> None:  # now from time.monotonic, the same clock as the sim thread
+        with self._lock:
+            snap, self._incoming = self._incoming, None
+            self._scheduled = False
+        if snap is None:
+            return
+        now = time.monotonic()
+        for sub in self._subs:
+            if sub.due(now):
+                sub.offer(snap, now)
+
+    def frame(self, sub: Subscription, snap: Snapshot) -> bytes:
+        """Serialise once per (tick, world selection) however many sockets share it."""
+        key = (snap.tick, sub.key)
+        frame = self._frame_cache.get(key)
+        if frame is None:
+            if len(self._frame_cache) > 256:
+                self._frame_cache.clear()
+            frame = self._frame_cache[key] = sub.render(snap)
+        return frame

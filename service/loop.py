@@ -1,0 +1,298 @@
+"""SimLoop: owns a WorldBatch on a thread of its own; time, commands and snapshots.
+
+Data flows one way. Commands arrive from any thread and are folded, under one lock, into a
+*pending* target table (validated first, so a rejected command changes nothing). At each tick
+boundary the loop thread moves what is pending into the engine in one write, steps the tick with
+the lock released (the graph replay releases the GIL too), then publishes a snapshot. A command
+therefore takes effect at a tick that is known when it is accepted: that is the `tick` in every
+reply, and the first snapshot whose `tick` is >= it carries the new target.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import logging
+import threading
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from service import commands
+from service.engine import WorldBatch
+from service.types import Mode, Snapshot
+
+log = logging.getLogger("armfleet.loop")
+
+# In fast mode with nobody streaming, a snapshot is still taken this often so that reads are
+# never older than this; readers that need the current tick ask for one explicitly.
+_IDLE_SNAPSHOT_PERIOD = 0.1
+_STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
+
+
+class NotPausedError(RuntimeError):
+    """Stepping by request is only meaningful while paused."""
+
+
+@dataclass(frozen=True)
+class CommandResult:
+    """Reply to a target command: the world's target row after it, what clamped, when it applies."""
+
+    world: int
+    target: np.ndarray
+    clamped: list[str]
+    tick: int
+
+
+@dataclass(frozen=True)
+class LoopStats:
+    tick: int
+    mode: Mode
+    ticks_per_s: float
+    realtime_factor: float
+
+
+class SnapshotSink:
+    """Where snapshots go (the API's stream hub). The loop asks it whether one is wanted now."""
+
+    def wants_snapshot(self, now: float) -> bool:
+        return False
+
+    def publish(self, snapshot: Snapshot) -> None:  # called on the loop thread
+        pass
+
+
+class SimLoop:
+    """Advance a WorldBatch in realtime, fast or paused mode and serialise commands into it."""
+
+    def __init__(
+        self, batch: WorldBatch, mode: Mode = Mode.REALTIME, sink: SnapshotSink | None = None
+    ):
+        self.batch = batch
+        self.spec = batch.spec
+        self.sink = sink or SnapshotSink()
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._mode = Mode(mode)
+        self._running = False
+        self._thread: threading.Thread | None = None
+        # Everything below is guarded by _lock.
+        self._pending = batch.targets  # float64 (nworld, 7): targets as of all accepted commands
+        self._dirty = np.zeros(batch.nworld, dtype=bool)
+        self._reset = np.zeros(batch.nworld, dtype=bool)
+        self._stepping = False
+        self._tick = batch.tick
+        self._step_goal = self._tick  # paused mode: run until the tick counter reaches this
+        self._step_waiters: list[tuple[int, concurrent.futures.Future[int]]] = []
+        self._snapshot_waiters: list[concurrent.futures.Future[Snapshot]] = []
+        self._latest = batch.snapshot()
+        self._last_snapshot_wall = 0.0
+        self._stats = LoopStats(self._tick, self._mode, 0.0, 0.0)
+        self._window: tuple[float, int] = (time.monotonic(), self._tick)
+
+    # -- life cycle -------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._running = True
+        self._thread = threading.Thread(target=self._run, name="armfleet-sim", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        with self._wake:
+            self._running = False
+            self._wake.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout=10)
+        for _, fut in self._step_waiters:
+            fut.cancel()
+        for fut in self._snapshot_waiters:
+            fut.cancel()
+
+    # -- commands (any thread) --------------------------------------------------------------
+
+    def _accept_tick(self) -> int:
+        """The tick whose stepping first uses a command accepted now (lock held)."""
+        return self._tick + (2 if self._stepping else 1)
+
+    def _check_world(self, world: int) -> None:
+        if not 0 <= world < self.batch.nworld:
+            raise IndexError(f"world {world} does not exist (0..{self.batch.nworld - 1})")
+
+    def increment(self, world: int, deltas: Mapping[int, float]) -> CommandResult:
+        """Add deltas (joint index → rad) to the world's latest target, clamped."""
+        self._check_world(world)
+        with self._lock:
+            update = commands.increment(self.spec, self._pending[world], deltas)
+            return self._stage(world, update)
+
+    def set_targets(self, world: int, values: Mapping[int, float]) -> CommandResult:
+        """Set the named joints' targets (others keep theirs), clamped."""
+        self._check_world(world)
+        with self._lock:
+            update = commands.set_targets(self.spec, self._pending[world], values)
+            return self._stage(world, update)
+
+    def set_many(self, worlds: list[int], positions: np.ndarray) -> list[CommandResult]:
+        """Full 7-joint targets for many worlds, all applied at the same tick boundary."""
+        for w in worlds:
+            self._check_world(w)
+        every = dict.fromkeys(range(len(self.spec.joints)), 0.0)
+        with self._lock:
+            updates = [
+                commands.set_targets(
+                    self.spec, self._pending[w], dict(zip(every, row, strict=True))
+                )
+                for w, row in zip(worlds, positions, strict=True)
+            ]
+            return [self._stage(w, u) for w, u in zip(worlds, updates, strict=True)]
+
+    def _stage(self, world: int, update: commands.TargetUpdate) -> CommandResult:
+        self._pending[world] = update.target
+        self._dirty[world] = True
+        return CommandResult(world, update.target.copy(), update.clamped, self._accept_tick())
+
+    def reset(self, worlds: list[int] | None = None) -> int:
+        """Reset worlds (all when None) to home, state and targets; returns the effective tick."""
+        idx = np.arange(self.batch.nworld) if worlds is None else np.asarray(worlds, dtype=int)
+        for w in idx:
+            self._check_world(int(w))
+        with self._lock:
+            self._reset[idx] = True
+            self._dirty[idx] = False
+            self._pending[idx] = self.batch.home_target
+            return self._accept_tick()
+
+    def pending_targets(self, world: int) -> np.ndarray:
+        with self._lock:
+            return self._pending[world].copy()
+
+    # -- time control -----------------------------------------------------------------------
+
+    @property
+    def mode(self) -> Mode:
+        return self._mode
+
+    def set_mode(self, mode: Mode) -> None:
+        with self._wake:
+            self._mode = Mode(mode)
+            self._window = (time.monotonic(), self._tick)
+            self._wake.notify_all()
+
+    def step(self, ticks: int) -> concurrent.futures.Future[int]:
+        """Paused only: advance exactly `ticks`; the future resolves with the tick reached."""
+        fut: concurrent.futures.Future[int] = concurrent.futures.Future()
+        with self._wake:
+            if self._mode is not Mode.PAUSED:
+                raise NotPausedError(f"step needs mode 'paused' (mode is {self._mode.value!r})")
+            self._step_goal = max(self._step_goal, self._tick) + ticks
+            self._step_waiters.append((self._step_goal, fut))
+            self._wake.notify_all()
+        return fut
+
+    # -- reading ----------------------------------------------------------------------------
+
+    @property
+    def tick(self) -> int:
+        """Control ticks completed so far."""
+        return self._tick
+
+    @property
+    def latest(self) -> Snapshot:
+        return self._latest
+
+    def fresh_snapshot(self) -> concurrent.futures.Future[Snapshot]:
+        """A snapshot of the last completed tick: at once if there is one, else after the next."""
+        fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
+        with self._wake:
+            if self._latest.tick == self._tick or not self._running or self._mode is Mode.PAUSED:
+                fut.set_result(self._latest)
+            else:
+                self._snapshot_waiters.append(fut)
+        return fut
+
+    @property
+    def stats(self) -> LoopStats:
+        if self._mode is Mode.PAUSED:
+            return LoopStats(self._tick, self._mode, 0.0, 0.0)
+        return self._stats
+
+    # -- the loop thread --------------------------------------------------------------------
+
+    def _run(self) -> None:
+        next_deadline = time.perf_counter()
+        while True:
+            with self._wake:
+                if not self._running:
+                    return
+                mode = self._mode
+                if mode is Mode.PAUSED and self._tick >= self._step_goal:
+                    self._wake.wait()
+                    next_deadline = time.perf_counter()
+                    continue
+                if mode is Mode.REALTIME:
+                    delay = next_deadline - time.perf_counter()
+                    if delay > 0:
+                        self._wake.wait(delay)
+                        continue
+            try:
+                self._tick_once(mode)
+            except Exception:  # never let one bad tick kill the loop silently
+                log.exception("tick failed")
+                time.sleep(0.1)
+            if mode is Mode.REALTIME:
+                # Keep the cadence; when a tick overran, start the next one now rather than
+                # bursting to catch up (the real-time factor shows the shortfall).
+                next_deadline = max(next_deadline + self.batch.tick_dt, time.perf_counter())
+
+    def _tick_once(self, mode: Mode) -> None:
+        with self._lock:
+            resets = np.flatnonzero(self._reset)
+            dirty = np.flatnonzero(self._dirty)
+            targets = self._pending[dirty].copy()
+            self._reset[:] = False
+            self._dirty[:] = False
+            self._stepping = True
+        batch = self.batch
+        batch.reset(resets)
+        if dirty.size:
+            batch.set_targets(dirty, targets)
+        faulted = batch.step(1)
+        now = time.monotonic()
+        with self._lock:
+            self._tick = batch.tick
+            self._stepping = False
+            if faulted.size:
+                keep = faulted[~self._dirty[faulted]]  # commands that arrived since still apply
+                self._pending[keep] = batch.home_target
+            want = (
+                mode is Mode.REALTIME
+                or (mode is Mode.PAUSED and self._tick >= self._step_goal)
+                or bool(self._snapshot_waiters)
+                or now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
+                or self.sink.wants_snapshot(now)
+            )
+        if want:
+            snap = batch.snapshot()
+            with self._lock:
+                self._latest = snap
+                self._last_snapshot_wall = now
+                waiters, self._snapshot_waiters = self._snapshot_waiters, []
+            for fut in waiters:
+                fut.set_result(snap)
+            self.sink.publish(snap)
+        with self._lock:
+            done = [f for g, f in self._step_waiters if g <= self._tick]
+            self._step_waiters = [(g, f) for g, f in self._step_waiters if g > self._tick]
+        for fut in done:
+            fut.set_result(self._tick)
+        self._update_stats(now)
+
+    def _update_stats(self, now: float) -> None:
+        t0, tick0 = self._window
+        if now - t0 < _STATS_WINDOW:
+            return
+        ticks = self._tick - tick0
+        rate = ticks / (now - t0)
+        self._stats = LoopStats(self._tick, self._mode, rate, rate * self.batch.tick_dt)
+        self._window = (now, self._tick)

@@ -1,0 +1,65 @@
+"""Runtime: what one running service holds (engine, loop, hub) and how it starts and stops.
+
+The engine is built off the event loop because the first build compiles kernels (tens of
+seconds cold); the HTTP server is up meanwhile, `/healthz` answers and `/readyz` says 503.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+
+from service.engine import WorldBatch
+from service.hub import StreamHub
+from service.loop import SimLoop
+from service.settings import Settings
+
+log = logging.getLogger("armfleet")
+
+
+class Runtime:
+    def __init__(self, settings: Settings):
+        self.settings = settings
+        self.loop: SimLoop | None = None
+        self.hub: StreamHub | None = None
+        self.error: str | None = None
+        self.started_at = time.monotonic()
+
+    @property
+    def ready(self) -> bool:
+        return self.loop is not None
+
+    async def start(self) -> None:
+        s = self.settings
+        try:
+            batch = await asyncio.to_thread(
+                WorldBatch, s.worlds, s.device, s.control_hz, s.physics_dt
+            )
+        except Exception as exc:
+            self.error = f"{type(exc).__name__}: {exc}"
+            log.exception("engine failed to start")
+            return
+        self.hub = StreamHub(asyncio.get_running_loop())
+        loop = SimLoop(batch, s.mode, self.hub)
+        loop.start()
+        self.loop = loop
+        log.info(
+            "armfleet ready at http://%s:%d (docs /docs): %d worlds on %s, %d substeps of "
+            "%.3f ms per %.0f Hz tick, mode %s; compile %.1f s, capture %.2f s%s",
+            s.host,
+            s.port,
+            batch.nworld,
+            batch.device_name,
+            batch.substeps,
+            batch.physics_dt * 1e3,
+            batch.control_hz,
+            loop.mode.value,
+            batch.compile_s,
+            batch.capture_s,
+            "" if batch.captured else f" (NOT captured: {batch.capture_error})",
+        )
+
+    def stop(self) -> None:
+        if self.loop is not None:
+            self.loop.stop()

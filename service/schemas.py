@@ -1,0 +1,199 @@
+"""The wire contract: pydantic models for every HTTP body and WebSocket message.
+
+Numbers are finite floats (NaN/Inf are refused at the edge, before anything is staged).
+Joint-state fields follow sensor_msgs/JointState (`name`, `position`, `velocity`, `effort`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from service.types import Mode
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=False)]
+JointRef = Annotated[str | int, Field(description="joint name or index 0..6")]
+Delta = Annotated[
+    float,
+    Field(allow_inf_nan=False, ge=-2 * math.pi, le=2 * math.pi, description="rad, |delta| <= 2π"),
+]
+MAX_STEP_TICKS = 100_000
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+# -- replies ----------------------------------------------------------------------------------
+
+
+class JointInfo(BaseModel):
+    name: str
+    lower: float
+    upper: float
+    home: float
+    velocity_limit: float
+    effort_limit: float
+
+
+class Info(BaseModel):
+    robot: str
+    joints: list[JointInfo]
+    nworld: int
+    device: str
+    control_hz: float
+    physics_dt: float
+    substeps: int
+    mode: Mode
+    tick: int
+    sim_time: float = Field(description="tick / control_hz: simulated seconds since start")
+    ticks_per_s: float = Field(description="measured over the last second")
+    realtime_factor: float = Field(description="simulated seconds per wall second")
+    captured: bool = Field(description="the control tick replays a captured graph")
+
+
+class Flange(BaseModel):
+    position: list[float] = Field(description="x y z [m], world frame")
+    quaternion: list[float] = Field(description="w x y z")
+
+
+class WorldState(BaseModel):
+    """sensor_msgs/JointState fields plus the target in effect and the flange pose."""
+
+    world: int
+    tick: int
+    sim_time: float = Field(description="simulated seconds since this world's last reset")
+    name: list[str]
+    position: list[float]
+    velocity: list[float]
+    effort: list[float]
+    target: list[float]
+    flange: Flange
+    faults: int = Field(description="times this world was reset for NaN or capacity overflow")
+
+
+class WorldStates(BaseModel):
+    tick: int
+    worlds: list[WorldState]
+
+
+class CommandReply(BaseModel):
+    world: int
+    target: list[float] = Field(description="the world's 7 targets after this command [rad]")
+    clamped: list[str] = Field(description="joints whose target hit a range limit")
+    tick: int = Field(description="first tick stepped with this command")
+
+
+class BatchCommandReply(BaseModel):
+    tick: int
+    results: list[CommandReply]
+
+
+class ResetReply(BaseModel):
+    worlds: list[int]
+    tick: int
+
+
+class SimReply(BaseModel):
+    mode: Mode
+    tick: int
+
+
+# -- requests ---------------------------------------------------------------------------------
+
+
+class IncrementRequest(_Strict):
+    """One joint (`joint` + `delta`) or several (`deltas`): the seed's Up/Down buttons."""
+
+    joint: JointRef | None = None
+    delta: Delta | None = None
+    deltas: dict[str, Delta] | None = None
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"joint": "elbow_joint", "delta": 0.1},
+                {"deltas": {"elbow_joint": 0.1, "finger_joint": -0.1}},
+            ]
+        },
+    )
+
+    @model_validator(mode="after")
+    def _one_form(self) -> IncrementRequest:
+        single = self.joint is not None or self.delta is not None
+        if single == (self.deltas is not None):
+            raise ValueError("give either `joint` and `delta`, or `deltas`")
+        if single and (self.joint is None or self.delta is None):
+            raise ValueError("`joint` and `delta` go together")
+        return self
+
+    def as_mapping(self) -> dict[str | int, float]:
+        if self.deltas is not None:
+            return dict(self.deltas)
+        assert self.joint is not None and self.delta is not None
+        return {self.joint: self.delta}
+
+
+class JointTargets(_Strict):
+    """sensor_msgs/JointState-shaped: a subset of names is allowed; others keep their targets."""
+
+    name: list[str] = Field(min_length=1, max_length=7)
+    position: list[FiniteFloat] = Field(min_length=1, max_length=7)
+
+    model_config = ConfigDict(
+        extra="allow",  # JointState also carries header/velocity/effort; they are ignored
+        json_schema_extra={
+            "examples": [{"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]}]
+        },
+    )
+
+    @model_validator(mode="after")
+    def _same_length(self) -> JointTargets:
+        if len(self.name) != len(self.position):
+            raise ValueError(
+                f"name and position must have the same length "
+                f"(got {len(self.name)} and {len(self.position)})"
+            )
+        if len(set(self.name)) != len(self.name):
+            raise ValueError("name lists a joint twice")
+        return self
+
+
+class BatchTargets(_Strict):
+    """Full 7-joint targets for many worlds in one request, applied at one tick boundary."""
+
+    worlds: list[int] = Field(min_length=1)
+    position: list[Annotated[list[FiniteFloat], Field(min_length=7, max_length=7)]]
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [{"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2}]
+        },
+    )
+
+    @model_validator(mode="after")
+    def _same_length(self) -> BatchTargets:
+        if len(self.worlds) != len(self.position):
+            raise ValueError(
+                f"worlds and position must have the same length "
+                f"(got {len(self.worlds)} and {len(self.position)})"
+            )
+        if len(set(self.worlds)) != len(self.worlds):
+            raise ValueError("worlds lists a world twice")
+        return self
+
+
+class ResetRequest(_Strict):
+    worlds: list[int] | None = Field(default=None, description="omit for all worlds")
+
+
+class ModeRequest(_Strict):
+    mode: Mode
+
+
+class StepRequest(_Strict):
+    ticks: int = Field(default=1, ge=1, le=MAX_STEP_TICKS)

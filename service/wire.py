@@ -1,0 +1,91 @@
+"""Snapshot → JSON bytes, shared by HTTP replies and WebSocket frames.
+
+orjson serialises numpy arrays directly (float32 in its shortest form, NaN as null), which keeps
+per-frame cost low when hundreds of worlds are streamed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import orjson
+
+from service.types import Snapshot
+
+_OPTS = orjson.OPT_SERIALIZE_NUMPY
+
+
+def dumps(obj: Any) -> bytes:
+    return orjson.dumps(obj, option=_OPTS)
+
+
+def world_state(snap: Snapshot, world: int, names: list[str]) -> dict[str, Any]:
+    """One world as sensor_msgs/JointState fields plus target, flange and fault count."""
+    return {
+        "world": world,
+        "tick": snap.tick,
+        "sim_time": float(snap.sim_time[world]),
+        "name": names,
+        "position": snap.position[world],
+        "velocity": snap.velocity[world],
+        "effort": snap.effort[world],
+        "target": snap.target[world],
+        "flange": {"position": snap.flange_pos[world], "quaternion": snap.flange_quat[world]},
+        "faults": int(snap.faults[world]),
+    }
+
+
+def states(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> dict[str, Any]:
+    return {"tick": snap.tick, "worlds": [world_state(snap, int(w), names) for w in worlds]}
+
+
+def single_frame(snap: Snapshot, world: int, names: list[str]) -> bytes:
+    return dumps({"op": "state", **world_state(snap, world, names)})
+
+
+def batch_frame(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> bytes:
+    """Many worlds in one frame, column-wise (row i of each array belongs to worlds[i])."""
+    return dumps(
+        {
+            "op": "states",
+            "tick": snap.tick,
+            "name": names,
+            "worlds": worlds,
+            "sim_time": snap.sim_time[worlds],
+            "position": snap.position[worlds],
+            "velocity": snap.velocity[worlds],
+            "effort": snap.effort[worlds],
+            "target": snap.target[worlds],
+            "flange_position": snap.flange_pos[worlds],
+            "flange_quaternion": snap.flange_quat[worlds],
+            "faults": snap.faults[worlds],
+        }
+    )
+
+
+def parse_worlds(spec: str, nworld: int) -> np.ndarray:
+    """'0-63,70,72-75' → sorted unique world ids.
+
+    ValueError for text that is not a list of ids/ranges, IndexError for ids that do not exist
+    (the API maps them to 422 and 404).
+    """
+    out: set[int] = set()
+    for part in spec.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        lo_s, sep, hi_s = part.partition("-")
+        try:
+            lo = int(lo_s)
+            hi = int(hi_s) if sep else lo
+        except ValueError:
+            raise ValueError(f"worlds: {part!r} is not an id or a range like 0-63") from None
+        if lo > hi:
+            raise ValueError(f"worlds: range {part!r} is empty")
+        if lo < 0 or hi >= nworld:
+            raise IndexError(f"worlds: {part!r} is outside 0..{nworld - 1}")
+        out.update(range(lo, hi + 1))
+    if not out:
+        raise ValueError("worlds: no world ids given")
+    return np.array(sorted(out), dtype=np.int64)
