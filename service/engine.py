@@ -51,8 +51,8 @@ _DIVERGED_QVEL = wp.constant(1.0e4)
 
 # Per-world contact and constraint capacity. Measured on the grasp (pads on the cube, cube on
 # the table, arm near the table): see tests/test_engine.py::test_grasp_never_overflows_capacity.
-NCONMAX = 48
-NJMAX = 256
+NCONMAX = 32
+NJMAX = 128
 
 
 @wp.kernel(enable_backward=False)

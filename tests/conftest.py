@@ -1,0 +1,77 @@
+"""Shared fixtures: a real `armfleet serve` process on a free loopback port.
+
+End-to-end tests talk to it over real sockets; nothing of the engine or server is mocked.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Server:
+    url: str
+    ws_url: str
+    process: subprocess.Popen[bytes]
+    log_path: Path
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+
+@contextlib.contextmanager
+def running_server(tmp_path: Path, worlds: int = 4, mode: str = "realtime", *extra: str) -> Iterator[Server]:
+    """Start `armfleet serve` and wait for /readyz; stop it (SIGINT, like Ctrl-C) afterwards."""
+    port = free_port()
+    log_path = tmp_path / f"server-{port}.log"
+    cmd = [sys.executable, "-m", "service.cli", "serve", "--worlds", str(worlds), "--port", str(port),
+           "--mode", mode, *extra]
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy())
+    url = f"http://127.0.0.1:{port}"
+    server = Server(url=url, ws_url=f"ws://127.0.0.1:{port}", process=proc, log_path=log_path)
+    try:
+        deadline = time.monotonic() + 300  # a cold kernel cache compiles for a while
+        while True:
+            if proc.poll() is not None:
+                raise RuntimeError(f"server exited with {proc.returncode}:\n{server.log()}")
+            with contextlib.suppress(httpx.HTTPError):
+                if httpx.get(f"{url}/readyz", timeout=1).status_code == 200:
+                    break
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"server not ready in time:\n{server.log()}")
+            time.sleep(0.2)
+        yield server
+    finally:
+        proc.send_signal(2)
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """A 4-world realtime server shared by the tests of one module."""
+    with running_server(tmp_path_factory.mktemp("server")) as srv:
+        yield srv
