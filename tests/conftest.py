@@ -39,14 +39,22 @@ class Server:
 
 
 @contextlib.contextmanager
-def running_server(tmp_path: Path, worlds: int = 4, mode: str = "realtime", *extra: str) -> Iterator[Server]:
+def running_server(
+    tmp_path: Path,
+    worlds: int = 4,
+    mode: str = "realtime",
+    port: int | None = None,
+    extra: tuple[str, ...] = (),
+) -> Iterator[Server]:
     """Start `armfleet serve` and wait for /readyz; stop it (SIGINT, like Ctrl-C) afterwards."""
-    port = free_port()
+    port = port or free_port()
     log_path = tmp_path / f"server-{port}.log"
-    cmd = [sys.executable, "-m", "service.cli", "serve", "--worlds", str(worlds), "--port", str(port),
-           "--mode", mode, *extra]
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy())
+    cmd = [sys.executable, "-m", "service.cli", "serve", "--worlds", str(worlds)]
+    cmd += ["--port", str(port), "--mode", mode, *extra]
+    with open(log_path, "ab") as log:
+        proc = subprocess.Popen(
+            cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy()
+        )
     url = f"http://127.0.0.1:{port}"
     server = Server(url=url, ws_url=f"ws://127.0.0.1:{port}", process=proc, log_path=log_path)
     try:

@@ -1,0 +1,193 @@
+"""WorldBatch: batched stepping, targets, resets, fault isolation, fidelity vs native MuJoCo."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+from test_model import solve_ik
+
+from service.engine import WorldBatch
+
+NWORLD = 4
+
+
+@pytest.fixture(scope="module")
+def twins() -> tuple[WorldBatch, WorldBatch]:
+    """Two identical batches: one is disturbed, the other is the undisturbed reference."""
+    return WorldBatch(NWORLD), WorldBatch(NWORLD)
+
+
+@pytest.fixture
+def fresh(twins):
+    for b in twins:
+        b.reset(np.arange(NWORLD))
+    return twins
+
+
+def distinct_targets(batch: WorldBatch) -> np.ndarray:
+    """A different pose per world so that a leak between worlds would show."""
+    t = np.tile(batch.home_target, (batch.nworld, 1))
+    t[:, 0] += 0.2 * np.arange(batch.nworld)
+    t[:, 2] -= 0.1 * np.arange(batch.nworld)
+    t[:, 6] = 0.35
+    return t
+
+
+def test_tick_is_captured_and_replays_like_uncaptured_stepping():
+    captured = WorldBatch(2)
+    plain = WorldBatch(2, capture=False)
+    assert captured.captured and not plain.captured
+    for b in (captured, plain):
+        b.set_targets(np.array([1]), np.array([[0.3, -1.2, 1.2, -1.5, -1.5, 0.4, 0.5]]))
+        b.step(5)
+    np.testing.assert_array_equal(captured.qpos(), plain.qpos())
+    assert captured.tick == plain.tick == 5
+
+
+def test_tick_zero_snapshot_is_home_with_exact_sim_time(fresh):
+    batch, _ = fresh
+    snap = batch.snapshot()
+    np.testing.assert_allclose(snap.position, np.tile(batch.home_target, (NWORLD, 1)), atol=1e-6)
+    batch.step(3)
+    snap = batch.snapshot()
+    assert snap.tick == batch.tick
+    np.testing.assert_allclose(snap.sim_time, 3 / 60.0)
+    assert batch.substeps * batch.physics_dt == pytest.approx(1 / 60.0)
+    assert snap.flange_quat.shape == (NWORLD, 4)
+    np.testing.assert_allclose(np.linalg.norm(snap.flange_quat, axis=1), 1.0, atol=1e-5)
+
+
+def test_targets_for_a_subset_move_only_those_worlds(fresh):
+    batch, _ = fresh
+    target = batch.home_target.copy()
+    target[2] += 0.3
+    batch.set_targets(np.array([1, 3]), np.array([target, target]))
+    batch.step(45)
+    snap = batch.snapshot()
+    np.testing.assert_allclose(snap.position[[1, 3], 2], target[2], atol=5e-3)
+    np.testing.assert_allclose(snap.position[[0, 2], 2], batch.home_target[2], atol=1e-3)
+    np.testing.assert_allclose(snap.target[1], target)
+    np.testing.assert_allclose(snap.target[0], batch.home_target)
+
+
+def test_targets_are_clamped_to_joint_ranges(fresh):
+    batch, _ = fresh
+    batch.set_targets(np.array([0]), np.array([[9.0, 0, 0, 0, 0, 0, 5.0]]))
+    assert batch.targets[0, 0] == pytest.approx(2 * np.pi)
+    assert batch.targets[0, 6] == pytest.approx(0.7)
+
+
+def test_reset_of_one_world_leaves_the_others_bit_identical(fresh):
+    batch, reference = fresh
+    for b in (batch, reference):
+        b.set_targets(np.arange(NWORLD), distinct_targets(b))
+        b.step(20)
+    batch.reset(np.array([2]))
+    for b in (batch, reference):
+        b.step(20)
+    others = [0, 1, 3]
+    np.testing.assert_array_equal(batch.qpos()[others], reference.qpos()[others])
+    np.testing.assert_array_equal(batch.qvel()[others], reference.qvel()[others])
+    # The reset world went home, targets included, and its clock restarted.
+    snap = batch.snapshot()
+    np.testing.assert_allclose(snap.target[2], batch.home_target)
+    np.testing.assert_allclose(snap.position[2], batch.home_target, atol=2e-3)
+    assert snap.sim_time[2] == pytest.approx(20 / 60.0)
+    assert snap.sim_time[0] == pytest.approx(40 / 60.0)
+
+
+def test_nan_world_is_reset_and_flagged_while_the_others_go_on(fresh):
+    batch, reference = fresh
+    for b in (batch, reference):
+        b.set_targets(np.arange(NWORLD), distinct_targets(b))
+        b.step(10)
+    poisoned = batch.qpos()[1]
+    poisoned[3] = np.nan
+    batch.write_qpos(1, poisoned)
+    faulted = [batch.step(1) for _ in range(10)]
+    reference.step(10)
+    np.testing.assert_array_equal(np.concatenate(faulted), [1])
+    snap = batch.snapshot()
+    assert snap.faults.tolist() == [0, 1, 0, 0]
+    assert np.isfinite(batch.qpos()).all()
+    np.testing.assert_allclose(snap.target[1], batch.home_target)
+    others = [0, 2, 3]
+    np.testing.assert_array_equal(batch.qpos()[others], reference.qpos()[others])
+
+
+def test_grasp_never_overflows_capacity(fresh):
+    """World 1 grasps and lifts the cube through the engine; no contact or row is dropped."""
+    batch, _ = fresh
+    mjm = batch.robot.mjm
+    data = mujoco.MjData(mjm)
+    mujoco.mj_resetDataKeyframe(mjm, data, batch.robot.home_key)
+    mujoco.mj_forward(mjm, data)
+    cube_z = mjm.jnt_qposadr[mjm.joint("cube_joint").id] + 2
+    cube = data.xpos[mjm.body("cube").id].copy()
+    flange_rot = data.site("flange").xmat.reshape(3, 3).copy()
+    home = batch.home_target[:6]
+    q_grasp = solve_ik(mjm, data, home, cube + [0, 0, 0.02], flange_rot)
+    q_lift = solve_ik(mjm, data, q_grasp, cube + [0, 0, 0.12], flange_rot)
+    z0 = batch.qpos()[1, cube_z]
+    faults_before = batch.snapshot().faults.copy()
+
+    peak_rows = 0
+
+    def move(q_from, q_to, seconds, finger_from, finger_to):
+        nonlocal peak_rows
+        n = round(seconds * batch.control_hz)
+        for k in range(n):
+            s = min(1.0, 1.5 * (k + 1) / n)
+            arm = q_from + s * (q_to - q_from)
+            finger = finger_from + s * (finger_to - finger_from)
+            batch.set_targets(np.array([1]), np.append(arm, finger)[None])
+            batch.step(1)
+            peak_rows = max(peak_rows, batch.capacity_usage()[1])
+
+    move(home, q_grasp, 1.2, 0.0, 0.0)
+    move(q_grasp, q_grasp, 0.8, 0.0, 0.7)
+    move(q_grasp, q_lift, 1.2, 0.7, 0.7)
+    batch.step(120)  # hold 2 s
+    rise = batch.qpos()[1, cube_z] - z0
+    assert rise > 0.09, rise
+    np.testing.assert_array_equal(batch.snapshot().faults, faults_before)
+    assert 40 < peak_rows < 128  # the pads really touched, and well inside capacity
+
+
+def test_float32_warp_tracks_float64_native_mujoco_within_a_milliradian():
+    batch = WorldBatch(1)
+    mjm = batch.robot.mjm  # timestep already set to the engine's substep
+    data = mujoco.MjData(mjm)
+    mujoco.mj_resetDataKeyframe(mjm, data, batch.robot.home_key)
+    rng = np.random.default_rng(7)
+    target = batch.home_target.copy()
+    worst = 0.0
+    for tick in range(120):  # 2 s of presses, one every 0.1 s
+        if tick % 6 == 0:
+            j = rng.integers(6)
+            target[j] += rng.choice([-0.1, 0.1])
+        batch.set_targets(np.array([0]), target[None])
+        data.ctrl[:] = target
+        mujoco.mj_step(mjm, data, nstep=batch.substeps)
+        batch.step(1)
+        warp_q = batch.snapshot().position[0]
+        native_q = data.qpos[batch.robot.qpos_adr]
+        worst = max(worst, float(np.abs(warp_q - native_q).max()))
+    assert worst < 1e-3, worst
+
+
+def test_random_presses_for_60_s_never_produce_nan_in_any_world():
+    batch = WorldBatch(NWORLD)
+    rng = np.random.default_rng(3)
+    targets = np.tile(batch.home_target, (NWORLD, 1))
+    lo, hi = batch.spec.lower, batch.spec.upper
+    for tick in range(60 * 60):
+        if tick % 6 == 0:  # every world gets a press every 0.1 s
+            joints = rng.integers(7, size=NWORLD)
+            targets[np.arange(NWORLD), joints] += rng.choice([-0.1, 0.1], size=NWORLD)
+            targets = np.clip(targets, lo, hi)
+            batch.set_targets(np.arange(NWORLD), targets)
+        assert batch.step(1).size == 0, f"a world faulted at tick {tick}"
+    assert np.isfinite(batch.qpos()).all()
+    assert batch.snapshot().faults.sum() == 0
