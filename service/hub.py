@@ -44,7 +44,11 @@ class Subscription:
         if self.latest is not None:
             self.dropped += 1
         self.latest = snap
-        self.next_due = max(self.next_due + self.period, now) if self.period else now
+        if self.period:
+            # Keep the cadence; after a stall start afresh instead of sending a burst.
+            self.next_due += self.period
+            if self.next_due < now:
+                self.next_due = now + self.period
         self.ready.set()
 
     def push_ack(self, message: bytes) -> None:

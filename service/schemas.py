@@ -13,11 +13,18 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from service.types import Mode
 
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=False)]
+# Strict: numbers only ("0.1" and true are refused); ints are fine.
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
 JointRef = Annotated[str | int, Field(description="joint name or index 0..6")]
 Delta = Annotated[
     float,
-    Field(allow_inf_nan=False, ge=-2 * math.pi, le=2 * math.pi, description="rad, |delta| <= 2π"),
+    Field(
+        allow_inf_nan=False,
+        strict=True,
+        ge=-2 * math.pi,
+        le=2 * math.pi,
+        description="rad, |delta| <= 2π",
+    ),
 ]
 MAX_STEP_TICKS = 100_000
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import time
 from collections.abc import Callable
 from typing import Annotated, Any
 
@@ -88,7 +89,7 @@ async def _serve(
 ) -> None:
     await ws.accept()
     hub.add(sub)
-    sub.offer(loop.latest, 0.0)  # the current state at once, then the stream
+    sub.offer(loop.latest, time.monotonic())  # the current state at once, then the stream
     writer = asyncio.create_task(_write(ws, hub, sub))
     try:
         while True:
