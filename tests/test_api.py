@@ -368,7 +368,7 @@ def test_two_clients_on_two_worlds_do_not_disturb_each_other(server, http):
 def test_a_client_that_stops_reading_does_not_delay_another(server, http):
     stalled_sock = socket.create_connection(("127.0.0.1", int(server.url.rsplit(":", 1)[1])))
     stalled_sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    with connect(f"{server.ws_url}/v1/ws", sock=stalled_sock, max_queue=1):
+    with connect(f"{server.ws_url}/v1/ws", sock=stalled_sock, max_queue=1, close_timeout=1):
         time.sleep(2.0)  # its buffers fill up; the server's sends to it now block
         with connect(f"{server.ws_url}/v1/ws/worlds/0") as reader:
             reader.recv(timeout=5)
