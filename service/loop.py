@@ -21,6 +21,7 @@ import numpy as np
 
 from service import commands
 from service.engine import WorldBatch
+from service.shards import ShardedBatch
 from service.types import Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
@@ -67,7 +68,10 @@ class SimLoop:
     """Advance a WorldBatch in realtime, fast or paused mode and serialise commands into it."""
 
     def __init__(
-        self, batch: WorldBatch, mode: Mode = Mode.REALTIME, sink: SnapshotSink | None = None
+        self,
+        batch: WorldBatch | ShardedBatch,
+        mode: Mode = Mode.REALTIME,
+        sink: SnapshotSink | None = None,
     ):
         self.batch = batch
         self.spec = batch.spec

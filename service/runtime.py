@@ -14,8 +14,16 @@ from service.engine import WorldBatch
 from service.hub import StreamHub
 from service.loop import SimLoop
 from service.settings import Settings
+from service.shards import ShardedBatch, auto_shards
 
 log = logging.getLogger("armfleet")
+
+
+def build_batch(s: Settings, shards: int) -> WorldBatch | ShardedBatch:
+    kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
+    if shards > 1:
+        return ShardedBatch(s.worlds, shards, **kwargs)
+    return WorldBatch(s.worlds, **kwargs)
 
 
 class Runtime:
@@ -32,10 +40,9 @@ class Runtime:
 
     async def start(self) -> None:
         s = self.settings
+        shards = s.shards or auto_shards(s.worlds, s.device)
         try:
-            batch = await asyncio.to_thread(
-                WorldBatch, s.worlds, s.device, s.control_hz, s.physics_dt
-            )
+            batch = await asyncio.to_thread(build_batch, s, shards)
         except Exception as exc:
             self.error = f"{type(exc).__name__}: {exc}"
             log.exception("engine failed to start")
@@ -45,12 +52,14 @@ class Runtime:
         loop.start()
         self.loop = loop
         log.info(
-            "armfleet ready at http://%s:%d (docs /docs): %d worlds on %s, %d substeps of "
-            "%.3f ms per %.0f Hz tick, mode %s; compile %.1f s, capture %.2f s%s",
+            "armfleet ready at http://%s:%d (docs /docs): %d worlds on %s (%d shard%s), "
+            "%d substeps of %.3f ms per %.0f Hz tick, mode %s; compile %.1f s, capture %.2f s%s",
             s.host,
             s.port,
             batch.nworld,
             batch.device_name,
+            shards,
+            "" if shards == 1 else "s",
             batch.substeps,
             batch.physics_dt * 1e3,
             batch.control_hz,
@@ -63,3 +72,4 @@ class Runtime:
     def stop(self) -> None:
         if self.loop is not None:
             self.loop.stop()
+            self.loop.batch.close()

@@ -50,6 +50,7 @@ class Info(BaseModel):
     joints: list[JointInfo]
     nworld: int
     device: str
+    shards: int = Field(description="processes the worlds are split across (CPU cores used)")
     control_hz: float
     physics_dt: float
     substeps: int

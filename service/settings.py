@@ -17,6 +17,9 @@ class Settings(BaseSettings):
     device: str = Field("cpu", description="warp device: cpu, cuda or cuda:N")
     host: str = Field("127.0.0.1", description="bind address (loopback by default)")
     port: int = Field(8000, ge=0, le=65535)
+    shards: int = Field(
+        0, ge=0, le=256, description="CPU worker shards (one per core); 0 = auto by batch size"
+    )
     mode: Mode = Mode.REALTIME
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
     physics_dt: float = Field(0.002, gt=0, le=0.01, description="approximate physics step [s]")

@@ -314,15 +314,16 @@ def test_websocket_errors_name_the_problem_and_keep_the_socket_open(server):
         ]
         for text in bad:
             ws.send(text)
+        ws.send(b"\x00binary")
         ws.send(json.dumps({"op": "reset", "id": 6}))
         replies = []
-        while len(replies) < len(bad) + 1:
+        while len(replies) < len(bad) + 2:
             msg = json.loads(ws.recv(timeout=5))
             if msg["op"] != "state":
                 replies.append(msg)
-        assert [r["op"] for r in replies] == ["error"] * len(bad) + ["ack"]
+        assert [r["op"] for r in replies] == ["error"] * (len(bad) + 1) + ["ack"]
         details = [r["detail"] for r in replies[:-1]]
-        needles = ["JSON", "fly", "nose", "6.28", "position", "world 0"]
+        needles = ["JSON", "fly", "nose", "6.28", "position", "world 0", "text frames"]
         for needle, detail in zip(needles, details, strict=True):
             assert needle in detail, detail
 

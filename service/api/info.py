@@ -19,6 +19,7 @@ async def info(loop: Loop) -> Info:
         joints=[JointInfo(**vars(j)) for j in batch.spec.joints],
         nworld=batch.nworld,
         device=batch.device_name,
+        shards=batch.shards,
         control_hz=batch.control_hz,
         physics_dt=batch.physics_dt,
         substeps=batch.substeps,

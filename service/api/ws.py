@@ -93,10 +93,17 @@ async def _serve(
     writer = asyncio.create_task(_write(ws, hub, sub))
     try:
         while True:
-            text = await ws.receive_text()
+            message = await ws.receive()
+            if message["type"] == "websocket.disconnect":
+                break
             while len(sub.acks) > _MAX_QUEUED_ACKS:
                 await asyncio.sleep(0.005)
-            sub.push_ack(wire.dumps(_handle(loop, text, default_world)))
+            text = message.get("text")
+            if text is None:
+                reply = {"op": "error", "id": None, "detail": "send JSON as text frames"}
+            else:
+                reply = _handle(loop, text, default_world)
+            sub.push_ack(wire.dumps(reply))
     except (WebSocketDisconnect, RuntimeError):
         pass
     finally:

@@ -1,0 +1,191 @@
+"""ShardedBatch: one batch of worlds split across CPU cores, behind WorldBatch's interface.
+
+Warp runs CPU kernels on one core, and two captured graphs replayed from two threads of one
+process crash warp 1.19 (seen here: a segfault), so the second core is used by a worker
+*process*. Shard 0 steps in the calling thread while shards 1.. step in their processes at the
+same time; commands and snapshots cross a pipe as small numpy arrays. Worlds are independent, so
+the result is bit-identical to one WorldBatch of the same size (tests/test_shards.py).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import os
+from multiprocessing.connection import Connection
+from typing import Any
+
+import numpy as np
+
+from service.engine import WorldBatch
+from service.types import Snapshot
+
+# Below this many worlds per shard the pipe round trip (~0.1 ms) outweighs the second core.
+MIN_WORLDS_PER_SHARD = 16
+
+
+def auto_shards(nworld: int, device: str) -> int:
+    """How many shards to use: one per core on the CPU when the batch is big enough."""
+    if not device.startswith("cpu"):
+        return 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(cores or 1, nworld // MIN_WORLDS_PER_SHARD))
+
+
+def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
+    """A shard's process: build the batch, then serve step/snapshot/reset/targets requests."""
+    try:
+        batch = WorldBatch(nworld, **kwargs)
+    except Exception as exc:  # report instead of leaving the parent waiting
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        return
+    conn.send(("ready", batch.compile_s, batch.capture_s, batch.capture_error))
+    while True:
+        try:
+            op, *args = conn.recv()
+        except EOFError:  # parent gone
+            return
+        if op == "step":
+            resets, dirty, targets, ticks = args
+            batch.reset(resets)
+            if dirty.size:
+                batch.set_targets(dirty, targets)
+            conn.send(batch.step(ticks))
+        elif op == "snapshot":
+            conn.send(batch.snapshot())
+        elif op == "qpos":
+            conn.send((batch.qpos(), batch.qvel()))
+        elif op == "stop":
+            return
+
+
+class ShardedBatch:
+    """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
+
+    def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
+        if not 1 <= shards <= nworld:
+            raise ValueError(f"shards must be in 1..{nworld}, got {shards}")
+        bounds = np.linspace(0, nworld, shards + 1).astype(int)
+        self._starts = bounds[:-1]
+        self._sizes = np.diff(bounds)
+        ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
+        self._conns: list[Connection] = []
+        self._procs = []
+        for size in self._sizes[1:]:
+            parent, child = ctx.Pipe()
+            proc = ctx.Process(target=_worker, args=(child, int(size), kwargs), daemon=True)
+            proc.start()
+            self._conns.append(parent)
+            self._procs.append(proc)
+        self._local = WorldBatch(int(self._sizes[0]), **kwargs)  # builds while workers build
+        for conn in self._conns:
+            reply = conn.recv()
+            if reply[0] == "error":
+                self.close()
+                raise RuntimeError(f"shard worker failed to start: {reply[1]}")
+        self.nworld = nworld
+        self.shards = shards
+        local = self._local
+        self.robot, self.spec = local.robot, local.spec
+        self.control_hz, self.tick_dt = local.control_hz, local.tick_dt
+        self.substeps, self.physics_dt = local.substeps, local.physics_dt
+        self.device, self.device_name = local.device, local.device_name
+        self.home_target = local.home_target
+        self.compile_s, self.capture_s = local.compile_s, local.capture_s
+        self.capture_error = local.capture_error
+        self._targets = np.tile(self.home_target, (nworld, 1))
+        self._pending_resets: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
+        self._pending_dirty: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
+
+    @property
+    def captured(self) -> bool:
+        return self._local.captured
+
+    @property
+    def tick(self) -> int:
+        return self._local.tick
+
+    @property
+    def targets(self) -> np.ndarray:
+        return self._targets.copy()
+
+    def _split(self, worlds: np.ndarray) -> list[np.ndarray]:
+        """Global world ids → per-shard local ids."""
+        worlds = np.asarray(worlds, dtype=np.int64)
+        return [
+            worlds[(worlds >= start) & (worlds < start + size)] - start
+            for start, size in zip(self._starts, self._sizes, strict=True)
+        ]
+
+    def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
+        """Stage targets; the local shard gets them now, workers with their next step."""
+        worlds = np.asarray(worlds, dtype=np.int64)
+        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
+        for i, local_ids in enumerate(self._split(worlds)):
+            if local_ids.size:
+                self._pending_dirty[i] = np.union1d(self._pending_dirty[i], local_ids)
+        if self._pending_dirty[0].size:
+            ids = self._pending_dirty[0]
+            self._local.set_targets(ids, self._targets[ids])
+            self._pending_dirty[0] = np.zeros(0, dtype=np.int64)
+
+    def reset(self, worlds: np.ndarray) -> None:
+        worlds = np.asarray(worlds, dtype=np.int64)
+        if worlds.size == 0:
+            return
+        self._targets[worlds] = self.home_target
+        parts = self._split(worlds)
+        self._local.reset(parts[0])
+        for i, local_ids in enumerate(parts[1:], start=1):
+            self._pending_resets[i] = np.union1d(self._pending_resets[i], local_ids)
+            # A reset overrides targets staged before it in the same tick.
+            self._pending_dirty[i] = np.setdiff1d(self._pending_dirty[i], local_ids)
+
+    def step(self, ticks: int = 1) -> np.ndarray:
+        """Advance all shards together; returns the (global) worlds reset for faults."""
+        for i, conn in enumerate(self._conns, start=1):
+            dirty = self._pending_dirty[i]
+            targets = self._targets[dirty + self._starts[i]]
+            conn.send(("step", self._pending_resets[i], dirty, targets, ticks))
+            self._pending_resets[i] = np.zeros(0, dtype=np.int64)
+            self._pending_dirty[i] = np.zeros(0, dtype=np.int64)
+        faulted = [self._local.step(ticks)]
+        for i, conn in enumerate(self._conns, start=1):
+            faulted.append(conn.recv() + self._starts[i])
+        out = np.concatenate(faulted)
+        self._targets[out] = self.home_target
+        return out
+
+    def snapshot(self) -> Snapshot:
+        for conn in self._conns:
+            conn.send(("snapshot",))
+        parts = [self._local.snapshot()] + [conn.recv() for conn in self._conns]
+        fields = ("sim_time", "position", "velocity", "effort", "flange_pos", "flange_quat")
+        joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}
+        return Snapshot(
+            tick=parts[0].tick,
+            target=self._targets.copy(),
+            faults=np.concatenate([p.faults for p in parts]),
+            **joined,
+        )
+
+    def qpos(self) -> np.ndarray:
+        return self._gather_qpos()[0]
+
+    def qvel(self) -> np.ndarray:
+        return self._gather_qpos()[1]
+
+    def _gather_qpos(self) -> tuple[np.ndarray, np.ndarray]:
+        for conn in self._conns:
+            conn.send(("qpos",))
+        parts = [(self._local.qpos(), self._local.qvel())] + [c.recv() for c in self._conns]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def close(self) -> None:
+        for conn in self._conns:
+            with contextlib.suppress(BrokenPipeError, OSError):
+                conn.send(("stop",))
+        for proc in self._procs:
+            proc.join(timeout=5)
+            if proc.is_alive():
+                proc.kill()
