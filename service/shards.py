@@ -75,11 +75,15 @@ class ShardedBatch:
             parent, child = ctx.Pipe()
             proc = ctx.Process(target=_worker, args=(child, int(size), kwargs), daemon=True)
             proc.start()
+            child.close()  # so that a dead worker shows up as EOFError, not a hang
             self._conns.append(parent)
             self._procs.append(proc)
         self._local = WorldBatch(int(self._sizes[0]), **kwargs)  # builds while workers build
         for conn in self._conns:
-            reply = conn.recv()
+            try:
+                reply = conn.recv()
+            except EOFError:
+                reply = ("error", "worker exited while building its shard")
             if reply[0] == "error":
                 self.close()
                 raise RuntimeError(f"shard worker failed to start: {reply[1]}")

@@ -1,0 +1,518 @@
+"""Sections 2 and 3: the service as a subprocess, measured from a client.
+
+2. ``fast``: ``armfleet serve --mode fast`` with every world streamed to one WebSocket client
+   (``/v1/ws?rate=30``). World-steps/s come from the tick advance over wall time (``/v1/info``
+   before and after the window; the frames' ticks are reported too) and are compared with the
+   engine and raw captured MuJoCo Warp numbers of section 1: the service's overhead.
+3. ``capacity``: the largest batch for which ``realtime`` mode holds a real-time factor >= 0.99
+   over a window, 60 Hz control, ~2 ms physics, one subscriber (``/v1/ws?worlds=a-b&rate=30``)
+   per 16 worlds. Doubling, then bisection; the RTF of every candidate is reported.
+
+The client shares the machine with the server: on a 2-core box its frame handling competes with
+the server's threads, as a real co-located client would.
+
+Standalone: ``python -m bench.service_bench fast --worlds 16 256`` or
+``python -m bench.service_bench capacity --window 10``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import math
+import re
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import httpx
+import websockets.asyncio.client as ws_client
+
+from bench import common
+
+SECTION_FAST = "service_fast"
+SECTION_CAPACITY = "realtime_capacity"
+CPU_SIZES = (1, 16, 64, 256, 1024, 4096)
+CPU_SIZES_QUICK = (16, 256)
+CUDA_SIZES = (1024, 4096, 16384, 65536)
+CUDA_SIZES_QUICK = (1024, 16384)
+WORLDS_PER_SUBSCRIBER = 16
+RTF_GOAL = 0.99
+MIN_TICKS = 20  # fast mode: the window covers at least this many ticks ...
+MAX_WINDOW = 40.0  # ... but lasts no longer than this [s]
+
+_TICK = re.compile(r'"tick":(\d+)')
+
+
+def frame_tick(frame: str | bytes) -> int | None:
+    """The `tick` of a state frame without parsing the whole (possibly MB-sized) frame."""
+    head = frame[:96] if isinstance(frame, str) else frame[:96].decode(errors="replace")
+    m = _TICK.search(head)
+    return int(m.group(1)) if m else None
+
+
+def defaults_fast(quick: bool, device: str) -> dict[str, Any]:
+    cuda = device.startswith("cuda")
+    if quick:
+        return {
+            "sizes": CUDA_SIZES_QUICK if cuda else CPU_SIZES_QUICK,
+            "duration": 3.0,
+            "warmup": 1.0,
+        }
+    return {"sizes": CUDA_SIZES if cuda else CPU_SIZES, "duration": 8.0, "warmup": 2.0}
+
+
+def defaults_capacity(quick: bool) -> dict[str, Any]:
+    if quick:
+        return {"window": 10.0, "warmup": 2.0, "refine": 1}
+    return {"window": 60.0, "warmup": 3.0, "refine": 2}
+
+
+# -- a streaming client --------------------------------------------------------------------------
+
+
+class FrameCounter:
+    """Reads one socket's frames, keeping count, bytes and the last tick seen."""
+
+    def __init__(self) -> None:
+        self.frames = 0
+        self.bytes = 0
+        self.first: tuple[float, int] | None = None  # (perf_counter, tick) while counting
+        self.last: tuple[float, int] | None = None
+        self.counting = False
+        self.error: str | None = None
+
+    def reset(self) -> None:
+        self.frames = 0
+        self.bytes = 0
+        self.first = self.last = None
+        self.counting = True
+
+    async def run(self, url: str) -> None:
+        try:
+            async with ws_client.connect(url, max_size=None, compression=None) as ws:
+                async for msg in ws:
+                    if not self.counting:
+                        continue
+                    now = time.perf_counter()
+                    tick = frame_tick(msg)
+                    if tick is None:
+                        continue
+                    self.frames += 1
+                    self.bytes += len(msg)
+                    if self.first is None:
+                        self.first = (now, tick)
+                    self.last = (now, tick)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # reported, not raised: the measurement says what it saw
+            self.error = f"{type(exc).__name__}: {exc}"
+
+
+async def _info(client: httpx.AsyncClient, url: str) -> tuple[float, dict[str, Any]]:
+    t0 = time.perf_counter()
+    r = await client.get(f"{url}/v1/info")
+    t1 = time.perf_counter()
+    r.raise_for_status()
+    return (t0 + t1) / 2, r.json()
+
+
+# -- section 2: fast mode ------------------------------------------------------------------------
+
+
+async def _measure_fast(server: common.Server, duration: float, warmup: float) -> dict[str, Any]:
+    counter = FrameCounter()
+    reader = asyncio.create_task(counter.run(f"{server.ws_url}/v1/ws?rate=30"))
+    try:
+        async with httpx.AsyncClient(timeout=60) as client:
+            await asyncio.sleep(warmup)
+            counter.reset()
+            t0, info0 = await _info(client, server.url)
+            # Slow ticks (thousands of worlds on a CPU) get a window of >= MIN_TICKS ticks, so
+            # that the whole-tick granularity of the counter stays a small error.
+            tps = info0.get("ticks_per_s") or 0.0
+            window = min(max(duration, MIN_TICKS / tps), MAX_WINDOW) if tps > 0 else duration
+            await asyncio.sleep(window)
+            t1, info1 = await _info(client, server.url)
+            counter.counting = False
+    finally:
+        reader.cancel()
+        await asyncio.gather(reader, return_exceptions=True)
+    n, substeps = info1["nworld"], info1["substeps"]
+    ticks = info1["tick"] - info0["tick"]
+    wall = t1 - t0
+    out: dict[str, Any] = {
+        "nworld": n,
+        "substeps": substeps,
+        "ticks": ticks,
+        "wall_s": wall,
+        "ticks_per_s": ticks / wall,
+        "world_steps_per_s": common.world_steps(ticks, n, substeps) / wall,
+        "realtime_factor": common.rtf(ticks, info1["control_hz"], wall),
+        "loop_ticks_per_s": info1["ticks_per_s"],  # the loop's own last 1 s window
+        "frames": counter.frames,
+        "frames_per_s": counter.frames / wall,
+        "frame_bytes_mean": counter.bytes / counter.frames if counter.frames else None,
+        "stream_error": counter.error,
+        "captured": info1.get("captured"),
+        "ready_s": server.ready_s,
+    }
+    if counter.first and counter.last and counter.last[0] > counter.first[0]:
+        (ta, ka), (tb, kb) = counter.first, counter.last
+        out["world_steps_per_s_frames"] = common.world_steps(kb - ka, n, substeps) / (tb - ta)
+    return out
+
+
+def measure_fast(nworld: int, device: str, duration: float, warmup: float) -> dict[str, Any]:
+    with common.running_server(nworld, "fast", device) as server:
+        return asyncio.run(_measure_fast(server, duration, warmup))
+
+
+def run_fast(
+    sizes: Sequence[int],
+    device: str = "cpu",
+    duration: float = 8.0,
+    warmup: float = 2.0,
+    throughput: dict[str, Any] | None = None,
+    progress: Callable[[str], None] | None = print,
+) -> dict[str, Any]:
+    """Section 2 at every size; ratios against section 1's payload when given."""
+    started = common.now_iso()
+    say = progress or (lambda _msg: None)
+    results: dict[str, Any] = {}
+    errors: dict[str, str] = {}
+    base = (throughput or {}).get("results", {})
+    for n in sizes:
+        t0 = time.perf_counter()
+        try:
+            res = measure_fast(n, device, duration, warmup)
+        except Exception as exc:
+            errors[str(n)] = f"{type(exc).__name__}: {exc}"
+            say(f"  {n:>6} worlds  service fast FAILED: {exc}")
+            continue
+        engines = base.get(str(n), {}).get("engines", {})
+        for key in ("engine", "engine_cores", "warp_captured", "rollout_all"):
+            ref = engines.get(key, {}).get("world_steps_per_s")
+            res[f"ratio_to_{key}"] = res["world_steps_per_s"] / ref if ref else None
+        results[str(n)] = res
+        say(
+            f"  {n:>6} worlds  service fast {res['world_steps_per_s']:>14,.0f} world-steps/s "
+            f"({res['frames_per_s']:.1f} frames/s, {time.perf_counter() - t0:.1f} s)"
+        )
+    data = {
+        "device": device,
+        "mode": "fast",
+        "stream": "/v1/ws?rate=30 (all worlds, one client)",
+        "sizes": list(sizes),
+        "duration_s": duration,
+        "warmup_s": warmup,
+        "results": results,
+        "errors": errors,
+    }
+    return common.section_payload(SECTION_FAST, device, data, started)
+
+
+def table_fast(payload: dict[str, Any]):
+    from rich import box
+    from rich.table import Table
+
+    t = Table(
+        title=f"2. Service, fast mode, all worlds streamed at 30 Hz ({payload['device']})",
+        box=box.SIMPLE_HEAD,
+    )
+    for col in ("worlds", "world-steps/s", "ticks/s", "frames/s", "frame KB", "svc/engine"):
+        t.add_column(col, justify="right")
+    t.add_column("svc/eng cores", justify="right")
+    t.add_column("svc/warp capt", justify="right")
+    t.add_column("svc/mj all", justify="right")
+    for n, r in payload["results"].items():
+        kb = r.get("frame_bytes_mean")
+        t.add_row(
+            n,
+            common.si(r["world_steps_per_s"]),
+            f"{r['ticks_per_s']:.1f}",
+            f"{r['frames_per_s']:.1f}",
+            "-" if kb is None else f"{kb / 1e3:.1f}",
+            common.ratio(r.get("ratio_to_engine")),
+            common.ratio(r.get("ratio_to_engine_cores")),
+            common.ratio(r.get("ratio_to_warp_captured")),
+            common.ratio(r.get("ratio_to_rollout_all")),
+        )
+    return t
+
+
+# -- section 3: real-time capacity ------------------------------------------------------------
+
+
+async def _measure_realtime(
+    server: common.Server,
+    window: float,
+    warmup: float,
+    check_every: float = 2.0,
+    abort_below: float = 0.95,
+    abort_after: float = 5.0,
+) -> dict[str, Any]:
+    n = server.nworld
+    groups = [
+        (lo, min(n, lo + WORLDS_PER_SUBSCRIBER) - 1) for lo in range(0, n, WORLDS_PER_SUBSCRIBER)
+    ]
+    counters = [FrameCounter() for _ in groups]
+    readers = [
+        asyncio.create_task(c.run(f"{server.ws_url}/v1/ws?worlds={lo}-{hi}&rate=30"))
+        for c, (lo, hi) in zip(counters, groups, strict=True)
+    ]
+    samples: list[float] = []  # the loop's own 1 s RTF, sampled during the window
+    aborted = False
+    try:
+        async with httpx.AsyncClient(timeout=60) as client:
+            await asyncio.sleep(warmup)
+            for c in counters:
+                c.reset()
+            t0, info0 = await _info(client, server.url)
+            t1, info1 = t0, info0
+            while t1 - t0 < window:
+                await asyncio.sleep(min(check_every, max(0.05, window - (t1 - t0))))
+                t1, info1 = await _info(client, server.url)
+                samples.append(info1["realtime_factor"])
+                so_far = common.rtf(info1["tick"] - info0["tick"], info1["control_hz"], t1 - t0)
+                if t1 - t0 >= abort_after and so_far < abort_below:
+                    aborted = True  # clearly short of real time: no need to wait out the window
+                    break
+    finally:
+        for r in readers:
+            r.cancel()
+        await asyncio.gather(*readers, return_exceptions=True)
+    ticks = info1["tick"] - info0["tick"]
+    wall = t1 - t0
+    frames = [c.frames / wall for c in counters]
+    return {
+        "nworld": n,
+        "subscribers": len(groups),
+        "ticks": ticks,
+        "wall_s": wall,
+        "realtime_factor": common.rtf(ticks, info1["control_hz"], wall),
+        "min_loop_rtf_1s": min(samples) if samples else None,
+        "aborted_early": aborted,
+        "frames_per_s_per_subscriber_min": min(frames) if frames else None,
+        "frames_per_s_per_subscriber_mean": sum(frames) / len(frames) if frames else None,
+        "stream_errors": sorted({c.error for c in counters if c.error}),
+        "world_steps_per_s": common.world_steps(ticks, n, info1["substeps"]) / wall,
+        "ready_s": server.ready_s,
+    }
+
+
+def measure_realtime(nworld: int, device: str, window: float, warmup: float) -> dict[str, Any]:
+    with common.running_server(nworld, "realtime", device) as server:
+        return asyncio.run(_measure_realtime(server, window, warmup))
+
+
+def _round_to(x: float, step: int) -> int:
+    return max(1, round(x / step) * step)
+
+
+def capacity_search(
+    measure: Callable[[int], dict[str, Any]],
+    start: int = 16,
+    max_worlds: int = 4096,
+    refine: int = 2,
+    goal: float = RTF_GOAL,
+) -> tuple[int | None, list[dict[str, Any]]]:
+    """Doubling (or halving) from `start` until pass/fail brackets, then `refine` bisections.
+
+    `measure(n)` returns a dict with `realtime_factor`. Returns (largest passing n or None,
+    every candidate's result in the order measured).
+    """
+    tried: dict[int, dict[str, Any]] = {}
+
+    def passes(n: int) -> bool:
+        if n not in tried:
+            tried[n] = {**measure(n), "order": len(tried)}
+            tried[n]["passed"] = (tried[n].get("realtime_factor") or 0.0) >= goal
+        return tried[n]["passed"]
+
+    lo: int | None = None
+    hi: int | None = None
+    n = max(1, start)
+    if passes(n):
+        lo = n
+        while n * 2 <= max_worlds:
+            n *= 2
+            if passes(n):
+                lo = n
+            else:
+                hi = n
+                break
+    else:
+        hi = n
+        while n > 1:
+            n //= 2
+            if passes(n):
+                lo = n
+                break
+            hi = n
+    for _ in range(refine):
+        if lo is None or hi is None:
+            break
+        step = 8 if lo >= 16 else 1
+        mid = _round_to((lo + hi) / 2, step)
+        if mid <= lo or mid >= hi:
+            break
+        if passes(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo, sorted(tried.values(), key=lambda r: r["order"])
+
+
+def start_from_throughput(throughput: dict[str, Any] | None, control_hz: float = 60.0) -> int:
+    """Where doubling starts: the power of two at or below half of what section 1 predicts.
+
+    The prediction is the largest min(n, engine world-steps/s at n / steps a world needs per
+    second) over the measured sizes; without section 1, 16.
+    """
+    if not throughput:
+        return WORLDS_PER_SUBSCRIBER
+    need = control_hz * throughput.get("substeps", 8)  # physics steps per world per second
+    best = 0.0
+    for n, entry in throughput.get("results", {}).items():
+        wsps = entry.get("engines", {}).get("engine", {}).get("world_steps_per_s")
+        if wsps:
+            best = max(best, min(int(n), wsps / need))
+    if best < 2:
+        return 1
+    return 2 ** math.floor(math.log2(best / 2))
+
+
+def run_capacity(
+    device: str = "cpu",
+    window: float = 60.0,
+    warmup: float = 3.0,
+    refine: int = 2,
+    start: int = WORLDS_PER_SUBSCRIBER,
+    max_worlds: int = 4096,
+    progress: Callable[[str], None] | None = print,
+) -> dict[str, Any]:
+    started = common.now_iso()
+    say = progress or (lambda _msg: None)
+    errors: dict[str, str] = {}
+
+    def measure(n: int) -> dict[str, Any]:
+        t0 = time.perf_counter()
+        try:
+            res = measure_realtime(n, device, window, warmup)
+        except Exception as exc:
+            errors[str(n)] = f"{type(exc).__name__}: {exc}"
+            say(f"  {n:>6} worlds  realtime FAILED: {exc}")
+            return {"nworld": n, "realtime_factor": None, "error": errors[str(n)]}
+        verdict = "ok" if res["realtime_factor"] >= RTF_GOAL else "short"
+        say(
+            f"  {n:>6} worlds  realtime RTF {res['realtime_factor']:.3f} over "
+            f"{res['wall_s']:.1f} s ({verdict}{', stopped early' if res['aborted_early'] else ''};"
+            f" {time.perf_counter() - t0:.1f} s)"
+        )
+        return res
+
+    best, candidates = capacity_search(measure, start, max_worlds, refine)
+    data = {
+        "device": device,
+        "mode": "realtime",
+        "rtf_goal": RTF_GOAL,
+        "window_s": window,
+        "warmup_s": warmup,
+        "worlds_per_subscriber": WORLDS_PER_SUBSCRIBER,
+        "stream": "/v1/ws?worlds=a-b&rate=30, one per 16 worlds",
+        "search": {"start": start, "max_worlds": max_worlds, "refine": refine},
+        "capacity_worlds": best,
+        "candidates": candidates,
+        "errors": errors,
+    }
+    return common.section_payload(SECTION_CAPACITY, device, data, started)
+
+
+def table_capacity(payload: dict[str, Any]):
+    from rich import box
+    from rich.table import Table
+
+    best = payload.get("capacity_worlds")
+    t = Table(
+        title=(
+            f"3. Real-time capacity: {best if best is not None else 'none'} worlds at RTF >= "
+            f"{payload['rtf_goal']} over {payload['window_s']:.0f} s ({payload['device']})"
+        ),
+        box=box.SIMPLE_HEAD,
+    )
+    for col in ("worlds", "RTF", "min 1 s RTF", "wall s", "subscribers", "frames/s/sub", "ok"):
+        t.add_column(col, justify="right")
+    for r in payload["candidates"]:
+        rtf = r.get("realtime_factor")
+        mn = r.get("min_loop_rtf_1s")
+        fps = r.get("frames_per_s_per_subscriber_mean")
+        t.add_row(
+            str(r["nworld"]),
+            "-" if rtf is None else f"{rtf:.3f}",
+            "-" if mn is None else f"{mn:.3f}",
+            f"{r.get('wall_s', 0):.1f}" + ("*" if r.get("aborted_early") else ""),
+            str(r.get("subscribers", "-")),
+            "-" if fps is None else f"{fps:.1f}",
+            "yes" if r.get("passed") else "no",
+        )
+    return t
+
+
+# -- command line ------------------------------------------------------------------------------
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench.service_bench", description=__doc__)
+    sub = p.add_subparsers(dest="what", required=True)
+    f = sub.add_parser("fast", help="section 2: fast mode, all worlds streamed at 30 Hz")
+    f.add_argument("--worlds", type=int, nargs="+")
+    f.add_argument("--device", default="cpu")
+    f.add_argument("--quick", action="store_true")
+    f.add_argument("--duration", type=float)
+    f.add_argument("--warmup", type=float)
+    c = sub.add_parser("capacity", help="section 3: largest batch at RTF >= 0.99")
+    c.add_argument("--device", default="cpu")
+    c.add_argument("--quick", action="store_true")
+    c.add_argument("--window", type=float)
+    c.add_argument("--warmup", type=float)
+    c.add_argument("--refine", type=int, help="bisection steps after doubling")
+    c.add_argument("--start", type=int, default=WORLDS_PER_SUBSCRIBER)
+    c.add_argument("--max-worlds", type=int, default=4096)
+    args = p.parse_args(argv)
+    if args.device.startswith("cuda"):
+        from bench.throughput import cuda_available
+
+        if not cuda_available():
+            print(f"bench: no CUDA device is available here; --device {args.device} cannot run.")
+            return 2
+    suffix = common.suffix_for(args.device)
+    if args.what == "fast":
+        d = defaults_fast(args.quick, args.device)
+        payload = run_fast(
+            args.worlds or d["sizes"],
+            args.device,
+            args.duration or d["duration"],
+            args.warmup if args.warmup is not None else d["warmup"],
+            throughput=common.read_json(f"throughput{suffix}.json"),
+        )
+        path = common.write_json(f"{SECTION_FAST}{suffix}.json", payload)
+        common.console().print(table_fast(payload))
+    else:
+        d = defaults_capacity(args.quick)
+        payload = run_capacity(
+            args.device,
+            args.window or d["window"],
+            args.warmup if args.warmup is not None else d["warmup"],
+            d["refine"] if args.refine is None else args.refine,
+            args.start,
+            args.max_worlds,
+        )
+        path = common.write_json(f"{SECTION_CAPACITY}{suffix}.json", payload)
+        common.console().print(table_capacity(payload))
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,109 @@
+"""`armfleet watch` against a real server: JSON lines for piping, and the live table."""
+
+from __future__ import annotations
+
+import json
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from conftest import ROOT, Server
+
+from clients import ArmfleetClient
+
+JOINTS = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+    "finger_joint",
+]
+
+
+def watch(url: str, *args: str) -> subprocess.Popen[str]:
+    cmd = [sys.executable, "-m", "service.cli", "watch", "--url", url, *args]
+    return subprocess.Popen(
+        cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+
+
+class Lines:
+    """Lines of a process's stdout as they come (a reader thread), with timeouts."""
+
+    def __init__(self, proc: subprocess.Popen[str]) -> None:
+        self.proc = proc
+        self._q: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self._q.put(line)
+
+    def next(self, timeout: float = 15) -> str:
+        return self._q.get(timeout=timeout)
+
+
+@pytest.fixture
+def json_watch(server: Server) -> Iterator[Lines]:
+    proc = watch(server.url, "--world", "1", "--rate", "20", "--json")
+    try:
+        yield Lines(proc)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_json_mode_prints_one_state_per_line_with_increasing_ticks(json_watch: Lines) -> None:
+    frames: list[dict[str, Any]] = [json.loads(json_watch.next()) for _ in range(6)]
+    ticks = [f["tick"] for f in frames]
+    assert ticks == sorted(ticks) and len(set(ticks)) == len(ticks)
+    for frame in frames:
+        assert frame["world"] == 1
+        assert frame["name"] == JOINTS
+        assert len(frame["position"]) == 7 and len(frame["target"]) == 7
+        assert len(frame["flange"]["quaternion"]) == 4
+
+
+def test_json_lines_show_a_target_set_through_the_api(server: Server, json_watch: Lines) -> None:
+    json.loads(json_watch.next())  # streaming
+    with ArmfleetClient(server.url) as client:
+        ack = client.set_targets(1, {"elbow_joint": 1.0})
+        try:
+            deadline = time.monotonic() + 10
+            while True:
+                frame = json.loads(json_watch.next())
+                if frame["tick"] >= ack.tick:
+                    break
+                assert time.monotonic() < deadline, "no frame at or after the command's tick"
+            assert frame["target"][2] == pytest.approx(1.0)
+        finally:
+            client.reset(1)
+
+
+def test_table_mode_shows_the_joint_rows(server: Server) -> None:
+    proc = watch(server.url, "--world", "0", "--rate", "10")
+    time.sleep(1.5)  # start up and show a few frames
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=10)
+    assert proc.returncode == 0, err
+    assert "world 0" in out and "tick" in out
+    for name in JOINTS:
+        assert name in out
+    assert "flange" in out
+
+
+def test_unknown_world_exits_with_the_server_detail(server: Server) -> None:
+    proc = watch(server.url, "--world", "9", "--json")
+    out, err = proc.communicate(timeout=15)
+    assert proc.returncode == 1
+    assert out == ""
+    assert "world 9 does not exist" in err
