@@ -46,6 +46,8 @@ _TICK = re.compile(r'"tick":(\d+)')
 
 def frame_tick(frame: str | bytes) -> int | None:
     """The `tick` of a state frame without parsing the whole (possibly MB-sized) frame."""
+    if isinstance(frame, bytes) and frame[:4] == b"AFS1":  # binary: JSON header after 8 bytes
+        frame = frame[8:104]
     head = frame[:96] if isinstance(frame, str) else frame[:96].decode(errors="replace")
     m = _TICK.search(head)
     return int(m.group(1)) if m else None
@@ -120,9 +122,11 @@ async def _info(client: httpx.AsyncClient, url: str) -> tuple[float, dict[str, A
 # -- section 2: fast mode ------------------------------------------------------------------------
 
 
-async def _measure_fast(server: common.Server, duration: float, warmup: float) -> dict[str, Any]:
+async def _measure_fast(
+    server: common.Server, duration: float, warmup: float, fmt: str = "json"
+) -> dict[str, Any]:
     counter = FrameCounter()
-    reader = asyncio.create_task(counter.run(f"{server.ws_url}/v1/ws?rate=30"))
+    reader = asyncio.create_task(counter.run(f"{server.ws_url}/v1/ws?rate=30&format={fmt}"))
     try:
         async with httpx.AsyncClient(timeout=60) as client:
             await asyncio.sleep(warmup)
@@ -163,9 +167,11 @@ async def _measure_fast(server: common.Server, duration: float, warmup: float) -
     return out
 
 
-def measure_fast(nworld: int, device: str, duration: float, warmup: float) -> dict[str, Any]:
+def measure_fast(
+    nworld: int, device: str, duration: float, warmup: float, fmt: str = "json"
+) -> dict[str, Any]:
     with common.running_server(nworld, "fast", device) as server:
-        return asyncio.run(_measure_fast(server, duration, warmup))
+        return asyncio.run(_measure_fast(server, duration, warmup, fmt))
 
 
 def run_fast(
@@ -175,6 +181,7 @@ def run_fast(
     warmup: float = 2.0,
     throughput: dict[str, Any] | None = None,
     progress: Callable[[str], None] | None = print,
+    fmt: str = "json",
 ) -> dict[str, Any]:
     """Section 2 at every size; ratios against section 1's payload when given."""
     started = common.now_iso()
@@ -185,7 +192,7 @@ def run_fast(
     for n in sizes:
         t0 = time.perf_counter()
         try:
-            res = measure_fast(n, device, duration, warmup)
+            res = measure_fast(n, device, duration, warmup, fmt)
         except Exception as exc:
             errors[str(n)] = f"{type(exc).__name__}: {exc}"
             say(f"  {n:>6} worlds  service fast FAILED: {exc}")
@@ -202,7 +209,8 @@ def run_fast(
     data = {
         "device": device,
         "mode": "fast",
-        "stream": "/v1/ws?rate=30 (all worlds, one client)",
+        "stream": f"/v1/ws?rate=30&format={fmt} (all worlds, one client)",
+        "format": fmt,
         "sizes": list(sizes),
         "duration_s": duration,
         "warmup_s": warmup,
@@ -217,7 +225,10 @@ def table_fast(payload: dict[str, Any]):
     from rich.table import Table
 
     t = Table(
-        title=f"2. Service, fast mode, all worlds streamed at 30 Hz ({payload['device']})",
+        title=(
+            f"2. Service, fast mode, all worlds streamed at 30 Hz, {payload.get('format', 'json')}"
+            f" frames ({payload['device']})"
+        ),
         box=box.SIMPLE_HEAD,
     )
     for col in ("worlds", "world-steps/s", "ticks/s", "frames/s", "frame KB", "svc/engine"):
@@ -471,6 +482,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     f.add_argument("--quick", action="store_true")
     f.add_argument("--duration", type=float)
     f.add_argument("--warmup", type=float)
+    f.add_argument("--format", choices=("json", "binary"), default="json", dest="fmt")
     c = sub.add_parser("capacity", help="section 3: largest batch at RTF >= 0.99")
     c.add_argument("--device", default="cpu")
     c.add_argument("--quick", action="store_true")
@@ -495,8 +507,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.duration or d["duration"],
             args.warmup if args.warmup is not None else d["warmup"],
             throughput=common.read_json(f"throughput{suffix}.json"),
+            fmt=args.fmt,
         )
-        path = common.write_json(f"{SECTION_FAST}{suffix}.json", payload)
+        tag = "" if args.fmt == "json" else f"_{args.fmt}"
+        path = common.write_json(f"{SECTION_FAST}{tag}{suffix}.json", payload)
         common.console().print(table_fast(payload))
     else:
         d = defaults_capacity(args.quick)

@@ -506,8 +506,12 @@ def parse_reply(call: Call, status: int, body: bytes) -> Any:
 
 # -- WebSocket ----------------------------------------------------------------------------------
 
+BINARY_MAGIC = b"AFS1"  # batch frames sent with format=binary
 
-def ws_url(base_url: str, worlds: WorldSpec, rate: float | None = None) -> str:
+
+def ws_url(
+    base_url: str, worlds: WorldSpec, rate: float | None = None, binary: bool = False
+) -> str:
     """http://host:port + 3 → ws://host:port/v1/ws/worlds/3; a list/range/None → /v1/ws?worlds=."""
     parts = urlsplit(base_url)
     scheme = {"http": "ws", "https": "wss"}.get(parts.scheme, parts.scheme)
@@ -521,6 +525,8 @@ def ws_url(base_url: str, worlds: WorldSpec, rate: float | None = None) -> str:
         spec = worlds_param(worlds)
         if spec is not None:
             params = {"worlds": spec, **params}
+        if binary:
+            params["format"] = "binary"
     base_path = parts.path.rstrip("/")
     return urlunsplit((scheme, parts.netloc, base_path + path, urlencode(params), ""))
 
@@ -536,8 +542,39 @@ class WsError:
 WsMessage = WorldState | BatchStates | CommandAck | WsError
 
 
+def parse_binary_states(data: bytes) -> BatchStates:
+    """A binary batch frame (`format=binary`; layout in service/wire.py) as BatchStates."""
+    hlen = int.from_bytes(data[4:8], "little")
+    header = orjson.loads(data[8 : 8 + hlen])
+    n = header["n"]
+    at = 8 + hlen
+    worlds = np.frombuffer(data, "<i4", n, at).astype(np.int64)
+    width = sum(w for _, w in header["columns"])
+    rows = np.frombuffer(data, "<f4", n * width, at + 4 * n).reshape(n, width)
+    cols: dict[str, np.ndarray] = {}
+    col = 0
+    for name, w in header["columns"]:
+        cols[name] = rows[:, col : col + w] if w > 1 else rows[:, col]
+        col += w
+    return BatchStates(
+        tick=int(header["tick"]),
+        name=tuple(header["name"]),
+        worlds=worlds,
+        sim_time=cols["sim_time"].astype(np.float64),
+        position=cols["position"],
+        velocity=cols["velocity"],
+        effort=cols["effort"],
+        target=cols["target"],
+        flange_position=cols["flange_position"],
+        flange_quaternion=cols["flange_quaternion"],
+        faults=cols["faults"].astype(np.int64),
+    )
+
+
 def parse_ws(text: str | bytes) -> WsMessage | None:
     """A server WebSocket message; None for an op this client does not know."""
+    if isinstance(text, bytes) and text[:4] == BINARY_MAGIC:
+        return parse_binary_states(text)
     d = orjson.loads(text)
     op = d.get("op")
     if op == "state":

@@ -136,9 +136,10 @@ class AsyncArmfleetClient:
         on_status: _core.StatusCallback | None = None,
         backoff: _core.Backoff | None = None,
         give_up_after: float | None = None,
+        binary: bool = False,
     ) -> AsyncIterator[Any]:
         """Async twin of `ArmfleetClient.stream` (same arguments, same reconnect rules)."""
-        url = _core.ws_url(self.url, worlds, rate)
+        url = _core.ws_url(self.url, worlds, rate, binary)
         policy = _core.Reconnector(url, reconnect, on_status, backoff, give_up_after)
         while True:
             try:

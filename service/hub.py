@@ -23,9 +23,15 @@ class Subscription:
     """One WebSocket's interest: which worlds, how often, and its outbox."""
 
     def __init__(
-        self, worlds: np.ndarray, rate: float | None, render: Callable[[Snapshot], bytes], kind: str
+        self,
+        worlds: np.ndarray,
+        rate: float | None,
+        render: Callable[[Snapshot], bytes],
+        kind: str,
+        binary: bool = False,
     ):
         self.worlds = worlds
+        self.binary = binary  # frames go out as binary WebSocket messages
         # Sockets with the same kind of frame over the same worlds share one serialisation.
         self.key = (kind, worlds.tobytes())
         self.period = 1.0 / rate if rate else 0.0  # 0: every tick

@@ -64,6 +64,57 @@ def batch_frame(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> bytes:
     )
 
 
+# Binary batch frames: b"AFS1", uint32 header length, JSON header, int32 world ids, then one
+# float32 row per world holding these columns side by side (all little-endian).
+BINARY_MAGIC = b"AFS1"
+BINARY_COLUMNS = (
+    ("sim_time", 1),
+    ("position", 7),
+    ("velocity", 7),
+    ("effort", 7),
+    ("target", 7),
+    ("flange_position", 3),
+    ("flange_quaternion", 4),
+    ("faults", 1),
+)
+
+
+def batch_frame_binary(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> bytes:
+    """The batch frame as float32 rows: ~4x smaller than JSON and no per-number formatting."""
+    header = dumps(
+        {
+            "op": "states",
+            "tick": snap.tick,
+            "n": len(worlds),
+            "name": names,
+            "columns": BINARY_COLUMNS,
+        }
+    )
+    rows = np.concatenate(
+        [
+            snap.sim_time[worlds, None],
+            snap.position[worlds],
+            snap.velocity[worlds],
+            snap.effort[worlds],
+            snap.target[worlds],
+            snap.flange_pos[worlds],
+            snap.flange_quat[worlds],
+            snap.faults[worlds, None],
+        ],
+        axis=1,
+        dtype="<f4",
+    )
+    return b"".join(
+        (
+            BINARY_MAGIC,
+            len(header).to_bytes(4, "little"),
+            header,
+            worlds.astype("<i4").tobytes(),
+            rows.tobytes(),
+        )
+    )
+
+
 def parse_worlds(spec: str, nworld: int) -> np.ndarray:
     """'0-63,70,72-75' → sorted unique world ids.
 

@@ -377,3 +377,26 @@ def test_a_client_that_stops_reading_does_not_delay_another(server, http):
         # Every tick reaches the live reader, none skipped, while the other socket is stuck.
         assert ticks == list(range(ticks[0], ticks[0] + 60))
         assert http.get("/readyz").status_code == 200
+
+
+def test_binary_batch_frames_carry_the_same_state_as_json(server, http):
+    http.post("/v1/sim/pause").raise_for_status()
+    http.put("/v1/worlds/2/targets", json={"name": ["elbow_joint"], "position": [1.3]})
+    http.post("/v1/sim/step", json={"ticks": 3}).raise_for_status()
+    with connect(f"{server.ws_url}/v1/ws?worlds=1-3&format=binary") as ws:
+        data = ws.recv(timeout=5)
+    with connect(f"{server.ws_url}/v1/ws?worlds=1-3") as ws:
+        as_json = json.loads(ws.recv(timeout=5))
+    assert isinstance(data, bytes) and data[:4] == b"AFS1"
+    hlen = int.from_bytes(data[4:8], "little")
+    header = json.loads(data[8 : 8 + hlen])
+    assert header["tick"] == as_json["tick"] and header["n"] == 3
+    worlds = np.frombuffer(data, "<i4", 3, 8 + hlen)
+    width = sum(w for _, w in header["columns"])
+    rows = np.frombuffer(data, "<f4", 3 * width, 8 + hlen + 12).reshape(3, width)
+    assert worlds.tolist() == [1, 2, 3]
+    columns = [name for name, _ in header["columns"]]
+    start = sum(w for _, w in header["columns"][: columns.index("position")])
+    np.testing.assert_array_equal(rows[:, start : start + 7], np.float32(as_json["position"]))
+    start = sum(w for _, w in header["columns"][: columns.index("target")])
+    assert rows[1, start + 2] == pytest.approx(1.3)

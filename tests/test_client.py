@@ -383,3 +383,14 @@ def test_stream_reconnects_after_the_server_restarts(
         assert any(not s.connected for s in statuses), kind
         assert statuses[-1].connected, kind  # back up after the restart
         assert not any(t.is_alive() for t in readers)
+
+
+def test_binary_batch_stream_yields_the_same_batch_states(server):
+    from clients import ArmfleetClient
+
+    with ArmfleetClient(server.url) as arm:
+        stream = arm.stream([0, 2], binary=True)
+        batch = next(stream)
+        stream.close()
+        assert batch.worlds.tolist() == [0, 2] and batch.position.shape == (2, 7)
+        assert batch.world(2).target == pytest.approx(arm.state(2).target, abs=1e-6)

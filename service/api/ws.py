@@ -11,7 +11,7 @@ import asyncio
 import contextlib
 import time
 from collections.abc import Callable
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import orjson
@@ -56,6 +56,9 @@ async def batch_socket(
     ws: WebSocket,
     worlds: Annotated[str | None, Query(description="e.g. 0-63 or 0,3,7 (default all)")] = None,
     rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
+    format: Annotated[
+        Literal["json", "binary"], Query(description="binary: float32 rows, see service/wire.py")
+    ] = "json",
 ) -> None:
     """Many worlds per frame (`{"op": "states", ...}`, column-wise); commands name `world`."""
     loop, hub = _running(ws)
@@ -70,7 +73,12 @@ async def batch_socket(
     except (ValueError, IndexError) as exc:
         return await _refuse(ws, _CLOSE_POLICY, str(exc))
     names = loop.spec.names
-    sub = Subscription(ids, rate, lambda s: wire.batch_frame(s, ids, names), "batch")
+    if format == "binary":
+        sub = Subscription(
+            ids, rate, lambda s: wire.batch_frame_binary(s, ids, names), "binary", binary=True
+        )
+    else:
+        sub = Subscription(ids, rate, lambda s: wire.batch_frame(s, ids, names), "batch")
     await _serve(ws, loop, hub, sub, default_world=None)
 
 
@@ -120,8 +128,13 @@ async def _write(ws: WebSocket, hub: StreamHub, sub: Subscription) -> None:
         while sub.acks:
             await ws.send_text(sub.acks.popleft().decode())
         snap, sub.latest = sub.latest, None
-        if snap is not None:
-            await ws.send_text(hub.frame(sub, snap).decode())
+        if snap is None:
+            continue
+        frame = hub.frame(sub, snap)
+        if sub.binary:
+            await ws.send_bytes(frame)
+        else:
+            await ws.send_text(frame.decode())
 
 
 def _handle(loop: SimLoop, text: str, default_world: int | None) -> dict[str, Any]:
