@@ -102,6 +102,48 @@ def measure(server: common.Server, clients: int, duration: float, warmup: float)
     }
 
 
+_WRK_SCRIPT = """
+wrk.method = "POST"
+wrk.headers["Content-Type"] = "application/json"
+local n = 0
+request = function()
+  n = n + 1
+  local delta = (n % 2 == 0) and 0.1 or -0.1
+  return wrk.format(nil, nil, nil, '{"joint": "JOINT", "delta": ' .. delta .. '}')
+end
+done = function(summary, latency, requests)
+  io.write(string.format("WRK %d %d %d %d %f %f %d\\n", summary.requests,
+    summary.errors.status, summary.errors.connect + summary.errors.read + summary.errors.write,
+    summary.errors.timeout, latency:percentile(50) / 1000, latency:percentile(99) / 1000,
+    summary.duration))
+end
+"""
+
+
+def measure_wrk(server: common.Server, connections: int, duration: float) -> dict | None:
+    """The same request from wrk (a C load generator), so the client is not what is measured."""
+    import shutil
+    import subprocess
+    import tempfile
+
+    if shutil.which("wrk") is None:
+        return None
+    with tempfile.NamedTemporaryFile("w", suffix=".lua", delete=False) as f:
+        f.write(_WRK_SCRIPT.replace("JOINT", JOINT))
+    url = f"{server.url}/v1/worlds/0/increments"
+    cmd = ["wrk", "-t1", f"-c{connections}", f"-d{max(1, round(duration))}s", "-s", f.name, url]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=duration + 30).stdout
+    line = next(x for x in out.splitlines() if x.startswith("WRK "))
+    req, non2xx, sock_err, timeouts, p50, p99, dur_us = line.split()[1:]
+    return {
+        "client": "wrk",
+        "requests_per_s": int(req) / (int(dur_us) / 1e6),
+        "latency": {"p50_ms": round(float(p50), 3), "p99_ms": round(float(p99), 3)},
+        "non_2xx": int(non2xx),
+        "errors": int(sock_err) + int(timeouts),
+    }
+
+
 def run(
     nworld: int = 16,
     duration: float = 10.0,
@@ -126,6 +168,13 @@ def run(
                 f"  {k} client(s)  {res['requests_per_s']:,.0f} increments/s, "
                 f"p50 {res['latency']['p50_ms']} ms, p99 {res['latency']['p99_ms']} ms"
             )
+            fast = measure_wrk(srv, k, duration)
+            if fast is not None:
+                results[f"wrk/{k}"] = fast
+                say(
+                    f"  wrk, {k} connection(s)  {fast['requests_per_s']:,.0f} increments/s, "
+                    f"p50 {fast['latency']['p50_ms']} ms, p99 {fast['latency']['p99_ms']} ms"
+                )
         t_info1, info1 = srv.get_info()
         rtf["value"] = common.rtf(
             info1["tick"] - info0["tick"], info1["control_hz"], t_info1 - t_info0
@@ -166,15 +215,19 @@ def table(payload: dict[str, Any]):
         t.add_column(col, justify="right")
     for k, r in payload["results"].items():
         lat = r["latency"]
-        bad = sum(v for code, v in r["status"].items() if code != "200")
+        if r.get("client") == "wrk":
+            bad, errors = r["non_2xx"], r["errors"]
+        else:
+            bad = sum(v for code, v in r["status"].items() if code != "200")
+            errors = r["nerrors"]
         t.add_row(
-            k,
+            k if "/" in k else f"httpx/{k}",
             f"{r['requests_per_s']:,.0f}",
             f"{lat['p50_ms']}",
             f"{lat['p99_ms']}",
-            f"{lat['max_ms']}",
+            f"{lat.get('max_ms', '-')}",
             str(bad),
-            str(r["nerrors"]),
+            str(errors),
         )
     return t
 

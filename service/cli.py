@@ -118,11 +118,14 @@ def watch(
 def bench(
     quick: Annotated[bool, typer.Option(help="smaller sizes and shorter runs")] = False,
     device: Annotated[str, typer.Option(help="cpu or cuda")] = "cpu",
+    sections: Annotated[
+        list[int] | None, typer.Option("--section", help="run only these (1-6); repeatable")
+    ] = None,
 ) -> None:
     """Benchmarks against native MuJoCo and raw MuJoCo Warp; writes bench/results/."""
     from bench.suite import run_suite
 
-    run_suite(quick=quick, device=device)
+    run_suite(quick=quick, device=device, sections=sections or None)
 
 
 if __name__ == "__main__":

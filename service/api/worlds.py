@@ -32,13 +32,18 @@ def _json(payload: Any) -> Response:
     return Response(wire.dumps(payload), media_type="application/json")
 
 
-def _reply(result: CommandResult) -> CommandReply:
-    return CommandReply(
-        world=result.world,
-        target=result.target.tolist(),
-        clamped=result.clamped,
-        tick=result.tick,
-    )
+def _reply_dict(result: CommandResult) -> dict[str, Any]:
+    return {
+        "world": result.world,
+        "target": result.target,
+        "clamped": result.clamped,
+        "tick": result.tick,
+    }
+
+
+def _reply(result: CommandResult) -> Response:
+    """CommandReply, serialised directly (the hot path of the Up/Down buttons)."""
+    return _json(_reply_dict(result))
 
 
 @router.get(
@@ -78,7 +83,7 @@ async def get_state(loop: Loop, world: World) -> Response:
     response_model=CommandReply,
     summary="Add to joint targets (the seed's Up/Down buttons); clamps to the joint range",
 )
-async def increment(loop: Loop, world: World, body: IncrementRequest) -> CommandReply:
+async def increment(loop: Loop, world: World, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
     try:
         deltas = resolve_joints(loop.spec, body.as_mapping(), field)
@@ -92,7 +97,7 @@ async def increment(loop: Loop, world: World, body: IncrementRequest) -> Command
     response_model=CommandReply,
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
 )
-async def put_targets(loop: Loop, world: World, body: JointTargets) -> CommandReply:
+async def put_targets(loop: Loop, world: World, body: JointTargets) -> Response:
     try:
         values = resolve_joints(loop.spec, dict(zip(body.name, body.position, strict=True)), "name")
         return _reply(loop.set_targets(world, values))
@@ -105,13 +110,13 @@ async def put_targets(loop: Loop, world: World, body: JointTargets) -> CommandRe
     response_model=BatchCommandReply,
     summary="Full 7-joint targets for many worlds, applied together at one tick boundary",
 )
-async def post_targets(loop: Loop, body: BatchTargets) -> BatchCommandReply:
+async def post_targets(loop: Loop, body: BatchTargets) -> Response:
     n = loop.batch.nworld
     missing = [w for w in body.worlds if not 0 <= w < n]
     if missing:
         raise HTTPException(404, f"worlds {missing} do not exist (0..{n - 1})")
     results = loop.set_many(body.worlds, np.asarray(body.position, dtype=np.float64))
-    return BatchCommandReply(tick=results[0].tick, results=[_reply(r) for r in results])
+    return _json({"tick": results[0].tick, "results": [_reply_dict(r) for r in results]})
 
 
 @router.post("/worlds/{world}/reset", response_model=ResetReply, summary="Reset one world to home")
