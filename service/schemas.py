@@ -198,10 +198,16 @@ class BatchTargets(_Strict):
 class ResetRequest(_Strict):
     worlds: list[int] | None = Field(default=None, description="omit for all worlds")
 
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"worlds": [0, 3]}]})
+
 
 class ModeRequest(_Strict):
     mode: Mode
 
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"mode": "fast"}]})
+
 
 class StepRequest(_Strict):
     ticks: int = Field(default=1, ge=1, le=MAX_STEP_TICKS)
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"ticks": 60}]})

@@ -400,3 +400,32 @@ def test_binary_batch_frames_carry_the_same_state_as_json(server, http):
     np.testing.assert_array_equal(rows[:, start : start + 7], np.float32(as_json["position"]))
     start = sum(w for _, w in header["columns"][: columns.index("target")])
     assert rows[1, start + 2] == pytest.approx(1.3)
+
+
+def test_openapi_lists_every_route_and_every_request_body_has_an_example(http):
+    spec = http.get("/openapi.json").json()
+    paths = set(spec["paths"])
+    for route in (
+        "/v1/info",
+        "/v1/worlds/state",
+        "/v1/worlds/{world}/state",
+        "/v1/worlds/{world}/increments",
+        "/v1/worlds/{world}/targets",
+        "/v1/targets",
+        "/v1/worlds/{world}/reset",
+        "/v1/reset",
+        "/v1/sim/pause",
+        "/v1/sim/resume",
+        "/v1/sim/mode",
+        "/v1/sim/step",
+    ):
+        assert route in paths
+    schemas = spec["components"]["schemas"]
+    for ops in spec["paths"].values():
+        for op in ops.values():
+            body = op.get("requestBody")
+            if body:
+                ref = body["content"]["application/json"]["schema"]
+                ref = ref.get("$ref") or next(x["$ref"] for x in ref["anyOf"] if "$ref" in x)
+                assert schemas[ref.rsplit("/", 1)[1]].get("examples"), ref
+    assert "/v1/ws/worlds/{world}" in spec["info"]["description"]
