@@ -40,16 +40,13 @@ class Subscription:
         self.latest: Snapshot | None = None
         self.acks: deque[bytes] = deque()
         self.ready = asyncio.Event()
-        self.dropped = 0  # snapshots replaced before this reader took them
 
     def due(self, now: float) -> bool:
         # A little slack so that a 30 Hz stream on a 60 Hz loop really gets every other tick.
         return now >= self.next_due - 0.1 * self.period
 
     def offer(self, snap: Snapshot, now: float) -> None:
-        if self.latest is not None:
-            self.dropped += 1
-        self.latest = snap
+        self.latest = snap  # replaces one the reader has not taken yet
         if self.period:
             # Keep the cadence; after a stall start afresh instead of sending a burst.
             self.next_due += self.period

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import time
 
 from service.engine import WorldBatch
 from service.hub import StreamHub
@@ -32,7 +31,6 @@ class Runtime:
         self.loop: SimLoop | None = None
         self.hub: StreamHub | None = None
         self.error: str | None = None
-        self.started_at = time.monotonic()
 
     @property
     def ready(self) -> bool:

@@ -122,16 +122,14 @@ class ShardedBatch:
         ]
 
     def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
-        """Stage targets; the local shard gets them now, workers with their next step."""
+        """The local shard gets its targets now, worker shards with their next step."""
         worlds = np.asarray(worlds, dtype=np.int64)
         self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        for i, local_ids in enumerate(self._split(worlds)):
-            if local_ids.size:
-                self._pending_dirty[i] = np.union1d(self._pending_dirty[i], local_ids)
-        if self._pending_dirty[0].size:
-            ids = self._pending_dirty[0]
-            self._local.set_targets(ids, self._targets[ids])
-            self._pending_dirty[0] = np.zeros(0, dtype=np.int64)
+        parts = self._split(worlds)
+        if parts[0].size:
+            self._local.set_targets(parts[0], self._targets[parts[0]])
+        for i, local_ids in enumerate(parts[1:], start=1):
+            self._pending_dirty[i] = np.union1d(self._pending_dirty[i], local_ids)
 
     def reset(self, worlds: np.ndarray) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
