@@ -245,9 +245,13 @@ class SimLoop:
                 log.exception("tick failed")
                 time.sleep(0.1)
             if mode is Mode.REALTIME:
-                # Keep the cadence; when a tick overran, start the next one now rather than
-                # bursting to catch up (the real-time factor shows the shortfall).
-                next_deadline = max(next_deadline + self.batch.tick_dt, time.perf_counter())
+                # Keep the cadence. A tick that overran is made up by starting the next one at
+                # once, but never more than one tick of lag is carried: further behind, the time
+                # is given up (the real-time factor shows it) instead of bursting to catch up.
+                next_deadline += self.batch.tick_dt
+                now = time.perf_counter()
+                if now - next_deadline > self.batch.tick_dt:
+                    next_deadline = now
 
     def _tick_once(self, mode: Mode) -> None:
         with self._lock:
