@@ -28,7 +28,7 @@ import websockets.asyncio.client as ws_client
 from bench import common
 
 SECTION = "latency"
-SIZES = (16, 256)
+SIZES = (16, 64, 256)  # the latency target is stated at 64 worlds
 JOINT = "wrist_3_joint"
 JOINT_INDEX = 5  # position in the frames' name list (service.robot.JOINT_NAMES)
 DELTA = 0.1
