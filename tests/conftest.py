@@ -11,14 +11,52 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
 
+from clients import ArmfleetClient, WorldState
+
 ROOT = Path(__file__).resolve().parents[1]
+
+# The commanded joints and the `home` keyframe, as the tests expect the service to publish them.
+JOINTS = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+    "finger_joint",
+]
+HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0, 0.0]
+ELBOW, FINGER = 2, 6
+
+
+def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
+    """Poll `pred` until it returns something truthy; fail naming `what` after `timeout` s."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = pred()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.05)
+
+
+def target_after(client: ArmfleetClient, world: int, pred: Callable[[WorldState], bool]) -> Any:
+    """The world's targets once `pred(state)` holds (commands apply at the next tick)."""
+
+    def check() -> WorldState | None:
+        state = client.state(world)
+        return state if pred(state) else None
+
+    return wait_for(check, f"world {world}'s target to change").target
 
 
 def free_port() -> int:

@@ -11,18 +11,8 @@ import time
 import httpx
 import numpy as np
 import pytest
+from conftest import HOME, JOINTS
 from websockets.sync.client import connect
-
-HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0, 0.0]
-NAMES = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-    "finger_joint",
-]
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +55,7 @@ def test_health_ready_and_info_describe_the_batch(http):
     assert http.get("/healthz").json() == {"status": "ok"}
     assert http.get("/readyz").status_code == 200
     info = http.get("/v1/info").json()
-    assert [j["name"] for j in info["joints"]] == NAMES
+    assert [j["name"] for j in info["joints"]] == JOINTS
     elbow = info["joints"][2]
     assert (elbow["lower"], elbow["upper"]) == pytest.approx((-math.pi, math.pi))
     assert info["joints"][6]["upper"] == pytest.approx(0.7)
@@ -80,7 +70,7 @@ def test_health_ready_and_info_describe_the_batch(http):
 
 def test_state_has_joint_state_fields_and_flange_pose(http):
     s = http.get("/v1/worlds/1/state").json()
-    assert s["world"] == 1 and s["name"] == NAMES
+    assert s["world"] == 1 and s["name"] == JOINTS
     for field in ("position", "velocity", "effort", "target"):
         assert len(s[field]) == 7
     assert s["target"] == pytest.approx(HOME)

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Server, free_port, running_server
+from conftest import ELBOW, FINGER, HOME, JOINTS, Server, free_port, running_server
 
 from clients import (
     ArmfleetClient,
@@ -28,18 +28,6 @@ from clients import (
     Unreachable,
     WorldState,
 )
-
-JOINTS = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-    "finger_joint",
-]
-HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0, 0.0]
-ELBOW, FINGER = 2, 6
 
 
 class _Blocking:

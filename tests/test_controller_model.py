@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+from conftest import HOME
 
 from clients import CommandAck, ConnectionStatus, Info, JointInfo, ResetResult, WorldState
 from clients.controller import DEFAULT_JOINTS, ControllerModel, Notice
 
 URL = "http://127.0.0.1:8000"
-HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0, 0.0]
 
 
 def state(world: int, tick: int, target: list[float], position: list[float] | None = None):

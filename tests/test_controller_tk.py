@@ -15,16 +15,26 @@ import os
 import shutil
 import subprocess
 import sys
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import ROOT, Server, free_port, running_server
+from conftest import (
+    ELBOW,
+    FINGER,
+    HOME,
+    JOINTS,
+    ROOT,
+    Server,
+    free_port,
+    running_server,
+    target_after,
+    wait_for,
+)
 
-from clients import ArmfleetClient, WorldState
+from clients import ArmfleetClient
 
 pytest.importorskip("tkinter", reason="tkinter (python3-tk) is not installed")
 for _tool in ("Xvfb", "xdotool"):
@@ -34,29 +44,7 @@ for _tool in ("Xvfb", "xdotool"):
         )
 
 TITLE = "Robot Joint Controller"
-JOINTS = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-    "finger_joint",
-]
 WORLD = 1
-ELBOW, FINGER = 2, 6
-HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0, 0.0]
-
-
-def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
-    deadline = time.monotonic() + timeout
-    while True:
-        value = pred()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.05)
 
 
 @pytest.fixture(scope="module")
@@ -175,16 +163,6 @@ def app(tk_app: tuple[TkApp, Server]) -> TkApp:
 def client(tk_app: tuple[TkApp, Server]) -> Iterator[ArmfleetClient]:
     with ArmfleetClient(tk_app[1].url) as c:
         yield c
-
-
-def target_after(client: ArmfleetClient, world: int, pred: Callable[[WorldState], bool]) -> Any:
-    """The world's targets once `pred(state)` holds (commands apply at the next tick)."""
-
-    def check() -> WorldState | None:
-        state = client.state(world)
-        return state if pred(state) else None
-
-    return wait_for(check, f"world {world}'s target to change").target
 
 
 def label_shows(app: TkApp, key: str, text: str) -> None:

@@ -13,42 +13,20 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import pytest
-from conftest import ROOT, Server
+from conftest import ELBOW, FINGER, HOME, JOINTS, ROOT, Server, target_after, wait_for
 
-from clients import ArmfleetClient, WorldState
+from clients import ArmfleetClient
 
 if shutil.which("tmux") is None:
     pytest.skip("tmux is not installed (apt-get install tmux)", allow_module_level=True)
 
 WORLD = 2
-JOINTS = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-    "finger_joint",
-]
-HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0, 0.0]
-ELBOW, FINGER = 2, 6
 ROW = re.compile(r"^\s*(>?)\s*\[(\d)\] (\w+)\s+(-?\d+\.\d\d|--)\s+(-?\d+\.\d\d|--)\s*$")
-
-
-def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
-    deadline = time.monotonic() + timeout
-    while True:
-        value = pred()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.05)
 
 
 @dataclass
@@ -133,14 +111,6 @@ def client(server: Server, term: Terminal) -> Iterator[ArmfleetClient]:
         c.reset(WORLD)
         term.shows("elbow_joint", "1.57")
         yield c
-
-
-def target_after(client: ArmfleetClient, world: int, pred: Callable[[WorldState], bool]) -> Any:
-    def check() -> WorldState | None:
-        state = client.state(world)
-        return state if pred(state) else None
-
-    return wait_for(check, f"world {world}'s target to change").target
 
 
 def test_screen_shows_the_seven_joint_rows_with_live_values(

@@ -13,19 +13,9 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from conftest import ROOT, Server
+from conftest import JOINTS, ROOT, Server
 
 from clients import ArmfleetClient
-
-JOINTS = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-    "finger_joint",
-]
 
 
 def watch(url: str, *args: str) -> subprocess.Popen[str]:
