@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -31,6 +32,12 @@ class JointSpec:
     effort_limit: float
 
 
+def _frozen(values: list[float]) -> np.ndarray:
+    out = np.array(values, dtype=np.float64)
+    out.flags.writeable = False
+    return out
+
+
 @dataclass(frozen=True)
 class RobotSpec:
     """The commanded joints of the robot, in command order (six arm joints, then finger_joint)."""
@@ -38,21 +45,22 @@ class RobotSpec:
     name: str
     joints: tuple[JointSpec, ...]
 
-    @property
+    # Derived once: every command clamps against these. Read-only so that sharing is safe.
+    @cached_property
     def names(self) -> list[str]:
         return [j.name for j in self.joints]
 
-    @property
+    @cached_property
     def lower(self) -> np.ndarray:
-        return np.array([j.lower for j in self.joints])
+        return _frozen([j.lower for j in self.joints])
 
-    @property
+    @cached_property
     def upper(self) -> np.ndarray:
-        return np.array([j.upper for j in self.joints])
+        return _frozen([j.upper for j in self.joints])
 
-    @property
+    @cached_property
     def home(self) -> np.ndarray:
-        return np.array([j.home for j in self.joints])
+        return _frozen([j.home for j in self.joints])
 
     def index(self, joint: str | int) -> int:
         """Joint index from a name or an index; raises KeyError naming the valid choices."""
