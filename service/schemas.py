@@ -7,15 +7,23 @@ Joint-state fields follow sensor_msgs/JointState (`name`, `position`, `velocity`
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    StrictInt,
+    WithJsonSchema,
+    model_validator,
+)
 
+from service.robot import JOINT_NAMES
 from service.types import Mode
 
 # Strict: numbers only ("0.1" and true are refused); ints are fine.
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
-JointRef = Annotated[str | int, Field(description="joint name or index 0..6")]
 Delta = Annotated[
     float,
     Field(
@@ -27,10 +35,6 @@ Delta = Annotated[
     ),
 ]
 MAX_STEP_TICKS = 100_000
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
 
 
 # -- replies ----------------------------------------------------------------------------------
@@ -110,6 +114,67 @@ class SimReply(BaseModel):
 
 
 # -- requests ---------------------------------------------------------------------------------
+#
+# The JSON Schema of every request states every rule the server enforces (joint names, equal
+# lengths, which of increment's two shapes, strict integers), so that what the schema calls
+# valid is accepted and what it calls invalid is refused: schemathesis holds us to that
+# (tests/test_contract.py).
+
+JOINT_KEYS = (*JOINT_NAMES, *(str(i) for i in range(len(JOINT_NAMES))))  # names or "0".."6"
+MAX_BATCH_WORLDS = 64  # worlds per POST /v1/targets; the schema lists every allowed length
+
+
+def _joint_key(value: object) -> str:
+    """A joint named by its name or by its index as a string (JSON object keys are strings)."""
+    if not isinstance(value, str):
+        raise ValueError(f"a joint is named by a string, got {value!r}")
+    if value not in JOINT_KEYS:
+        raise ValueError(f"unknown joint {value!r}; joints are {list(JOINT_NAMES)} (or 0..6)")
+    return value
+
+
+def _joint_ref(value: object) -> str | int:
+    """A joint named by its name or its index 0..6 (booleans are not indices)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        if not 0 <= value < len(JOINT_NAMES):
+            raise ValueError(f"joint index {value} out of range 0..{len(JOINT_NAMES) - 1}")
+        return value
+    return _joint_key(value)
+
+
+_JOINT_KEY_SCHEMA = {
+    "type": "string",
+    "enum": list(JOINT_KEYS),
+    "description": "joint name, or its index as a string",
+}
+JointKey = Annotated[str, PlainValidator(_joint_key), WithJsonSchema(_JOINT_KEY_SCHEMA)]
+JointRef = Annotated[
+    str | int,
+    PlainValidator(_joint_ref),
+    WithJsonSchema(
+        {
+            "anyOf": [
+                {"type": "string", "enum": list(JOINT_NAMES)},
+                {"type": "integer", "minimum": 0, "maximum": len(JOINT_NAMES) - 1},
+            ],
+            "description": "joint name or index 0..6",
+        }
+    ),
+]
+WorldId = Annotated[StrictInt, Field(ge=0, description="world index")]
+
+
+def _equal_lengths(a: str, b: str, lengths: range) -> list[dict[str, Any]]:
+    """oneOf branches saying arrays `a` and `b` have the same length (JSON Schema cannot
+    compare two arrays, so every allowed length is listed)."""
+    return [
+        {"properties": {a: {"minItems": k, "maxItems": k}, b: {"minItems": k, "maxItems": k}}}
+        for k in lengths
+    ]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
 
 
 class IncrementRequest(_Strict):
@@ -117,17 +182,45 @@ class IncrementRequest(_Strict):
 
     joint: JointRef | None = None
     delta: Delta | None = None
-    deltas: dict[str, Delta] | None = None
+    deltas: Annotated[dict[JointKey, Delta], Field(min_length=1)] | None = None
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {"joint": "elbow_joint", "delta": 0.1},
-                {"deltas": {"elbow_joint": 0.1, "finger_joint": -0.1}},
-            ]
-        },
-    )
+    @staticmethod
+    def _schema(schema: dict[str, Any]) -> None:
+        # Exactly one of the two shapes, and no nulls (the validator below refuses them too).
+        props = schema.pop("properties")
+        plain = {k: _non_null(v) for k, v in props.items()}
+        schema.pop("additionalProperties", None)
+        schema["oneOf"] = [
+            {
+                "title": "one joint",
+                "type": "object",
+                "properties": {"joint": plain["joint"], "delta": plain["delta"]},
+                "required": ["joint", "delta"],
+                "additionalProperties": False,
+            },
+            {
+                "title": "several joints",
+                "type": "object",
+                "properties": {"deltas": plain["deltas"]},
+                "required": ["deltas"],
+                "additionalProperties": False,
+            },
+        ]
+        schema["examples"] = [
+            {"joint": "elbow_joint", "delta": 0.1},
+            {"deltas": {"elbow_joint": 0.1, "finger_joint": -0.1}},
+        ]
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_schema)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_nulls(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            for key in ("joint", "delta", "deltas"):
+                if key in data and data[key] is None:
+                    raise ValueError(f"`{key}` may be left out but not null")
+        return data
 
     @model_validator(mode="after")
     def _one_form(self) -> IncrementRequest:
@@ -145,16 +238,32 @@ class IncrementRequest(_Strict):
         return {self.joint: self.delta}
 
 
+def _non_null(prop: dict[str, Any]) -> dict[str, Any]:
+    """`X | None` as pydantic writes it (anyOf [X, null]) → X, keeping description/title."""
+    if "anyOf" not in prop:
+        return prop
+    kept = [p for p in prop["anyOf"] if p.get("type") != "null"]
+    out = {k: v for k, v in prop.items() if k not in ("anyOf", "default")}
+    if len(kept) == 1:
+        out.update(kept[0])
+    else:
+        out["anyOf"] = kept
+    return out
+
+
 class JointTargets(_Strict):
     """sensor_msgs/JointState-shaped: a subset of names is allowed; others keep their targets."""
 
-    name: list[str] = Field(min_length=1, max_length=7)
-    position: list[FiniteFloat] = Field(min_length=1, max_length=7)
+    name: list[JointKey] = Field(
+        min_length=1, max_length=len(JOINT_NAMES), json_schema_extra={"uniqueItems": True}
+    )
+    position: list[FiniteFloat] = Field(min_length=1, max_length=len(JOINT_NAMES))
 
     model_config = ConfigDict(
         extra="allow",  # JointState also carries header/velocity/effort; they are ignored
         json_schema_extra={
-            "examples": [{"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]}]
+            "examples": [{"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]}],
+            "oneOf": _equal_lengths("name", "position", range(1, len(JOINT_NAMES) + 1)),
         },
     )
 
@@ -173,13 +282,23 @@ class JointTargets(_Strict):
 class BatchTargets(_Strict):
     """Full 7-joint targets for many worlds in one request, applied at one tick boundary."""
 
-    worlds: list[int] = Field(min_length=1)
-    position: list[Annotated[list[FiniteFloat], Field(min_length=7, max_length=7)]]
+    worlds: list[WorldId] = Field(
+        min_length=1,
+        max_length=MAX_BATCH_WORLDS,
+        json_schema_extra={"uniqueItems": True},
+        description=f"distinct world ids, at most {MAX_BATCH_WORLDS} per request",
+    )
+    position: list[Annotated[list[FiniteFloat], Field(min_length=7, max_length=7)]] = Field(
+        min_length=1, max_length=MAX_BATCH_WORLDS, description="one row of 7 targets per world"
+    )
 
     model_config = ConfigDict(
         extra="forbid",
         json_schema_extra={
-            "examples": [{"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2}]
+            "examples": [
+                {"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2}
+            ],
+            "oneOf": _equal_lengths("worlds", "position", range(1, MAX_BATCH_WORLDS + 1)),
         },
     )
 
@@ -196,7 +315,7 @@ class BatchTargets(_Strict):
 
 
 class ResetRequest(_Strict):
-    worlds: list[int] | None = Field(default=None, description="omit for all worlds")
+    worlds: list[WorldId] | None = Field(default=None, description="omit for all worlds")
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"worlds": [0, 3]}]})
 
@@ -208,6 +327,6 @@ class ModeRequest(_Strict):
 
 
 class StepRequest(_Strict):
-    ticks: int = Field(default=1, ge=1, le=MAX_STEP_TICKS)
+    ticks: StrictInt = Field(default=1, ge=1, le=MAX_STEP_TICKS)
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"ticks": 60}]})
