@@ -25,11 +25,17 @@ app = typer.Typer(
 @app.command()
 def serve(
     worlds: Annotated[int, typer.Option(help="parallel worlds")] = 16,
+    engine: Annotated[
+        str | None,
+        typer.Option(help="warp (MuJoCo Warp, CPU or GPU; default) or mujoco (native, all cores)"),
+    ] = None,
     device: Annotated[str, typer.Option(help="warp device: cpu, cuda or cuda:N")] = "cpu",
     host: Annotated[str, typer.Option(help="bind address")] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="TCP port")] = 8000,
     mode: Annotated[Mode, typer.Option(help="how time advances")] = Mode.REALTIME,
-    shards: Annotated[int, typer.Option(help="CPU processes sharing the worlds; 0 = auto")] = 0,
+    shards: Annotated[
+        int, typer.Option(help="warp: CPU processes sharing the worlds, mujoco: threads; 0 = auto")
+    ] = 0,
     control_hz: Annotated[float, typer.Option(help="control ticks per second")] = 60.0,
     physics_dt: Annotated[float, typer.Option(help="approximate physics step [s]")] = 0.002,
     log_level: Annotated[str, typer.Option(help="debug, info, warning, error")] = "info",
@@ -40,7 +46,9 @@ def serve(
     from service.app import create_app
     from service.settings import Settings
 
+    given = {"engine": engine} if engine is not None else {}  # else ARMFLEET_ENGINE or warp
     settings = Settings(
+        **given,
         worlds=worlds,
         device=device,
         host=host,

@@ -8,17 +8,36 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from typing import TYPE_CHECKING
 
-from service.engine import WorldBatch
 from service.hub import StreamHub
 from service.loop import SimLoop
 from service.settings import Settings
-from service.shards import ShardedBatch, auto_shards
+from service.shards import auto_shards
+
+if TYPE_CHECKING:
+    from service.engine import WorldBatch
+    from service.native import NativeBatch
+    from service.shards import ShardedBatch
 
 log = logging.getLogger("armfleet")
 
 
-def build_batch(s: Settings, shards: int) -> WorldBatch | ShardedBatch:
+def build_batch(s: Settings, shards: int) -> WorldBatch | ShardedBatch | NativeBatch:
+    """The engine the settings ask for (imported here: the native one never loads warp)."""
+    if s.engine == "mujoco":
+        from service.native import NativeBatch
+
+        return NativeBatch(
+            s.worlds,
+            control_hz=s.control_hz,
+            physics_dt=s.physics_dt,
+            nthread=s.shards,
+            device=s.device,
+        )
+    from service.engine import WorldBatch
+    from service.shards import ShardedBatch
+
     kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
     if shards > 1:
         return ShardedBatch(s.worlds, shards, **kwargs)
@@ -38,7 +57,7 @@ class Runtime:
 
     async def start(self) -> None:
         s = self.settings
-        shards = s.shards or auto_shards(s.worlds, s.device)
+        shards = 1 if s.engine == "mujoco" else s.shards or auto_shards(s.worlds, s.device)
         try:
             batch = await asyncio.to_thread(build_batch, s, shards)
         except Exception as exc:
