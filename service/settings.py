@@ -1,4 +1,7 @@
-"""All service settings in one place; every field can also come from an ARMFLEET_* variable."""
+"""All service settings in one place; every field can also come from an ARMFLEET_* variable.
+
+Precedence: a `armfleet serve` option the user typed > ARMFLEET_* variable > the default here.
+"""
 
 from __future__ import annotations
 
@@ -22,17 +25,19 @@ class Settings(BaseSettings):
     )
     device: str = Field("cpu", description="warp device: cpu, cuda or cuda:N")
     host: str = Field("127.0.0.1", description="bind address (loopback by default)")
-    port: int = Field(8000, ge=0, le=65535)
+    port: int = Field(8000, ge=0, le=65535, description="TCP port")
     shards: int = Field(
         0,
         ge=0,
         le=256,
         description="warp: CPU worker processes (one per core), mujoco: threads; 0 = auto",
     )
-    mode: Mode = Mode.REALTIME
+    mode: Mode = Field(Mode.REALTIME, description="how time advances: realtime, fast or paused")
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
     physics_dt: float = Field(
         DEFAULT_PHYSICS_DT, gt=0, le=0.01, description="approximate physics step [s]"
     )
     max_body_bytes: int = Field(1 << 20, description="larger request bodies get 413")
-    log_level: Literal["debug", "info", "warning", "error"] = "info"
+    log_level: Literal["debug", "info", "warning", "error"] = Field(
+        "info", description="debug, info, warning or error"
+    )
