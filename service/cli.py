@@ -41,6 +41,7 @@ def _opt(name: str) -> Any:
 @app.command()
 def serve(
     worlds: Annotated[int | None, _opt("worlds")] = None,
+    engine: Annotated[str | None, _opt("engine")] = None,
     device: Annotated[str | None, _opt("device")] = None,
     host: Annotated[str | None, _opt("host")] = None,
     port: Annotated[int | None, _opt("port")] = None,

@@ -20,6 +20,7 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
+from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
 from service.robot import LoadedRobot, load_robot
 from service.types import Batch, Snapshot
 
@@ -115,7 +116,7 @@ class WorldBatch(Batch):
         nworld: int,
         device: str = "cpu",
         control_hz: float = 60.0,
-        physics_dt: float = 0.002,
+        physics_dt: float = DEFAULT_PHYSICS_DT,
         model_path: Path | str = SCENE_XML,
         capture: bool = True,
         nconmax: int = NCONMAX,
@@ -130,17 +131,12 @@ class WorldBatch(Batch):
         self.shards = 1
         self.control_hz = float(control_hz)
         self.tick_dt = 1.0 / self.control_hz
-        # Whole substeps per tick, physics dt adjusted so that sim time per tick is exact.
-        self.substeps = max(1, round(self.tick_dt / physics_dt))
-        self.physics_dt = self.tick_dt / self.substeps
+        self.substeps, self.physics_dt = tick_timing(self.control_hz, physics_dt)
         self.device = wp.get_device(device)
         self.device_name = str(self.device)
 
         mjm = self.robot.mjm
-        mjm.opt.timestep = self.physics_dt
-        # Conjugate gradient instead of Newton: ~15-20% less work per step on this model (measured
-        # in bench/), and every fidelity test (hold, step response, grasp, warp-vs-native) passes.
-        mjm.opt.solver = mujoco.mjtSolver.mjSOL_CG
+        configure(mjm, self.physics_dt)
         home = mujoco.MjData(mjm)
         mujoco.mj_resetDataKeyframe(mjm, home, self.robot.home_key)
         mujoco.mj_forward(mjm, home)

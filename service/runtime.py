@@ -32,7 +32,18 @@ class Surface(Protocol):
 
 
 def build_batch(s: Settings) -> Batch:
-    """The engine the settings ask for (MuJoCo Warp, split over CPU cores when it pays)."""
+    """The engine the settings ask for: native MuJoCo on every core, or MuJoCo Warp (split over
+    CPU cores when it pays). Imported here, so that the native engine never loads warp."""
+    if s.engine == "mujoco":
+        from service.native import NativeBatch
+
+        return NativeBatch(
+            s.worlds,
+            control_hz=s.control_hz,
+            physics_dt=s.physics_dt,
+            nthread=s.shards,
+            device=s.device,
+        )
     from service.engine import WorldBatch
     from service.shards import ShardedBatch, auto_shards
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from service.engine import WorldBatch
+from service.native import NativeBatch
 from service.shards import ShardedBatch
 from service.types import Batch
 
@@ -21,6 +22,7 @@ NWORLD = 4
 ENGINES: dict[str, Callable[[int], Batch]] = {
     "warp": lambda n: WorldBatch(n),
     "warp-sharded": lambda n: ShardedBatch(n, shards=2),
+    "mujoco": lambda n: NativeBatch(n, nthread=2),
 }
 
 
