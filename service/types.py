@@ -86,6 +86,9 @@ class Snapshot:
     flange_pos: flange site position in the world frame [m]                    (nworld, 3)
     flange_quat: flange site orientation, quaternion w x y z                   (nworld, 4)
     faults: how often each world has been reset for NaN or capacity overflow   (nworld,)
+    body_pos: every body's origin in the world frame [m], float32               (nworld, nbody, 3)
+    body_quat: every body's orientation, quaternion w x y z, float32           (nworld, nbody, 4)
+        (bodies in MjModel order, 0 = world; what viewers draw, see GET /v1/scene)
     """
 
     tick: int
@@ -97,6 +100,8 @@ class Snapshot:
     flange_pos: np.ndarray
     flange_quat: np.ndarray
     faults: np.ndarray
+    body_pos: np.ndarray
+    body_quat: np.ndarray
 
     @property
     def nworld(self) -> int:

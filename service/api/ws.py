@@ -23,6 +23,7 @@ from service.commands import CommandError, resolve_joints
 from service.hub import StreamHub, Subscription
 from service.loop import SimLoop
 from service.schemas import IncrementRequest, JointTargets
+from service.types import Snapshot
 
 router = APIRouter(prefix="/v1")
 
@@ -79,6 +80,57 @@ async def batch_socket(
         )
     else:
         sub = Subscription(ids, rate, lambda s: wire.batch_frame(s, ids, names), "batch")
+    await _serve(ws, loop, hub, sub, default_world=None)
+
+
+MAX_VIEW_WORLDS = 256  # what the page's fleet view draws; ~136 KB per pose frame
+
+
+@router.websocket("/ws/view")
+async def view_socket(
+    ws: WebSocket,
+    worlds: Annotated[
+        str | None, Query(description="worlds whose body poses to send, e.g. 0-63 (default: focus)")
+    ] = None,
+    focus: Annotated[int | None, Query(description="world whose joint state rides along")] = None,
+    rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
+) -> None:
+    """The browser page's socket: binary pose frames (`service/wire.py`), commands name `world`.
+
+    Each frame carries every body's pose for `worlds` and the `focus` world's joint state in
+    its header, so one socket feeds both the 3D view and the panel.
+    """
+    loop, hub = _running(ws)
+    if loop is None or hub is None:
+        return await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
+    nworld = loop.batch.nworld
+    if focus is not None and not 0 <= focus < nworld:
+        return await _refuse(ws, _CLOSE_POLICY, f"world {focus} does not exist (0..{nworld - 1})")
+    try:
+        if worlds is not None:
+            ids = wire.parse_worlds(worlds, nworld)
+        elif focus is not None:
+            ids = np.array([focus])
+        else:
+            raise ValueError("worlds: give `worlds` or `focus`")
+    except (ValueError, IndexError) as exc:
+        return await _refuse(ws, _CLOSE_POLICY, str(exc))
+    if len(ids) > MAX_VIEW_WORLDS:
+        return await _refuse(
+            ws, _CLOSE_POLICY, f"worlds: {len(ids)} asked, at most {MAX_VIEW_WORLDS} per view"
+        )
+    names = loop.spec.names
+
+    def render(snap: Snapshot) -> bytes:
+        st = loop.stats
+        stats = {
+            "mode": st.mode.value,
+            "ticks_per_s": st.ticks_per_s,
+            "realtime_factor": st.realtime_factor,
+        }
+        return wire.pose_frame(snap, ids, names, focus, stats)
+
+    sub = Subscription(ids, rate, render, f"view:{focus}", binary=True)
     await _serve(ws, loop, hub, sub, default_world=None)
 
 
