@@ -21,7 +21,7 @@ import warp as wp
 
 from mjcf import SCENE_XML
 from service.robot import LoadedRobot, load_robot
-from service.types import Snapshot
+from service.types import Batch, Snapshot
 
 log = logging.getLogger("armfleet.engine")
 
@@ -117,7 +117,7 @@ def _gather_bodies(
         out[w, b, 3 + i] = q[i]
 
 
-class WorldBatch:
+class WorldBatch(Batch):
     """N worlds of one model on one Warp device, advanced in captured control ticks.
 
     Targets live in a float64 host mirror (what was commanded, reported as `target`) and are
@@ -126,8 +126,6 @@ class WorldBatch:
     whose contact/constraint capacity overflows is reset to `home` after the tick that broke it
     and counted in `faults`; the other worlds are not touched.
     """
-
-    shards = 1  # the interface ShardedBatch shares
 
     def __init__(
         self,
@@ -146,6 +144,7 @@ class WorldBatch:
         self.robot = robot or load_robot(model_path)
         self.spec = self.robot.spec
         self.nworld = nworld
+        self.shards = 1
         self.control_hz = float(control_hz)
         self.tick_dt = 1.0 / self.control_hz
         # Whole substeps per tick, physics dt adjusted so that sim time per tick is exact.

@@ -124,7 +124,7 @@ def test_view_socket_sends_pose_frames_with_the_focus_worlds_state(srv, http):
 
 @pytest.mark.parametrize(
     ("query", "needle"),
-    [("worlds=0-9", "outside 0..3"), ("focus=7", "world 7 does not exist"), ("", "give")],
+    [("worlds=0-9", "do not exist (0..3)"), ("focus=7", "world 7 does not exist"), ("", "give")],
 )
 def test_view_socket_refuses_what_does_not_exist_with_a_reason(srv, query, needle):
     with (
