@@ -5,15 +5,19 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import AsyncIterator
+from typing import Any
 
 from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.api import health, info, scene, sim, web, worlds, ws
+from service import access
+from service.api import health, info, metrics, scene, sim, web, worlds, ws
 from service.errors import ArmfleetError, BadCommand
+from service.metrics import CommandCounter
 from service.runtime import Runtime
+from service.schemas import ANY, errors, fit_openapi
 from service.settings import Settings
 
 DESCRIPTION = """
@@ -87,12 +91,15 @@ async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
+    """The service as an ASGI app; ValueError when the settings are unsafe (see access)."""
     settings = settings or Settings()
+    access.check_bind(settings)
     runtime = Runtime(settings)
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         starting = asyncio.create_task(runtime.start())
+        runtime.install_stop_signal()
         yield
         with contextlib.suppress(BaseException):
             await asyncio.wait_for(starting, timeout=120)
@@ -110,7 +117,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.runtime = runtime
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    for module in (health, info, worlds, sim, scene, ws, web):
+    # Added last = runs first: count refused commands, then check token, origin and slots.
+    app.add_middleware(access.AccessMiddleware, settings=settings, slots=runtime.slots)
+    app.add_middleware(CommandCounter, metrics=runtime.metrics)
+    for module in (health, metrics, web):
         app.include_router(module.router)
+    # Every /v1 route can also answer 401/403 (token, origin) and 503 (not ready, client cap).
+    for module in (info, worlds, sim, scene, ws):
+        app.include_router(module.router, responses=errors(*ANY))
     web.mount_static(app)
+    generate = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            app.openapi_schema = fit_openapi(generate(), settings.worlds)
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
     return app

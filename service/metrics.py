@@ -16,11 +16,19 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest
+from prometheus_client import (
+    CollectorRegistry,
+    Counter,
+    Histogram,
+    disable_created_metrics,
+    generate_latest,
+)
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
+disable_created_metrics()  # the *_created series only double the output here
 
 # Control ticks are 16.7 ms at 60 Hz: buckets from well below to several ticks.
 _TICK_BUCKETS = (0.001, 0.002, 0.005, 0.01, 0.0167, 0.025, 0.05, 0.1, 0.25, 1.0)
@@ -55,19 +63,11 @@ class Metrics:
             buckets=_EFFECT_BUCKETS,
             registry=r,
         )
-        self.frames_skipped = Counter(
-            "armfleet_frames_skipped",
-            "state frames replaced by a newer one before a slow reader took them",
-            registry=r,
-        )
         self.faults = Counter(
             "armfleet_world_faults", "worlds reset for NaN or contact overflow", registry=r
         )
         self.engine_faults = Counter(
-            "armfleet_engine_faults", "ticks that failed (engine exception, lost shard)", registry=r
-        )
-        self.shard_restarts = Counter(
-            "armfleet_shard_restarts", "shard worker processes rebuilt after dying", registry=r
+            "armfleet_engine_faults", "ticks that failed with an engine exception", registry=r
         )
         self._levels = _Levels()
         r.register(self._levels)
@@ -89,7 +89,10 @@ class Metrics:
         self.commands.labels(str(source), kind or "unknown", result).inc()
 
     def on_tick(self, tick: int, seconds: float, faulted: int) -> None:
-        """The loop calls this on the sim thread after each tick that completed."""
+        """The loop calls this on the sim thread after each tick (faulted -1: the tick failed)."""
+        if faulted < 0:
+            self.engine_faults.inc()
+            return
         self.ticks.inc()
         self.tick_seconds.observe(seconds)
         if faulted:
@@ -142,3 +145,46 @@ class _Levels(Collector):
                 else GaugeMetricFamily(name, help_text, value=value)
             )
             yield family
+
+
+def command_kind(path: str) -> str | None:
+    """The command an HTTP write path stands for (for counting refusals), None if not one."""
+    if not path.startswith("/v1/"):
+        return None
+    last = path.rstrip("/").rsplit("/", 1)[-1]
+    return {
+        "increments": "increment",
+        "targets": "set_targets",
+        "reset": "reset",
+        "pause": "mode",
+        "resume": "mode",
+        "mode": "mode",
+        "step": "step",
+    }.get(last, "other")
+
+
+class CommandCounter:
+    """Counts HTTP writes answered with an error: 401/403/429/503 refused, other 4xx rejected.
+
+    (Accepted commands are counted by the control listener, whatever surface sent them.)
+    """
+
+    def __init__(self, app: ASGIApp, metrics: Metrics) -> None:
+        self.app = app
+        self.metrics = metrics
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):
+            return await self.app(scope, receive, send)
+        kind = command_kind(scope["path"])
+        if kind is None:
+            return await self.app(scope, receive, send)
+
+        async def counting(message: Message) -> None:
+            if message["type"] == "http.response.start" and message["status"] >= 400:
+                status = message["status"]
+                result = "refused" if status in (401, 403, 429, 503) else "rejected"
+                self.metrics.command_rejected("http", kind, result)
+            await send(message)
+
+        await self.app(scope, receive, counting)

@@ -14,7 +14,6 @@ from pydantic import (
     ConfigDict,
     Field,
     PlainValidator,
-    StrictInt,
     WithJsonSchema,
     model_validator,
 )
@@ -90,6 +89,11 @@ class WorldState(BaseModel):
     target: list[float]
     flange: Flange
     faults: int = Field(description="times this world was reset for NaN or capacity overflow")
+    pending_target: list[float] | None = Field(
+        None,
+        description="only while paused: the targets as of every accepted command, which the "
+        "next step puts in effect (`target` is what the last step used) [rad]",
+    )
 
 
 class WorldStates(BaseModel):
@@ -119,6 +123,36 @@ class SimReply(BaseModel):
     tick: int
 
 
+# -- error replies ----------------------------------------------------------------------------
+
+
+class ErrorReply(BaseModel):
+    """Every 4xx/5xx except 422: what went wrong, in words naming the field and the limit."""
+
+    detail: str
+
+
+_ERROR_MEANING = {
+    400: "the body is not JSON (or not UTF-8)",
+    401: "a write (or, with token_reads, a read) without the token",
+    403: "a write from a browser page of a foreign origin",
+    404: "no such world (the detail names the ids and the valid range)",
+    409: "the request does not fit the current state (e.g. step while not paused)",
+    413: "the body is over the size limit",
+    503: "the engine is starting, failed or is rebuilding a shard; or too many clients at once",
+}
+
+
+def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
+    """`responses=` for a route: the error statuses it can answer (422 FastAPI adds itself)."""
+    return {code: {"model": ErrorReply, "description": _ERROR_MEANING[code]} for code in codes}
+
+
+# Statuses every /v1 route can answer (engine not ready, client cap, token and origin checks).
+ANY = (401, 403, 503)
+WITH_BODY = (*ANY, 400, 413)
+
+
 # -- requests ---------------------------------------------------------------------------------
 #
 # The JSON Schema of every request states every rule the server enforces (joint names, equal
@@ -141,7 +175,9 @@ def _joint_key(value: object) -> str:
 
 
 def _joint_ref(value: object) -> str | int:
-    """A joint named by its name or its index 0..6 (booleans are not indices)."""
+    """A joint named by its name or its index 0..6 (booleans are not indices; 2.0 is 2)."""
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
     if isinstance(value, int) and not isinstance(value, bool):
         if not 0 <= value < len(JOINT_NAMES):
             raise ValueError(f"joint index {value} out of range 0..{len(JOINT_NAMES) - 1}")
@@ -168,7 +204,35 @@ JointRef = Annotated[
         }
     ),
 ]
-WorldId = Annotated[StrictInt, Field(ge=0, description="world index")]
+
+
+def json_int(minimum: int | None = None, maximum: int | None = None, description: str = "") -> Any:
+    """An integer as JSON Schema means it: 3 and 3.0 (JSON has one number type), never true/false
+    (Python's bools are ints), "3" or 3.5; with optional bounds, stated in the schema too."""
+
+    def check(value: object) -> int:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"must be an integer, got {value!r}")
+        if isinstance(value, float) and not value.is_integer():
+            raise ValueError(f"must be an integer, got {value!r}")
+        number = int(value)
+        if minimum is not None and number < minimum:
+            raise ValueError(f"must be >= {minimum}, got {number}")
+        if maximum is not None and number > maximum:
+            raise ValueError(f"must be <= {maximum}, got {number}")
+        return number
+
+    schema: dict[str, Any] = {"type": "integer"}
+    if minimum is not None:
+        schema["minimum"] = minimum
+    if maximum is not None:
+        schema["maximum"] = maximum
+    if description:
+        schema["description"] = description
+    return Annotated[int, PlainValidator(check), WithJsonSchema(schema)]
+
+
+WorldId = json_int(minimum=0, description="world index")
 
 
 def _equal_lengths(a: str, b: str, lengths: range) -> list[dict[str, Any]]:
@@ -318,7 +382,7 @@ class ModeRequest(_Strict):
 
 
 class StepRequest(_Strict):
-    ticks: StrictInt = Field(default=1, ge=1, le=MAX_STEP_TICKS)
+    ticks: json_int(minimum=1, maximum=MAX_STEP_TICKS) = 1  # type: ignore[valid-type]
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"ticks": 60}]})
 
@@ -359,3 +423,16 @@ class Scene(BaseModel):
     bodies: list[SceneBody]
     geoms: list[SceneGeom] = Field(description="geoms of groups 0-2 (MuJoCo's visible groups)")
     skipped: int = Field(description="visible geoms of types not described (height fields, SDFs)")
+
+
+def fit_openapi(spec: dict[str, Any], nworld: int) -> dict[str, Any]:
+    """Tighten the generated OpenAPI to this service's size: a batch lists distinct worlds, so
+    it never holds more than `nworld` of them; listing only the lengths that can occur keeps
+    the equal-length rule exact and the document small."""
+    batch = spec.get("components", {}).get("schemas", {}).get("BatchTargets")
+    if batch is not None:
+        most = min(nworld, MAX_BATCH_WORLDS)
+        batch["oneOf"] = _equal_lengths("worlds", "position", range(1, most + 1))
+        for key in ("worlds", "position"):
+            batch["properties"][key]["maxItems"] = most
+    return spec

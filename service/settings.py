@@ -48,7 +48,7 @@ class Settings(BaseSettings):
     insecure: bool = Field(False, description="allow a non-loopback bind without a token")
     token_reads: bool = Field(False, description="reads need the token too")
     allow_origins: list[str] = Field(
-        default_factory=list,
+        [],
         description="browser origins besides the service's own that may command (exact match)",
     )
     max_clients: int = Field(

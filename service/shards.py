@@ -10,8 +10,11 @@ the result is bit-identical to one WorldBatch of the same size (tests/test_shard
 from __future__ import annotations
 
 import contextlib
+import logging
 import multiprocessing as mp
 import os
+import threading
+import time
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -33,6 +36,8 @@ _FACTS_OF_LOCAL = (
     "capture_s",
     "capture_error",
 )
+
+log = logging.getLogger("armfleet.shards")
 
 # Below this many worlds per shard the pipe round trip (~0.1 ms) outweighs the second core.
 MIN_WORLDS_PER_SHARD = 16
@@ -75,6 +80,23 @@ def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
             return
 
 
+def _spawn(nworld: int, kwargs: dict[str, Any]) -> tuple[Any, Connection]:
+    """Start a worker process building `nworld` worlds; its first message says ready or not."""
+    ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
+    parent, child = ctx.Pipe()
+    proc = ctx.Process(target=_worker, args=(child, nworld, kwargs), daemon=True)
+    proc.start()
+    child.close()  # so that a dead worker shows up as EOFError, not a hang
+    return proc, parent
+
+
+def _ready_reply(conn: Connection) -> tuple[Any, ...]:
+    try:
+        return conn.recv()
+    except (EOFError, OSError):
+        return ("error", "worker exited while building its shard")
+
+
 class ShardedBatch(Batch):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
@@ -84,25 +106,30 @@ class ShardedBatch(Batch):
         bounds = np.linspace(0, nworld, shards + 1).astype(int)
         self._starts = bounds[:-1]
         self._sizes = np.diff(bounds)
-        ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
+        self._kwargs = kwargs
         self._conns: list[Connection] = []
-        self._procs = []
+        self._procs: list[Any] = []
         for size in self._sizes[1:]:
-            parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker, args=(child, int(size), kwargs), daemon=True)
-            proc.start()
-            child.close()  # so that a dead worker shows up as EOFError, not a hang
-            self._conns.append(parent)
+            proc, conn = _spawn(int(size), kwargs)
+            self._conns.append(conn)
             self._procs.append(proc)
         self._local = WorldBatch(int(self._sizes[0]), **kwargs)  # builds while workers build
         for conn in self._conns:
-            try:
-                reply = conn.recv()
-            except EOFError:
-                reply = ("error", "worker exited while building its shard")
+            reply = _ready_reply(conn)
             if reply[0] == "error":
                 self.close()
                 raise RuntimeError(f"shard worker failed to start: {reply[1]}")
+        # Losing a worker (killed, crashed): its worlds pause, showing their last state, while
+        # the others go on; a new worker is built in the background and swapped in at a tick
+        # boundary with the commanded targets of its worlds (their state starts from home).
+        # Index i below is the shard number (1.. for workers); the lock guards these tables.
+        self._health_lock = threading.Lock()
+        self._alive = [True] * shards
+        self._problems: dict[int, str] = {}
+        self._replacements: dict[int, tuple[Any, Connection]] = {}
+        self._last_parts: dict[int, Snapshot] = {}
+        self._fault_base = [np.zeros(int(n), dtype=np.int64) for n in self._sizes]
+        self.restarts = 0
         self.nworld = nworld
         self.shards = shards
         self.robot = self._local.robot
@@ -155,24 +182,55 @@ class ShardedBatch(Batch):
             self._pending_dirty[i] = np.setdiff1d(self._pending_dirty[i], local_ids)
 
     def step(self, ticks: int = 1) -> np.ndarray:
-        """Advance all shards together; returns the (global) worlds reset for faults."""
+        """Advance all live shards together; returns the (global) worlds reset for faults."""
+        self._swap_in()
+        sent = []
         for i, conn in enumerate(self._conns, start=1):
+            if not self._alive[i]:
+                continue  # its commands wait in _pending_* / _targets for the new worker
             dirty = self._pending_dirty[i]
             targets = self._targets[dirty + self._starts[i]]
-            conn.send(("step", self._pending_resets[i], dirty, targets, ticks))
+            try:
+                conn.send(("step", self._pending_resets[i], dirty, targets, ticks))
+            except OSError as exc:
+                self._lost(i, f"pipe broken ({exc})")
+                continue
             self._pending_resets[i] = np.zeros(0, dtype=np.int64)
             self._pending_dirty[i] = np.zeros(0, dtype=np.int64)
+            sent.append(i)
         faulted = [self._local.step(ticks)]
-        for i, conn in enumerate(self._conns, start=1):
-            faulted.append(conn.recv() + self._starts[i])
+        for i in sent:
+            try:
+                faulted.append(self._conns[i - 1].recv() + self._starts[i])
+            except (EOFError, OSError):
+                self._lost(i, self._exit_reason(i))
         out = np.concatenate(faulted)
         self._targets[out] = self.home_target
         return out
 
     def snapshot(self) -> Snapshot:
-        for conn in self._conns:
-            conn.send(("snapshot",))
-        parts = [self._local.snapshot()] + [conn.recv() for conn in self._conns]
+        self._swap_in()
+        asked = []
+        for i, conn in enumerate(self._conns, start=1):
+            if self._alive[i]:
+                try:
+                    conn.send(("snapshot",))
+                    asked.append(i)
+                except OSError as exc:
+                    self._lost(i, f"pipe broken ({exc})")
+        parts = [self._local.snapshot()]
+        for i in range(1, self.shards):
+            part = None
+            if i in asked:
+                try:
+                    part = self._conns[i - 1].recv()
+                except (EOFError, OSError):
+                    self._lost(i, self._exit_reason(i))
+            if part is None:  # lost: its worlds show their last state until the rebuild
+                part = self._last_parts[i]
+            else:
+                self._last_parts[i] = part
+            parts.append(part)
         fields = (
             "sim_time",
             "position",
@@ -187,7 +245,9 @@ class ShardedBatch(Batch):
         return Snapshot(
             tick=parts[0].tick,
             target=self._targets.copy(),
-            faults=np.concatenate([p.faults for p in parts]),
+            faults=np.concatenate(
+                [p.faults + b for p, b in zip(parts, self._fault_base, strict=True)]
+            ),
             **joined,
         )
 
@@ -211,7 +271,88 @@ class ShardedBatch(Batch):
         else:
             self._conns[shard - 1].send(("write_qpos", local, qpos))
 
+    # -- losing and rebuilding workers ------------------------------------------------------
+
+    def health(self) -> list[str]:
+        """Problems now (empty when every shard runs); notices dead workers between ticks too.
+
+        Cheap (a non-blocking wait per worker), so a watchdog may call it often from any thread.
+        """
+        for i, proc in enumerate(self._procs, start=1):
+            if self._alive[i] and proc.exitcode is not None:
+                self._lost(i, self._exit_reason(i))
+        with self._health_lock:
+            return [self._problems[i] for i in sorted(self._problems)]
+
+    def _exit_reason(self, i: int) -> str:
+        proc = self._procs[i - 1]
+        proc.join(timeout=0.5)
+        code = proc.exitcode
+        if code is None:
+            return "its pipe closed"
+        return f"killed by signal {-code}" if code < 0 else f"exited with status {code}"
+
+    def _lost(self, i: int, why: str) -> None:
+        """Mark worker shard i dead and start building its replacement (once)."""
+        with self._health_lock:
+            if not self._alive[i]:
+                return
+            self._alive[i] = False
+            lo, hi = int(self._starts[i]), int(self._starts[i] + self._sizes[i] - 1)
+            self._problems[i] = f"shard {i} (worlds {lo}..{hi}) lost: {why}; rebuilding"
+        log.error("shard %d (worlds %d..%d) lost: %s; rebuilding it", i, lo, hi, why)
+        threading.Thread(
+            target=self._rebuild, args=(i,), name=f"armfleet-rebuild-{i}", daemon=True
+        ).start()
+
+    def _rebuild(self, i: int) -> None:
+        """Build a new worker for shard i (off the sim thread); it is swapped in by _swap_in."""
+        for attempt in range(1, 4):
+            proc, conn = _spawn(int(self._sizes[i]), self._kwargs)
+            reply = _ready_reply(conn)
+            if reply[0] == "ready":
+                with self._health_lock:
+                    self._replacements[i] = (proc, conn)
+                return
+            proc.kill()
+            with self._health_lock:
+                self._problems[i] = f"shard {i} rebuild attempt {attempt} failed: {reply[1]}"
+            time.sleep(1.0)
+        log.error("shard %d could not be rebuilt: %s", i, self._problems.get(i))
+
+    def _swap_in(self) -> None:
+        """Put rebuilt workers in place at a tick boundary (sim thread), targets restored."""
+        if not self._replacements:
+            return
+        with self._health_lock:
+            ready, self._replacements = self._replacements, {}
+        for i, (proc, conn) in ready.items():
+            old_conn, old_proc = self._conns[i - 1], self._procs[i - 1]
+            with contextlib.suppress(OSError):
+                old_conn.close()
+            if old_proc.is_alive():
+                old_proc.kill()
+            self._conns[i - 1], self._procs[i - 1] = conn, proc
+            # The new worker starts at home: every world of it gets its commanded target back,
+            # and the loss counts as one fault for each of them.
+            self._pending_resets[i] = np.zeros(0, dtype=np.int64)
+            self._pending_dirty[i] = np.arange(int(self._sizes[i]), dtype=np.int64)
+            last = self._last_parts.get(i)
+            if last is not None:
+                self._fault_base[i] = self._fault_base[i] + last.faults + 1
+            with self._health_lock:
+                self._alive[i] = True
+                self._problems.pop(i, None)
+                self.restarts += 1
+            log.warning("shard %d rebuilt and back in the batch", i)
+
     def close(self) -> None:
+        with self._health_lock:
+            self._replacements, spare = {}, self._replacements
+        for proc, conn in spare.values():
+            with contextlib.suppress(OSError):
+                conn.send(("stop",))
+            proc.kill()
         for conn in self._conns:
             with contextlib.suppress(BrokenPipeError, OSError):
                 conn.send(("stop",))
