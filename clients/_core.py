@@ -173,6 +173,8 @@ class WorldState:
     flange_position: np.ndarray
     flange_quaternion: np.ndarray  # w x y z
     faults: int
+    # Only while the service is paused: targets as of every accepted command (the next step's).
+    pending_target: np.ndarray | None = None
 
     def index(self, joint: JointRef) -> int:
         return joint_index(self.name, joint)
@@ -191,6 +193,7 @@ class WorldState:
             flange_position=_arr(d["flange"]["position"]),
             flange_quaternion=_arr(d["flange"]["quaternion"]),
             faults=int(d["faults"]),
+            pending_target=_arr(d["pending_target"]) if "pending_target" in d else None,
         )
 
 
@@ -209,6 +212,7 @@ class BatchStates:
     flange_position: np.ndarray  # (n, 3)
     flange_quaternion: np.ndarray  # (n, 4) w x y z
     faults: np.ndarray  # (n,) int
+    pending_target: np.ndarray | None = None  # (n, 7), only while the service is paused
 
     def __len__(self) -> int:
         return int(self.worlds.shape[0])
@@ -234,6 +238,7 @@ class BatchStates:
             flange_position=self.flange_position[i],
             flange_quaternion=self.flange_quaternion[i],
             faults=int(self.faults[i]),
+            pending_target=None if self.pending_target is None else self.pending_target[i],
         )
 
     def __iter__(self):
@@ -256,6 +261,9 @@ class BatchStates:
             flange_position=_arr2([r["flange"]["position"] for r in rows], 3),
             flange_quaternion=_arr2([r["flange"]["quaternion"] for r in rows], 4),
             faults=np.array([r["faults"] for r in rows], dtype=np.int64),
+            pending_target=_arr2([r["pending_target"] for r in rows], len(names))
+            if rows and "pending_target" in rows[0]
+            else None,
         )
 
     @classmethod
