@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
+import json
 import subprocess
 import sys
 
+import httpx
 import pytest
-from conftest import ROOT
+from conftest import ROOT, running_server, wait_for
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
 
 from service import access
 from service.settings import Settings
@@ -112,3 +117,114 @@ def test_serve_refuses_a_public_address_without_a_token():
     )
     assert proc.returncode != 0
     assert "--token" in proc.stderr + proc.stdout
+
+
+# --------------------------------------------------------------------------- a real server
+
+RATE, BURST, MAX_CLIENTS = 20, 5, 4
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+PRESS = {"joint": "elbow_joint", "delta": 0.01}
+
+
+@pytest.fixture(scope="module")
+def guarded(tmp_path_factory):
+    extra = ("--token", TOKEN, "--command-rate", str(RATE), "--command-burst", str(BURST))
+    extra += ("--max-clients", str(MAX_CLIENTS))
+    with running_server(tmp_path_factory.mktemp("guarded"), worlds=2, extra=extra) as srv:
+        yield srv
+
+
+def _command(ws, msg_id) -> dict:
+    ws.send(json.dumps({"op": "increment", **PRESS, "id": msg_id}))
+    while True:
+        reply = json.loads(ws.recv(timeout=10))
+        if reply["op"] in ("ack", "error"):
+            return reply
+
+
+def test_http_writes_need_the_token_reads_do_not(guarded):
+    url = f"{guarded.url}/v1/worlds/0/increments"
+    r = httpx.post(url, json=PRESS)
+    assert r.status_code == 401 and r.headers["www-authenticate"] == "Bearer"
+    assert "token" in r.json()["detail"]
+    assert httpx.post(url, json=PRESS, headers={"Authorization": "Bearer nope"}).status_code == 401
+    assert httpx.post(url, json=PRESS, headers=AUTH).status_code == 200
+    assert httpx.get(f"{guarded.url}/v1/worlds/0/state").status_code == 200
+    foreign = {**AUTH, "Origin": "https://evil.example"}
+    assert httpx.post(url, json=PRESS, headers=foreign).status_code == 403
+
+
+def test_websocket_commands_need_the_token_by_query_header_or_subprotocol(guarded):
+    url = f"{guarded.ws_url}/v1/ws/worlds/1?rate=2"
+    with connect(url) as ws:
+        assert json.loads(ws.recv(timeout=10))["op"] == "state"  # watching is open
+        refused = _command(ws, "no-token")
+        assert refused["op"] == "error" and refused["id"] == "no-token"
+        assert "token" in refused["detail"]
+    with connect(f"{url}&token={TOKEN}") as ws:
+        assert _command(ws, 1)["op"] == "ack"
+    with connect(url, additional_headers=AUTH) as ws:
+        assert _command(ws, 2)["op"] == "ack"
+    with connect(url, subprotocols=[f"armfleet.token.{TOKEN}", "armfleet"]) as ws:
+        assert ws.subprotocol == "armfleet"
+        assert _command(ws, 3)["op"] == "ack"
+
+
+def test_a_browser_socket_from_a_foreign_origin_cannot_command(guarded):
+    url = f"{guarded.ws_url}/v1/ws/worlds/1?rate=2&token={TOKEN}"
+    with connect(url, origin="https://evil.example") as ws:
+        refused = _command(ws, "x")
+        assert refused["op"] == "error" and "origin" in refused["detail"]
+    own = guarded.url  # the page the service itself serves
+    with connect(url, origin=own) as ws:
+        assert _command(ws, "y")["op"] == "ack"
+
+
+def test_a_client_over_the_command_rate_gets_errors_then_1008(guarded):
+    with connect(f"{guarded.ws_url}/v1/ws/worlds/0?rate=1&token={TOKEN}") as ws:
+        for i in range(3 * BURST + 5):
+            ws.send(json.dumps({"op": "increment", **PRESS, "id": i}))
+        replies = []
+        with pytest.raises(ConnectionClosed):
+            while True:
+                msg = json.loads(ws.recv(timeout=10))
+                if msg["op"] in ("ack", "error"):
+                    replies.append(msg)
+        assert ws.close_code == 1008
+    assert [r["id"] for r in replies][: BURST + 1] == list(range(BURST + 1))
+    assert all(r["op"] == "ack" for r in replies[:BURST])
+    assert replies[BURST]["op"] == "error" and "rate" in replies[BURST]["detail"]
+    # Other clients never noticed: a fresh socket commands at once.
+    with connect(f"{guarded.ws_url}/v1/ws/worlds/0?rate=1&token={TOKEN}") as ws:
+        assert _command(ws, "after")["op"] == "ack"
+
+
+def test_the_client_cap_refuses_sockets_with_1013_and_http_with_503(guarded):
+    with contextlib.ExitStack() as stack:
+        sockets = [
+            stack.enter_context(connect(f"{guarded.ws_url}/v1/ws/worlds/0?rate=1"))
+            for _ in range(MAX_CLIENTS)
+        ]
+        for ws in sockets:
+            ws.recv(timeout=10)
+        with connect(f"{guarded.ws_url}/v1/ws/worlds/0?rate=1") as extra:
+            with pytest.raises(ConnectionClosed):
+                extra.recv(timeout=10)
+            assert extra.close_code == 1013
+        r = httpx.get(f"{guarded.url}/v1/info")
+        assert r.status_code == 503 and "clients" in r.json()["detail"]
+        assert httpx.get(f"{guarded.url}/readyz").status_code == 200  # probes still answer
+    wait_for(lambda: httpx.get(f"{guarded.url}/v1/info").status_code == 200, "a free slot")
+
+
+def test_token_reads_closes_reads_too(tmp_path):
+    with running_server(tmp_path, worlds=1, extra=("--token", TOKEN, "--token-reads")) as srv:
+        assert httpx.get(f"{srv.url}/v1/info").status_code == 401
+        assert httpx.get(f"{srv.url}/metrics").status_code == 401
+        assert httpx.get(f"{srv.url}/v1/info", headers=AUTH).status_code == 200
+        with connect(f"{srv.ws_url}/v1/ws/worlds/0") as ws:
+            with pytest.raises(ConnectionClosed):
+                ws.recv(timeout=10)
+            assert ws.close_code == 1008
+        with connect(f"{srv.ws_url}/v1/ws/worlds/0?token={TOKEN}") as ws:
+            assert json.loads(ws.recv(timeout=10))["op"] == "state"
