@@ -11,7 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.api import health, info, sim, worlds, ws
+from service.api import health, info, scene, sim, web, worlds, ws
 from service.errors import ArmfleetError, BadCommand
 from service.ros import rosbridge
 from service.ros.topics import TopicMap, parse_world_list
@@ -31,6 +31,11 @@ WebSocket streams (not listed by OpenAPI):
   `{"op": "error", "id", "detail"}`.
 * `/v1/ws?worlds=0-63&rate=10`: `{"op": "states", ...}` frames, column-wise over the listed
   worlds; commands carry `"world"`.
+* `/v1/ws/view?worlds=0-63&focus=3&rate=30`: the browser page's socket: binary pose frames
+  (every body of every listed world, plus the focus world's state; layout in service/wire.py)
+  drawn with the geoms of `GET /v1/scene`; commands carry `"world"`.
+
+The browser page is served at `/`.
 """
 
 
@@ -110,8 +115,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         TopicMap(parse_world_list(settings.ros2_worlds, settings.worlds)), settings.ros2_rate
     )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    for module in (health, info, worlds, sim, ws, rosbridge):
+    for module in (health, info, worlds, sim, scene, ws, web, rosbridge):
         app.include_router(module.router)
+    web.mount_static(app)
     return app
 
 

@@ -273,3 +273,11 @@ def test_nan_becomes_null_in_json() -> None:
     from service.ros import topics
 
     assert topics._floats(np.array([1.0, math.nan, math.inf])) == [1.0, None, None]
+
+
+def test_root_serves_the_page_to_browsers_and_rosbridge_to_websockets(
+    server: Server, ros: roslibpy.Ros
+) -> None:
+    page = httpx.get(server.url + "/")
+    assert page.status_code == 200 and "text/html" in page.headers["content-type"]
+    assert ros.is_connected  # roslibpy dialled ws://host:port/
