@@ -101,6 +101,23 @@ def _gather_state(
         fault_out[w] = 0
 
 
+@wp.kernel(enable_backward=False)
+def _gather_bodies(
+    xpos: wp.array2d(dtype=wp.vec3),
+    xquat: wp.array2d(dtype=wp.quat),
+    out: wp.array3d(dtype=float),
+):
+    # Every body's world pose, for viewers: position, then the quaternion as MuJoCo stores it
+    # (w, x, y, z; mujoco_warp keeps MuJoCo's component order in its quat arrays).
+    w, b = wp.tid()
+    p = xpos[w, b]
+    q = xquat[w, b]
+    for i in range(3):
+        out[w, b, i] = p[i]
+    for i in range(4):
+        out[w, b, 3 + i] = q[i]
+
+
 class WorldBatch(Batch):
     """N worlds of one model on one Warp device, advanced in captured control ticks.
 
@@ -156,6 +173,7 @@ class WorldBatch(Batch):
             self._qpos_adr = wp.array(self.robot.qpos_adr, dtype=int)
             self._dof_adr = wp.array(self.robot.dof_adr, dtype=int)
             self._state = wp.zeros((nworld, _NCOL), dtype=float)
+            self._bodies = wp.zeros((nworld, mjm.nbody, 7), dtype=float)
             self._fault = wp.zeros(nworld, dtype=int)
             self._nfault = wp.zeros(1, dtype=int)
             # One uncaptured tick compiles (or loads from cache) every kernel the tick uses;
@@ -199,6 +217,13 @@ class WorldBatch(Batch):
                 CAPACITY_OVERFLOWS,
             ],
             outputs=[self._state, self._fault, self._nfault],
+        )
+        # One more launch per tick (~nbody x 7 floats per world) so viewers get every body.
+        wp.launch(
+            _gather_bodies,
+            dim=(self.nworld, self._bodies.shape[1]),
+            inputs=[d.xpos, d.xquat],
+            outputs=[self._bodies],
         )
 
     def _capture(self) -> None:
@@ -276,8 +301,10 @@ class WorldBatch(Batch):
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, copied to host memory."""
         state = self._state.numpy()
+        bodies = self._bodies.numpy()
         if self.device.is_cpu:
-            state = state.copy()  # on the CPU .numpy() is a view the next tick overwrites
+            # On the CPU .numpy() is a view the next tick overwrites.
+            state, bodies = state.copy(), bodies.copy()
         return Snapshot(
             tick=self._tick,
             sim_time=self._world_ticks * self.tick_dt,
@@ -288,6 +315,8 @@ class WorldBatch(Batch):
             flange_pos=state[:, _FPOS],
             flange_quat=state[:, _FQUAT],
             faults=self._faults.copy(),
+            body_pos=bodies[:, :, :3],
+            body_quat=bodies[:, :, 3:],
         )
 
     # -- test and diagnostics hooks ---------------------------------------------------------

@@ -173,7 +173,16 @@ class ShardedBatch(Batch):
         for conn in self._conns:
             conn.send(("snapshot",))
         parts = [self._local.snapshot()] + [conn.recv() for conn in self._conns]
-        fields = ("sim_time", "position", "velocity", "effort", "flange_pos", "flange_quat")
+        fields = (
+            "sim_time",
+            "position",
+            "velocity",
+            "effort",
+            "flange_pos",
+            "flange_quat",
+            "body_pos",
+            "body_quat",
+        )
         joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}
         return Snapshot(
             tick=parts[0].tick,

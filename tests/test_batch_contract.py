@@ -9,9 +9,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 
+import mujoco
 import numpy as np
 import pytest
 
+from mjcf import SCENE_XML
 from service.engine import WorldBatch
 from service.native import NativeBatch
 from service.shards import ShardedBatch
@@ -63,6 +65,28 @@ def test_snapshot_has_the_documented_shapes(fresh):
     assert snap.flange_pos.shape == (NWORLD, 3) and snap.flange_quat.shape == (NWORLD, 4)
     assert snap.sim_time.shape == snap.faults.shape == (NWORLD,)
     np.testing.assert_allclose(snap.sim_time, 2 * batch.tick_dt)
+    nbody = batch.robot.mjm.nbody
+    assert snap.body_pos.shape == (NWORLD, nbody, 3)
+    assert snap.body_quat.shape == (NWORLD, nbody, 4)
+
+
+def test_snapshot_body_poses_are_native_kinematics_of_the_same_qpos(fresh):
+    """Every body's pose (what the page draws) is MuJoCo's xpos/xquat at the snapshot's tick."""
+    batch, _ = fresh
+    targets = np.tile(batch.home_target, (NWORLD, 1))
+    targets[:, 0] += 0.2 * np.arange(NWORLD)  # a different pose per world (both shards)
+    batch.set_targets(np.arange(NWORLD), targets)
+    batch.step(15)
+    snap = batch.snapshot()
+    mjm = mujoco.MjModel.from_xml_path(str(SCENE_XML))
+    data = mujoco.MjData(mjm)
+    for w, qpos in enumerate(batch.qpos()):
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(mjm, data)
+        np.testing.assert_allclose(snap.body_pos[w], data.xpos, atol=1e-5)
+        np.testing.assert_allclose(snap.body_quat[w], data.xquat, atol=1e-5)
+    gripper = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_BODY, "gripper_base")
+    assert len({tuple(np.round(p, 3)) for p in snap.body_pos[:, gripper]}) == NWORLD
 
 
 def test_targets_move_only_the_named_worlds(fresh):
