@@ -1,6 +1,6 @@
 """Section 4: command latency over the WebSocket, in realtime mode.
 
-A controller on ``/v1/ws/worlds/{w}`` (a frame every tick) sends ``increment`` on
+A controller on ``/v1/ws/worlds/{w}?rate=60`` (a frame every tick) sends ``increment`` on
 ``wrist_3_joint``, alternating +0.1 / -0.1 so the arm stays in range, and measures from the send:
 
 * ``ack``: the ack reply;
@@ -34,6 +34,7 @@ JOINT_INDEX = 5  # position in the frames' name list (service.robot.JOINT_NAMES)
 DELTA = 0.1
 MOVED = 0.01
 COMMAND_TIMEOUT = 10.0
+RATE = 60.0  # frames/s each controller asks for: every tick of the 60 Hz loop
 
 
 def controllers_for(nworld: int) -> int:
@@ -109,7 +110,10 @@ async def _measure(server: common.Server, commands: int, controllers: int, budge
     deadline = time.perf_counter() + budget
     t0 = time.perf_counter()
     counts = await asyncio.gather(
-        *(_controller(f"{server.ws_url}/v1/ws/worlds/{w}", per[w], out, deadline) for w in range(k))
+        *(
+            _controller(f"{server.ws_url}/v1/ws/worlds/{w}?rate={RATE:g}", per[w], out, deadline)
+            for w in range(k)
+        )
     )
     wall = time.perf_counter() - t0
     total = {key: sum(c[key] for c in counts) for key in counts[0]}
@@ -179,7 +183,7 @@ def run(
     data = {
         "device": device,
         "mode": "realtime",
-        "socket": "/v1/ws/worlds/{w} (a frame every tick)",
+        "socket": f"/v1/ws/worlds/{{w}}?rate={RATE:g} (a frame every tick)",
         "commands_per_size": commands,
         "sizes": list(sizes),
         "results": results,
