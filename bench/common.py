@@ -247,10 +247,10 @@ def served(
     """`python -m service.cli serve` on `device` via clients.testing.serve (stopped with SIGINT)."""
     from clients.testing import serve
 
-    full_env = {**os.environ, **env} if env else None
     args = ("--device", device, "--log-level", "warning")
     t0 = time.perf_counter()
-    with serve(worlds=nworld, mode=mode, extra_args=args, env=full_env) as server:
+    # A cold kernel cache compiles every kernel: minutes on a small CPU, more for CUDA.
+    with serve(nworld, mode, extra_args=args, env=env, ready_timeout=900) as server:
         ready_s = time.perf_counter() - t0
         srv = Served(server, server.url, server.ws_url, nworld, ready_s)
         srv.info = srv.get_info()[1]

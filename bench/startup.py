@@ -8,7 +8,8 @@
   ``--quick``).
 
 Both include the Python interpreter's start and imports, building the worlds and capturing the
-tick; it is the time clients.testing.serve takes to return (it polls /readyz).
+tick: it is the time clients.testing.serve takes to return, so its /readyz polling interval
+(0.2 s) is the resolution.
 
 Standalone: ``python -m bench.startup --quick``.
 """

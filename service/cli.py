@@ -134,7 +134,9 @@ def bench(
     if list_:
         print(runner.listing(registry.discover()))
         return
-    runner.run(section or None, quick, device, worlds or None, out)
+    report = runner.run(section or None, quick, device, worlds or None, out)
+    if report["errors"]:
+        raise typer.Exit(1)
 
 
 if __name__ == "__main__":
