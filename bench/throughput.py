@@ -52,11 +52,11 @@ DESCRIPTIONS = {
 }
 
 
-def physics_dt(control_hz: float = common.CONTROL_HZ, dt: float = common.PHYSICS_DT) -> tuple:
-    """(substeps, physics_dt) exactly as WorldBatch derives them."""
-    tick_dt = 1.0 / control_hz
-    substeps = max(1, round(tick_dt / dt))
-    return substeps, tick_dt / substeps
+def physics_dt() -> tuple[int, float]:
+    """(substeps, physics_dt) of the engine's defaults, exactly as WorldBatch derives them."""
+    from service.physics import tick_timing
+
+    return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
 
 
 # -- the engines -------------------------------------------------------------------------------

@@ -51,6 +51,10 @@ def serve(
     control_hz: Annotated[float | None, _opt("control_hz")] = None,
     physics_dt: Annotated[float | None, _opt("physics_dt")] = None,
     log_level: Annotated[str | None, _opt("log_level")] = None,
+    ros2: Annotated[bool | None, _opt("ros2")] = None,
+    ros2_rate: Annotated[float | None, _opt("ros2_rate")] = None,
+    ros2_worlds: Annotated[str | None, _opt("ros2_worlds")] = None,
+    ros2_network: Annotated[bool | None, _opt("ros2_network")] = None,
 ) -> None:
     """Start the service: N worlds, a real-time loop, REST + WebSocket on http://HOST:PORT."""
     given = {name: value for name, value in locals().items() if value is not None}

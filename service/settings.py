@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.physics import DEFAULT_PHYSICS_DT
@@ -41,3 +41,20 @@ class Settings(BaseSettings):
     log_level: Literal["debug", "info", "warning", "error"] = Field(
         "info", description="debug, info, warning or error"
     )
+    ros2: bool = Field(False, description="join the ROS 2 graph over DDS (Cyclone DDS)")
+    ros2_rate: float = Field(
+        60.0, gt=0, le=1000, description="/joint_states and /clock rate over DDS and rosbridge [Hz]"
+    )
+    ros2_worlds: str = Field(
+        "", description="worlds with /world_N/ topics, e.g. 0-7 (world 0 always has /joint_*)"
+    )
+    ros2_network: bool = Field(
+        False, description="open DDS to the network (default: loopback only, like the HTTP bind)"
+    )
+
+    @model_validator(mode="after")
+    def _ros2_worlds_exist(self) -> Settings:
+        from service.ros.topics import parse_world_list
+
+        parse_world_list(self.ros2_worlds, self.worlds)  # ValueError names the bad part
+        return self

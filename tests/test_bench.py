@@ -11,7 +11,8 @@ import math
 
 import pytest
 
-from bench import registry, runner, throughput
+from bench import common, registry, runner, throughput
+from service.physics import tick_timing
 
 
 def test_every_section_is_registered_once_with_a_stable_file_name():
@@ -41,7 +42,8 @@ def test_throughput_section_through_the_runner(tmp_path):
     assert data["errors"] == {}
     assert data["section"] == "throughput" and data["number"] == 1 and data["quick"]
     assert set(data["engines"]) == set(throughput.ENGINES)
-    assert data["substeps"] == 8 and math.isclose(data["physics_dt"], 1 / 480)
+    substeps, dt = tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
+    assert data["substeps"] == substeps and math.isclose(data["physics_dt"], dt)
     assert math.isclose(data["model"]["timestep"], data["physics_dt"])
     assert data["machine"]["mujoco"] and data["machine"]["warp"]
     for n in ("1", "4"):
