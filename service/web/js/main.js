@@ -19,7 +19,16 @@ const page = {
   shown: '',
   lastAck: null,
   // What tests and the bench read (window.armfleet): counts only, nothing to drive.
-  stats: { connected: false, tick: null, frames: 0, renders: 0, fps: 0, streamFps: 0, firstRenderMs: null },
+  stats: {
+    connected: false,
+    tick: null,
+    frames: 0,
+    renders: 0,
+    fps: 0,
+    streamFps: 0,
+    firstRenderMs: null,
+    softwareGL: false,
+  },
 };
 window.armfleet = page.stats;
 
@@ -121,18 +130,25 @@ function go() {
   conn.open({ worlds, focus: w, rate: page.rate });
 }
 
+// Text in the panel changes at most this often (each change costs a layout and a paint).
+const PANEL_MS = 100;
+let panelShown = 0;
+
 function onFrame(f) {
   const s = page.stats;
   s.frames++;
   s.tick = f.header.tick;
+  const now = performance.now();
   const key = f.worlds.join(',');
   if (key !== page.shown) {
     page.shown = key;
     track.reset();
     viewer.setWorlds(Array.from(f.worlds), f.poses.subarray(0, f.header.nbody * 7));
   }
-  track.push(f.poses, performance.now() / 1000);
+  track.push(f.poses, now / 1000);
   viewer.setFaults(f.faults);
+  if (now - panelShown < PANEL_MS) return;
+  panelShown = now;
   const st = f.header.focus;
   if (st && st.world === page.world) {
     panel.showMeasured(st.position);
@@ -141,19 +157,26 @@ function onFrame(f) {
   }
   const m = f.header.stats;
   const speed = m ? ` · RTF ${m.realtime_factor.toFixed(2)} · ${m.mode}` : '';
-  panel.status(`connected · world ${page.world} · tick ${s.tick}${speed} · ${s.fps} fps`);
+  const gl = s.softwareGL ? ' (software GL)' : '';
+  panel.status(`connected · world ${page.world} · tick ${s.tick}${speed} · ${s.fps} fps${gl}`);
 }
 
-let windowStart = performance.now(), windowRenders = 0, windowFrames = 0;
+let windowStart = performance.now(), windowRenders = 0, windowFrames = 0, lastDraw = 0;
+// With software WebGL every frame drawn is CPU time (shared with the simulation when both run
+// on one machine): draw at most at the stream's rate there instead of at the display's.
+const minDrawMs = () => (viewer.software ? 1000 / page.rate - 2 : 0);
 
 function animate() {
+  requestAnimationFrame(animate);
   const now = performance.now();
+  if (now - lastDraw < minDrawMs()) return;
   if (track.cur && track.moving) {
     const { poses, done } = track.sample(now / 1000);
     viewer.setPoses(poses);
     if (done) track.moving = false;
   }
   if (viewer.render()) {
+    lastDraw = now;
     page.stats.renders++;
     if (page.stats.firstRenderMs === null) page.stats.firstRenderMs = Math.round(now);
   }
@@ -165,7 +188,6 @@ function animate() {
     windowRenders = page.stats.renders;
     windowFrames = page.stats.frames;
   }
-  requestAnimationFrame(animate);
 }
 
 document.addEventListener('visibilitychange', () => (document.hidden ? conn.pause() : conn.resume()));
@@ -173,6 +195,7 @@ document.addEventListener('visibilitychange', () => (document.hidden ? conn.paus
 async function main() {
   const [info, scene] = [await fetchReady('/v1/info'), await fetchReady('/v1/scene')];
   page.info = info;
+  page.stats.softwareGL = viewer.software;
   panel.setJoints(info.joints.map((j) => j.name));
   viewer.setScene(scene);
   requestAnimationFrame(animate);
