@@ -30,6 +30,10 @@ def serve(
     port: Annotated[int, typer.Option(help="TCP port")] = 8000,
     mode: Annotated[Mode, typer.Option(help="how time advances")] = Mode.REALTIME,
     shards: Annotated[int, typer.Option(help="CPU processes sharing the worlds; 0 = auto")] = 0,
+    ray: Annotated[
+        str | None,
+        typer.Option(help="shards on Ray actors: auto, local or HOST:PORT (a head node)"),
+    ] = None,
     control_hz: Annotated[float, typer.Option(help="control ticks per second")] = 60.0,
     physics_dt: Annotated[float, typer.Option(help="approximate physics step [s]")] = 0.002,
     log_level: Annotated[str, typer.Option(help="debug, info, warning, error")] = "info",
@@ -47,6 +51,7 @@ def serve(
         port=port,
         mode=mode,
         shards=shards,
+        ray=ray,
         control_hz=control_hz,
         physics_dt=physics_dt,
         log_level=log_level,

@@ -20,6 +20,10 @@ log = logging.getLogger("armfleet")
 
 def build_batch(s: Settings, shards: int) -> WorldBatch | ShardedBatch:
     kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
+    if s.ray:
+        from service.ray_shards import RayBatch  # imports Ray only when asked for
+
+        return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
     if shards > 1:
         return ShardedBatch(s.worlds, shards, **kwargs)
     return WorldBatch(s.worlds, **kwargs)
@@ -56,8 +60,8 @@ class Runtime:
             s.port,
             batch.nworld,
             batch.device_name,
-            shards,
-            "" if shards == 1 else "s",
+            batch.shards,
+            "" if batch.shards == 1 else "s",
             batch.substeps,
             batch.physics_dt * 1e3,
             batch.control_hz,

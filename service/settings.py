@@ -20,6 +20,12 @@ class Settings(BaseSettings):
     shards: int = Field(
         0, ge=0, le=256, description="CPU worker shards (one per core); 0 = auto by batch size"
     )
+    ray: str | None = Field(
+        None,
+        description="put the shards on Ray actors: auto (the cluster `ray start` runs here), "
+        "local (a private instance on 127.0.0.1) or HOST:PORT of a head node; "
+        "unset = in-process shards",
+    )
     mode: Mode = Mode.REALTIME
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
     physics_dt: float = Field(0.002, gt=0, le=0.01, description="approximate physics step [s]")
