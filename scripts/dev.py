@@ -65,6 +65,19 @@ def ensure_test_tools() -> None:
     run(*sudo, "apt-get", "install", "-y", "-qq", "--no-install-recommends", *missing, env=env)
 
 
+def ensure_js_tools() -> None:
+    """roslib.js for the rosbridge tests, pinned by tests/js/package-lock.json."""
+    js = ROOT / "tests" / "js"
+    if (js / "node_modules" / "roslib").exists():
+        return
+    npm = shutil.which("npm")
+    if npm is None:
+        say("npm not found: the roslib.js tests will be skipped (install Node 20+ to run them)")
+        return
+    say("installing roslib.js for the rosbridge tests (npm ci in tests/js)")
+    subprocess.run([npm, "ci", "--no-audit", "--no-fund"], cwd=js, check=True)
+
+
 def main(argv: list[str]) -> int:
     if not argv or argv[0] not in ("serve", "test"):
         print(__doc__)
@@ -73,6 +86,7 @@ def main(argv: list[str]) -> int:
     ensure_venv()
     if command == "test":
         ensure_test_tools()
+        ensure_js_tools()
     warm_kernel_cache()
     if command == "serve":
         os.execv(BIN / "armfleet", [str(BIN / "armfleet"), "serve", *rest])

@@ -30,10 +30,12 @@ import numpy as np
 import ray
 from ray.exceptions import RayActorError
 
-from service.engine import WorldBatch
+from mjcf import SCENE_XML
+from service.engine import WorldBatch, configure
+from service.robot import load_robot
 from service.sharding import ShardPlan, StagedCommands, apply_and_step, join_snapshots
 from service.shards import MIN_WORLDS_PER_SHARD
-from service.types import Snapshot
+from service.types import Batch, Snapshot
 
 log = logging.getLogger("armfleet.ray")
 
@@ -128,6 +130,9 @@ class ShardActor:
     def state(self) -> tuple[np.ndarray, np.ndarray]:
         return self._batch.qpos(), self._batch.qvel()
 
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        self._batch.write_qpos(world, qpos)
+
 
 _RemoteShard = ray.remote(ShardActor)
 
@@ -143,7 +148,7 @@ class _Shard:
     lost: list[float] = field(default_factory=list)  # wall times at which the actor was lost
 
 
-class RayBatch:
+class RayBatch(Batch):
     """N worlds as k contiguous shards, each a Ray actor holding a WorldBatch.
 
     Implements the Batch protocol (service/types.py). `address` is as in `connect`; None uses
@@ -180,6 +185,9 @@ class RayBatch:
         self.spec = info["spec"]
         self.control_hz, self.tick_dt = info["control_hz"], info["tick_dt"]
         self.substeps, self.physics_dt = info["substeps"], info["physics_dt"]
+        # The model as the actors step it, for viewers (GET /v1/scene); nothing steps it here.
+        self.robot = load_robot(kwargs.get("model_path", SCENE_XML))
+        configure(self.robot.mjm, self.physics_dt)
         self.device_name = f"ray: {shards} × {info['device_name']}"
         self.nodes = len({i["node"] for i in infos})
         self.home_target = info["home_target"]
@@ -331,6 +339,18 @@ class RayBatch:
             raise RuntimeError("a Ray shard is being rebuilt; its state is not available")
         parts = ray.get([s.actor.state.remote() for s in self._shards])
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        """Overwrite one world's qpos now (fault-injection tests), on the shard that holds it."""
+        shard = int(np.searchsorted(self._plan.starts, world, side="right")) - 1
+        local = world - int(self._plan.starts[shard])
+        actor = self._shards[shard].actor
+        # Commands staged before this call happen before it, as on a WorldBatch: send them
+        # with a step of zero ticks first (an actor runs its calls in order).
+        resets, dirty = self._staged.take(shard)
+        targets = self._targets[dirty + self._plan.starts[shard]]
+        actor.step.remote(resets, dirty, targets, 0)
+        ray.get(actor.write_qpos.remote(local, np.asarray(qpos)))
 
     def close(self) -> None:
         """Stop every shard's actor (the Ray connection stays for others in this process)."""

@@ -19,7 +19,16 @@ from service.types import Snapshot
 _EMPTY = np.zeros(0, dtype=np.int64)
 
 # Snapshot fields that are per world and are joined shard after shard.
-WORLD_FIELDS = ("sim_time", "position", "velocity", "effort", "flange_pos", "flange_quat")
+WORLD_FIELDS = (
+    "sim_time",
+    "position",
+    "velocity",
+    "effort",
+    "flange_pos",
+    "flange_quat",
+    "body_pos",
+    "body_quat",
+)
 
 
 class ShardPlan:

@@ -1,7 +1,8 @@
 """RayBatch: shards on Ray actors behave exactly like one WorldBatch, and survive a lost actor.
 
-One local Ray instance for the module (bound to 127.0.0.1, no dashboard, two CPUs), one RayBatch
-of two CPU actors and one in-process WorldBatch of the same worlds as the reference.
+One local Ray instance (bound to 127.0.0.1, no dashboard; shared with test_batch_contract.py, so
+it stays up until the test process ends), one RayBatch of two CPU actors and one in-process
+WorldBatch of the same worlds as the reference.
 """
 
 from __future__ import annotations
@@ -26,12 +27,11 @@ REBUILD_DEADLINE_S = 300
 
 @pytest.fixture(scope="module")
 def pair():
-    connect("local", num_cpus=2)
+    connect("local", num_cpus=4)
     sharded = RayBatch(NWORLD, shards=2)
     single = WorldBatch(NWORLD)
     yield sharded, single
     sharded.close()
-    ray.shutdown()
 
 
 def drive(pair, rng, ticks: int) -> None:
