@@ -173,8 +173,8 @@ export class Viewer {
     const rows = Math.ceil(n / this.cols);
     const cx = ((this.cols - 1) * this.spacing) / 2 + this.center[0];
     const cy = (-(rows - 1) * this.spacing) / 2 + this.center[1];
-    const r = n > 1 ? Math.max(this.cols, rows) * this.spacing * 0.8 : 2.0;
-    this.controls.target.set(cx, cy, n > 1 ? 0.2 : 0.7);
+    const r = n > 1 ? Math.max(this.cols, rows) * this.spacing * 0.8 : 2.3;
+    this.controls.target.set(cx, cy, n > 1 ? 0.2 : 0.6);
     this.camera.position.set(cx + 0.75 * r, cy - 1.0 * r, 0.4 + 0.8 * r);
     this.camera.far = 10 * r + 50;
     this.camera.updateProjectionMatrix();
