@@ -25,12 +25,16 @@ from typing import Any
 
 import httpx
 
+from service.physics import DEFAULT_PHYSICS_DT
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 
-# The engine's defaults (service.settings.Settings): 60 Hz control, ~2 ms physics.
+# The engine's defaults (service.settings.Settings): 60 Hz control, the default physics step.
 CONTROL_HZ = 60.0
-PHYSICS_DT = 0.002
+PHYSICS_DT = DEFAULT_PHYSICS_DT
+# The physics step before the step study of issue 13 (8 substeps of 2.083 ms per 60 Hz tick).
+OLD_PHYSICS_DT = 0.002
 
 
 # -- results ---------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import AsyncIterator, Iterable, Mapping
-from typing import Any, Unpack
+from typing import Any, Self, Unpack
 
 import httpx
 from websockets.asyncio.client import ClientConnection
@@ -27,7 +27,20 @@ from clients.errors import ArmfleetError, Unreachable, unreachable
 from clients.models import JointRef, WorldSpec
 
 
-class AsyncArmfleetClient:
+class _Closes:
+    """`async with thing:` closes the thing at the end."""
+
+    async def close(self) -> None:
+        raise NotImplementedError
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+
+class AsyncArmfleetClient(_Closes):
     """REST + WebSocket client for one armfleet service, for asyncio."""
 
     def __init__(self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT) -> None:
@@ -45,12 +58,6 @@ class AsyncArmfleetClient:
 
     async def close(self) -> None:
         await self._http.aclose()
-
-    async def __aenter__(self) -> AsyncArmfleetClient:
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.close()
 
     # -- REST (docstrings on the sync twin) --------------------------------------------------
 
@@ -140,7 +147,7 @@ async def _open(url: str, timeout: float) -> ClientConnection:
         raise ArmfleetError(None, str(exc)) from exc
 
 
-class AsyncWorldSession:
+class AsyncWorldSession(_Closes):
     """One world over one WebSocket. A reader task routes acks to their commands (by id), so
     several tasks may send commands at once; state frames queue up for iteration (the oldest
     are dropped past 256)."""
@@ -253,9 +260,3 @@ class AsyncWorldSession:
         if self._reader is not None:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await self._reader
-
-    async def __aenter__(self) -> AsyncWorldSession:
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.close()

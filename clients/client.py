@@ -17,7 +17,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator, Mapping
-from typing import Any, Unpack
+from typing import Any, Self, Unpack
 
 import httpx
 from websockets.exceptions import InvalidURI
@@ -30,7 +30,20 @@ from clients.errors import ArmfleetError, Unreachable
 from clients.models import JointRef, WorldSpec
 
 
-class ArmfleetClient:
+class _Closes:
+    """`with thing:` closes the thing at the end."""
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class ArmfleetClient(_Closes):
     """REST + WebSocket client for one armfleet service. Thread-safe for HTTP calls."""
 
     def __init__(self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT) -> None:
@@ -47,12 +60,6 @@ class ArmfleetClient:
 
     def close(self) -> None:
         self._http.close()
-
-    def __enter__(self) -> ArmfleetClient:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- REST --------------------------------------------------------------------------------
 
@@ -156,7 +163,7 @@ def _open(url: str, timeout: float) -> ClientConnection:
         raise ArmfleetError(None, str(exc)) from exc
 
 
-class WorldSession:
+class WorldSession(_Closes):
     """One world over one WebSocket: commands get their acks back (matched by id) and state
     frames that arrive meanwhile are kept for iteration. Does not reconnect: a command on a
     dropped socket raises Unreachable. Use from one thread at a time (a lock enforces it).
@@ -235,9 +242,3 @@ class WorldSession:
 
     def close(self) -> None:
         self._ws.close()
-
-    def __enter__(self) -> WorldSession:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -11,8 +11,11 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.api import health, info, sim, worlds, ws
-from service.runtime import Runtime
+from service.api import health, info, scene, sim, web, worlds, ws
+from service.errors import ArmfleetError, BadCommand
+from service.ros import rosbridge
+from service.ros.topics import TopicMap, parse_world_list
+from service.runtime import Runtime, Surface
 from service.settings import Settings
 
 DESCRIPTION = """
@@ -28,6 +31,11 @@ WebSocket streams (not listed by OpenAPI):
   `{"op": "error", "id", "detail"}`.
 * `/v1/ws?worlds=0-63&rate=10`: `{"op": "states", ...}` frames, column-wise over the listed
   worlds; commands carry `"world"`.
+* `/v1/ws/view?worlds=0-63&focus=3&rate=30`: the browser page's socket: binary pose frames
+  (every body of every listed world, plus the focus world's state; layout in service/wire.py)
+  drawn with the geoms of `GET /v1/scene`; commands carry `"world"`.
+
+The browser page is served at `/`.
 """
 
 
@@ -65,9 +73,24 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
     return JSONResponse({"detail": detail}, status_code=422)
 
 
+async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
+    """The one mapping of domain errors to HTTP: status from the class, detail from the error."""
+    assert isinstance(exc, ArmfleetError)
+    if isinstance(exc, BadCommand):
+        # Shaped like FastAPI's own validation errors, so clients parse one 422 format.
+        loc = (exc.field or "body").split(".")
+        if loc[0] not in ("body", "query", "path"):
+            loc = ["body", *loc]
+        detail: object = [{"loc": loc, "msg": exc.message, "type": "value_error"}]
+    else:
+        detail = exc.detail
+    headers = {"Retry-After": "2"} if exc.status == 503 else None
+    return JSONResponse({"detail": detail}, status_code=exc.status, headers=headers)
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
-    runtime = Runtime(settings)
+    runtime = Runtime(settings, _surfaces(settings))
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -82,10 +105,27 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version="0.1.0",
         description=DESCRIPTION,
         lifespan=lifespan,
-        exception_handlers={RequestValidationError: _validation_error},
+        exception_handlers={
+            RequestValidationError: _validation_error,
+            ArmfleetError: _armfleet_error,
+        },
     )
     app.state.runtime = runtime
+    app.state.rosbridge = rosbridge.RosbridgeServer(
+        TopicMap(parse_world_list(settings.ros2_worlds, settings.worlds)), settings.ros2_rate
+    )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    for module in (health, info, worlds, sim, ws):
+    for module in (health, info, worlds, sim, scene, ws, web, rosbridge):
         app.include_router(module.router)
+    web.mount_static(app)
     return app
+
+
+def _surfaces(settings: Settings) -> tuple[Surface, ...]:
+    """The optional add-ons the settings switch on, in start order."""
+    surfaces: list[Surface] = []
+    if settings.ros2:
+        from service.ros.dds import DdsBridge
+
+        surfaces.append(DdsBridge(settings.ros2_rate, settings.ros2_worlds, settings.ros2_network))
+    return tuple(surfaces)

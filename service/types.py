@@ -9,8 +9,12 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from service.robot import LoadedRobot
 
 
 @dataclass(frozen=True)
@@ -86,6 +90,9 @@ class Snapshot:
     flange_pos: flange site position in the world frame [m]                    (nworld, 3)
     flange_quat: flange site orientation, quaternion w x y z                   (nworld, 4)
     faults: how often each world has been reset for NaN or capacity overflow   (nworld,)
+    body_pos: every body's origin in the world frame [m], float32               (nworld, nbody, 3)
+    body_quat: every body's orientation, quaternion w x y z, float32           (nworld, nbody, 4)
+        (bodies in MjModel order, 0 = world; what viewers draw, see GET /v1/scene)
     """
 
     tick: int
@@ -97,6 +104,8 @@ class Snapshot:
     flange_pos: np.ndarray
     flange_quat: np.ndarray
     faults: np.ndarray
+    body_pos: np.ndarray
+    body_quat: np.ndarray
 
     @property
     def nworld(self) -> int:
@@ -109,3 +118,70 @@ class Mode(enum.StrEnum):
     REALTIME = "realtime"  # paced to the wall clock; falls behind honestly (RTF < 1), no bursts
     FAST = "fast"  # as fast as the machine allows
     PAUSED = "paused"  # only on an explicit step request
+
+
+@runtime_checkable
+class Batch(Protocol):
+    """N worlds of one model advanced together in control ticks: what the loop needs of an engine.
+
+    WorldBatch (MuJoCo Warp on one device) and ShardedBatch (worlds split over worker processes)
+    implement it; so must any later engine. One thread owns a Batch: nothing here is thread-safe.
+    tests/test_batch_contract.py runs the same behavioural checks against every implementation.
+    """
+
+    nworld: int  # worlds in the batch
+    shards: int  # processes (or actors) the worlds are split across
+    spec: RobotSpec  # the commanded joints, limits and home
+    robot: LoadedRobot  # the compiled MjModel it steps (viewers describe it: GET /v1/scene)
+    control_hz: float  # control ticks per simulated second
+    tick_dt: float  # simulated seconds per tick (1 / control_hz)
+    substeps: int  # physics steps per tick
+    physics_dt: float  # simulated seconds per physics step (tick_dt / substeps)
+    device_name: str  # where it runs, e.g. "cpu" or "cuda:0"
+    home_target: np.ndarray  # (7,) targets of the `home` keyframe [rad]
+    captured: bool  # the tick replays a captured graph
+    capture_error: str | None  # why capture failed, when it did
+    compile_s: float  # seconds spent compiling/loading kernels at build
+    capture_s: float  # seconds spent capturing the tick at build
+
+    @property
+    def tick(self) -> int:
+        """Control ticks completed since the batch was built."""
+        ...
+
+    @property
+    def targets(self) -> np.ndarray:
+        """A copy of the targets in effect, (nworld, 7) [rad]."""
+        ...
+
+    def step(self, ticks: int = 1) -> np.ndarray:
+        """Advance every world by `ticks`; returns the worlds reset for faults (int64)."""
+        ...
+
+    def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
+        """Targets for `worlds` (k,) ← `targets` (k, 7), clamped, in effect from the next step."""
+        ...
+
+    def reset(self, worlds: np.ndarray) -> None:
+        """Reset `worlds` to `home` (state and targets); every other world stays bit-identical."""
+        ...
+
+    def snapshot(self) -> Snapshot:
+        """All worlds at the end of the last completed tick, in host memory."""
+        ...
+
+    def qpos(self) -> np.ndarray:
+        """Full qpos of every world (nworld, nq), a host copy (tests and diagnostics)."""
+        ...
+
+    def qvel(self) -> np.ndarray:
+        """Full qvel of every world (nworld, nv), a host copy (tests and diagnostics)."""
+        ...
+
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        """Overwrite one world's full qpos (nq,): tests inject faults with it."""
+        ...
+
+    def close(self) -> None:
+        """Release workers and devices; the batch is unusable afterwards."""
+        ...

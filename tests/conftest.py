@@ -8,6 +8,7 @@ that compares what the service publishes with them checks the service, not a cop
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -28,6 +29,17 @@ HOME: list[float] = SPEC.home.tolist()
 ELBOW, FINGER = SPEC.index("elbow_joint"), SPEC.index("finger_joint")
 
 __all__ = ["ELBOW", "FINGER", "HOME", "JOINTS", "ROOT", "Server", "free_port", "serve"]
+
+
+def running_server(
+    tmp_path: Path,
+    worlds: int = 4,
+    mode: str = "realtime",
+    port: int | None = None,
+    extra: tuple[str, ...] = (),
+) -> contextlib.AbstractContextManager[Server]:
+    """The old name and argument order of `serve`, kept for branches written against it."""
+    return serve(worlds=worlds, mode=mode, port=port, extra_args=extra, log_dir=tmp_path)
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -9,6 +9,7 @@ import json
 import math
 
 from bench import common, throughput
+from service.physics import tick_timing
 
 
 def test_throughput_section_reports_every_engine(tmp_path):
@@ -20,7 +21,8 @@ def test_throughput_section_reports_every_engine(tmp_path):
 
     assert data["errors"] == {}
     assert set(data["engines"]) == set(throughput.ENGINES)
-    assert data["substeps"] == 8 and math.isclose(data["physics_dt"], 1 / 480)
+    substeps, dt = tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
+    assert data["substeps"] == substeps and math.isclose(data["physics_dt"], dt)
     assert math.isclose(data["model"]["timestep"], data["physics_dt"])
     assert data["machine"]["mujoco"] and data["machine"]["warp"]
     for n in ("1", "4"):

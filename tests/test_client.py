@@ -106,7 +106,7 @@ def test_client_models_follow_the_server_schemas() -> None:
 
     pairs = [
         (models.Info, schemas.Info, set()),
-        (models.JointInfo, schemas.JointInfo, set()),
+        (models.JointInfo, schemas.JointSpec, set()),
         (models.CommandAck, schemas.CommandReply, {"id"}),  # id: WebSocket acks only
         (models.BatchAck, schemas.BatchCommandReply, set()),
         (models.ResetResult, schemas.ResetReply, set()),

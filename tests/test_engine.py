@@ -1,4 +1,8 @@
-"""WorldBatch: batched stepping, targets, resets, fault isolation, fidelity vs native MuJoCo."""
+"""Both engines (WorldBatch on MuJoCo Warp, NativeBatch on native MuJoCo): tick-zero state,
+grasp, 60 s of presses, fidelity against plain mj_step and against each other; warp's capture.
+
+Targets, masked resets and fault isolation are checked for every engine in test_batch_contract.py.
+"""
 
 from __future__ import annotations
 
@@ -8,14 +12,21 @@ import pytest
 from test_model import solve_ik
 
 from service.engine import WorldBatch
+from service.native import NativeBatch
 
 NWORLD = 4
+ENGINES = {"warp": WorldBatch, "mujoco": NativeBatch}
+
+
+@pytest.fixture(scope="module", params=sorted(ENGINES))
+def engine(request: pytest.FixtureRequest) -> type[WorldBatch] | type[NativeBatch]:
+    return ENGINES[request.param]
 
 
 @pytest.fixture(scope="module")
-def twins() -> tuple[WorldBatch, WorldBatch]:
+def twins(engine) -> tuple[WorldBatch, WorldBatch]:
     """Two identical batches: one is disturbed, the other is the undisturbed reference."""
-    return WorldBatch(NWORLD), WorldBatch(NWORLD)
+    return engine(NWORLD), engine(NWORLD)
 
 
 @pytest.fixture
@@ -23,15 +34,6 @@ def fresh(twins):
     for b in twins:
         b.reset(np.arange(NWORLD))
     return twins
-
-
-def distinct_targets(batch: WorldBatch) -> np.ndarray:
-    """A different pose per world so that a leak between worlds would show."""
-    t = np.tile(batch.home_target, (batch.nworld, 1))
-    t[:, 0] += 0.2 * np.arange(batch.nworld)
-    t[:, 2] -= 0.1 * np.arange(batch.nworld)
-    t[:, 6] = 0.35
-    return t
 
 
 def test_tick_is_captured_and_replays_like_uncaptured_stepping():
@@ -56,64 +58,6 @@ def test_tick_zero_snapshot_is_home_with_exact_sim_time(fresh):
     assert batch.substeps * batch.physics_dt == pytest.approx(1 / 60.0)
     assert snap.flange_quat.shape == (NWORLD, 4)
     np.testing.assert_allclose(np.linalg.norm(snap.flange_quat, axis=1), 1.0, atol=1e-5)
-
-
-def test_targets_for_a_subset_move_only_those_worlds(fresh):
-    batch, _ = fresh
-    target = batch.home_target.copy()
-    target[2] += 0.3
-    batch.set_targets(np.array([1, 3]), np.array([target, target]))
-    batch.step(45)
-    snap = batch.snapshot()
-    np.testing.assert_allclose(snap.position[[1, 3], 2], target[2], atol=5e-3)
-    np.testing.assert_allclose(snap.position[[0, 2], 2], batch.home_target[2], atol=1e-3)
-    np.testing.assert_allclose(snap.target[1], target)
-    np.testing.assert_allclose(snap.target[0], batch.home_target)
-
-
-def test_targets_are_clamped_to_joint_ranges(fresh):
-    batch, _ = fresh
-    batch.set_targets(np.array([0]), np.array([[9.0, 0, 0, 0, 0, 0, 5.0]]))
-    assert batch.targets[0, 0] == pytest.approx(2 * np.pi)
-    assert batch.targets[0, 6] == pytest.approx(0.7)
-
-
-def test_reset_of_one_world_leaves_the_others_bit_identical(fresh):
-    batch, reference = fresh
-    for b in (batch, reference):
-        b.set_targets(np.arange(NWORLD), distinct_targets(b))
-        b.step(20)
-    batch.reset(np.array([2]))
-    for b in (batch, reference):
-        b.step(20)
-    others = [0, 1, 3]
-    np.testing.assert_array_equal(batch.qpos()[others], reference.qpos()[others])
-    np.testing.assert_array_equal(batch.qvel()[others], reference.qvel()[others])
-    # The reset world went home, targets included, and its clock restarted.
-    snap = batch.snapshot()
-    np.testing.assert_allclose(snap.target[2], batch.home_target)
-    np.testing.assert_allclose(snap.position[2], batch.home_target, atol=2e-3)
-    assert snap.sim_time[2] == pytest.approx(20 / 60.0)
-    assert snap.sim_time[0] == pytest.approx(40 / 60.0)
-
-
-def test_nan_world_is_reset_and_flagged_while_the_others_go_on(fresh):
-    batch, reference = fresh
-    for b in (batch, reference):
-        b.set_targets(np.arange(NWORLD), distinct_targets(b))
-        b.step(10)
-    poisoned = batch.qpos()[1]
-    poisoned[3] = np.nan
-    batch.write_qpos(1, poisoned)
-    faulted = [batch.step(1) for _ in range(10)]
-    reference.step(10)
-    np.testing.assert_array_equal(np.concatenate(faulted), [1])
-    snap = batch.snapshot()
-    assert snap.faults.tolist() == [0, 1, 0, 0]
-    assert np.isfinite(batch.qpos()).all()
-    np.testing.assert_allclose(snap.target[1], batch.home_target)
-    others = [0, 2, 3]
-    np.testing.assert_array_equal(batch.qpos()[others], reference.qpos()[others])
 
 
 def test_grasp_never_overflows_capacity(fresh):
@@ -156,6 +100,7 @@ def test_grasp_never_overflows_capacity(fresh):
 
 
 def test_float32_warp_tracks_float64_native_mujoco_within_a_milliradian():
+    """The warp engine against plain mj_step on one MjData, the same commands."""
     batch = WorldBatch(1)
     mjm = batch.robot.mjm  # timestep already set to the engine's substep
     data = mujoco.MjData(mjm)
@@ -177,8 +122,71 @@ def test_float32_warp_tracks_float64_native_mujoco_within_a_milliradian():
     assert worst < 1e-3, worst
 
 
-def test_random_presses_for_60_s_never_produce_nan_in_any_world():
-    batch = WorldBatch(NWORLD)
+def test_warp_and_native_engines_agree_within_a_milliradian_over_2_s():
+    """The two engines through the same Batch calls, every world a different command sequence."""
+    warp, native = WorldBatch(NWORLD), NativeBatch(NWORLD)
+    rng = np.random.default_rng(11)
+    targets = np.tile(warp.home_target, (NWORLD, 1))
+    worst = 0.0
+    for tick in range(120):
+        if tick % 6 == 0:
+            targets[np.arange(NWORLD), rng.integers(7, size=NWORLD)] += rng.choice(
+                [-0.1, 0.1], size=NWORLD
+            )
+            for b in (warp, native):
+                b.set_targets(np.arange(NWORLD), targets)
+        for b in (warp, native):
+            assert b.step(1).size == 0
+        a, n = warp.snapshot(), native.snapshot()
+        worst = max(worst, float(np.abs(a.position - n.position).max()))
+    assert worst < 1e-3, worst
+    np.testing.assert_allclose(a.flange_pos, n.flange_pos, atol=2e-3)
+    np.testing.assert_allclose(a.target, n.target)
+
+
+def test_native_engine_is_bit_identical_to_mj_step_per_world():
+    """NativeBatch on its thread pool = one MjData per world stepped by mj_step, exactly."""
+    batch = NativeBatch(3, nthread=2)
+    mjm = batch.robot.mjm
+    datas = [mujoco.MjData(mjm) for _ in range(3)]
+    for d in datas:
+        mujoco.mj_resetDataKeyframe(mjm, d, batch.robot.home_key)
+    targets = np.tile(batch.home_target, (3, 1))
+    targets[:, 0] += 0.2 * np.arange(3)
+    targets[:, 2] -= 0.1 * np.arange(3)
+    targets[:, 6] = 0.35
+    batch.set_targets(np.arange(3), targets)
+    for d, t in zip(datas, batch.targets, strict=True):
+        d.ctrl[:] = t
+    for _ in range(30):
+        batch.step(1)
+        for d in datas:
+            mujoco.mj_step(mjm, d, nstep=batch.substeps)
+    snap = batch.snapshot()
+    for w, d in enumerate(datas):
+        np.testing.assert_array_equal(batch.qpos()[w], d.qpos)
+        np.testing.assert_array_equal(snap.effort[w], d.qfrc_actuator[batch.robot.dof_adr])
+        mujoco.mj_kinematics(mjm, d)  # the flange is reported at the state, not a substep before
+        np.testing.assert_allclose(snap.flange_pos[w], d.site_xpos[batch.robot.flange_site])
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, d.site_xmat[batch.robot.flange_site])
+        assert abs(abs(float(quat @ snap.flange_quat[w])) - 1.0) < 1e-12
+
+
+def test_native_engine_resets_a_diverging_world_alone():
+    """|qvel| over the limit (still finite) is a fault too; MuJoCo's own reset is not enough."""
+    batch, reference = NativeBatch(NWORLD), NativeBatch(NWORLD)
+    for b in (batch, reference):
+        b.step(5)
+    batch._qvel[2, 0] = 2.0e4  # no API spins a joint like this
+    assert batch.step(1).tolist() == [2]
+    reference.step(1)
+    assert batch.snapshot().faults.tolist() == [0, 0, 1, 0]
+    np.testing.assert_array_equal(batch.qpos()[[0, 1, 3]], reference.qpos()[[0, 1, 3]])
+
+
+def test_random_presses_for_60_s_never_produce_nan_in_any_world(engine):
+    batch = engine(NWORLD)
     rng = np.random.default_rng(3)
     targets = np.tile(batch.home_target, (NWORLD, 1))
     lo, hi = batch.spec.lower, batch.spec.upper

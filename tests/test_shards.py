@@ -38,7 +38,8 @@ def test_sharded_worlds_step_bit_identically_to_one_batch(pair):
     np.testing.assert_array_equal(sharded.qpos(), single.qpos())
     a, b = sharded.snapshot(), single.snapshot()
     assert a.tick == b.tick == 40
-    for field in ("position", "velocity", "effort", "target", "flange_pos", "sim_time"):
+    fields = ("position", "velocity", "effort", "target", "flange_pos", "sim_time", "body_pos")
+    for field in (*fields, "body_quat"):
         np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
 
 
