@@ -259,20 +259,21 @@ class BatchAck:
 class ResetResult:
     """Reply to a reset: the worlds put back to home, from `tick` on."""
 
-    worlds: tuple[int, ...]
-    tick: int
+    worlds: tuple[int, ...]  # the worlds put back to home
+    tick: int  # the first tick stepped from home
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ResetResult:
-        return cls(worlds=tuple(d["worlds"]), tick=int(d["tick"]))
+        worlds = tuple(int(w) for w in d["worlds"])
+        return cls(worlds=worlds, tick=int(d["tick"]))
 
 
 @dataclass(frozen=True)
 class SimStatus:
     """Reply of pause / resume / set_mode / step: the mode now and the tick reached."""
 
-    mode: str
-    tick: int
+    mode: str  # realtime | fast | paused
+    tick: int  # the tick reached (after `step`: the last of the n)
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> SimStatus:
