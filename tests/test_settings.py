@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import httpx
 import pytest
+from pydantic import ValidationError
 
 from clients.testing import ServerFailed, serve
+from service.settings import Settings
 
 
 def test_environment_applies_and_a_typed_option_overrides_it(tmp_path, monkeypatch):
@@ -23,3 +25,9 @@ def test_a_bad_environment_value_stops_start_up_naming_the_variable(tmp_path, mo
     monkeypatch.setenv("ARMFLEET_CONTROL_HZ", "fast")
     with pytest.raises(ServerFailed, match="control_hz"), serve(log_dir=tmp_path):
         pass
+
+
+def test_ray_with_the_native_engine_is_refused_naming_the_field():
+    with pytest.raises(ValidationError, match="ray: Ray actors run the warp engine only"):
+        Settings(ray="local", engine="mujoco")
+    assert Settings(ray="local").ray == "local"

@@ -41,6 +41,13 @@ function geometryOf(g) {
   }
 }
 
+/** WebGL drawn by the CPU (SwiftShader, llvmpipe): every frame drawn costs CPU time. */
+function isSoftware(gl) {
+  const ext = gl.getExtension('WEBGL_debug_renderer_info');
+  const name = ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
+  return /swiftshader|llvmpipe|softpipe|software/i.test(String(name));
+}
+
 export class Viewer {
   constructor(canvas, labels, onPick) {
     this.canvas = canvas;
@@ -48,6 +55,7 @@ export class Viewer {
     this.onPick = onPick;
     this.renderer = new THREE.WebGLRenderer({ canvas, antialias: false });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+    this.software = isSoftware(this.renderer.getContext());
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0x30343c);
     this.camera = new THREE.PerspectiveCamera(45, 1, 0.05, 500);
@@ -156,7 +164,7 @@ export class Viewer {
   setFaults(faults) {
     faults.forEach((f, i) => {
       const el = this.labelEls[i];
-      if (!el) return;
+      if (!el || el.dataset.faults === String(f)) return; // touch the DOM only on a change
       el.classList.toggle('faulted', f > 0);
       el.dataset.faults = String(f);
     });
