@@ -12,7 +12,7 @@ from collections.abc import Iterator
 import httpx
 import numpy as np
 import pytest
-from conftest import ELBOW, HOME, Server, running_server, wait_for
+from conftest import ELBOW, HOME, Server, serve, wait_for
 from websockets.sync.client import connect
 
 from service.native import NativeBatch, usable_cores
@@ -32,7 +32,8 @@ def test_native_engine_refuses_a_gpu_device():
 
 @pytest.fixture(scope="module")
 def native_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    with running_server(tmp_path_factory.mktemp("native"), 4, extra=("--engine", "mujoco")) as srv:
+    log_dir = tmp_path_factory.mktemp("native")
+    with serve(worlds=4, extra_args=("--engine", "mujoco"), log_dir=log_dir) as srv:
         yield srv
 
 

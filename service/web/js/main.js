@@ -17,6 +17,8 @@ const page = {
   rate: Number(params.get('rate')) || 30,
   info: null,
   shown: '',
+  sceneText: '',
+  reconnected: false,
   lastAck: null,
   // What tests and the bench read (window.armfleet): counts only, nothing to drive.
   stats: {
@@ -51,9 +53,12 @@ const conn = new Connection({
   open: () => {
     page.stats.connected = true;
     hideBanner();
+    if (page.reconnected) refresh();
+    page.reconnected = false;
   },
   down: (reason, final) => {
     page.stats.connected = false;
+    page.reconnected = true;
     panel.status(`disconnected: ${reason}${final ? '' : ' (reconnecting…)'}`, true);
     if (final) showBanner(reason);
   },
@@ -99,6 +104,20 @@ async function fetchReady(path) {
     }
     await new Promise((res) => setTimeout(res, wait));
   }
+}
+
+/** After a reconnect: the service may have restarted with other worlds or another model. */
+async function refresh() {
+  const [info, scene] = [await fetchReady('/v1/info'), await fetchReady('/v1/scene')];
+  const sceneText = JSON.stringify(scene);
+  const changed = info.nworld !== page.info.nworld || sceneText !== page.sceneText;
+  page.info = info;
+  if (sceneText !== page.sceneText) {
+    page.sceneText = sceneText;
+    viewer.setScene(scene);
+    page.shown = ''; // lay the worlds out again with the next frame
+  }
+  if (changed) go();
 }
 
 /** Open the stream for the current world and view (or say why not). */
@@ -195,6 +214,7 @@ document.addEventListener('visibilitychange', () => (document.hidden ? conn.paus
 async function main() {
   const [info, scene] = [await fetchReady('/v1/info'), await fetchReady('/v1/scene')];
   page.info = info;
+  page.sceneText = JSON.stringify(scene);
   page.stats.softwareGL = viewer.software;
   panel.setJoints(info.joints.map((j) => j.name));
   viewer.setScene(scene);
