@@ -11,7 +11,7 @@ import json
 import httpx
 import numpy as np
 import pytest
-from conftest import ELBOW, HOME, running_server, wait_for
+from conftest import ELBOW, HOME, serve, wait_for
 from websockets.sync.client import connect
 
 from service.native import NativeBatch, usable_cores
@@ -30,7 +30,7 @@ def test_native_engine_refuses_a_gpu_device():
 
 
 def test_service_runs_the_native_engine_end_to_end(tmp_path):
-    with running_server(tmp_path, worlds=4, extra=("--engine", "mujoco")) as srv:
+    with serve(worlds=4, extra_args=("--engine", "mujoco"), log_dir=tmp_path) as srv:
         http = httpx.Client(base_url=srv.url, timeout=10)
         info = http.get("/v1/info").json()
         assert "native MuJoCo" in info["device"]

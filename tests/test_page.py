@@ -15,7 +15,7 @@ import time
 import httpx
 import numpy as np
 import pytest
-from conftest import HOME, JOINTS, free_port, running_server, wait_for
+from conftest import HOME, JOINTS, free_port, serve, wait_for
 from PIL import Image
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
@@ -40,7 +40,7 @@ class RestartableServer:
         self.server = None
 
     def start(self) -> None:
-        self._cm = running_server(self.tmp_path, worlds=NWORLD, port=self.port)
+        self._cm = serve(worlds=NWORLD, port=self.port, log_dir=self.tmp_path)
         self.server = self._cm.__enter__()
 
     def stop(self) -> None:
