@@ -16,7 +16,9 @@ from service import access
 from service.api import health, info, metrics, scene, sim, web, worlds, ws
 from service.errors import ArmfleetError, BadCommand
 from service.metrics import CommandCounter
-from service.runtime import Runtime
+from service.ros import rosbridge
+from service.ros.topics import TopicMap, parse_world_list
+from service.runtime import Runtime, Surface
 from service.schemas import ANY, errors, fit_openapi
 from service.settings import Settings
 
@@ -94,7 +96,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     """The service as an ASGI app; ValueError when the settings are unsafe (see access)."""
     settings = settings or Settings()
     access.check_bind(settings)
-    runtime = Runtime(settings)
+    runtime = Runtime(settings, _surfaces(settings))
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -116,11 +118,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         },
     )
     app.state.runtime = runtime
+    app.state.rosbridge = rosbridge.RosbridgeServer(
+        TopicMap(parse_world_list(settings.ros2_worlds, settings.worlds)), settings.ros2_rate
+    )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Added last = runs first: count refused commands, then check token, origin and slots.
     app.add_middleware(access.AccessMiddleware, settings=settings, slots=runtime.slots)
     app.add_middleware(CommandCounter, metrics=runtime.metrics)
-    for module in (health, metrics, web):
+    for module in (health, metrics, web, rosbridge):
         app.include_router(module.router)
     # Every /v1 route can also answer 401/403 (token, origin) and 503 (not ready, client cap).
     for module in (info, worlds, sim, scene, ws):
@@ -135,3 +140,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app.openapi = openapi  # type: ignore[method-assign]
     return app
+
+
+def _surfaces(settings: Settings) -> tuple[Surface, ...]:
+    """The optional add-ons the settings switch on, in start order."""
+    surfaces: list[Surface] = []
+    if settings.ros2:
+        from service.ros.dds import DdsBridge
+
+        surfaces.append(DdsBridge(settings.ros2_rate, settings.ros2_worlds, settings.ros2_network))
+    return tuple(surfaces)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -47,6 +48,7 @@ def serve(
     port: Annotated[int | None, _opt("port")] = None,
     mode: Annotated[Mode | None, _opt("mode")] = None,
     shards: Annotated[int | None, _opt("shards")] = None,
+    ray: Annotated[str | None, _opt("ray")] = None,
     control_hz: Annotated[float | None, _opt("control_hz")] = None,
     physics_dt: Annotated[float | None, _opt("physics_dt")] = None,
     log_level: Annotated[str | None, _opt("log_level")] = None,
@@ -57,6 +59,10 @@ def serve(
     max_clients: Annotated[int | None, _opt("max_clients")] = None,
     command_rate: Annotated[float | None, _opt("command_rate")] = None,
     command_burst: Annotated[int | None, _opt("command_burst")] = None,
+    ros2: Annotated[bool | None, _opt("ros2")] = None,
+    ros2_rate: Annotated[float | None, _opt("ros2_rate")] = None,
+    ros2_worlds: Annotated[str | None, _opt("ros2_worlds")] = None,
+    ros2_network: Annotated[bool | None, _opt("ros2_network")] = None,
 ) -> None:
     """Start the service: N worlds, a real-time loop, REST + WebSocket on http://HOST:PORT.
 
@@ -140,16 +146,26 @@ def watch(
 
 @app.command()
 def bench(
-    quick: Annotated[bool, typer.Option(help="smaller sizes and shorter runs")] = False,
-    device: Annotated[str, typer.Option(help="cpu or cuda")] = "cpu",
-    sections: Annotated[
-        list[int] | None, typer.Option("--section", help="run only these (1-6); repeatable")
+    section: Annotated[
+        list[int] | None, typer.Option(help="run this section (repeatable; --list shows them)")
     ] = None,
+    quick: Annotated[bool, typer.Option(help="smaller sizes and shorter runs")] = False,
+    device: Annotated[str, typer.Option(help="cpu or cuda[:N]")] = "cpu",
+    worlds: Annotated[
+        list[int] | None, typer.Option(help="batch size instead of the sections' (repeatable)")
+    ] = None,
+    out: Annotated[Path | None, typer.Option(help="results folder (default bench/results)")] = None,
+    list_: Annotated[bool, typer.Option("--list", help="list the sections and exit")] = False,
 ) -> None:
     """Benchmarks against native MuJoCo and raw MuJoCo Warp; writes bench/results/."""
-    from bench.suite import run_suite
+    from bench import registry, runner
 
-    run_suite(quick=quick, device=device, sections=sections or None)
+    if list_:
+        print(runner.listing(registry.discover()))
+        return
+    report = runner.run(section or None, quick, device, worlds or None, out)
+    if report["errors"]:
+        raise typer.Exit(1)
 
 
 if __name__ == "__main__":

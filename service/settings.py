@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.physics import DEFAULT_PHYSICS_DT
@@ -31,6 +31,12 @@ class Settings(BaseSettings):
         ge=0,
         le=256,
         description="warp: CPU worker processes (one per core), mujoco: threads; 0 = auto",
+    )
+    ray: str | None = Field(
+        None,
+        description="put the shards on Ray actors: auto (the cluster `ray start` runs here), "
+        "local (a private instance on 127.0.0.1) or HOST:PORT of a head node; "
+        "unset = in-process shards",
     )
     mode: Mode = Field(Mode.REALTIME, description="how time advances: realtime, fast or paused")
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
@@ -58,3 +64,26 @@ class Settings(BaseSettings):
     command_burst: int | None = Field(
         None, ge=1, description="commands a connection may send at once (default: one second's)"
     )
+    ros2: bool = Field(False, description="join the ROS 2 graph over DDS (Cyclone DDS)")
+    ros2_rate: float = Field(
+        60.0, gt=0, le=1000, description="/joint_states and /clock rate over DDS and rosbridge [Hz]"
+    )
+    ros2_worlds: str = Field(
+        "", description="worlds with /world_N/ topics, e.g. 0-7 (world 0 always has /joint_*)"
+    )
+    ros2_network: bool = Field(
+        False, description="open DDS to the network (default: loopback only, like the HTTP bind)"
+    )
+
+    @model_validator(mode="after")
+    def _ray_runs_the_warp_engine(self) -> Settings:
+        if self.ray and self.engine != "warp":
+            raise ValueError("ray: Ray actors run the warp engine only (use --engine warp)")
+        return self
+
+    @model_validator(mode="after")
+    def _ros2_worlds_exist(self) -> Settings:
+        from service.ros.topics import parse_world_list
+
+        parse_world_list(self.ros2_worlds, self.worlds)  # ValueError names the bad part
+        return self

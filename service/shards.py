@@ -21,7 +21,10 @@ from typing import Any
 import numpy as np
 
 from service.engine import WorldBatch
+from service.sharding import ShardPlan, StagedCommands, apply_and_step, join_snapshots
 from service.types import Batch, Snapshot
+
+log = logging.getLogger("armfleet.shards")
 
 # The Batch facts that are the same for every shard (read from the local one).
 _FACTS_OF_LOCAL = (
@@ -36,8 +39,6 @@ _FACTS_OF_LOCAL = (
     "capture_s",
     "capture_error",
 )
-
-log = logging.getLogger("armfleet.shards")
 
 # Below this many worlds per shard the pipe round trip (~0.1 ms) outweighs the second core.
 MIN_WORLDS_PER_SHARD = 16
@@ -65,11 +66,7 @@ def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
         except EOFError:  # parent gone
             return
         if op == "step":
-            resets, dirty, targets, ticks = args
-            batch.reset(resets)
-            if dirty.size:
-                batch.set_targets(dirty, targets)
-            conn.send(batch.step(ticks))
+            conn.send(apply_and_step(batch, *args))
         elif op == "snapshot":
             conn.send(batch.snapshot())
         elif op == "write_qpos":
@@ -101,11 +98,8 @@ class ShardedBatch(Batch):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
     def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
-        if not 1 <= shards <= nworld:
-            raise ValueError(f"shards must be in 1..{nworld}, got {shards}")
-        bounds = np.linspace(0, nworld, shards + 1).astype(int)
-        self._starts = bounds[:-1]
-        self._sizes = np.diff(bounds)
+        self._plan = ShardPlan(nworld, shards)
+        self._starts, self._sizes = self._plan.starts, self._plan.sizes
         self._kwargs = kwargs
         self._conns: list[Connection] = []
         self._procs: list[Any] = []
@@ -119,6 +113,13 @@ class ShardedBatch(Batch):
             if reply[0] == "error":
                 self.close()
                 raise RuntimeError(f"shard worker failed to start: {reply[1]}")
+        self.nworld = nworld
+        self.shards = shards
+        self.robot = self._local.robot
+        for name in _FACTS_OF_LOCAL:  # every shard is built alike: the local one speaks for all
+            setattr(self, name, getattr(self._local, name))
+        self._targets = np.tile(self.home_target, (nworld, 1))
+        self._staged = StagedCommands(shards)
         # Losing a worker (killed, crashed): its worlds pause, showing their last state, while
         # the others go on; a new worker is built in the background and swapped in at a tick
         # boundary with the commanded targets of its worlds (their state starts from home).
@@ -130,14 +131,6 @@ class ShardedBatch(Batch):
         self._last_parts: dict[int, Snapshot] = {}
         self._fault_base = [np.zeros(int(n), dtype=np.int64) for n in self._sizes]
         self.restarts = 0
-        self.nworld = nworld
-        self.shards = shards
-        self.robot = self._local.robot
-        for name in _FACTS_OF_LOCAL:  # every shard is built alike: the local one speaks for all
-            setattr(self, name, getattr(self._local, name))
-        self._targets = np.tile(self.home_target, (nworld, 1))
-        self._pending_resets: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
-        self._pending_dirty: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
 
     @property
     def captured(self) -> bool:
@@ -151,35 +144,25 @@ class ShardedBatch(Batch):
     def targets(self) -> np.ndarray:
         return self._targets.copy()
 
-    def _split(self, worlds: np.ndarray) -> list[np.ndarray]:
-        """Global world ids → per-shard local ids."""
-        worlds = np.asarray(worlds, dtype=np.int64)
-        return [
-            worlds[(worlds >= start) & (worlds < start + size)] - start
-            for start, size in zip(self._starts, self._sizes, strict=True)
-        ]
-
     def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
         """The local shard gets its targets now, worker shards with their next step."""
         worlds = np.asarray(worlds, dtype=np.int64)
         self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        parts = self._split(worlds)
+        parts = self._plan.split(worlds)
         if parts[0].size:
             self._local.set_targets(parts[0], self._targets[parts[0]])
         for i, local_ids in enumerate(parts[1:], start=1):
-            self._pending_dirty[i] = np.union1d(self._pending_dirty[i], local_ids)
+            self._staged.targets(i, local_ids)
 
     def reset(self, worlds: np.ndarray) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
         if worlds.size == 0:
             return
         self._targets[worlds] = self.home_target
-        parts = self._split(worlds)
+        parts = self._plan.split(worlds)
         self._local.reset(parts[0])
         for i, local_ids in enumerate(parts[1:], start=1):
-            self._pending_resets[i] = np.union1d(self._pending_resets[i], local_ids)
-            # A reset overrides targets staged before it in the same tick.
-            self._pending_dirty[i] = np.setdiff1d(self._pending_dirty[i], local_ids)
+            self._staged.reset(i, local_ids)
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance all live shards together; returns the (global) worlds reset for faults."""
@@ -187,16 +170,14 @@ class ShardedBatch(Batch):
         sent = []
         for i, conn in enumerate(self._conns, start=1):
             if not self._alive[i]:
-                continue  # its commands wait in _pending_* / _targets for the new worker
-            dirty = self._pending_dirty[i]
+                continue  # its commands stay staged (and in _targets) for the new worker
+            resets, dirty = self._staged.take(i)
             targets = self._targets[dirty + self._starts[i]]
             try:
-                conn.send(("step", self._pending_resets[i], dirty, targets, ticks))
+                conn.send(("step", resets, dirty, targets, ticks))
             except OSError as exc:
                 self._lost(i, f"pipe broken ({exc})")
                 continue
-            self._pending_resets[i] = np.zeros(0, dtype=np.int64)
-            self._pending_dirty[i] = np.zeros(0, dtype=np.int64)
             sent.append(i)
         faulted = [self._local.step(ticks)]
         for i in sent:
@@ -231,25 +212,10 @@ class ShardedBatch(Batch):
             else:
                 self._last_parts[i] = part
             parts.append(part)
-        fields = (
-            "sim_time",
-            "position",
-            "velocity",
-            "effort",
-            "flange_pos",
-            "flange_quat",
-            "body_pos",
-            "body_quat",
+        faults = np.concatenate(
+            [p.faults + b for p, b in zip(parts, self._fault_base, strict=True)]
         )
-        joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}
-        return Snapshot(
-            tick=parts[0].tick,
-            target=self._targets.copy(),
-            faults=np.concatenate(
-                [p.faults + b for p, b in zip(parts, self._fault_base, strict=True)]
-            ),
-            **joined,
-        )
+        return join_snapshots(parts, parts[0].tick, self._targets, faults)
 
     def qpos(self) -> np.ndarray:
         return self._gather_qpos()[0]
@@ -335,8 +301,8 @@ class ShardedBatch(Batch):
             self._conns[i - 1], self._procs[i - 1] = conn, proc
             # The new worker starts at home: every world of it gets its commanded target back,
             # and the loss counts as one fault for each of them.
-            self._pending_resets[i] = np.zeros(0, dtype=np.int64)
-            self._pending_dirty[i] = np.arange(int(self._sizes[i]), dtype=np.int64)
+            self._staged.take(i)  # resets staged meanwhile are moot: it starts at home
+            self._staged.targets(i, np.arange(int(self._sizes[i]), dtype=np.int64))
             last = self._last_parts.get(i)
             if last is not None:
                 self._fault_base[i] = self._fault_base[i] + last.faults + 1

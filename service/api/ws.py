@@ -189,6 +189,8 @@ async def _serve(
                     reply = _handle(control, text, default_world, source)
                     if reply.get("op") == "error":
                         metrics.command_rejected(source, _op(text))
+                    elif reply.get("op") == "ack" and isinstance(reply.get("tick"), int):
+                        sub.owe(reply["tick"])  # its first frame goes out whatever the cadence
                 else:
                     reply = wire.error_frame(wire.read_id(text), limiter.detail)
                     metrics.command_rejected(source, _op(text), "refused")

@@ -17,9 +17,21 @@ const page = {
   rate: Number(params.get('rate')) || 30,
   info: null,
   shown: '',
+  sceneText: '',
+  reconnected: false,
   lastAck: null,
   // What tests and the bench read (window.armfleet): counts only, nothing to drive.
-  stats: { connected: false, tick: null, frames: 0, renders: 0, fps: 0, streamFps: 0, firstRenderMs: null },
+  stats: {
+    connected: false,
+    tick: null,
+    frames: 0,
+    renders: 0,
+    fps: 0,
+    streamFps: 0,
+    firstRenderMs: null,
+    softwareGL: false,
+    drawCalls: 0,
+  },
 };
 window.armfleet = page.stats;
 
@@ -42,9 +54,12 @@ const conn = new Connection({
   open: () => {
     page.stats.connected = true;
     hideBanner();
+    if (page.reconnected) refresh();
+    page.reconnected = false;
   },
   down: (reason, final) => {
     page.stats.connected = false;
+    page.reconnected = true;
     panel.status(`disconnected: ${reason}${final ? '' : ' (reconnecting…)'}`, true);
     if (final) showBanner(reason);
   },
@@ -92,6 +107,20 @@ async function fetchReady(path) {
   }
 }
 
+/** After a reconnect: the service may have restarted with other worlds or another model. */
+async function refresh() {
+  const [info, scene] = [await fetchReady('/v1/info'), await fetchReady('/v1/scene')];
+  const sceneText = JSON.stringify(scene);
+  const changed = info.nworld !== page.info.nworld || sceneText !== page.sceneText;
+  page.info = info;
+  if (sceneText !== page.sceneText) {
+    page.sceneText = sceneText;
+    viewer.setScene(scene);
+    page.shown = ''; // lay the worlds out again with the next frame
+  }
+  if (changed) go();
+}
+
 /** Open the stream for the current world and view (or say why not). */
 function go() {
   const n = page.info.nworld;
@@ -121,18 +150,25 @@ function go() {
   conn.open({ worlds, focus: w, rate: page.rate });
 }
 
+// Text in the panel changes at most this often (each change costs a layout and a paint).
+const PANEL_MS = 100;
+let panelShown = 0;
+
 function onFrame(f) {
   const s = page.stats;
   s.frames++;
   s.tick = f.header.tick;
+  const now = performance.now();
   const key = f.worlds.join(',');
   if (key !== page.shown) {
     page.shown = key;
     track.reset();
     viewer.setWorlds(Array.from(f.worlds), f.poses.subarray(0, f.header.nbody * 7));
   }
-  track.push(f.poses, performance.now() / 1000);
+  track.push(f.poses, now / 1000);
   viewer.setFaults(f.faults);
+  if (now - panelShown < PANEL_MS) return;
+  panelShown = now;
   const st = f.header.focus;
   if (st && st.world === page.world) {
     panel.showMeasured(st.position);
@@ -141,20 +177,28 @@ function onFrame(f) {
   }
   const m = f.header.stats;
   const speed = m ? ` · RTF ${m.realtime_factor.toFixed(2)} · ${m.mode}` : '';
-  panel.status(`connected · world ${page.world} · tick ${s.tick}${speed} · ${s.fps} fps`);
+  const gl = s.softwareGL ? ' (software GL)' : '';
+  panel.status(`connected · world ${page.world} · tick ${s.tick}${speed} · ${s.fps} fps${gl}`);
 }
 
-let windowStart = performance.now(), windowRenders = 0, windowFrames = 0;
+let windowStart = performance.now(), windowRenders = 0, windowFrames = 0, lastDraw = 0;
+// With software WebGL every frame drawn is CPU time (shared with the simulation when both run
+// on one machine): draw at most at the stream's rate there instead of at the display's.
+const minDrawMs = () => (viewer.software ? 1000 / page.rate - 2 : 0);
 
 function animate() {
+  requestAnimationFrame(animate);
   const now = performance.now();
+  if (now - lastDraw < minDrawMs()) return;
   if (track.cur && track.moving) {
     const { poses, done } = track.sample(now / 1000);
     viewer.setPoses(poses);
     if (done) track.moving = false;
   }
   if (viewer.render()) {
+    lastDraw = now;
     page.stats.renders++;
+    page.stats.drawCalls = viewer.drawCalls;
     if (page.stats.firstRenderMs === null) page.stats.firstRenderMs = Math.round(now);
   }
   if (now - windowStart >= 1000) {
@@ -165,7 +209,6 @@ function animate() {
     windowRenders = page.stats.renders;
     windowFrames = page.stats.frames;
   }
-  requestAnimationFrame(animate);
 }
 
 document.addEventListener('visibilitychange', () => (document.hidden ? conn.pause() : conn.resume()));
@@ -173,6 +216,8 @@ document.addEventListener('visibilitychange', () => (document.hidden ? conn.paus
 async function main() {
   const [info, scene] = [await fetchReady('/v1/info'), await fetchReady('/v1/scene')];
   page.info = info;
+  page.sceneText = JSON.stringify(scene);
+  page.stats.softwareGL = viewer.software;
   panel.setJoints(info.joints.map((j) => j.name));
   viewer.setScene(scene);
   requestAnimationFrame(animate);
