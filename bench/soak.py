@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
+import os
 import random
 import time
 from collections.abc import Callable
@@ -33,6 +33,7 @@ import psutil
 import websockets
 
 from bench import common
+from bench.registry import Context, Result, section
 
 ARM_JOINTS = 6  # the finger (0..0.7 rad from 0) would clamp at once; the arm has room
 STEP = 0.01
@@ -286,32 +287,60 @@ def _judge(
     )
 
 
+DURATION_ENV = "ARMFLEET_SOAK_DURATION"  # seconds, for `armfleet bench --section 14`
+
+
+@section(14, "soak", "Load with nothing lost: 200 WebSocket clients on 64 worlds", default_on=())
+def soak_section(ctx: Context) -> Result:
+    """The soak as a bench section (not run by default: it takes 10 minutes).
+
+    ARMFLEET_SOAK_DURATION sets the seconds (default 600; 60 with --quick).
+    """
+    duration = float(os.environ.get(DURATION_ENV) or ctx.pick(600.0, 60.0))
+    result = run(duration=duration, say=ctx.say, device=ctx.device)
+    lat = result.ack_latency
+    rows = [
+        {
+            "clients": result.clients,
+            "worlds": result.worlds,
+            "s": result.duration_s,
+            "commands": result.commands_sent,
+            "acks": result.acks,
+            "lost/dup/reordered": f"{result.missing}/{result.duplicates}/{result.out_of_order}",
+            "worlds wrong": result.worlds_wrong,
+            "ack p50/p99 ms": f"{lat['p50_ms']}/{lat['p99_ms']}",
+            "RSS MB before/after": f"{result.rss_mb_before}/{result.rss_mb_after}",
+            "RTF mean/min": f"{result.rtf_mean}/{result.rtf_min}",
+        }
+    ]
+    errors = {"soak": "; ".join(result.problems)} if result.problems else {}
+    return Result(rows, data={"result": asdict(result), "ok": result.ok, "errors": errors})
+
+
 def run(
     clients: int = 200,
     worlds: int = 64,
     rate: float = 5.0,
     duration: float = 600.0,
     say: Callable[[str], None] = print,
-) -> dict[str, Any]:
-    """Start a realtime service with `worlds` worlds, soak it, write bench/results/soak.json."""
-    started = common.now_iso()
+    device: str = "cpu",
+) -> SoakResult:
+    """Start a realtime service with `worlds` worlds and soak it."""
     say(f"  soak: {clients} clients on {worlds} worlds, {rate:g}/s each, {duration:g} s")
-    with common.running_server(worlds, "realtime") as server:
+    with common.served(worlds, "realtime", device) as srv:
         result = asyncio.run(
             soak(
-                server.url,
+                srv.url,
                 clients=clients,
                 worlds=worlds,
                 rate=rate,
                 duration=duration,
-                server_pid=server.process.pid,
+                server_pid=srv.server.process.pid,
                 say=say,
             )
         )
-    data = {"result": asdict(result), "ok": result.ok}
-    common.write_json("soak.json", common.section_payload("soak", "cpu", data, started))
     say(table(result))
-    return data
+    return result
 
 
 def table(r: SoakResult) -> str:
@@ -338,9 +367,11 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=5.0, help="commands/s per client")
     parser.add_argument("--duration", type=float, default=600.0, help="seconds")
     args = parser.parse_args()
-    data = run(args.clients, args.worlds, args.rate, args.duration)
-    print(json.dumps(data["result"]["problems"]))
-    raise SystemExit(0 if data["ok"] else 1)
+    started = common.now_iso()
+    result = run(args.clients, args.worlds, args.rate, args.duration)
+    data = {"result": asdict(result), "ok": result.ok}
+    common.write_json("soak.json", {"section": "soak", "started": started, **data})
+    raise SystemExit(0 if result.ok else 1)
 
 
 if __name__ == "__main__":

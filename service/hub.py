@@ -43,6 +43,7 @@ class Subscription:
         self.ready = asyncio.Event()
         # Set by the socket that owns it: close the socket (code, reason), e.g. 1001 at shutdown.
         self.close: Callable[[int, str], Awaitable[None]] | None = None
+        self.status_frames = False  # the socket speaks our protocol: send it status frames
 
     def due(self, now: float) -> bool:
         # A little slack so that a 30 Hz stream on a 60 Hz loop really gets every other tick.
@@ -128,7 +129,8 @@ class StreamHub(SnapshotSink):
     def broadcast(self, message: bytes) -> None:
         """Queue a message (a status frame) for every subscriber, in order with its acks."""
         for sub in self._subs:
-            sub.push_ack(message)
+            if sub.status_frames:
+                sub.push_ack(message)
 
     async def close_all(self, code: int, reason: str) -> None:
         """Close every subscriber's socket with `code` (1001 when the service stops)."""

@@ -228,3 +228,22 @@ def test_token_reads_closes_reads_too(tmp_path):
             assert ws.close_code == 1008
         with connect(f"{srv.ws_url}/v1/ws/worlds/0?token={TOKEN}") as ws:
             assert json.loads(ws.recv(timeout=10))["op"] == "state"
+
+
+def test_rosbridge_publishes_follow_the_same_policy(guarded):
+    publish = {
+        "op": "publish",
+        "id": "p1",
+        "topic": "/joint_commands",
+        "msg": {"name": ["elbow_joint"], "position": [1.3]},
+    }
+    with connect(f"{guarded.ws_url}/rosbridge") as ws:
+        ws.send(json.dumps(publish))
+        status = json.loads(ws.recv(timeout=10))
+        assert status["op"] == "status" and "token" in status["msg"] and status["id"] == "p1"
+    with connect(f"{guarded.ws_url}/rosbridge?token={TOKEN}") as ws:
+        ws.send(json.dumps(publish))
+        wait_for(
+            lambda: httpx.get(f"{guarded.url}/v1/worlds/0/state").json()["target"][2] == 1.3,
+            "the authorised publish to take effect",
+        )

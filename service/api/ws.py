@@ -166,6 +166,7 @@ async def _serve(
         await ws.close(code=code, reason=reason[:120])
 
     sub.close = close
+    sub.status_frames = True
     hub.add(sub)
     sub.offer(loop.latest, time.monotonic())  # the current state at once, then the stream
     writer = asyncio.create_task(_write(ws, hub, sub))
