@@ -30,6 +30,7 @@ const page = {
     streamFps: 0,
     firstRenderMs: null,
     softwareGL: false,
+    drawCalls: 0,
   },
 };
 window.armfleet = page.stats;
@@ -197,6 +198,7 @@ function animate() {
   if (viewer.render()) {
     lastDraw = now;
     page.stats.renders++;
+    page.stats.drawCalls = viewer.drawCalls;
     if (page.stats.firstRenderMs === null) page.stats.firstRenderMs = Math.round(now);
   }
   if (now - windowStart >= 1000) {
