@@ -3,10 +3,14 @@ user would. The first test is the README's example, word for word: keep the two 
 
 from __future__ import annotations
 
+import importlib
 import signal
+import tomllib
 
 import pytest
+from conftest import ROOT
 
+from clients import pytest_plugin
 from clients.testing import ServerFailed, serve, stop
 
 
@@ -50,3 +54,12 @@ def test_factory_serves_a_paused_batch_that_steps_exactly(armfleet_server_factor
 def test_serve_reports_a_server_that_cannot_start(tmp_path):
     with pytest.raises(ServerFailed, match="worlds"), serve(worlds=0, log_dir=tmp_path):
         pass
+
+
+def test_the_pytest11_entry_point_names_this_plugin():
+    """What `pip install armfleet` registers with pytest is the module with our fixtures."""
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    target = meta["project"]["entry-points"]["pytest11"]["armfleet"]
+    plugin = importlib.import_module(target)
+    assert plugin is pytest_plugin
+    assert {"armfleet_server", "armfleet_server_factory"} <= set(vars(plugin))
