@@ -34,8 +34,12 @@ TOKEN_SUBPROTOCOL = "armfleet.token."  # + the token: how a browser socket prese
 APP_SUBPROTOCOL = "armfleet"  # offered beside the token one; the server answers with this
 CLOSE_POLICY = 1008  # WebSocket close: policy violation (bad token, over the command rate)
 CLOSE_TRY_AGAIN = 1013  # WebSocket close: try again later (client cap reached)
-# Probes and the API description stay readable even with `token_reads`.
-OPEN_PATHS = frozenset({"/healthz", "/readyz", "/docs", "/openapi.json", "/docs/oauth2-redirect"})
+# Probes, the API description and the browser page's own files (no data in them) stay readable
+# even with `token_reads`; the page then reads the token from its URL for its requests.
+OPEN_PATHS = frozenset(
+    {"/", "/healthz", "/readyz", "/docs", "/openapi.json", "/docs/oauth2-redirect"}
+)
+OPEN_PREFIXES = ("/web/",)
 _READ_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 
 
@@ -103,7 +107,7 @@ def origin_allowed(settings: Settings, headers: Mapping[str, str]) -> bool:
 
 def check_http(settings: Settings, method: str, path: str, headers: Mapping[str, str]) -> None:
     """Raise AccessError unless this request may go on (see the module docstring)."""
-    if path in OPEN_PATHS:
+    if path in OPEN_PATHS or path.startswith(OPEN_PREFIXES):
         return
     write = method.upper() not in _READ_METHODS
     if (write or settings.token_reads) and not token_matches(settings, bearer(headers)):

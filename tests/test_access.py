@@ -247,3 +247,38 @@ def test_rosbridge_publishes_follow_the_same_policy(guarded):
             lambda: httpx.get(f"{guarded.url}/v1/worlds/0/state").json()["target"][2] == 1.3,
             "the authorised publish to take effect",
         )
+
+
+def test_the_browser_page_takes_the_token_from_its_url(guarded):
+    """Chromium judges: the page's socket presents ?token= from the page URL, else is refused."""
+    from clients import headless
+
+    reason = headless.why_unavailable()
+    if reason:
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    def elbow() -> float:
+        return httpx.get(f"{guarded.url}/v1/worlds/1/state").json()["target"][2]
+
+    with sync_playwright() as p:
+        chromium = headless.launch(p)
+        try:
+            for query, allowed in ((f"?world=1&token={TOKEN}", True), ("?world=1", False)):
+                page = chromium.new_page()
+                page.goto(f"{guarded.url}/{query}")
+                page.wait_for_function(
+                    "window.armfleet && window.armfleet.connected", timeout=30_000
+                )
+                before = elbow()
+                row = page.locator('tr[data-joint="elbow_joint"]')
+                row.get_by_role("button", name="Up (+0.1)").click()
+                if allowed:
+                    wait_for(lambda b=before: elbow() > b + 0.05, "the page's press")
+                else:
+                    msg = page.locator("#message")
+                    wait_for(lambda m=msg: "token" in m.inner_text(), "the refusal shown")
+                    assert elbow() == before
+                page.close()
+        finally:
+            chromium.close()
