@@ -11,9 +11,11 @@ Two measurements, both of the engine as the loop drives it (no HTTP in between):
   scheduling, the reply), reported as p50 / p99 / mean; the snapshot fetch (all shards' states
   into the API process) is timed beside it.
 
-Standalone, e.g. on the GPU machine:
-``python -m bench.ray_bench --device cuda --worlds 32768 --out ray_cuda.json``.
-Imports Ray, Warp and MuJoCo inside functions so that importing this module stays light.
+Section 10 of ``armfleet bench`` (``--section 10``; on by default with ``--device cuda``), or
+``python -m bench.ray_bench --device cuda``. Where the bench runner's dependencies are missing
+(the lent GPU machine): ``python -c "import sys; from bench.ray_bench import standalone;
+standalone(sys.argv[1:])" --device cuda --out ray_cuda.json``. Ray, Warp and MuJoCo are imported
+inside functions so that importing this module stays light.
 """
 
 from __future__ import annotations
@@ -59,7 +61,9 @@ def fast_rate(batch: Any, seconds: float, warmup: float = 1.0) -> dict[str, Any]
         "ticks": ticks,
         "snapshots": snaps,
         "ticks_per_s": round(ticks / elapsed, 2),
-        "world_steps_per_s": round(ticks * batch.nworld / elapsed, 1),
+        # worlds x physics steps, as in section 1
+        "world_steps_per_s": round(ticks * batch.substeps * batch.nworld / elapsed, 1),
+        "snapshots_with_step": getattr(batch, "prefetched", None),
     }
 
 
@@ -70,6 +74,7 @@ def round_trip(batch: Any, ticks: int) -> dict[str, Any]:
     deadline = time.perf_counter()
     next_snap = deadline
     late = 0
+    start = time.perf_counter()
     for _ in range(ticks):
         delay = deadline - time.perf_counter()
         if delay > 0:
@@ -101,7 +106,9 @@ def round_trip(batch: Any, ticks: int) -> dict[str, Any]:
         "shards": batch.shards,
         "control_hz": batch.control_hz,
         "ticks": ticks,
+        "achieved_hz": round(ticks / (time.perf_counter() - start), 2),
         "late_ticks": late,
+        "snapshots_with_step": batch.prefetched,
         "ray_overhead": stats(overhead),
         "step_wall": stats(wall),
         "slowest_shard": stats(shard),
@@ -197,43 +204,115 @@ def machine() -> dict[str, Any]:
     return info
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--device", default="cpu")
-    ap.add_argument("--worlds", type=int, default=64, help="worlds per shard (fast mode)")
-    ap.add_argument("--shards", type=int, default=2)
-    ap.add_argument("--seconds", type=float, default=8.0, help="fast-mode window per config")
-    ap.add_argument("--rt-ticks", type=int, default=600, help="ticks paced at 60 Hz")
-    ap.add_argument(
-        "--rt-worlds", type=int, nargs="*", default=[64], help="worlds per shard at 60 Hz"
-    )
-    ap.add_argument("--no-double", action="store_true", help="skip one device with all worlds")
-    ap.add_argument("--out", default=None, help="JSON file to write")
-    a = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    payload: dict[str, Any] = {"machine": machine(), "command": " ".join(sys.argv)}
+def _rows(payload: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per configuration: fast-mode rates, then the 60 Hz round trips."""
+    one = payload["fast"].get("ray_1_shard", {}).get("world_steps_per_s")
+    labels = {
+        "in_process_1x": "fast, in-process",
+        "in_process_all_worlds": "fast, in-process, all",
+        "ray_1_shard": "fast, Ray 1 shard",
+    }
+    rows = []
+    for key, res in payload["fast"].items():
+        label = labels.get(key, f"fast, Ray {res['shards']} shards")
+        rows.append(
+            {
+                "run": label,
+                "worlds": res["nworld"],
+                "ticks/s": res["ticks_per_s"],
+                "world-steps/s": round(res["world_steps_per_s"]),
+                "vs Ray 1 shard": round(res["world_steps_per_s"] / one, 2) if one else "",
+                "Ray ms/tick p50": "",
+                "Ray ms/tick p99": "",
+                "snapshot ms p50": "",
+            }
+        )
+    for n, res in payload["rt"].items():
+        rows.append(
+            {
+                "run": f"60 Hz, Ray {res['shards']} shards",
+                "worlds": int(n),
+                "ticks/s": res["achieved_hz"],
+                "world-steps/s": "",
+                "vs Ray 1 shard": "",
+                "Ray ms/tick p50": res["ray_overhead"]["p50_ms"],
+                "Ray ms/tick p99": res["ray_overhead"]["p99_ms"],
+                "snapshot ms p50": res["snapshot_fetch"]["p50_ms"],
+            }
+        )
+    return rows
 
-    def save(data: dict[str, Any]) -> None:
-        data["took_s"] = round(time.perf_counter() - t0, 1)
-        if a.out:
-            with open(a.out, "w") as fh:
-                json.dump(data, fh, indent=1)
 
+def measure(
+    quick: bool, device: str, worlds: int | None, say: Any = print, save: Any = None
+) -> dict[str, Any]:
+    """The section's work with its default sizes: 2 x 32768 worlds on CUDA, small on the CPU."""
+    cuda = device.startswith("cuda")
+    per_shard = worlds or (32768 if cuda else (16 if quick else 64))
+    small = 64 if cuda else 8
+    payload: dict[str, Any] = {"machine": machine()}
     run(
-        a.device,
-        a.worlds,
-        a.seconds,
-        a.rt_ticks,
-        a.rt_worlds,
-        a.shards,
-        not a.no_double,
+        device,
+        per_shard,
+        seconds=3.0 if quick else 8.0,
+        rt_ticks=120 if quick else 600,
+        rt_worlds=sorted({small, per_shard}),
+        say=say,
         out=payload,
         save=save,
     )
+    return payload
+
+
+try:  # the registry is part of the bench package; the device machine may run this file alone
+    from bench.registry import Context, Result, section
+except ImportError:  # pragma: no cover
+    section = None
+
+if section is not None:
+
+    @section(
+        10,
+        "ray",
+        "Ray shards: one vs two in fast mode; the Ray round trip per tick at 60 Hz",
+        ("cpu", "cuda"),
+        default_on=("cuda",),
+    )
+    def ray_shards(ctx: Context) -> Result:
+        payload = measure(ctx.quick, ctx.device, ctx.worlds[0] if ctx.worlds else None, ctx.say)
+        notes = [
+            f"two shards / one shard (Ray): {payload['scaling']}x; "
+            f"/ in-process one device: {payload['scaling_vs_in_process']}x",
+            "Ray ms/tick: driver's step wall time minus the slowest shard's own step time; "
+            "snapshot: all shards' states into the API process (30 Hz)",
+        ]
+        return Result(_rows(payload), data=payload, notes=notes)
+
+
+def standalone(argv: list[str] | None = None) -> int:
+    """Without the bench runner (e.g. on a machine lacking its dependencies): JSON to --out."""
+    ap = argparse.ArgumentParser(description="Ray shards benchmark, standalone")
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--worlds", type=int, default=None, help="worlds per shard")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default=None, help="JSON file to write")
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+
+    def save(payload: dict[str, Any]) -> None:
+        payload["took_s"] = round(time.perf_counter() - t0, 1)
+        if a.out:
+            with open(a.out, "w") as fh:
+                json.dump(payload, fh, indent=1)
+
+    payload = measure(a.quick, a.device, a.worlds, save=save)
+    payload["rows"] = _rows(payload)
     save(payload)
-    print(json.dumps(payload, indent=1))
+    print(json.dumps(payload["rows"], indent=1))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from bench.runner import main
+
+    raise SystemExit(main(module=__name__))
