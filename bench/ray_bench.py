@@ -38,9 +38,12 @@ def _pct(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
-def fast_rate(batch: Any, seconds: float, warmup: float = 1.0) -> dict[str, Any]:
-    """Ticks/s and world-steps/s stepping flat out with a snapshot every 1/30 s."""
-    period = 1.0 / SNAPSHOT_HZ
+def fast_rate(
+    batch: Any, seconds: float, warmup: float = 1.0, snapshot_hz: float = SNAPSHOT_HZ
+) -> dict[str, Any]:
+    """Ticks/s and world-steps/s stepping flat out with a snapshot every 1/`snapshot_hz` s
+    (none when 0: what the shards' compute alone scales to)."""
+    period = 1.0 / snapshot_hz if snapshot_hz else float("inf")
     end_warm = time.perf_counter() + warmup
     while time.perf_counter() < end_warm:
         batch.step(1)
@@ -134,7 +137,12 @@ def run(
     from service.ray_shards import RayBatch, connect
 
     out = {} if out is None else out
-    out.update({"device": device, "worlds_per_shard": worlds, "fast": {}, "rt": {}})
+    out.update({"device": device, "worlds_per_shard": worlds, "fast": {}, "steps": {}, "rt": {}})
+
+    def both(key: str, batch: Any) -> dict[str, Any]:
+        out["fast"][key] = res = fast_rate(batch, seconds)
+        out["steps"][key] = fast_rate(batch, seconds / 2, warmup=0.2, snapshot_hz=0)
+        return res
 
     def saved(msg: str) -> None:
         say(msg)
@@ -145,13 +153,13 @@ def run(
     # The in-process baseline first: on a cold machine it compiles the kernels the actors load.
     wb = WorldBatch(worlds, device=device)
     say(f"in-process WorldBatch({worlds}) built in {time.perf_counter() - t0:.1f} s")
-    out["fast"]["in_process_1x"] = fast_rate(wb, seconds)
+    both("in_process_1x", wb)
     saved(f"  in-process: {out['fast']['in_process_1x']}")
     del wb
     gc.collect()
     if single_gpu_double:
         wb = WorldBatch(worlds * shards, device=device)
-        out["fast"]["in_process_all_worlds"] = fast_rate(wb, seconds)
+        both("in_process_all_worlds", wb)
         saved(f"  in-process, {worlds * shards} worlds: {out['fast']['in_process_all_worlds']}")
         del wb
         gc.collect()
@@ -164,10 +172,9 @@ def run(
         t1 = time.perf_counter()
         rb = RayBatch(worlds * k, k, device=device)
         build = time.perf_counter() - t1
-        res = fast_rate(rb, seconds)
+        res = both(f"ray_{k}_shard", rb)
         res["build_s"] = round(build, 2)
         res["device_name"] = rb.device_name
-        out["fast"][f"ray_{k}_shard"] = res
         saved(f"  ray {k} shard(s): {res}")
         rb.close()
         del rb
@@ -177,6 +184,11 @@ def run(
     out["scaling"] = round(many / one, 3)
     out["scaling_vs_in_process"] = round(
         many / out["fast"]["in_process_1x"]["world_steps_per_s"], 3
+    )
+    steps = {k: v["world_steps_per_s"] for k, v in out["steps"].items()}
+    out["steps_scaling"] = round(steps[f"ray_{shards}_shard"] / steps["ray_1_shard"], 3)
+    out["steps_scaling_vs_in_process"] = round(
+        steps[f"ray_{shards}_shard"] / steps["in_process_1x"], 3
     )
     for n in rt_worlds:
         rb = RayBatch(n * shards, shards, device=device)
@@ -206,27 +218,28 @@ def machine() -> dict[str, Any]:
 
 def _rows(payload: dict[str, Any]) -> list[dict[str, Any]]:
     """One row per configuration: fast-mode rates, then the 60 Hz round trips."""
-    one = payload["fast"].get("ray_1_shard", {}).get("world_steps_per_s")
     labels = {
-        "in_process_1x": "fast, in-process",
-        "in_process_all_worlds": "fast, in-process, all",
-        "ray_1_shard": "fast, Ray 1 shard",
+        "in_process_1x": "in-process",
+        "in_process_all_worlds": "in-process, all",
+        "ray_1_shard": "Ray 1 shard",
     }
     rows = []
-    for key, res in payload["fast"].items():
-        label = labels.get(key, f"fast, Ray {res['shards']} shards")
-        rows.append(
-            {
-                "run": label,
-                "worlds": res["nworld"],
-                "ticks/s": res["ticks_per_s"],
-                "world-steps/s": round(res["world_steps_per_s"]),
-                "vs Ray 1 shard": round(res["world_steps_per_s"] / one, 2) if one else "",
-                "Ray ms/tick p50": "",
-                "Ray ms/tick p99": "",
-                "snapshot ms p50": "",
-            }
-        )
+    for group, title in (("fast", "fast, 30 Hz snapshots"), ("steps", "steps only")):
+        one = payload[group].get("ray_1_shard", {}).get("world_steps_per_s")
+        for key, res in payload[group].items():
+            label = labels.get(key, f"Ray {res['shards']} shards")
+            rows.append(
+                {
+                    "run": f"{title}, {label}",
+                    "worlds": res["nworld"],
+                    "ticks/s": res["ticks_per_s"],
+                    "world-steps/s": round(res["world_steps_per_s"]),
+                    "vs Ray 1 shard": round(res["world_steps_per_s"] / one, 2) if one else "",
+                    "Ray ms/tick p50": "",
+                    "Ray ms/tick p99": "",
+                    "snapshot ms p50": "",
+                }
+            )
     for n, res in payload["rt"].items():
         rows.append(
             {
@@ -281,8 +294,9 @@ if section is not None:
     def ray_shards(ctx: Context) -> Result:
         payload = measure(ctx.quick, ctx.device, ctx.worlds[0] if ctx.worlds else None, ctx.say)
         notes = [
-            f"two shards / one shard (Ray): {payload['scaling']}x; "
-            f"/ in-process one device: {payload['scaling_vs_in_process']}x",
+            f"two shards / one shard (Ray): {payload['scaling']}x with 30 Hz snapshots, "
+            f"{payload['steps_scaling']}x steps only; / in-process one device: "
+            f"{payload['scaling_vs_in_process']}x, {payload['steps_scaling_vs_in_process']}x",
             "Ray ms/tick: driver's step wall time minus the slowest shard's own step time; "
             "snapshot: all shards' states into the API process (30 Hz)",
         ]
