@@ -1,6 +1,6 @@
 """Section 4: command latency over the WebSocket, in realtime mode.
 
-A controller on ``/v1/ws/worlds/{w}`` (a frame every tick) sends ``increment`` on
+A controller on ``/v1/ws/worlds/{w}?rate=60`` (a frame every tick) sends ``increment`` on
 ``wrist_3_joint``, alternating +0.1 / -0.1 so the arm stays in range, and measures from the send:
 
 * ``ack``: the ack reply;
@@ -31,6 +31,7 @@ JOINT = "wrist_3_joint"
 DELTA = 0.1
 MOVED = 0.01
 COMMAND_TIMEOUT = 10.0
+RATE = 60.0  # frames/s each controller asks for: every tick of the 60 Hz loop
 
 
 def controllers_for(nworld: int) -> int:
@@ -102,7 +103,10 @@ async def _measure(server: common.Served, commands: int, controllers: int, budge
     deadline = time.perf_counter() + budget
     t0 = time.perf_counter()
     counts = await asyncio.gather(
-        *(_controller(f"{server.ws_url}/v1/ws/worlds/{w}", per[w], out, deadline) for w in range(k))
+        *(
+            _controller(f"{server.ws_url}/v1/ws/worlds/{w}?rate={RATE:g}", per[w], out, deadline)
+            for w in range(k)
+        )
     )
     wall = time.perf_counter() - t0
     total = {key: sum(c[key] for c in counts) for key in counts[0]}
@@ -156,7 +160,7 @@ def latency(ctx: Context) -> Result:
         rows.append(row | {"RTF": r["realtime_factor"], "timeouts": r["timeouts"]})
     data = {
         "mode": "realtime",
-        "socket": "/v1/ws/worlds/{w} (a frame every tick)",
+        "socket": f"/v1/ws/worlds/{{w}}?rate={RATE:g} (a frame every tick)",
         "commands_per_size": commands,
         "sizes": sizes,
         "results": results,

@@ -236,11 +236,10 @@ async def _measure_realtime(
     check_every: float = 2.0,
     abort_below: float = 0.95,
     abort_after: float = 5.0,
+    per_subscriber: int = WORLDS_PER_SUBSCRIBER,
 ) -> dict[str, Any]:
     n = server.nworld
-    groups = [
-        (lo, min(n, lo + WORLDS_PER_SUBSCRIBER) - 1) for lo in range(0, n, WORLDS_PER_SUBSCRIBER)
-    ]
+    groups = [(lo, min(n, lo + per_subscriber) - 1) for lo in range(0, n, per_subscriber)]
     counters = [FrameCounter() for _ in groups]
     readers = [
         asyncio.create_task(c.run(f"{server.ws_url}/v1/ws?worlds={lo}-{hi}&rate=30"))

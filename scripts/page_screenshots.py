@@ -62,11 +62,11 @@ def pose_worlds(url: str) -> None:
     for w in range(NWORLD):
         t = list(home)
         t[0] = 0.6 * math.sin(1.7 * w)
-        t[1] = -1.57 + 0.35 * math.sin(0.9 * w + 1)
-        t[2] = 1.57 - 0.4 * math.cos(1.3 * w)
+        t[1] = -1.57 - 0.35 * abs(math.sin(0.9 * w + 1))  # raised: clear of the table
+        t[2] = 1.57 - 0.4 * abs(math.cos(1.3 * w))
         t[6] = 0.7 * (w % 3) / 2
         rows.append(t)
-    rows[0] = [0.25, -1.2, 1.6, -1.9, -1.57, 0.0, 0.3]
+    rows[0] = [0.3, -1.45, 1.45, -1.57, -1.57, 0.0, 0.35]
     body = {"worlds": list(range(NWORLD)), "position": rows}
     httpx.post(f"{url}/v1/targets", json=body, timeout=10).raise_for_status()
     deadline = time.monotonic() + 60

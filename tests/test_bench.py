@@ -63,3 +63,18 @@ def test_throughput_section_through_the_runner(tmp_path):
     if importlib.util.find_spec("matplotlib"):
         assert report["plot"] == str(tmp_path / "throughput.png")
         assert (tmp_path / "throughput.png").stat().st_size > 0
+
+
+def test_physics_step_and_kernel_sections_through_the_runner(tmp_path):
+    """Sections 12 and 13 (issue 13) at two worlds: both engines at both steps, warp's kernels."""
+    report = runner.run([12, 13], quick=True, worlds=[2], out_dir=tmp_path, say=lambda _m: None)
+    assert report["errors"] == {} and report["sections_run"] == [12, 13]
+    step = json.loads((tmp_path / "physics_step.json").read_text())
+    res = step["results"]["2"]
+    for engine in ("mujoco", "warp"):
+        assert res[f"{engine}_old"]["substeps"] == 8
+        assert res[f"{engine}_new"]["substeps"] == tick_timing(60.0, common.PHYSICS_DT)[0]
+        assert res[f"{engine}_gain"] > 0
+    prof = json.loads((tmp_path / "kernels.json").read_text())["results"]["2"]
+    assert prof["launches_per_tick"] > 50  # every substep's kernels were seen
+    assert math.isclose(sum(k["share"] for k in prof["kernels"]), 1.0)
