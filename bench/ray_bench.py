@@ -11,7 +11,7 @@ Two measurements, both of the engine as the loop drives it (no HTTP in between):
   scheduling, the reply), reported as p50 / p99 / mean; the snapshot fetch (all shards' states
   into the API process) is timed beside it.
 
-Section 10 of ``armfleet bench`` (``--section 10``; on by default with ``--device cuda``), or
+Section 15 of ``armfleet bench`` (``--section 15``; on by default with ``--device cuda``), or
 ``python -m bench.ray_bench --device cuda``. Where the bench runner's dependencies are missing
 (the lent GPU machine): ``python -c "import sys; from bench.ray_bench import standalone;
 standalone(sys.argv[1:])" --device cuda --out ray_cuda.json``. Ray, Warp and MuJoCo are imported
@@ -285,7 +285,7 @@ except ImportError:  # pragma: no cover
 if section is not None:
 
     @section(
-        10,
+        15,
         "ray",
         "Ray shards: one vs two in fast mode; the Ray round trip per tick at 60 Hz",
         ("cpu", "cuda"),
