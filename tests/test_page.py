@@ -295,6 +295,32 @@ def test_gripper_buttons_keyboard_shortcuts_and_reset_drive_the_world(srv, http,
     assert target(http, 0) == pytest.approx(HOME)  # the other worlds saw nothing
 
 
+def test_a_hidden_tab_stops_its_stream_and_resumes_when_shown(srv, page):
+    """Headless Chromium never hides a tab, so the page is told the way a browser tells it:
+    `visibilityState` reads "hidden" and `visibilitychange` fires (then the reverse)."""
+    open_page(page, srv, "?world=0")
+
+    def set_visibility(state: str) -> None:
+        page.evaluate(
+            """(state) => {
+                const as = (value) => ({ value, configurable: true });
+                Object.defineProperty(document, 'visibilityState', as(state));
+                Object.defineProperty(document, 'hidden', as(state === 'hidden'));
+                document.dispatchEvent(new Event('visibilitychange'));
+            }""",
+            state,
+        )
+
+    set_visibility("hidden")
+    page.wait_for_function("!window.armfleet.connected")
+    frames = page.evaluate("window.armfleet.frames")
+    time.sleep(0.5)
+    assert page.evaluate("window.armfleet.frames") == frames  # no frame while hidden
+    expect(page.locator("#status")).to_contain_text("tab hidden")
+    set_visibility("visible")
+    page.wait_for_function(f"window.armfleet.connected && window.armfleet.frames > {frames}")
+
+
 def test_a_killed_server_shows_disconnected_and_the_page_recovers_when_it_is_back(srv, page):
     """Last in the module: it replaces the module's server with a new one on the same port."""
     open_page(page, srv, "?world=2")
