@@ -114,7 +114,9 @@ def test_view_socket_sends_pose_frames_with_the_focus_worlds_state(srv, http):
     scene = http.get("/v1/scene").json()
     nbody = scene["nbody"]
     gripper = next(b["id"] for b in scene["bodies"] if b["name"] == "gripper_base")
-    with connect(f"{srv.server.ws_url}/v1/ws/view?worlds=0-3&focus=2&rate=30") as ws:
+    url = f"{srv.server.ws_url}/v1/ws/view?worlds=0-3&focus=2&rate=30"
+    with connect(url, compression="deflate") as ws:  # offered, as browsers do; declined
+        assert "permessage-deflate" not in str(ws.response.headers)
         header, worlds, faults, poses = read_pose_frame(ws.recv(timeout=5))
         # Commands go over the same socket, with ids, and are acknowledged.
         ws.send(json.dumps({"op": "increment", "world": 1, "joint": 0, "delta": 0.1, "id": 7}))
