@@ -52,6 +52,7 @@ def serve(
     control_hz: Annotated[float | None, _opt("control_hz")] = None,
     physics_dt: Annotated[float | None, _opt("physics_dt")] = None,
     log_level: Annotated[str | None, _opt("log_level")] = None,
+    ws_compression: Annotated[bool | None, _opt("ws_compression")] = None,
     ros2: Annotated[bool | None, _opt("ros2")] = None,
     ros2_rate: Annotated[float | None, _opt("ros2_rate")] = None,
     ros2_worlds: Annotated[str | None, _opt("ros2_worlds")] = None,
@@ -73,6 +74,9 @@ def serve(
         port=settings.port,
         log_level=level,
         ws_max_size=1 << 20,
+        # Browsers offer permessage-deflate on every socket; deflating binary frames for each
+        # viewer was the largest server cost of many viewers (bench section 9).
+        ws_per_message_deflate=settings.ws_compression,
         timeout_graceful_shutdown=3,
     )
 
