@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from service.engine import WorldBatch
-from service.types import Snapshot
+from service.types import BatchState, Snapshot
 
 # Below this many worlds per shard the pipe round trip (~0.1 ms) outweighs the second core.
 MIN_WORLDS_PER_SHARD = 16
@@ -47,16 +47,52 @@ def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
             return
         if op == "step":
             resets, dirty, targets, ticks = args
-            batch.reset(resets)
-            if dirty.size:
-                batch.set_targets(dirty, targets)
+            _apply(batch, resets, dirty, targets)
             conn.send(batch.step(ticks))
+        elif op == "get_state":
+            _apply(batch, *args)
+            conn.send(batch.get_state())
+        elif op == "set_state":
+            try:
+                batch.set_state(args[0])
+                conn.send(None)
+            except ValueError as exc:
+                conn.send(str(exc))
         elif op == "snapshot":
             conn.send(batch.snapshot())
         elif op == "qpos":
             conn.send((batch.qpos(), batch.qvel()))
         elif op == "stop":
             return
+
+
+def _apply(batch: WorldBatch, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray) -> None:
+    """Commands staged in the parent since the shard's last step."""
+    batch.reset(resets)
+    if dirty.size:
+        batch.set_targets(dirty, targets)
+
+
+def _slice_state(state: BatchState, start: int, stop: int) -> BatchState:
+    """Worlds start..stop of a state, as a state of its own (for one shard)."""
+    return BatchState(
+        tick=state.tick,
+        world_ticks=state.world_ticks[start:stop],
+        faults=state.faults[start:stop],
+        targets=state.targets[start:stop],
+        physics={k: v[start:stop] for k, v in state.physics.items()},
+    )
+
+
+def _join_states(parts: list[BatchState]) -> BatchState:
+    """Shards' states, in shard order, as one state of the whole batch."""
+    return BatchState(
+        tick=parts[0].tick,
+        world_ticks=np.concatenate([p.world_ticks for p in parts]),
+        faults=np.concatenate([p.faults for p in parts]),
+        targets=np.concatenate([p.targets for p in parts]),
+        physics={k: np.concatenate([p.physics[k] for p in parts]) for k in parts[0].physics},
+    )
 
 
 class ShardedBatch:
@@ -143,14 +179,18 @@ class ShardedBatch:
             # A reset overrides targets staged before it in the same tick.
             self._pending_dirty[i] = np.setdiff1d(self._pending_dirty[i], local_ids)
 
+    def _take_pending(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Shard i's staged (resets, dirty local ids, their targets), cleared here."""
+        dirty = self._pending_dirty[i]
+        staged = (self._pending_resets[i], dirty, self._targets[dirty + self._starts[i]])
+        self._pending_resets[i] = np.zeros(0, dtype=np.int64)
+        self._pending_dirty[i] = np.zeros(0, dtype=np.int64)
+        return staged
+
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance all shards together; returns the (global) worlds reset for faults."""
         for i, conn in enumerate(self._conns, start=1):
-            dirty = self._pending_dirty[i]
-            targets = self._targets[dirty + self._starts[i]]
-            conn.send(("step", self._pending_resets[i], dirty, targets, ticks))
-            self._pending_resets[i] = np.zeros(0, dtype=np.int64)
-            self._pending_dirty[i] = np.zeros(0, dtype=np.int64)
+            conn.send(("step", *self._take_pending(i), ticks))
         faulted = [self._local.step(ticks)]
         for i, conn in enumerate(self._conns, start=1):
             faulted.append(conn.recv() + self._starts[i])
@@ -170,6 +210,34 @@ class ShardedBatch:
             faults=np.concatenate([p.faults for p in parts]),
             **joined,
         )
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        return self._local.physics_shapes()
+
+    def get_state(self) -> BatchState:
+        """Every shard's state (staged commands applied first), joined in world order."""
+        for i, conn in enumerate(self._conns, start=1):
+            conn.send(("get_state", *self._take_pending(i)))
+        parts = [self._local.get_state()] + [conn.recv() for conn in self._conns]
+        joined = _join_states(parts)
+        # The parent's mirror is authoritative for targets (identical once applied).
+        return BatchState(
+            joined.tick, joined.world_ticks, joined.faults, self._targets.copy(), joined.physics
+        )
+
+    def set_state(self, state: BatchState) -> None:
+        """Split `state` over the shards; checked whole first so no shard is half-restored."""
+        state.check_compatible(self.nworld, self.physics_shapes())
+        for i in range(1, self.shards):
+            self._take_pending(i)  # staged commands belong to the state being replaced
+        bounds = [*self._starts, self.nworld]
+        for i, conn in enumerate(self._conns, start=1):
+            conn.send(("set_state", _slice_state(state, bounds[i], bounds[i + 1])))
+        self._local.set_state(_slice_state(state, 0, bounds[1]))
+        errors = [err for err in (conn.recv() for conn in self._conns) if err]
+        if errors:  # cannot happen after the check above; say so loudly if it does
+            raise RuntimeError(f"shard refused a checked state: {errors[0]}")
+        self._targets = np.array(state.targets, dtype=np.float64)
 
     def qpos(self) -> np.ndarray:
         return self._gather_qpos()[0]
