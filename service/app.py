@@ -12,6 +12,7 @@ from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service.api import health, info, sim, worlds, ws
+from service.errors import ArmfleetError, BadCommand
 from service.runtime import Runtime
 from service.settings import Settings
 
@@ -65,6 +66,21 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
     return JSONResponse({"detail": detail}, status_code=422)
 
 
+async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
+    """The one mapping of domain errors to HTTP: status from the class, detail from the error."""
+    assert isinstance(exc, ArmfleetError)
+    if isinstance(exc, BadCommand):
+        # Shaped like FastAPI's own validation errors, so clients parse one 422 format.
+        loc = (exc.field or "body").split(".")
+        if loc[0] not in ("body", "query", "path"):
+            loc = ["body", *loc]
+        detail: object = [{"loc": loc, "msg": exc.message, "type": "value_error"}]
+    else:
+        detail = exc.detail
+    headers = {"Retry-After": "2"} if exc.status == 503 else None
+    return JSONResponse({"detail": detail}, status_code=exc.status, headers=headers)
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
     runtime = Runtime(settings)
@@ -82,7 +98,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version="0.1.0",
         description=DESCRIPTION,
         lifespan=lifespan,
-        exception_handlers={RequestValidationError: _validation_error},
+        exception_handlers={
+            RequestValidationError: _validation_error,
+            ArmfleetError: _armfleet_error,
+        },
     )
     app.state.runtime = runtime
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -22,41 +22,49 @@ app = typer.Typer(
 )
 
 
+def _opt(name: str) -> Any:
+    """A `serve` option documented from its Settings field (one description, one default).
+
+    Options default to None so that only what the user typed overrides the settings, which
+    themselves come from ARMFLEET_* variables or the field defaults.
+    """
+    from service.settings import Settings
+
+    field = Settings.model_fields[name]
+    default = field.default.value if isinstance(field.default, Mode) else field.default
+    return typer.Option(
+        help=f"{field.description or name} (default {default}; env ARMFLEET_{name.upper()})",
+        show_default=False,
+    )
+
+
 @app.command()
 def serve(
-    worlds: Annotated[int, typer.Option(help="parallel worlds")] = 16,
-    device: Annotated[str, typer.Option(help="warp device: cpu, cuda or cuda:N")] = "cpu",
-    host: Annotated[str, typer.Option(help="bind address")] = "127.0.0.1",
-    port: Annotated[int, typer.Option(help="TCP port")] = 8000,
-    mode: Annotated[Mode, typer.Option(help="how time advances")] = Mode.REALTIME,
-    shards: Annotated[int, typer.Option(help="CPU processes sharing the worlds; 0 = auto")] = 0,
-    control_hz: Annotated[float, typer.Option(help="control ticks per second")] = 60.0,
-    physics_dt: Annotated[float, typer.Option(help="approximate physics step [s]")] = 0.002,
-    log_level: Annotated[str, typer.Option(help="debug, info, warning, error")] = "info",
+    worlds: Annotated[int | None, _opt("worlds")] = None,
+    device: Annotated[str | None, _opt("device")] = None,
+    host: Annotated[str | None, _opt("host")] = None,
+    port: Annotated[int | None, _opt("port")] = None,
+    mode: Annotated[Mode | None, _opt("mode")] = None,
+    shards: Annotated[int | None, _opt("shards")] = None,
+    control_hz: Annotated[float | None, _opt("control_hz")] = None,
+    physics_dt: Annotated[float | None, _opt("physics_dt")] = None,
+    log_level: Annotated[str | None, _opt("log_level")] = None,
 ) -> None:
     """Start the service: N worlds, a real-time loop, REST + WebSocket on http://HOST:PORT."""
+    given = {name: value for name, value in locals().items() if value is not None}
     import uvicorn
 
     from service.app import create_app
     from service.settings import Settings
 
-    settings = Settings(
-        worlds=worlds,
-        device=device,
-        host=host,
-        port=port,
-        mode=mode,
-        shards=shards,
-        control_hz=control_hz,
-        physics_dt=physics_dt,
-        log_level=log_level,
-    )
-    logging.basicConfig(level=log_level.upper(), format="%(asctime)s %(name)s %(message)s")
+    settings = Settings(**given)
+    level = settings.log_level
+    logging.basicConfig(level=level.upper(), format="%(asctime)s %(name)s %(message)s")
     uvicorn.run(
         create_app(settings),
-        host=host,
-        port=port,
-        log_level=log_level,
+        host=settings.host,
+        port=settings.port,
+        log_level=level,
         ws_max_size=1 << 20,
         timeout_graceful_shutdown=3,
     )

@@ -12,21 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from service.errors import BadCommand
 from service.types import RobotSpec
 
 MAX_ABS_DELTA = 2 * math.pi  # one press may not move a target by more than a full turn
 # Increments are rounded to this many decimals so that repeated ±0.1 presses land on decimal
 # values (0.1 * 7 == 0.7 exactly, and back down to exactly 0.0), as the seed's round(x, 2) did.
 _INCREMENT_DECIMALS = 9
-
-
-class CommandError(ValueError):
-    """A command that cannot be applied; `field` names what was wrong for the 422 detail."""
-
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(message)
-        self.field = field
-        self.message = message
 
 
 @dataclass(frozen=True)
@@ -42,17 +34,17 @@ def resolve_joints(
 ) -> dict[int, float]:
     """Map joint names or indices to indices, checking every value is a finite number."""
     if not values:
-        raise CommandError(field, f"{field} must name at least one joint")
+        raise BadCommand(field, f"{field} must name at least one joint")
     out: dict[int, float] = {}
     for key, value in values.items():
         try:
             idx = spec.index(int(key) if isinstance(key, str) and key.isdigit() else key)
         except KeyError as exc:
-            raise CommandError(f"{field}.{key}", exc.args[0]) from None
+            raise BadCommand(f"{field}.{key}", exc.args[0]) from None
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise CommandError(f"{field}.{key}", f"value must be a number, got {value!r}")
+            raise BadCommand(f"{field}.{key}", f"value must be a number, got {value!r}")
         if not math.isfinite(value):
-            raise CommandError(f"{field}.{key}", "value must be finite (no NaN or Inf)")
+            raise BadCommand(f"{field}.{key}", "value must be finite (no NaN or Inf)")
         out[idx] = float(value)
     return out
 
@@ -68,7 +60,7 @@ def increment(spec: RobotSpec, current: np.ndarray, deltas: Mapping[int, float])
     for i, delta in deltas.items():
         if abs(delta) > MAX_ABS_DELTA:
             name = spec.joints[i].name
-            raise CommandError(f"delta.{name}", f"|delta| must be <= 2π ({MAX_ABS_DELTA:.6f} rad)")
+            raise BadCommand(f"delta.{name}", f"|delta| must be <= 2π ({MAX_ABS_DELTA:.6f} rad)")
     row = np.array(current, dtype=np.float64)
     for i, delta in deltas.items():
         row[i] = round(row[i] + delta, _INCREMENT_DECIMALS)

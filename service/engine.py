@@ -21,7 +21,7 @@ import warp as wp
 
 from mjcf import SCENE_XML
 from service.robot import LoadedRobot, load_robot
-from service.types import PHYSICS_FIELDS, BatchState, Snapshot
+from service.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.engine")
 
@@ -107,7 +107,7 @@ def _host_layout(arr: wp.array) -> tuple[tuple[int, ...], type]:
     return (*arr.shape, *inner), wp.dtype_to_numpy(scalar)
 
 
-class WorldBatch:
+class WorldBatch(Batch):
     """N worlds of one model on one Warp device, advanced in captured control ticks.
 
     Targets live in a float64 host mirror (what was commanded, reported as `target`) and are
@@ -116,8 +116,6 @@ class WorldBatch:
     whose contact/constraint capacity overflows is reset to `home` after the tick that broke it
     and counted in `faults`; the other worlds are not touched.
     """
-
-    shards = 1  # the interface ShardedBatch shares
 
     def __init__(
         self,
@@ -136,6 +134,7 @@ class WorldBatch:
         self.robot = robot or load_robot(model_path)
         self.spec = self.robot.spec
         self.nworld = nworld
+        self.shards = 1
         self.control_hz = float(control_hz)
         self.tick_dt = 1.0 / self.control_hz
         # Whole substeps per tick, physics dt adjusted so that sim time per tick is exact.

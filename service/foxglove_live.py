@@ -127,7 +127,9 @@ def geom_entities(mjm: mujoco.MjModel, prefix: str, stamp: Timestamp) -> list[Sc
             )
         elif kind == mujoco.mjtGeom.mjGEOM_PLANE:
             tile = (2 * _FLOOR_HALF, 2 * _FLOOR_HALF, 0.002)
-            prims["cubes"].append(CubePrimitive(pose=_pose(pos, quat), size=_vec(tile), color=color))
+            prims["cubes"].append(
+                CubePrimitive(pose=_pose(pos, quat), size=_vec(tile), color=color)
+            )
         elif kind == mujoco.mjtGeom.mjGEOM_SPHERE:
             prims["spheres"].append(
                 SpherePrimitive(pose=_pose(pos, quat), size=_vec([2 * size[0]] * 3), color=color)
@@ -267,9 +269,7 @@ class FoxgloveLive:
     def _publish_frame(self) -> None:
         worlds = np.array(self.worlds)
         # One request served between ticks: the snapshot and full qpos of the same tick.
-        snap, qpos = self._loop.call(lambda b: (b.snapshot(), b.qpos()[worlds])).result(
-            timeout=5
-        )
+        snap, qpos = self._loop.call(lambda b: (b.snapshot(), b.qpos()[worlds])).result(timeout=5)
         ns, stamp = self._stamp(snap.tick)
         self._publish_joint_states(snap, ns)
         if not self._tf.has_sinks():

@@ -20,9 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from service import commands
-from service.engine import WorldBatch
-from service.shards import ShardedBatch
-from service.types import Mode, Snapshot
+from service.errors import NotPaused, UnknownWorld
+from service.types import Batch, Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
 
@@ -30,10 +29,6 @@ log = logging.getLogger("armfleet.loop")
 # never older than this; readers that need the current tick ask for one explicitly.
 _IDLE_SNAPSHOT_PERIOD = 0.1
 _STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
-
-
-class NotPausedError(RuntimeError):
-    """Stepping by request is only meaningful while paused."""
 
 
 @dataclass(frozen=True)
@@ -55,7 +50,11 @@ class LoopStats:
 
 
 class SnapshotSink:
-    """Where snapshots go (the API's stream hub). The loop asks it whether one is wanted now."""
+    """Where snapshots go (the stream hub, the ROS 2 bridge, the recorder, ...).
+
+    Both methods run on the sim thread between ticks: they must be quick and hand any real work
+    (serialising, sending, writing) to a thread or event loop of their own.
+    """
 
     def wants_snapshot(self, now: float) -> bool:
         return False
@@ -65,17 +64,17 @@ class SnapshotSink:
 
 
 class SimLoop:
-    """Advance a WorldBatch in realtime, fast or paused mode and serialise commands into it."""
+    """Advance a Batch in realtime, fast or paused mode and serialise commands into it."""
 
     def __init__(
         self,
-        batch: WorldBatch | ShardedBatch,
+        batch: Batch,
         mode: Mode = Mode.REALTIME,
-        sink: SnapshotSink | None = None,
+        sinks: tuple[SnapshotSink, ...] = (),
     ):
         self.batch = batch
         self.spec = batch.spec
-        self.sink = sink or SnapshotSink()
+        self._sinks = tuple(sinks)  # replaced, never mutated: read by the sim thread
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._mode = Mode(mode)
@@ -102,6 +101,13 @@ class SimLoop:
         self._thread = threading.Thread(target=self._run, name="armfleet-sim", daemon=True)
         self._thread.start()
 
+    def add_sink(self, sink: SnapshotSink) -> None:
+        """Also publish snapshots to `sink` (from the next tick on)."""
+        self._sinks = (*self._sinks, sink)
+
+    def remove_sink(self, sink: SnapshotSink) -> None:
+        self._sinks = tuple(s for s in self._sinks if s is not sink)
+
     def stop(self) -> None:
         with self._wake:
             self._running = False
@@ -121,7 +127,7 @@ class SimLoop:
 
     def _check_world(self, world: int) -> None:
         if not 0 <= world < self.batch.nworld:
-            raise IndexError(f"world {world} does not exist (0..{self.batch.nworld - 1})")
+            raise UnknownWorld(world, self.batch.nworld)
 
     def increment(self, world: int, deltas: Mapping[int, float]) -> CommandResult:
         """Add deltas (joint index → rad) to the world's latest target, clamped."""
@@ -188,7 +194,7 @@ class SimLoop:
         fut: concurrent.futures.Future[int] = concurrent.futures.Future()
         with self._wake:
             if self._mode is not Mode.PAUSED:
-                raise NotPausedError(f"step needs mode 'paused' (mode is {self._mode.value!r})")
+                raise NotPaused(f"step needs mode 'paused' (mode is {self._mode.value!r})")
             self._step_goal = max(self._step_goal, self._tick) + ticks
             self._step_waiters.append((self._step_goal, fut))
             self._wake.notify_all()
@@ -254,6 +260,18 @@ class SimLoop:
                     next_deadline = now
 
     def _tick_once(self, mode: Mode) -> None:
+        """One tick as named stages, each holding the lock only for its own bookkeeping."""
+        resets, dirty, targets = self._take_commands()
+        self._apply(resets, dirty, targets)
+        faulted = self.batch.step(1)
+        now = time.monotonic()
+        if self._finish_tick(faulted, mode, now):
+            self._publish(now)
+        self._release_step_waiters()
+        self._update_stats(now)
+
+    def _take_commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Take what is pending from under the lock: (worlds to reset, dirty worlds, targets)."""
         with self._lock:
             resets = np.flatnonzero(self._reset)
             dirty = np.flatnonzero(self._dirty)
@@ -261,40 +279,48 @@ class SimLoop:
             self._reset[:] = False
             self._dirty[:] = False
             self._stepping = True
-        batch = self.batch
-        batch.reset(resets)
+        return resets, dirty, targets
+
+    def _apply(self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray) -> None:
+        """Hand the tick's commands to the engine: resets first, then targets."""
+        self.batch.reset(resets)
         if dirty.size:
-            batch.set_targets(dirty, targets)
-        faulted = batch.step(1)
-        now = time.monotonic()
+            self.batch.set_targets(dirty, targets)
+
+    def _finish_tick(self, faulted: np.ndarray, mode: Mode, now: float) -> bool:
+        """Count the tick, forget targets of worlds reset for faults; is a snapshot wanted?"""
         with self._lock:
-            self._tick = batch.tick
+            self._tick = self.batch.tick
             self._stepping = False
             if faulted.size:
                 keep = faulted[~self._dirty[faulted]]  # commands that arrived since still apply
-                self._pending[keep] = batch.home_target
-            want = (
+                self._pending[keep] = self.batch.home_target
+            return (
                 mode is Mode.REALTIME
                 or (mode is Mode.PAUSED and self._tick >= self._step_goal)
                 or bool(self._snapshot_waiters)
                 or now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
-                or self.sink.wants_snapshot(now)
+                or any(sink.wants_snapshot(now) for sink in self._sinks)
             )
-        if want:
-            snap = batch.snapshot()
-            with self._lock:
-                self._latest = snap
-                self._last_snapshot_wall = now
-                waiters, self._snapshot_waiters = self._snapshot_waiters, []
-            for fut in waiters:
-                fut.set_result(snap)
-            self.sink.publish(snap)
+
+    def _publish(self, now: float) -> None:
+        """Take a snapshot, wake the readers waiting for one, hand it to every sink."""
+        snap = self.batch.snapshot()
+        with self._lock:
+            self._latest = snap
+            self._last_snapshot_wall = now
+            waiters, self._snapshot_waiters = self._snapshot_waiters, []
+        for fut in waiters:
+            fut.set_result(snap)
+        for sink in self._sinks:
+            sink.publish(snap)
+
+    def _release_step_waiters(self) -> None:
         with self._lock:
             done = [f for g, f in self._step_waiters if g <= self._tick]
             self._step_waiters = [(g, f) for g, f in self._step_waiters if g > self._tick]
         for fut in done:
             fut.set_result(self._tick)
-        self._update_stats(now)
 
     def _update_stats(self, now: float) -> None:
         t0, tick0 = self._window

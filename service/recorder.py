@@ -200,8 +200,11 @@ class Recorder:
     # The loop sink: a snapshot at every `every`-th tick, handed over as it is (immutable).
     def wants_snapshot(self, now: float) -> bool:
         rt = self._runtime
-        return self._active and rt is not None and rt.loop is not None and (
-            rt.loop.tick % self._every == 0
+        return (
+            self._active
+            and rt is not None
+            and rt.loop is not None
+            and (rt.loop.tick % self._every == 0)
         )
 
     def publish(self, snapshot: Snapshot) -> None:

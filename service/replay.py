@@ -150,7 +150,12 @@ def read_recording(path: Path | str) -> Recording:
                 raise ReplayError(f"{topic}: joint names {msg_names} differ from {names}")
             seg.states[tick_of(stamp, hz)][world] = (pos, vel, eff)
     return Recording(
-        header, segments, names, [int(w) for w in header["worlds"]], float(header["rate"]), truncated
+        header,
+        segments,
+        names,
+        [int(w) for w in header["worlds"]],
+        float(header["rate"]),
+        truncated,
     )
 
 

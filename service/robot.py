@@ -16,15 +16,6 @@ from mjcf import SCENE_XML
 from service.types import JointSpec, RobotSpec
 
 ROBOT_NAME = "UR10e + Robotiq 2F-140"
-JOINT_NAMES = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-    "finger_joint",
-)
 HOME_KEY = "home"
 FLANGE_SITE = "flange"
 
@@ -45,27 +36,28 @@ class LoadedRobot:
 def load_robot(path: Path | str = SCENE_XML) -> LoadedRobot:
     """Compile the scene and check it honours the contract the rest of the service relies on."""
     mjm = mujoco.MjModel.from_xml_path(str(path))
-    qpos_adr, dof_adr, act_ids = [], [], []
-    for name in JOINT_NAMES:
-        jid = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_JOINT, name)
-        if jid < 0:
-            raise ValueError(f"{path}: joint {name!r} missing")
-        aid = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
-        if aid < 0 or mjm.actuator_trnid[aid, 0] != jid:
-            raise ValueError(f"{path}: no actuator named {name!r} driving joint {name!r}")
+    # The commanded joints are the actuated ones, in actuator order (the MJCF lists the six arm
+    # joints, then finger_joint): the model is the one place that names them.
+    names: list[str] = []
+    qpos_adr, dof_adr = [], []
+    for aid in range(mjm.nu):
+        jid = int(mjm.actuator_trnid[aid, 0])
+        if mjm.actuator_trntype[aid] != mujoco.mjtTrn.mjTRN_JOINT or jid < 0:
+            raise ValueError(f"{path}: actuator {aid} must drive a joint")
+        name = mujoco.mj_id2name(mjm, mujoco.mjtObj.mjOBJ_JOINT, jid)
+        if mujoco.mj_id2name(mjm, mujoco.mjtObj.mjOBJ_ACTUATOR, aid) != name:
+            raise ValueError(f"{path}: actuator {aid} must be named after its joint {name!r}")
+        names.append(name)
         qpos_adr.append(mjm.jnt_qposadr[jid])
         dof_adr.append(mjm.jnt_dofadr[jid])
-        act_ids.append(aid)
-    if list(act_ids) != list(range(len(JOINT_NAMES))) or mjm.nu != len(JOINT_NAMES):
-        raise ValueError(f"{path}: the actuators must be exactly the {len(JOINT_NAMES)} joints")
     home_key = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_KEY, HOME_KEY)
     flange = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_SITE, FLANGE_SITE)
     if home_key < 0 or flange < 0:
         raise ValueError(f"{path}: keyframe {HOME_KEY!r} and site {FLANGE_SITE!r} are required")
 
-    vel_limit = _custom_numeric(mjm, "velocity_limit", len(JOINT_NAMES))
+    vel_limit = _custom_numeric(mjm, "velocity_limit", len(names))
     joints = []
-    for i, name in enumerate(JOINT_NAMES):
+    for i, name in enumerate(names):
         jid = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_JOINT, name)
         lower, upper = (float(v) for v in mjm.jnt_range[jid])
         joints.append(
@@ -85,7 +77,7 @@ def load_robot(path: Path | str = SCENE_XML) -> LoadedRobot:
         spec=RobotSpec(name=ROBOT_NAME, joints=tuple(joints)),
         qpos_adr=np.array(qpos_adr, dtype=np.int32),
         dof_adr=np.array(dof_adr, dtype=np.int32),
-        actuator_ids=np.array(act_ids, dtype=np.int32),
+        actuator_ids=np.arange(mjm.nu, dtype=np.int32),
         flange_site=flange,
         home_key=home_key,
     )

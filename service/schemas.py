@@ -11,7 +11,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from service.types import Mode
+from service.types import JointSpec, Mode
 
 # Strict: numbers only ("0.1" and true are refused); ints are fine.
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
@@ -29,6 +29,17 @@ Delta = Annotated[
 MAX_STEP_TICKS = 100_000
 
 
+def _paired(keys_name: str, keys: list, values_name: str, values: list) -> None:
+    """Parallel lists (JointState's name/position, worlds/position): same length, keys unique."""
+    if len(keys) != len(values):
+        raise ValueError(
+            f"{keys_name} and {values_name} must have the same length "
+            f"(got {len(keys)} and {len(values)})"
+        )
+    if len(set(keys)) != len(keys):
+        raise ValueError(f"{keys_name} lists an entry twice")
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -36,18 +47,9 @@ class _Strict(BaseModel):
 # -- replies ----------------------------------------------------------------------------------
 
 
-class JointInfo(BaseModel):
-    name: str
-    lower: float
-    upper: float
-    home: float
-    velocity_limit: float
-    effort_limit: float
-
-
 class Info(BaseModel):
     robot: str
-    joints: list[JointInfo]
+    joints: list[JointSpec] = Field(description="the commanded joints, in command order")
     nworld: int
     device: str
     shards: int = Field(description="processes the worlds are split across (CPU cores used)")
@@ -160,13 +162,7 @@ class JointTargets(_Strict):
 
     @model_validator(mode="after")
     def _same_length(self) -> JointTargets:
-        if len(self.name) != len(self.position):
-            raise ValueError(
-                f"name and position must have the same length "
-                f"(got {len(self.name)} and {len(self.position)})"
-            )
-        if len(set(self.name)) != len(self.name):
-            raise ValueError("name lists a joint twice")
+        _paired("name", self.name, "position", self.position)
         return self
 
 
@@ -185,13 +181,7 @@ class BatchTargets(_Strict):
 
     @model_validator(mode="after")
     def _same_length(self) -> BatchTargets:
-        if len(self.worlds) != len(self.position):
-            raise ValueError(
-                f"worlds and position must have the same length "
-                f"(got {len(self.worlds)} and {len(self.position)})"
-            )
-        if len(set(self.worlds)) != len(self.worlds):
-            raise ValueError("worlds lists a world twice")
+        _paired("worlds", self.worlds, "position", self.position)
         return self
 
 

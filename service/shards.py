@@ -18,7 +18,21 @@ from typing import Any
 import numpy as np
 
 from service.engine import WorldBatch
-from service.types import BatchState, Snapshot
+from service.types import Batch, BatchState, Snapshot
+
+# The Batch facts that are the same for every shard (read from the local one).
+_FACTS_OF_LOCAL = (
+    "spec",
+    "control_hz",
+    "tick_dt",
+    "substeps",
+    "physics_dt",
+    "device_name",
+    "home_target",
+    "compile_s",
+    "capture_s",
+    "capture_error",
+)
 
 # Below this many worlds per shard the pipe round trip (~0.1 ms) outweighs the second core.
 MIN_WORLDS_PER_SHARD = 16
@@ -60,6 +74,8 @@ def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
                 conn.send(str(exc))
         elif op == "snapshot":
             conn.send(batch.snapshot())
+        elif op == "write_qpos":
+            batch.write_qpos(*args)
         elif op == "qpos":
             conn.send((batch.qpos(), batch.qvel()))
         elif op == "stop":
@@ -95,7 +111,7 @@ def _join_states(parts: list[BatchState]) -> BatchState:
     )
 
 
-class ShardedBatch:
+class ShardedBatch(Batch):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
     def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
@@ -125,14 +141,9 @@ class ShardedBatch:
                 raise RuntimeError(f"shard worker failed to start: {reply[1]}")
         self.nworld = nworld
         self.shards = shards
-        local = self._local
-        self.robot, self.spec = local.robot, local.spec
-        self.control_hz, self.tick_dt = local.control_hz, local.tick_dt
-        self.substeps, self.physics_dt = local.substeps, local.physics_dt
-        self.device, self.device_name = local.device, local.device_name
-        self.home_target = local.home_target
-        self.compile_s, self.capture_s = local.compile_s, local.capture_s
-        self.capture_error = local.capture_error
+        self.robot = self._local.robot
+        for name in _FACTS_OF_LOCAL:  # every shard is built alike: the local one speaks for all
+            setattr(self, name, getattr(self._local, name))
         self._targets = np.tile(self.home_target, (nworld, 1))
         self._pending_resets: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
         self._pending_dirty: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
@@ -250,6 +261,14 @@ class ShardedBatch:
             conn.send(("qpos",))
         parts = [(self._local.qpos(), self._local.qvel())] + [c.recv() for c in self._conns]
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        shard = int(np.searchsorted(self._starts, world, side="right")) - 1
+        local = world - int(self._starts[shard])
+        if shard == 0:
+            self._local.write_qpos(local, qpos)
+        else:
+            self._conns[shard - 1].send(("write_qpos", local, qpos))
 
     def close(self) -> None:
         for conn in self._conns:

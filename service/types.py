@@ -9,6 +9,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -186,3 +187,78 @@ class BatchState:
                 )
             if arr.dtype != bool and not np.isfinite(arr).all():
                 raise ValueError(f"physics field {name!r} holds non-finite values")
+
+
+@runtime_checkable
+class Batch(Protocol):
+    """N worlds of one model advanced together in control ticks: what the loop needs of an engine.
+
+    WorldBatch (MuJoCo Warp on one device) and ShardedBatch (worlds split over worker processes)
+    implement it; so must any later engine. One thread owns a Batch: nothing here is thread-safe.
+    tests/test_batch_contract.py runs the same behavioural checks against every implementation.
+    """
+
+    nworld: int  # worlds in the batch
+    shards: int  # processes (or actors) the worlds are split across
+    spec: RobotSpec  # the commanded joints, limits and home
+    control_hz: float  # control ticks per simulated second
+    tick_dt: float  # simulated seconds per tick (1 / control_hz)
+    substeps: int  # physics steps per tick
+    physics_dt: float  # simulated seconds per physics step (tick_dt / substeps)
+    device_name: str  # where it runs, e.g. "cpu" or "cuda:0"
+    home_target: np.ndarray  # (7,) targets of the `home` keyframe [rad]
+    captured: bool  # the tick replays a captured graph
+    capture_error: str | None  # why capture failed, when it did
+    compile_s: float  # seconds spent compiling/loading kernels at build
+    capture_s: float  # seconds spent capturing the tick at build
+
+    @property
+    def tick(self) -> int:
+        """Control ticks completed since the batch was built."""
+        ...
+
+    @property
+    def targets(self) -> np.ndarray:
+        """A copy of the targets in effect, (nworld, 7) [rad]."""
+        ...
+
+    def step(self, ticks: int = 1) -> np.ndarray:
+        """Advance every world by `ticks`; returns the worlds reset for faults (int64)."""
+        ...
+
+    def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
+        """Targets for `worlds` (k,) ← `targets` (k, 7), clamped, in effect from the next step."""
+        ...
+
+    def reset(self, worlds: np.ndarray) -> None:
+        """Reset `worlds` to `home` (state and targets); every other world stays bit-identical."""
+        ...
+
+    def snapshot(self) -> Snapshot:
+        """All worlds at the end of the last completed tick, in host memory."""
+        ...
+
+    def get_state(self) -> BatchState:
+        """Everything needed to continue bit-identically (see `BatchState`), host copies."""
+        ...
+
+    def set_state(self, state: BatchState) -> None:
+        """Continue from `state` (same model and nworld); ValueError naming the mismatch, and
+        nothing changed, when it does not fit."""
+        ...
+
+    def qpos(self) -> np.ndarray:
+        """Full qpos of every world (nworld, nq), a host copy (tests and diagnostics)."""
+        ...
+
+    def qvel(self) -> np.ndarray:
+        """Full qvel of every world (nworld, nv), a host copy (tests and diagnostics)."""
+        ...
+
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        """Overwrite one world's full qpos (nq,): tests inject faults with it."""
+        ...
+
+    def close(self) -> None:
+        """Release workers and devices; the batch is unusable afterwards."""
+        ...

@@ -6,18 +6,42 @@ per-frame cost low when hundreds of worlds are streamed.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import orjson
 
+from service.errors import ArmfleetError, BadCommand, UnknownWorld
 from service.types import Snapshot
+
+if TYPE_CHECKING:
+    from service.loop import CommandResult
 
 _OPTS = orjson.OPT_SERIALIZE_NUMPY
 
 
 def dumps(obj: Any) -> bytes:
     return orjson.dumps(obj, option=_OPTS)
+
+
+def command_reply(result: CommandResult) -> dict[str, Any]:
+    """The one reply shape of a target command, over HTTP and in WebSocket acks alike."""
+    return {
+        "world": result.world,
+        "target": result.target,
+        "clamped": result.clamped,
+        "tick": result.tick,
+    }
+
+
+def ack(msg_id: Any, result: CommandResult) -> dict[str, Any]:
+    """A WebSocket ack: the command reply plus the client's `id`."""
+    return {"op": "ack", "id": msg_id, **command_reply(result)}
+
+
+def error_frame(msg_id: Any, error: ArmfleetError | str) -> dict[str, Any]:
+    """A WebSocket error frame: `detail` is "field: message" as in the HTTP 4xx bodies."""
+    return {"op": "error", "id": msg_id, "detail": str(error)}
 
 
 def world_state(snap: Snapshot, world: int, names: list[str]) -> dict[str, Any]:
@@ -116,10 +140,9 @@ def batch_frame_binary(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> 
 
 
 def parse_worlds(spec: str, nworld: int) -> np.ndarray:
-    """'0-63,70,72-75' → sorted unique world ids.
+    """'0-63,70,72-75' (the `worlds` query of HTTP and WebSocket) → sorted unique world ids.
 
-    ValueError for text that is not a list of ids/ranges, IndexError for ids that do not exist
-    (the API maps them to 422 and 404).
+    BadCommand for text that is not a list of ids/ranges, UnknownWorld for ids that do not exist.
     """
     out: set[int] = set()
     for part in spec.split(","):
@@ -131,12 +154,15 @@ def parse_worlds(spec: str, nworld: int) -> np.ndarray:
             lo = int(lo_s)
             hi = int(hi_s) if sep else lo
         except ValueError:
-            raise ValueError(f"worlds: {part!r} is not an id or a range like 0-63") from None
+            raise BadCommand(_WORLDS, f"{part!r} is not an id or a range like 0-63") from None
         if lo > hi:
-            raise ValueError(f"worlds: range {part!r} is empty")
+            raise BadCommand(_WORLDS, f"range {part!r} is empty")
         if lo < 0 or hi >= nworld:
-            raise IndexError(f"worlds: {part!r} is outside 0..{nworld - 1}")
+            raise UnknownWorld(part, nworld)
         out.update(range(lo, hi + 1))
     if not out:
-        raise ValueError("worlds: no world ids given")
+        raise BadCommand(_WORLDS, "no world ids given")
     return np.array(sorted(out), dtype=np.int64)
+
+
+_WORLDS = "query.worlds"

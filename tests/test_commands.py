@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from service import commands
+from service.errors import BadCommand
 from service.robot import load_robot
 
 SPEC = load_robot().spec
@@ -35,7 +36,7 @@ def test_increment_touches_only_the_named_joints():
 
 
 def test_delta_over_a_full_turn_is_refused_before_anything_changes():
-    with pytest.raises(commands.CommandError) as err:
+    with pytest.raises(BadCommand) as err:
         commands.increment(SPEC, HOME, {0: 0.1, 1: 2 * math.pi + 0.01})
     assert err.value.field == "delta.shoulder_lift_joint"
 
@@ -59,7 +60,7 @@ def test_absolute_targets_clamp_and_report_each_joint_that_hit_a_limit():
     ],
 )
 def test_joint_references_and_values_are_checked(values, field):
-    with pytest.raises(commands.CommandError) as err:
+    with pytest.raises(BadCommand) as err:
         commands.resolve_joints(SPEC, values, "name")
     assert err.value.field == field
 

@@ -1,15 +1,18 @@
-"""Dependencies shared by the routers: the running loop, world ids, and error shapes.
+"""Dependencies shared by the routers: the runtime, the loop, the control layer, world ids.
 
 They are `async def` on purpose: plain `def` dependencies each hop through the threadpool
-(~0.1 ms apiece on every request).
+(~0.1 ms apiece on every request). Errors are raised as service.errors exceptions; the app maps
+them to status codes in one place.
 """
 
 from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import Depends, HTTPException, Path, Request
+from fastapi import Depends, Path, Request
 
+from service.control import Control
+from service.errors import Unavailable, UnknownWorld
 from service.loop import SimLoop
 from service.runtime import Runtime
 
@@ -20,23 +23,26 @@ async def get_runtime(request: Request) -> Runtime:
 
 async def get_loop(runtime: Annotated[Runtime, Depends(get_runtime)]) -> SimLoop:
     if runtime.loop is None:
-        detail = runtime.error or "simulation is starting (compiling kernels); see /readyz"
-        raise HTTPException(status_code=503, detail=detail, headers={"Retry-After": "2"})
+        starting = "simulation is starting (compiling kernels); see /readyz"
+        raise Unavailable(runtime.error or starting)
     return runtime.loop
 
 
+async def get_control(
+    runtime: Annotated[Runtime, Depends(get_runtime)], loop: Annotated[SimLoop, Depends(get_loop)]
+) -> Control:
+    assert runtime.control is not None  # set together with the loop
+    return runtime.control
+
+
 Loop = Annotated[SimLoop, Depends(get_loop)]
+Ctl = Annotated[Control, Depends(get_control)]
 
 
 async def world_id(loop: Loop, world: Annotated[int, Path(description="world index")]) -> int:
     if not 0 <= world < loop.batch.nworld:
-        raise HTTPException(404, f"world {world} does not exist (0..{loop.batch.nworld - 1})")
+        raise UnknownWorld(world, loop.batch.nworld)
     return world
 
 
 World = Annotated[int, Depends(world_id)]
-
-
-def unprocessable(loc: list[str | int], message: str) -> HTTPException:
-    """A 422 shaped like FastAPI's own validation errors, so clients parse one format."""
-    return HTTPException(422, [{"loc": loc, "msg": message, "type": "value_error"}])

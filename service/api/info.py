@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from service.api.deps import Loop
-from service.schemas import Info, JointInfo
+from service.schemas import Info
 
 router = APIRouter(prefix="/v1", tags=["info"])
 
@@ -16,7 +16,7 @@ async def info(loop: Loop) -> Info:
     stats = loop.stats
     return Info(
         robot=batch.spec.name,
-        joints=[JointInfo(**vars(j)) for j in batch.spec.joints],
+        joints=list(batch.spec.joints),
         nworld=batch.nworld,
         device=batch.device_name,
         shards=batch.shards,

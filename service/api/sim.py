@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import asyncio
 
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter
 
-from service.api.deps import Loop
-from service.loop import NotPausedError
+from service.api.deps import Ctl, Loop
+from service.control import Source
 from service.schemas import ModeRequest, SimReply, StepRequest
 from service.types import Mode
 
@@ -15,21 +15,18 @@ router = APIRouter(prefix="/v1/sim", tags=["sim"])
 
 
 @router.post("/pause", response_model=SimReply, summary="Stop advancing time (mode paused)")
-async def pause(loop: Loop) -> SimReply:
-    loop.set_mode(Mode.PAUSED)
-    return SimReply(mode=loop.mode, tick=loop.tick)
+async def pause(control: Ctl) -> SimReply:
+    return SimReply(mode=Mode.PAUSED, tick=control.set_mode(Mode.PAUSED, Source.HTTP))
 
 
 @router.post("/resume", response_model=SimReply, summary="Advance in real time again")
-async def resume(loop: Loop) -> SimReply:
-    loop.set_mode(Mode.REALTIME)
-    return SimReply(mode=loop.mode, tick=loop.tick)
+async def resume(control: Ctl) -> SimReply:
+    return SimReply(mode=Mode.REALTIME, tick=control.set_mode(Mode.REALTIME, Source.HTTP))
 
 
 @router.post("/mode", response_model=SimReply, summary="Switch to realtime, fast or paused")
-async def set_mode(loop: Loop, body: ModeRequest) -> SimReply:
-    loop.set_mode(body.mode)
-    return SimReply(mode=loop.mode, tick=loop.tick)
+async def set_mode(control: Ctl, body: ModeRequest) -> SimReply:
+    return SimReply(mode=body.mode, tick=control.set_mode(body.mode, Source.HTTP))
 
 
 @router.post(
@@ -39,9 +36,5 @@ async def set_mode(loop: Loop, body: ModeRequest) -> SimReply:
     responses={409: {"description": "not paused"}},
 )
 async def step(loop: Loop, body: StepRequest) -> SimReply:
-    try:
-        fut = loop.step(body.ticks)
-    except NotPausedError as exc:
-        raise HTTPException(409, str(exc)) from None
-    tick = await asyncio.wrap_future(fut)
+    tick = await asyncio.wrap_future(loop.step(body.ticks))  # NotPaused → 409 (app handler)
     return SimReply(mode=loop.mode, tick=tick)

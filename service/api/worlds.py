@@ -1,4 +1,8 @@
-"""Per-world state and commands: read JointState, press Up/Down, set targets, reset."""
+"""Per-world state and commands: read JointState, press Up/Down, set targets, reset.
+
+Routes only translate HTTP to the control layer and back; validation, staging and the reply
+shape live in service/control.py and service/wire.py, errors are mapped by the app.
+"""
 
 from __future__ import annotations
 
@@ -6,13 +10,12 @@ import asyncio
 from typing import Annotated, Any
 
 import numpy as np
-from fastapi import APIRouter, Body, HTTPException, Query
+from fastapi import APIRouter, Body, Query
 from fastapi.responses import Response
 
 from service import wire
-from service.api.deps import Loop, World, unprocessable
-from service.commands import CommandError, resolve_joints
-from service.loop import CommandResult
+from service.api.deps import Ctl, Loop, World
+from service.control import Source
 from service.schemas import (
     BatchCommandReply,
     BatchTargets,
@@ -29,21 +32,8 @@ router = APIRouter(prefix="/v1", tags=["worlds"])
 
 
 def _json(payload: Any) -> Response:
+    """Serialised directly with orjson (the hot path of the Up/Down buttons)."""
     return Response(wire.dumps(payload), media_type="application/json")
-
-
-def _reply_dict(result: CommandResult) -> dict[str, Any]:
-    return {
-        "world": result.world,
-        "target": result.target,
-        "clamped": result.clamped,
-        "tick": result.tick,
-    }
-
-
-def _reply(result: CommandResult) -> Response:
-    """CommandReply, serialised directly (the hot path of the Up/Down buttons)."""
-    return _json(_reply_dict(result))
 
 
 @router.get(
@@ -58,12 +48,7 @@ async def get_states(
     ] = None,
 ) -> Response:
     n = loop.batch.nworld
-    try:
-        ids = np.arange(n) if worlds is None else wire.parse_worlds(worlds, n)
-    except IndexError as exc:
-        raise HTTPException(404, str(exc)) from None
-    except ValueError as exc:
-        raise unprocessable(["query", "worlds"], str(exc)) from None
+    ids = np.arange(n) if worlds is None else wire.parse_worlds(worlds, n)
     snap = await asyncio.wrap_future(loop.fresh_snapshot())
     return _json(wire.states(snap, ids, loop.spec.names))
 
@@ -83,13 +68,10 @@ async def get_state(loop: Loop, world: World) -> Response:
     response_model=CommandReply,
     summary="Add to joint targets (the seed's Up/Down buttons); clamps to the joint range",
 )
-async def increment(loop: Loop, world: World, body: IncrementRequest) -> Response:
+async def increment(control: Ctl, world: World, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
-    try:
-        deltas = resolve_joints(loop.spec, body.as_mapping(), field)
-        return _reply(loop.increment(world, deltas))
-    except CommandError as exc:
-        raise unprocessable(["body", *exc.field.split(".")], exc.message) from None
+    result = control.increment(world, body.as_mapping(), Source.HTTP, field)
+    return _json(wire.command_reply(result))
 
 
 @router.put(
@@ -97,12 +79,9 @@ async def increment(loop: Loop, world: World, body: IncrementRequest) -> Respons
     response_model=CommandReply,
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
 )
-async def put_targets(loop: Loop, world: World, body: JointTargets) -> Response:
-    try:
-        values = resolve_joints(loop.spec, dict(zip(body.name, body.position, strict=True)), "name")
-        return _reply(loop.set_targets(world, values))
-    except CommandError as exc:
-        raise unprocessable(["body", *exc.field.split(".")], exc.message) from None
+async def put_targets(control: Ctl, world: World, body: JointTargets) -> Response:
+    result = control.set_targets(world, body.name, body.position, Source.HTTP)
+    return _json(wire.command_reply(result))
 
 
 @router.post(
@@ -110,27 +89,23 @@ async def put_targets(loop: Loop, world: World, body: JointTargets) -> Response:
     response_model=BatchCommandReply,
     summary="Full 7-joint targets for many worlds, applied together at one tick boundary",
 )
-async def post_targets(loop: Loop, body: BatchTargets) -> Response:
-    n = loop.batch.nworld
-    missing = [w for w in body.worlds if not 0 <= w < n]
-    if missing:
-        raise HTTPException(404, f"worlds {missing} do not exist (0..{n - 1})")
-    results = loop.set_many(body.worlds, np.asarray(body.position, dtype=np.float64))
-    return _json({"tick": results[0].tick, "results": [_reply_dict(r) for r in results]})
+async def post_targets(control: Ctl, body: BatchTargets) -> Response:
+    results = control.set_many(body.worlds, body.position, Source.HTTP)
+    return _json({"tick": results[0].tick, "results": [wire.command_reply(r) for r in results]})
 
 
 @router.post("/worlds/{world}/reset", response_model=ResetReply, summary="Reset one world to home")
-async def reset_world(loop: Loop, world: World) -> ResetReply:
-    return ResetReply(worlds=[world], tick=loop.reset([world]))
+async def reset_world(control: Ctl, world: World) -> ResetReply:
+    done = control.reset([world], Source.HTTP)
+    return ResetReply(worlds=done.worlds, tick=done.tick)
 
 
 @router.post(
     "/reset", response_model=ResetReply, summary="Reset listed worlds (default: all) to home"
 )
-async def reset_many(loop: Loop, body: Annotated[ResetRequest | None, Body()] = None) -> ResetReply:
-    n = loop.batch.nworld
-    worlds = body.worlds if body is not None and body.worlds is not None else list(range(n))
-    missing = [w for w in worlds if not 0 <= w < n]
-    if missing:
-        raise HTTPException(404, f"worlds {missing} do not exist (0..{n - 1})")
-    return ResetReply(worlds=worlds, tick=loop.reset(worlds))
+async def reset_many(
+    control: Ctl, body: Annotated[ResetRequest | None, Body()] = None
+) -> ResetReply:
+    worlds = body.worlds if body is not None else None
+    done = control.reset(worlds, Source.HTTP)
+    return ResetReply(worlds=done.worlds, tick=done.tick)

@@ -1,7 +1,7 @@
 """WebSocket streams: state frames out, commands in, acks in order.
 
-One socket = one Subscription. A reader task turns client messages into loop commands and
-queues their acks; a writer task sends acks first (never dropped, never reordered) and then
+One socket = one Subscription. A reader task hands client messages to the control layer and
+queues the acks it returns; a writer task sends acks first (never dropped, never reordered) and then
 the newest state frame (older undelivered frames are replaced, so memory stays bounded).
 """
 
@@ -10,19 +10,17 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
 import numpy as np
 import orjson
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
-from pydantic import ValidationError
 
 from service import wire
-from service.commands import CommandError, resolve_joints
+from service.control import Control, Source
+from service.errors import ArmfleetError
 from service.hub import StreamHub, Subscription
 from service.loop import SimLoop
-from service.schemas import IncrementRequest, JointTargets
 
 router = APIRouter(prefix="/v1")
 
@@ -39,16 +37,19 @@ async def world_socket(
     rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
 ) -> None:
     """One world's state frames (`{"op": "state", ...}`); commands need no `world` field."""
-    loop, hub = _running(ws)
-    if loop is None or hub is None:
+    running = _running(ws)
+    if running is None:
         return await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
-    if not 0 <= world < loop.batch.nworld:
-        return await _refuse(ws, _CLOSE_POLICY, f"world {world} does not exist")
+    loop, control, hub = running
+    try:
+        world = control.world(world)
+    except ArmfleetError as exc:
+        return await _refuse(ws, _CLOSE_POLICY, exc.detail)
     names = loop.spec.names
     sub = Subscription(
         np.array([world]), rate, lambda s: wire.single_frame(s, world, names), "single"
     )
-    await _serve(ws, loop, hub, sub, default_world=world)
+    await _serve(ws, loop, control, hub, sub, default_world=world)
 
 
 @router.websocket("/ws")
@@ -61,16 +62,14 @@ async def batch_socket(
     ] = "json",
 ) -> None:
     """Many worlds per frame (`{"op": "states", ...}`, column-wise); commands name `world`."""
-    loop, hub = _running(ws)
-    if loop is None or hub is None:
+    running = _running(ws)
+    if running is None:
         return await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
+    loop, control, hub = running
+    n = loop.batch.nworld
     try:
-        ids = (
-            np.arange(loop.batch.nworld)
-            if worlds is None
-            else wire.parse_worlds(worlds, loop.batch.nworld)
-        )
-    except (ValueError, IndexError) as exc:
+        ids = np.arange(n) if worlds is None else wire.parse_worlds(worlds, n)
+    except ArmfleetError as exc:
         return await _refuse(ws, _CLOSE_POLICY, str(exc))
     names = loop.spec.names
     if format == "binary":
@@ -79,12 +78,14 @@ async def batch_socket(
         )
     else:
         sub = Subscription(ids, rate, lambda s: wire.batch_frame(s, ids, names), "batch")
-    await _serve(ws, loop, hub, sub, default_world=None)
+    await _serve(ws, loop, control, hub, sub, default_world=None)
 
 
-def _running(ws: WebSocket) -> tuple[SimLoop | None, StreamHub | None]:
+def _running(ws: WebSocket) -> tuple[SimLoop, Control, StreamHub] | None:
     runtime = ws.app.state.runtime
-    return runtime.loop, runtime.hub
+    if runtime.loop is None or runtime.control is None or runtime.hub is None:
+        return None
+    return runtime.loop, runtime.control, runtime.hub
 
 
 async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
@@ -93,7 +94,13 @@ async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
 
 
 async def _serve(
-    ws: WebSocket, loop: SimLoop, hub: StreamHub, sub: Subscription, default_world: int | None
+    ws: WebSocket,
+    loop: SimLoop,
+    control: Control,
+    hub: StreamHub,
+    sub: Subscription,
+    default_world: int | None,
+    source: Source = Source.WS,
 ) -> None:
     await ws.accept()
     hub.add(sub)
@@ -108,9 +115,9 @@ async def _serve(
                 await asyncio.sleep(0.005)
             text = message.get("text")
             if text is None:
-                reply = {"op": "error", "id": None, "detail": "send JSON as text frames"}
+                reply = wire.error_frame(None, "send JSON as text frames")
             else:
-                reply = _handle(loop, text, default_world)
+                reply = _handle(control, text, default_world, source)
             sub.push_ack(wire.dumps(reply))
     except (WebSocketDisconnect, RuntimeError):
         pass
@@ -137,65 +144,12 @@ async def _write(ws: WebSocket, hub: StreamHub, sub: Subscription) -> None:
             await ws.send_text(frame.decode())
 
 
-def _handle(loop: SimLoop, text: str, default_world: int | None) -> dict[str, Any]:
-    """One client message → ack or error (the socket stays open either way)."""
-    msg_id: Any = None
+def _handle(
+    control: Control, text: str, default_world: int | None, source: Source
+) -> dict[str, Any]:
+    """One client text frame → ack or error (the socket stays open either way)."""
     try:
         msg = orjson.loads(text)
-        if not isinstance(msg, dict):
-            raise CommandError("message", "a message must be a JSON object with an `op`")
-        msg_id = msg.pop("id", None)
-        op = msg.pop("op", None)
-        world = msg.pop("world", default_world)
-        if default_world is not None and world != default_world:
-            raise CommandError("world", f"this socket controls world {default_world} only")
-        if isinstance(world, bool) or not isinstance(world, int):
-            raise CommandError("world", "`world` (an integer id) is required on this socket")
-        if not 0 <= world < loop.batch.nworld:
-            raise CommandError(
-                "world", f"world {world} does not exist (0..{loop.batch.nworld - 1})"
-            )
-        handler = _OPS.get(op)
-        if handler is None:
-            raise CommandError("op", f"unknown op {op!r}; ops are {sorted(_OPS)}")
-        return {"op": "ack", "id": msg_id, **handler(loop, world, msg)}
     except orjson.JSONDecodeError as exc:
-        return {"op": "error", "id": msg_id, "detail": f"malformed JSON: {exc}"}
-    except CommandError as exc:
-        return {"op": "error", "id": msg_id, "detail": f"{exc.field}: {exc.message}"}
-    except ValidationError as exc:
-        return {"op": "error", "id": msg_id, "detail": _validation_detail(exc)}
-
-
-def _validation_detail(exc: ValidationError) -> str:
-    return "; ".join(
-        f"{'.'.join(str(p) for p in err['loc']) or 'message'}: {err['msg']}" for err in exc.errors()
-    )
-
-
-def _increment(loop: SimLoop, world: int, msg: dict[str, Any]) -> dict[str, Any]:
-    req = IncrementRequest.model_validate(msg)
-    field = "deltas" if req.deltas is not None else "joint"
-    r = loop.increment(world, resolve_joints(loop.spec, req.as_mapping(), field))
-    return {"world": world, "tick": r.tick, "target": r.target, "clamped": r.clamped}
-
-
-def _set_targets(loop: SimLoop, world: int, msg: dict[str, Any]) -> dict[str, Any]:
-    req = JointTargets.model_validate(msg)
-    values = resolve_joints(loop.spec, dict(zip(req.name, req.position, strict=True)), "name")
-    r = loop.set_targets(world, values)
-    return {"world": world, "tick": r.tick, "target": r.target, "clamped": r.clamped}
-
-
-def _reset(loop: SimLoop, world: int, msg: dict[str, Any]) -> dict[str, Any]:
-    if msg:
-        raise CommandError(next(iter(msg)), "reset takes no fields besides op, id and world")
-    tick = loop.reset([world])
-    return {"world": world, "tick": tick, "target": loop.pending_targets(world), "clamped": []}
-
-
-_OPS: dict[str, Callable[[SimLoop, int, dict[str, Any]], dict[str, Any]]] = {
-    "increment": _increment,
-    "set_targets": _set_targets,
-    "reset": _reset,
-}
+        return wire.error_frame(None, f"malformed JSON: {exc}")
+    return control.handle(msg, default_world, source)

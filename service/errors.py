@@ -1,0 +1,71 @@
+"""Domain errors, raised anywhere and mapped to a status code in exactly one place.
+
+Every surface (HTTP routes, WebSocket frames, ROS 2, rosbridge, Foxglove, replay) raises these; the
+app's one exception handler turns them into HTTP replies and `wire.error_frame` into WebSocket error
+frames, so an unknown world is a 404 whichever way the command came in.
+"""
+
+from __future__ import annotations
+
+
+class ArmfleetError(Exception):
+    """A request that cannot be served; `status` is its HTTP status, `field` what was wrong."""
+
+    status = 400
+
+    def __init__(self, detail: str, field: str | None = None) -> None:
+        super().__init__(detail)
+        self.detail = detail
+        self.field = field
+
+    def __str__(self) -> str:
+        return f"{self.field}: {self.detail}" if self.field else self.detail
+
+
+class BadCommand(ArmfleetError):
+    """The command itself is invalid (unknown joint, wrong lengths, NaN, out of limits): 422."""
+
+    status = 422
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(message, field)
+        self.message = message
+
+
+class UnknownWorld(ArmfleetError):
+    """The world id is not in 0..nworld-1: 404."""
+
+    status = 404
+
+    def __init__(self, worlds: int | list[int] | str, nworld: int) -> None:
+        if isinstance(worlds, int):
+            what = f"world {worlds} does not"
+        else:  # a list of ids, or a range as written in a `worlds` query
+            shown = worlds if isinstance(worlds, list) else repr(worlds)
+            what = f"worlds {shown} do not"
+        super().__init__(f"{what} exist (0..{nworld - 1})", "world")
+        self.worlds = worlds
+
+
+class NotFound(ArmfleetError):
+    """A named thing (snapshot, recording) that does not exist: 404."""
+
+    status = 404
+
+
+class NotPaused(ArmfleetError):
+    """Stepping by request only makes sense while paused: 409."""
+
+    status = 409
+
+
+class Conflict(ArmfleetError):
+    """The request is valid but does not fit the current state (other model, other size): 409."""
+
+    status = 409
+
+
+class Unavailable(ArmfleetError):
+    """The engine is starting, failed or is being rebuilt: 503 (retry later)."""
+
+    status = 503
