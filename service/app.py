@@ -11,7 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.api import health, info, sim, worlds, ws
+from service.api import health, info, recordings, sim, snapshots, worlds, ws
 from service.errors import ArmfleetError, BadCommand
 from service.runtime import Runtime
 from service.settings import Settings
@@ -105,6 +105,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.runtime = runtime
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    for module in (health, info, worlds, sim, ws):
+    for module in (health, info, worlds, sim, ws, snapshots, recordings):
         app.include_router(module.router)
     return app

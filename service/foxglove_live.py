@@ -52,7 +52,7 @@ from foxglove.messages import (
 from service.control import Source
 from service.errors import ArmfleetError
 from service.robot import load_robot
-from service.wire import parse_worlds
+from service.wire import pick_worlds
 
 if TYPE_CHECKING:
     from foxglove.websocket import ChannelView, Client, ClientChannel
@@ -177,7 +177,11 @@ class FoxgloveLive:
     name = "foxglove"
 
     def __init__(
-        self, host: str = "127.0.0.1", port: int = 8765, worlds: str = "0-7", rate: float = 30.0
+        self,
+        host: str = "127.0.0.1",
+        port: int = 8765,
+        worlds: str | None = None,
+        rate: float = 30.0,
     ):
         self._host, self._port, self._worlds_spec = host, port, worlds
         self._period = 1.0 / rate
@@ -196,12 +200,7 @@ class FoxgloveLive:
         loop, control = runtime.loop, runtime.control
         assert loop is not None and control is not None
         self._loop, self._control = loop, control
-        nworld = loop.batch.nworld
-        spec = self._worlds_spec
-        if spec.count("-") == 1 and spec.split("-")[0].isdigit():  # clip "0-7" to small batches
-            lo, hi = (int(x) for x in spec.split("-"))
-            spec = f"{lo}-{min(hi, nworld - 1)}"
-        self.worlds = [int(w) for w in parse_worlds(spec, nworld)]
+        self.worlds = pick_worlds(self._worlds_spec, loop.batch.nworld)
         self._names = list(loop.batch.spec.names)
         self._hz = float(loop.batch.control_hz)
         self._mjm = load_robot().mjm

@@ -47,6 +47,26 @@ COMMANDS = "/armfleet/commands"
 RESTORES = "/armfleet/restores"
 STATUS = "/armfleet/status"
 METADATA = "armfleet"
+# Metadata values are strings; these keys hold JSON (numbers, lists), the others plain text.
+JSON_KEYS = frozenset(
+    {
+        "nworld",
+        "control_hz",
+        "physics_dt",
+        "substeps",
+        "versions",
+        "worlds",
+        "every_ticks",
+        "rate",
+        "start_tick",
+        "joint_names",
+    }
+)
+
+
+def parse_metadata(values: dict[str, str]) -> dict[str, Any]:
+    """The inverse of `McapLog.metadata`."""
+    return {k: json.loads(v) if k in JSON_KEYS else v for k, v in values.items()}
 
 
 def joint_state_topic(world: int) -> str:
@@ -172,11 +192,31 @@ def decode_joint_state(data: bytes) -> tuple[int, list[str], np.ndarray, np.ndar
     return sec * 1_000_000_000 + nanosec, names, arrays[0], arrays[1], arrays[2]
 
 
+class _Counted:
+    """A write-only stream that knows its position without seeking, so that a recording can go
+    to a pipe or FIFO as well as to a file (the MCAP writer asks `tell()` for its indexes)."""
+
+    def __init__(self, stream: IO[bytes]):
+        self._stream = stream
+        self._pos = 0
+
+    def write(self, data: bytes) -> int:
+        self._stream.write(data)
+        self._pos += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def flush(self) -> None:
+        self._stream.flush()
+
+
 class McapLog:
     """Writes one recording. Not thread-safe: the recorder's writer thread owns it."""
 
     def __init__(self, stream: IO[bytes], header: dict[str, Any], names: list[str]):
-        self._writer = Writer(stream, chunk_size=256 * 1024)
+        self._writer = Writer(_Counted(stream), chunk_size=256 * 1024)
         self._writer.start(profile="ros2", library="armfleet")
         self._names = names
         self._hz = float(header["control_hz"])
@@ -210,7 +250,7 @@ class McapLog:
     def metadata(self, values: dict[str, Any]) -> None:
         self._writer.add_metadata(
             METADATA,
-            {k: v if isinstance(v, str) else json.dumps(v) for k, v in values.items()},
+            {k: json.dumps(v) if k in JSON_KEYS else str(v) for k, v in values.items()},
         )
 
     def attach_state(self, tick: int, data: bytes, wall_ns: int | None = None) -> str:

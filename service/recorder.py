@@ -28,6 +28,7 @@ from service.mcap_log import COMMANDS, RESTORES, STATUS, McapLog
 from service.provenance import batch_header
 from service.snapshots import encode_state
 from service.types import BatchState, Snapshot
+from service.wire import pick_worlds
 
 if TYPE_CHECKING:
     from service.control import Accepted
@@ -70,15 +71,16 @@ class Recorder:
     def __init__(
         self,
         path: Path | str,
-        worlds: Sequence[int] | None = None,
+        worlds: Sequence[int] | str | None = None,
         rate: float = 30.0,
         queue_items: int = QUEUE_ITEMS,
         block: bool = False,
     ):
-        """`worlds` None records every world; `block` (replay only) waits for the disk instead
-        of failing, since nothing live is slowed by it there."""
+        """`worlds`: ids, a spec like "0-7,12", or None for the first 8; `block` (replay only)
+        waits for the disk instead of failing, since nothing live is slowed by it there."""
         self.path = Path(path).expanduser()
-        self._worlds = None if worlds is None else np.array(sorted(set(worlds)), dtype=np.int64)
+        self._worlds_arg = worlds
+        self._worlds: np.ndarray | None = None
         self._rate = float(rate)
         self._queue: queue.Queue[Any] = queue.Queue(maxsize=queue_items)
         self._block = block
@@ -101,8 +103,10 @@ class Recorder:
         assert loop is not None and control is not None
         self._runtime = runtime
         batch = loop.batch
-        if self._worlds is None:
-            self._worlds = np.arange(batch.nworld, dtype=np.int64)
+        worlds = self._worlds_arg
+        if worlds is None or isinstance(worlds, str):
+            worlds = pick_worlds(worlds, batch.nworld)
+        self._worlds = np.array(sorted(set(worlds)), dtype=np.int64)
         self._every = every_ticks(self._rate, batch.control_hz)
         self._header = batch_header(batch)
         self._names = list(batch.spec.names)

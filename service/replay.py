@@ -27,7 +27,14 @@ from mcap.stream_reader import StreamReader
 
 from service.control import Control, Source
 from service.loop import SimLoop
-from service.mcap_log import COMMANDS, METADATA, RESTORES, decode_joint_state, tick_of
+from service.mcap_log import (
+    COMMANDS,
+    METADATA,
+    RESTORES,
+    decode_joint_state,
+    parse_metadata,
+    tick_of,
+)
 from service.provenance import batch_header, mismatch
 from service.recorder import Recorder
 from service.snapshots import decode_state
@@ -74,6 +81,7 @@ class Segment:
 
 @dataclass
 class Recording:
+    path: str
     header: dict[str, Any]
     segments: list[Segment]
     names: list[str]
@@ -113,7 +121,7 @@ def read_recording(path: Path | str) -> Recording:
         try:
             for record in StreamReader(f, validate_crcs=True).records:
                 if isinstance(record, Metadata) and record.name == METADATA:
-                    header = {k: _parse(v) for k, v in record.metadata.items()}
+                    header = parse_metadata(record.metadata)
                 elif isinstance(record, Attachment):
                     attachments[record.name] = record.data
                 elif isinstance(record, Channel):
@@ -149,21 +157,9 @@ def read_recording(path: Path | str) -> Recording:
             if msg_names != names:
                 raise ReplayError(f"{topic}: joint names {msg_names} differ from {names}")
             seg.states[tick_of(stamp, hz)][world] = (pos, vel, eff)
-    return Recording(
-        header,
-        segments,
-        names,
-        [int(w) for w in header["worlds"]],
-        float(header["rate"]),
-        truncated,
-    )
-
-
-def _parse(value: str) -> Any:
-    try:
-        return json.loads(value)
-    except ValueError:
-        return value
+    worlds = [int(w) for w in header["worlds"]]
+    rate = float(header["rate"])
+    return Recording(str(path), header, segments, names, worlds, rate, truncated)
 
 
 def replay(
@@ -172,9 +168,16 @@ def replay(
     device: str | None = None,
 ) -> ReplayReport:
     """Replay `path` (see the module doc); `out` also writes the replayed run as a recording."""
+    return replay_recording(read_recording(path), out, device)
+
+
+def replay_recording(
+    rec: Recording, out: Path | str | None = None, device: str | None = None
+) -> ReplayReport:
+    """Replay a parsed recording (tests change one on purpose to see divergence named)."""
     from service.engine import WorldBatch
 
-    rec = read_recording(path)
+    path = rec.path
     h = rec.header
     batch = WorldBatch(
         int(h["nworld"]),

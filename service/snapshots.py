@@ -26,13 +26,12 @@ import numpy as np
 
 from service.errors import BadCommand, Conflict, NotFound
 from service.provenance import mismatch
+from service.schemas import SNAPSHOT_NAME
 from service.types import PHYSICS_FIELDS, BatchState
 
 FORMAT = "armfleet-snapshot/1"
 SUFFIX = ".npz"
-# Names become file names: letters, digits, '.', '_', '-', not starting with '.', 1-64 long.
-NAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9._-]{0,63}$"
-NAME_MAX = 64
+NAME_PATTERN = SNAPSHOT_NAME  # names become file names: no separators, no hidden files
 LATEST = "latest"  # what a clean shutdown saves and `--restore latest` reads
 _SCALARS = ("world_ticks", "faults", "targets")
 
@@ -54,8 +53,8 @@ def check_name(name: str, field: str = "name") -> str:
     if not isinstance(name, str) or not re.fullmatch(NAME_PATTERN, name):
         raise BadCommand(
             field,
-            f"a snapshot name is 1-{NAME_MAX} letters, digits, '.', '_' or '-', not starting "
-            f"with '.' (got {name!r})",
+            f"a name is 1-64 letters, digits, '.', '_' or '-', not starting with '.' or '-' "
+            f"(got {name!r})",
         )
     return name
 

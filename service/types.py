@@ -130,6 +130,9 @@ PHYSICS_FIELDS = (
     "mocap_pos",
     "mocap_quat",
     "userdata",
+    # Not integration state: the actuator forces of the last step, restored so that the snapshot
+    # at the restored tick reports the same effort as the one taken when the state was saved.
+    "qfrc_actuator",
 )
 
 
@@ -151,7 +154,8 @@ class BatchState:
         history, plastic, qacc_warmstart (the solver's warm start, nworld × nv), ctrl
         (nworld, nu), qfrc_applied (nworld, nv), xfrc_applied (nworld, nbody, 6), eq_active
         (nworld, neq) bool, mocap_pos (nworld, nmocap, 3), mocap_quat (nworld, nmocap, 4),
-        userdata (nworld, nuserdata)
+        userdata (nworld, nuserdata); and qfrc_actuator (nworld, nv) [N·m], the last step's
+        actuator forces, so that the restored tick's snapshot shows the same effort
     """
 
     tick: int

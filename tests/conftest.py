@@ -90,9 +90,10 @@ def running_server(
     cmd = [sys.executable, "-m", "service.cli", "serve", "--worlds", str(worlds)]
     cmd += ["--port", str(port), "--mode", mode, *extra]
     with open(log_path, "ab") as log:
-        proc = subprocess.Popen(
-            cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy()
-        )
+        env = os.environ.copy()
+        # Snapshots (`latest` on every stop) and recordings stay with the test, not in ~/.local.
+        env.setdefault("ARMFLEET_DATA_DIR", str(tmp_path / "data"))
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, env=env)
     url = f"http://127.0.0.1:{port}"
     server = Server(url=url, ws_url=f"ws://127.0.0.1:{port}", process=proc, log_path=log_path)
     try:

@@ -117,3 +117,14 @@ def test_sharded_state_round_trips_and_matches_one_batch():
             np.testing.assert_array_equal(a, c)
     finally:
         sharded.close()
+
+
+def test_the_snapshot_at_the_restored_tick_is_the_saved_one(batch):
+    drive(batch, 7, seed=8)
+    state, snap = batch.get_state(), batch.snapshot()
+    fresh = WorldBatch(NWORLD)
+    fresh.set_state(state)
+    again = fresh.snapshot()
+    assert again.tick == snap.tick
+    for field in ("position", "velocity", "effort", "target", "flange_pos", "sim_time", "faults"):
+        np.testing.assert_array_equal(getattr(again, field), getattr(snap, field), err_msg=field)
