@@ -22,8 +22,15 @@ ROOT = Path(__file__).resolve().parents[1]
 VENV = ROOT / ".venv"
 BIN = VENV / "bin"
 STAMP = VENV / ".armfleet-installed"
-# What the UI tests drive: a virtual X display, a pointer, a terminal multiplexer.
-TEST_DEBS = {"Xvfb": "xvfb", "xdotool": "xdotool", "tmux": "tmux", "xwd": "x11-apps"}
+# What the UI tests drive: a virtual X display, a pointer, a terminal multiplexer, and the
+# browser the page's tests load it in (Playwright drives it; its own download is not used).
+TEST_DEBS = {
+    "Xvfb": "xvfb",
+    "xdotool": "xdotool",
+    "tmux": "tmux",
+    "xwd": "x11-apps",
+    "chromium": "chromium",
+}
 
 
 def say(msg: str) -> None:
@@ -65,6 +72,19 @@ def ensure_test_tools() -> None:
     run(*sudo, "apt-get", "install", "-y", "-qq", "--no-install-recommends", *missing, env=env)
 
 
+def ensure_js_tools() -> None:
+    """roslib.js for the rosbridge tests, pinned by tests/js/package-lock.json."""
+    js = ROOT / "tests" / "js"
+    if (js / "node_modules" / "roslib").exists():
+        return
+    npm = shutil.which("npm")
+    if npm is None:
+        say("npm not found: the roslib.js tests will be skipped (install Node 20+ to run them)")
+        return
+    say("installing roslib.js for the rosbridge tests (npm ci in tests/js)")
+    subprocess.run([npm, "ci", "--no-audit", "--no-fund"], cwd=js, check=True)
+
+
 def main(argv: list[str]) -> int:
     if not argv or argv[0] not in ("serve", "test"):
         print(__doc__)
@@ -73,6 +93,7 @@ def main(argv: list[str]) -> int:
     ensure_venv()
     if command == "test":
         ensure_test_tools()
+        ensure_js_tools()
     warm_kernel_cache()
     if command == "serve":
         os.execv(BIN / "armfleet", [str(BIN / "armfleet"), "serve", *rest])

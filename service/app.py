@@ -11,9 +11,11 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.api import health, info, recordings, sim, snapshots, worlds, ws
+from service.api import health, info, recordings, scene, sim, snapshots, web, worlds, ws
 from service.errors import ArmfleetError, BadCommand
-from service.runtime import Runtime
+from service.ros import rosbridge
+from service.ros.topics import TopicMap, parse_world_list
+from service.runtime import Runtime, Surface
 from service.settings import Settings
 
 DESCRIPTION = """
@@ -29,6 +31,11 @@ WebSocket streams (not listed by OpenAPI):
   `{"op": "error", "id", "detail"}`.
 * `/v1/ws?worlds=0-63&rate=10`: `{"op": "states", ...}` frames, column-wise over the listed
   worlds; commands carry `"world"`.
+* `/v1/ws/view?worlds=0-63&focus=3&rate=30`: the browser page's socket: binary pose frames
+  (every body of every listed world, plus the focus world's state; layout in service/wire.py)
+  drawn with the geoms of `GET /v1/scene`; commands carry `"world"`.
+
+The browser page is served at `/`.
 """
 
 
@@ -83,7 +90,7 @@ async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
 
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
-    runtime = Runtime(settings)
+    runtime = Runtime(settings, _surfaces(settings))
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -104,7 +111,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         },
     )
     app.state.runtime = runtime
+    app.state.rosbridge = rosbridge.RosbridgeServer(
+        TopicMap(parse_world_list(settings.ros2_worlds, settings.worlds)), settings.ros2_rate
+    )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    for module in (health, info, worlds, sim, ws, snapshots, recordings):
+    for module in (health, info, worlds, sim, scene, ws, web, rosbridge, snapshots, recordings):
         app.include_router(module.router)
+    web.mount_static(app)
     return app
+
+
+def _surfaces(settings: Settings) -> tuple[Surface, ...]:
+    """The optional add-ons the settings switch on, in start order."""
+    surfaces: list[Surface] = []
+    if settings.ros2:
+        from service.ros.dds import DdsBridge
+
+        surfaces.append(DdsBridge(settings.ros2_rate, settings.ros2_worlds, settings.ros2_network))
+    return tuple(surfaces)

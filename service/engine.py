@@ -20,6 +20,7 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
+from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
 from service.robot import LoadedRobot, load_robot
 from service.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
 
@@ -107,6 +108,23 @@ def _host_layout(arr: wp.array) -> tuple[tuple[int, ...], type]:
     return (*arr.shape, *inner), wp.dtype_to_numpy(scalar)
 
 
+@wp.kernel(enable_backward=False)
+def _gather_bodies(
+    xpos: wp.array2d(dtype=wp.vec3),
+    xquat: wp.array2d(dtype=wp.quat),
+    out: wp.array3d(dtype=float),
+):
+    # Every body's world pose, for viewers: position, then the quaternion as MuJoCo stores it
+    # (w, x, y, z; mujoco_warp keeps MuJoCo's component order in its quat arrays).
+    w, b = wp.tid()
+    p = xpos[w, b]
+    q = xquat[w, b]
+    for i in range(3):
+        out[w, b, i] = p[i]
+    for i in range(4):
+        out[w, b, 3 + i] = q[i]
+
+
 class WorldBatch(Batch):
     """N worlds of one model on one Warp device, advanced in captured control ticks.
 
@@ -122,7 +140,7 @@ class WorldBatch(Batch):
         nworld: int,
         device: str = "cpu",
         control_hz: float = 60.0,
-        physics_dt: float = 0.002,
+        physics_dt: float = DEFAULT_PHYSICS_DT,
         model_path: Path | str = SCENE_XML,
         capture: bool = True,
         nconmax: int = NCONMAX,
@@ -137,17 +155,12 @@ class WorldBatch(Batch):
         self.shards = 1
         self.control_hz = float(control_hz)
         self.tick_dt = 1.0 / self.control_hz
-        # Whole substeps per tick, physics dt adjusted so that sim time per tick is exact.
-        self.substeps = max(1, round(self.tick_dt / physics_dt))
-        self.physics_dt = self.tick_dt / self.substeps
+        self.substeps, self.physics_dt = tick_timing(self.control_hz, physics_dt)
         self.device = wp.get_device(device)
         self.device_name = str(self.device)
 
         mjm = self.robot.mjm
-        mjm.opt.timestep = self.physics_dt
-        # Conjugate gradient instead of Newton: ~15-20% less work per step on this model (measured
-        # in bench/), and every fidelity test (hold, step response, grasp, warp-vs-native) passes.
-        mjm.opt.solver = mujoco.mjtSolver.mjSOL_CG
+        configure(mjm, self.physics_dt)
         home = mujoco.MjData(mjm)
         mujoco.mj_resetDataKeyframe(mjm, home, self.robot.home_key)
         mujoco.mj_forward(mjm, home)
@@ -167,6 +180,7 @@ class WorldBatch(Batch):
             self._qpos_adr = wp.array(self.robot.qpos_adr, dtype=int)
             self._dof_adr = wp.array(self.robot.dof_adr, dtype=int)
             self._state = wp.zeros((nworld, _NCOL), dtype=float)
+            self._bodies = wp.zeros((nworld, mjm.nbody, 7), dtype=float)
             self._fault = wp.zeros(nworld, dtype=int)
             self._nfault = wp.zeros(1, dtype=int)
             # One uncaptured tick compiles (or loads from cache) every kernel the tick uses;
@@ -210,6 +224,13 @@ class WorldBatch(Batch):
                 CAPACITY_OVERFLOWS,
             ],
             outputs=[self._state, self._fault, self._nfault],
+        )
+        # One more launch per tick (~nbody x 7 floats per world) so viewers get every body.
+        wp.launch(
+            _gather_bodies,
+            dim=(self.nworld, self._bodies.shape[1]),
+            inputs=[d.xpos, d.xquat],
+            outputs=[self._bodies],
         )
 
     def _capture(self) -> None:
@@ -287,8 +308,10 @@ class WorldBatch(Batch):
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, copied to host memory."""
         state = self._state.numpy()
+        bodies = self._bodies.numpy()
         if self.device.is_cpu:
-            state = state.copy()  # on the CPU .numpy() is a view the next tick overwrites
+            # On the CPU .numpy() is a view the next tick overwrites.
+            state, bodies = state.copy(), bodies.copy()
         return Snapshot(
             tick=self._tick,
             sim_time=self._world_ticks * self.tick_dt,
@@ -299,6 +322,8 @@ class WorldBatch(Batch):
             flange_pos=state[:, _FPOS],
             flange_quat=state[:, _FQUAT],
             faults=self._faults.copy(),
+            body_pos=bodies[:, :, :3],
+            body_quat=bodies[:, :, 3:],
         )
 
     # -- state -----------------------------------------------------------------------------

@@ -14,11 +14,11 @@ from typing import TYPE_CHECKING, Protocol
 
 from service import provenance
 from service.control import Control
-from service.errors import NotFound
+from service.errors import Conflict, NotFound
 from service.hub import StreamHub
 from service.loop import SimLoop
 from service.settings import Settings
-from service.snapshots import LATEST, SnapshotStore
+from service.snapshots import LATEST, SnapshotStore, check_state_support
 from service.types import Batch
 
 if TYPE_CHECKING:
@@ -38,12 +38,27 @@ class Surface(Protocol):
 
 
 def build_batch(s: Settings) -> Batch:
-    """The engine the settings ask for (MuJoCo Warp, split over CPU cores when it pays)."""
+    """The engine the settings ask for: native MuJoCo on every core, or MuJoCo Warp (split over
+    CPU cores when it pays). Imported here, so that the native engine never loads warp."""
+    if s.engine == "mujoco":
+        from service.native import NativeBatch
+
+        return NativeBatch(
+            s.worlds,
+            control_hz=s.control_hz,
+            physics_dt=s.physics_dt,
+            nthread=s.shards,
+            device=s.device,
+        )
     from service.engine import WorldBatch
     from service.shards import ShardedBatch, auto_shards
 
     shards = s.shards or auto_shards(s.worlds, s.device)
     kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
+    if s.ray:
+        from service.ray_shards import RayBatch  # imports Ray only when asked for
+
+        return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
     if shards > 1:
         return ShardedBatch(s.worlds, shards, **kwargs)
     return WorldBatch(s.worlds, **kwargs)
@@ -129,6 +144,7 @@ class Runtime:
         A missing `latest` only means there was no earlier run: the batch starts from home.
         """
         try:
+            check_state_support(batch)
             state = self.snapshots.load(name, self.header)
             batch.set_state(state)
         except NotFound:
@@ -152,9 +168,18 @@ class Runtime:
                 log.exception("surface %s failed to stop", surface.name)
         if self.loop is not None:
             self.loop.stop()
-            if self.settings.save_on_exit:
+            if self.settings.save_on_exit and self._can_save():
                 self._save_latest()
             self.loop.batch.close()
+
+    def _can_save(self) -> bool:
+        assert self.loop is not None
+        try:
+            check_state_support(self.loop.batch)
+        except Conflict as exc:
+            log.warning("not saving snapshot latest: %s", exc)
+            return False
+        return True
 
     def _save_latest(self) -> None:
         """Snapshot `latest` of the stopped batch; a failure is logged, never raised at exit."""

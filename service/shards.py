@@ -18,6 +18,14 @@ from typing import Any
 import numpy as np
 
 from service.engine import WorldBatch
+from service.sharding import (
+    ShardPlan,
+    StagedCommands,
+    apply_and_step,
+    join_snapshots,
+    join_states,
+    slice_state,
+)
 from service.types import Batch, BatchState, Snapshot
 
 # The Batch facts that are the same for every shard (read from the local one).
@@ -60,11 +68,12 @@ def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
         except EOFError:  # parent gone
             return
         if op == "step":
-            resets, dirty, targets, ticks = args
-            _apply(batch, resets, dirty, targets)
-            conn.send(batch.step(ticks))
+            conn.send(apply_and_step(batch, *args))
         elif op == "get_state":
-            _apply(batch, *args)
+            resets, dirty, targets = args  # staged commands are part of the state
+            batch.reset(resets)
+            if dirty.size:
+                batch.set_targets(dirty, targets)
             conn.send(batch.get_state())
         elif op == "set_state":
             try:
@@ -82,44 +91,12 @@ def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
             return
 
 
-def _apply(batch: WorldBatch, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray) -> None:
-    """Commands staged in the parent since the shard's last step."""
-    batch.reset(resets)
-    if dirty.size:
-        batch.set_targets(dirty, targets)
-
-
-def _slice_state(state: BatchState, start: int, stop: int) -> BatchState:
-    """Worlds start..stop of a state, as a state of its own (for one shard)."""
-    return BatchState(
-        tick=state.tick,
-        world_ticks=state.world_ticks[start:stop],
-        faults=state.faults[start:stop],
-        targets=state.targets[start:stop],
-        physics={k: v[start:stop] for k, v in state.physics.items()},
-    )
-
-
-def _join_states(parts: list[BatchState]) -> BatchState:
-    """Shards' states, in shard order, as one state of the whole batch."""
-    return BatchState(
-        tick=parts[0].tick,
-        world_ticks=np.concatenate([p.world_ticks for p in parts]),
-        faults=np.concatenate([p.faults for p in parts]),
-        targets=np.concatenate([p.targets for p in parts]),
-        physics={k: np.concatenate([p.physics[k] for p in parts]) for k in parts[0].physics},
-    )
-
-
 class ShardedBatch(Batch):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
     def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
-        if not 1 <= shards <= nworld:
-            raise ValueError(f"shards must be in 1..{nworld}, got {shards}")
-        bounds = np.linspace(0, nworld, shards + 1).astype(int)
-        self._starts = bounds[:-1]
-        self._sizes = np.diff(bounds)
+        self._plan = ShardPlan(nworld, shards)
+        self._starts, self._sizes = self._plan.starts, self._plan.sizes
         ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
         self._conns: list[Connection] = []
         self._procs = []
@@ -145,8 +122,7 @@ class ShardedBatch(Batch):
         for name in _FACTS_OF_LOCAL:  # every shard is built alike: the local one speaks for all
             setattr(self, name, getattr(self._local, name))
         self._targets = np.tile(self.home_target, (nworld, 1))
-        self._pending_resets: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
-        self._pending_dirty: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
+        self._staged = StagedCommands(shards)
 
     @property
     def captured(self) -> bool:
@@ -160,48 +136,32 @@ class ShardedBatch(Batch):
     def targets(self) -> np.ndarray:
         return self._targets.copy()
 
-    def _split(self, worlds: np.ndarray) -> list[np.ndarray]:
-        """Global world ids → per-shard local ids."""
-        worlds = np.asarray(worlds, dtype=np.int64)
-        return [
-            worlds[(worlds >= start) & (worlds < start + size)] - start
-            for start, size in zip(self._starts, self._sizes, strict=True)
-        ]
-
     def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
         """The local shard gets its targets now, worker shards with their next step."""
         worlds = np.asarray(worlds, dtype=np.int64)
         self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        parts = self._split(worlds)
+        parts = self._plan.split(worlds)
         if parts[0].size:
             self._local.set_targets(parts[0], self._targets[parts[0]])
         for i, local_ids in enumerate(parts[1:], start=1):
-            self._pending_dirty[i] = np.union1d(self._pending_dirty[i], local_ids)
+            self._staged.targets(i, local_ids)
 
     def reset(self, worlds: np.ndarray) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
         if worlds.size == 0:
             return
         self._targets[worlds] = self.home_target
-        parts = self._split(worlds)
+        parts = self._plan.split(worlds)
         self._local.reset(parts[0])
         for i, local_ids in enumerate(parts[1:], start=1):
-            self._pending_resets[i] = np.union1d(self._pending_resets[i], local_ids)
-            # A reset overrides targets staged before it in the same tick.
-            self._pending_dirty[i] = np.setdiff1d(self._pending_dirty[i], local_ids)
-
-    def _take_pending(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Shard i's staged (resets, dirty local ids, their targets), cleared here."""
-        dirty = self._pending_dirty[i]
-        staged = (self._pending_resets[i], dirty, self._targets[dirty + self._starts[i]])
-        self._pending_resets[i] = np.zeros(0, dtype=np.int64)
-        self._pending_dirty[i] = np.zeros(0, dtype=np.int64)
-        return staged
+            self._staged.reset(i, local_ids)
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance all shards together; returns the (global) worlds reset for faults."""
         for i, conn in enumerate(self._conns, start=1):
-            conn.send(("step", *self._take_pending(i), ticks))
+            resets, dirty = self._staged.take(i)
+            targets = self._targets[dirty + self._starts[i]]
+            conn.send(("step", resets, dirty, targets, ticks))
         faulted = [self._local.step(ticks)]
         for i, conn in enumerate(self._conns, start=1):
             faulted.append(conn.recv() + self._starts[i])
@@ -213,14 +173,7 @@ class ShardedBatch(Batch):
         for conn in self._conns:
             conn.send(("snapshot",))
         parts = [self._local.snapshot()] + [conn.recv() for conn in self._conns]
-        fields = ("sim_time", "position", "velocity", "effort", "flange_pos", "flange_quat")
-        joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}
-        return Snapshot(
-            tick=parts[0].tick,
-            target=self._targets.copy(),
-            faults=np.concatenate([p.faults for p in parts]),
-            **joined,
-        )
+        return join_snapshots(parts, parts[0].tick, self._targets)
 
     def physics_shapes(self) -> dict[str, tuple[int, ...]]:
         return self._local.physics_shapes()
@@ -228,23 +181,20 @@ class ShardedBatch(Batch):
     def get_state(self) -> BatchState:
         """Every shard's state (staged commands applied first), joined in world order."""
         for i, conn in enumerate(self._conns, start=1):
-            conn.send(("get_state", *self._take_pending(i)))
+            resets, dirty = self._staged.take(i)
+            conn.send(("get_state", resets, dirty, self._targets[dirty + self._starts[i]]))
         parts = [self._local.get_state()] + [conn.recv() for conn in self._conns]
-        joined = _join_states(parts)
-        # The parent's mirror is authoritative for targets (identical once applied).
-        return BatchState(
-            joined.tick, joined.world_ticks, joined.faults, self._targets.copy(), joined.physics
-        )
+        return join_states(parts, self._targets)
 
     def set_state(self, state: BatchState) -> None:
         """Split `state` over the shards; checked whole first so no shard is half-restored."""
         state.check_compatible(self.nworld, self.physics_shapes())
         for i in range(1, self.shards):
-            self._take_pending(i)  # staged commands belong to the state being replaced
-        bounds = [*self._starts, self.nworld]
+            self._staged.take(i)  # staged commands belonged to the state being replaced
+        bounds = [*self._starts.tolist(), self.nworld]
         for i, conn in enumerate(self._conns, start=1):
-            conn.send(("set_state", _slice_state(state, bounds[i], bounds[i + 1])))
-        self._local.set_state(_slice_state(state, 0, bounds[1]))
+            conn.send(("set_state", slice_state(state, bounds[i], bounds[i + 1])))
+        self._local.set_state(slice_state(state, 0, bounds[1]))
         errors = [err for err in (conn.recv() for conn in self._conns) if err]
         if errors:  # cannot happen after the check above; say so loudly if it does
             raise RuntimeError(f"shard refused a checked state: {errors[0]}")

@@ -27,7 +27,7 @@ import numpy as np
 from service.errors import BadCommand, Conflict, NotFound
 from service.provenance import mismatch
 from service.schemas import SNAPSHOT_NAME
-from service.types import PHYSICS_FIELDS, BatchState
+from service.types import PHYSICS_FIELDS, Batch, BatchState
 
 FORMAT = "armfleet-snapshot/1"
 SUFFIX = ".npz"
@@ -46,6 +46,13 @@ class SnapshotInfo:
     tick: int
     nworld: int
     model_hash: str
+
+
+def check_state_support(batch: Batch) -> None:
+    """Conflict (409) naming the engine when it cannot save and restore state (yet)."""
+    impl = getattr(type(batch), "get_state", None)
+    if impl is None or impl is Batch.get_state:  # missing, or the protocol's empty body
+        raise Conflict(f"the {type(batch).__name__} engine cannot save or restore state")
 
 
 def check_name(name: str, field: str = "name") -> str:

@@ -9,9 +9,12 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from service.robot import LoadedRobot
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,9 @@ class Snapshot:
     flange_pos: flange site position in the world frame [m]                    (nworld, 3)
     flange_quat: flange site orientation, quaternion w x y z                   (nworld, 4)
     faults: how often each world has been reset for NaN or capacity overflow   (nworld,)
+    body_pos: every body's origin in the world frame [m], float32               (nworld, nbody, 3)
+    body_quat: every body's orientation, quaternion w x y z, float32           (nworld, nbody, 4)
+        (bodies in MjModel order, 0 = world; what viewers draw, see GET /v1/scene)
     """
 
     tick: int
@@ -98,6 +104,8 @@ class Snapshot:
     flange_pos: np.ndarray
     flange_quat: np.ndarray
     faults: np.ndarray
+    body_pos: np.ndarray
+    body_quat: np.ndarray
 
     @property
     def nworld(self) -> int:
@@ -205,6 +213,7 @@ class Batch(Protocol):
     nworld: int  # worlds in the batch
     shards: int  # processes (or actors) the worlds are split across
     spec: RobotSpec  # the commanded joints, limits and home
+    robot: LoadedRobot  # the compiled MjModel it steps (viewers describe it: GET /v1/scene)
     control_hz: float  # control ticks per simulated second
     tick_dt: float  # simulated seconds per tick (1 / control_hz)
     substeps: int  # physics steps per tick

@@ -13,6 +13,7 @@ from service.errors import Conflict, NotFound
 from service.recorder import Recorder
 from service.runtime import Runtime
 from service.schemas import RecordingRequest, RecordingStatus
+from service.snapshots import check_state_support
 
 router = APIRouter(prefix="/v1/recordings", tags=["recordings"])
 Rt = Annotated[Runtime, Depends(get_runtime)]
@@ -35,6 +36,7 @@ async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingSta
         current = runtime.recorder
         if current is not None and current.status.active:
             raise Conflict(f"a recording is already running ({current.path}); stop it first")
+        check_state_support(loop.batch)  # a recording starts from the full state
         path = runtime.snapshots.dir.parent / "recordings" / f"{body.name}.mcap"
         recorder = Recorder(path, body.worlds, body.rate, runtime.settings.record_queue)
         await asyncio.to_thread(recorder.start, runtime)  # waits for a tick boundary

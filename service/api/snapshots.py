@@ -12,6 +12,7 @@ from service.api.deps import Loop, get_runtime
 from service.errors import Conflict
 from service.runtime import Runtime
 from service.schemas import RestoreReply, SnapshotInfo, SnapshotName, SnapshotRequest
+from service.snapshots import check_state_support
 
 router = APIRouter(prefix="/v1/snapshots", tags=["snapshots"])
 Rt = Annotated[Runtime, Depends(get_runtime)]
@@ -25,6 +26,7 @@ Rt = Annotated[Runtime, Depends(get_runtime)]
     responses={422: {"description": "bad name (separators, empty, over 64 characters)"}},
 )
 async def save(runtime: Rt, loop: Loop, body: SnapshotRequest) -> SnapshotInfo:
+    check_state_support(loop.batch)
     state = await asyncio.wrap_future(loop.request_state())
     info = await asyncio.to_thread(runtime.snapshots.save, body.name, state, runtime.header)
     return SnapshotInfo(**dataclasses.asdict(info))
@@ -47,6 +49,7 @@ async def listing(runtime: Rt) -> list[SnapshotInfo]:
     },
 )
 async def restore(runtime: Rt, loop: Loop, name: Annotated[SnapshotName, Path()]) -> RestoreReply:
+    check_state_support(loop.batch)
     # Read and check the whole file first: a bad one changes nothing.
     state = await asyncio.to_thread(runtime.snapshots.load, name, runtime.header)
     try:

@@ -18,9 +18,10 @@ from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
 from service import wire
 from service.control import Control, Source
-from service.errors import ArmfleetError
+from service.errors import ArmfleetError, BadCommand
 from service.hub import StreamHub, Subscription
 from service.loop import SimLoop
+from service.types import Snapshot
 
 router = APIRouter(prefix="/v1")
 
@@ -81,6 +82,55 @@ async def batch_socket(
     await _serve(ws, loop, control, hub, sub, default_world=None)
 
 
+MAX_VIEW_WORLDS = 256  # what the page's fleet view draws; ~136 KB per pose frame
+
+
+@router.websocket("/ws/view")
+async def view_socket(
+    ws: WebSocket,
+    worlds: Annotated[
+        str | None, Query(description="worlds whose body poses to send, e.g. 0-63 (default: focus)")
+    ] = None,
+    focus: Annotated[int | None, Query(description="world whose joint state rides along")] = None,
+    rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
+) -> None:
+    """The browser page's socket: binary pose frames (`service/wire.py`), commands name `world`.
+
+    Each frame carries every body's pose for `worlds` and the `focus` world's joint state in
+    its header, so one socket feeds both the 3D view and the panel. Its commands are the
+    control layer's with source `browser`.
+    """
+    running = _running(ws)
+    if running is None:
+        return await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
+    loop, control, hub = running
+    try:
+        focus = None if focus is None else control.world(focus)
+        if worlds is not None:
+            ids = wire.parse_worlds(worlds, loop.batch.nworld)
+        elif focus is not None:
+            ids = np.array([focus])
+        else:
+            raise BadCommand("query.worlds", "give `worlds`, `focus` or both")
+        if len(ids) > MAX_VIEW_WORLDS:
+            raise BadCommand("query.worlds", f"{len(ids)} asked, at most {MAX_VIEW_WORLDS}")
+    except ArmfleetError as exc:
+        return await _refuse(ws, _CLOSE_POLICY, str(exc))
+    names = loop.spec.names
+
+    def render(snap: Snapshot) -> bytes:
+        st = loop.stats
+        stats = {
+            "mode": st.mode.value,
+            "ticks_per_s": st.ticks_per_s,
+            "realtime_factor": st.realtime_factor,
+        }
+        return wire.pose_frame(snap, ids, names, focus, stats)
+
+    sub = Subscription(ids, rate, render, f"view:{focus}", binary=True)
+    await _serve(ws, loop, control, hub, sub, default_world=None, source=Source.BROWSER)
+
+
 def _running(ws: WebSocket) -> tuple[SimLoop, Control, StreamHub] | None:
     runtime = ws.app.state.runtime
     if runtime.loop is None or runtime.control is None or runtime.hub is None:
@@ -118,6 +168,8 @@ async def _serve(
                 reply = wire.error_frame(None, "send JSON as text frames")
             else:
                 reply = _handle(control, text, default_world, source)
+                if reply.get("op") == "ack" and isinstance(reply.get("tick"), int):
+                    sub.owe(reply["tick"])  # its first frame goes out whatever the cadence
             sub.push_ack(wire.dumps(reply))
     except (WebSocketDisconnect, RuntimeError):
         pass

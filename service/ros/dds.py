@@ -1,0 +1,326 @@
+"""The ROS 2 bridge over DDS: armfleet as a participant of the ROS 2 graph, without ROS.
+
+Eclipse Cyclone DDS (the middleware behind rmw_cyclonedds_cpp) carries the ROS 2 topics with the
+names and types a ROS 2 node uses (`rt/joint_commands`, `sensor_msgs::msg::dds_::JointState_`)
+and rclpy-compatible QoS, so the seed's rclpy controller drives world 0 unchanged and
+`ros2 topic echo /joint_states` shows the arm.
+
+Two threads of its own, never the event loop or the sim thread:
+- the reader thread waits on a WaitSet over the command readers and hands each JointState to
+  the control layer (source `ros2`), which validates, clamps and stages it like any command;
+- the publisher thread writes `/joint_states`, `/world_N/joint_states` and `/clock` from the
+  newest snapshot. The loop sees the bridge as a snapshot sink that only stores a reference.
+
+DDS stays on loopback unless the user opens it (`--ros2-network`, or their own CYCLONEDDS_URI),
+like the HTTP bind; `ROS_LOCALHOST_ONLY=1` always keeps it on loopback.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from service.control import Source
+from service.errors import ArmfleetError
+from service.ros import topics
+from service.ros.topics import BadMessage, BadMessageCounter, TopicMap
+from service.types import Snapshot
+
+if TYPE_CHECKING:
+    from service.runtime import Runtime
+
+log = logging.getLogger("armfleet.ros2")
+
+# Unicast discovery on 127.0.0.1 only, no multicast (tried with cyclonedds 11: processes on one
+# host find each other; nothing leaves the machine).
+LOOPBACK_CONFIG = (
+    "<CycloneDDS><Domain><General><Interfaces>"
+    '<NetworkInterface address="127.0.0.1"/></Interfaces>'
+    "<AllowMulticast>false</AllowMulticast></General>"
+    '<Discovery><Peers><Peer address="127.0.0.1"/></Peers>'
+    "<ParticipantIndex>auto</ParticipantIndex>"
+    "<MaxAutoParticipantIndex>50</MaxAutoParticipantIndex></Discovery>"
+    "</Domain></CycloneDDS>"
+)
+_READER_DEPTH = 64  # commands buffered per topic between two wake-ups of the reader thread
+_WRITE_BLOCK_S = 0.01  # a reliable write never holds the publisher thread longer than this
+
+
+@dataclass(frozen=True)
+class DdsConfig:
+    """Where the participant lives.
+
+    domain_id: the DDS domain (ROS_DOMAIN_ID)
+    config: Cyclone XML given to the domain, or None to let Cyclone read CYCLONEDDS_URI / defaults
+    scope: 'loopback', 'user CYCLONEDDS_URI' or 'network', for the log and GET /v1/ros
+    """
+
+    domain_id: int
+    config: str | None
+    scope: str
+
+
+def choose_config(network: bool, env: dict[str, str] | None = None) -> DdsConfig:
+    """Decide the DDS scope from `--ros2-network` and the ROS/Cyclone environment variables."""
+    env = dict(os.environ) if env is None else env
+    raw_domain = env.get("ROS_DOMAIN_ID", "").strip() or "0"
+    try:
+        domain_id = int(raw_domain)
+    except ValueError:
+        raise ValueError(f"ROS_DOMAIN_ID must be an integer, got {raw_domain!r}") from None
+    if not 0 <= domain_id <= 232:
+        raise ValueError(f"ROS_DOMAIN_ID must be in 0..232, got {domain_id}")
+    if env.get("ROS_LOCALHOST_ONLY", "").strip() == "1":
+        if network:
+            log.warning("ROS_LOCALHOST_ONLY=1 overrides --ros2-network: DDS stays on loopback")
+        return DdsConfig(domain_id, LOOPBACK_CONFIG, "loopback")
+    if env.get("CYCLONEDDS_URI", "").strip():
+        return DdsConfig(domain_id, None, "user CYCLONEDDS_URI")
+    if network:
+        return DdsConfig(domain_id, None, "network")
+    return DdsConfig(domain_id, LOOPBACK_CONFIG, "loopback")
+
+
+class DdsBridge:
+    """Runtime surface: `start(runtime)` joins the graph, `stop()` leaves it."""
+
+    name = "ros2"
+
+    def __init__(self, rate: float = 60.0, worlds: str | None = None, network: bool = False):
+        if not 0 < rate <= 1000:
+            raise ValueError(f"ros2_rate must be in (0, 1000] Hz, got {rate}")
+        self.rate = rate
+        self._worlds_spec = worlds
+        self._network = network
+        self.config: DdsConfig | None = None
+        self.topics: TopicMap | None = None
+        self.bad = BadMessageCounter("ros2")
+        self.received = 0  # commands accepted by the control layer
+        self.published = 0  # JointState samples written
+        self._period = 1.0 / rate
+        self._next_due = 0.0
+        self._cond = threading.Condition()
+        self._latest: Snapshot | None = None
+        self._running = False
+        self._threads: list[threading.Thread] = []
+        self._entities: list[Any] = []  # DDS entities, deleted children first on stop
+
+    # -- life cycle -------------------------------------------------------------------------
+
+    def start(self, runtime: Runtime) -> None:
+        from cyclonedds.core import (
+            GuardCondition,
+            InstanceState,
+            ReadCondition,
+            SampleState,
+            ViewState,
+            WaitSet,
+        )
+        from cyclonedds.domain import Domain, DomainParticipant
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+
+        from service.ros import msgs
+
+        loop, control = runtime.loop, runtime.control
+        assert loop is not None and control is not None
+        self._control = control
+        self._joints = tuple(loop.spec.names)
+        self._joint_list = list(self._joints)
+        self._tick_dt = loop.batch.tick_dt
+        self.topics = TopicMap(topics.parse_world_list(self._worlds_spec, loop.batch.nworld))
+        self.config = cfg = choose_config(self._network)
+        if cfg.config is not None:
+            self._entities.append(Domain(cfg.domain_id, cfg.config))
+        dp = DomainParticipant(cfg.domain_id)
+        self._entities.append(dp)
+
+        def topic(name: str, kind: type) -> Any:
+            t = Topic(dp, topics.dds_name(name), kind)
+            self._entities.append(t)
+            return t
+
+        self._readers: list[tuple[Any, str, int]] = []
+        for name, world in self.topics.command_topics().items():
+            r = DataReader(
+                dp, topic(name, msgs.JointState), qos=_qos(_READER_DEPTH, accept_xcdr2=True)
+            )
+            self._entities.append(r)
+            self._readers.append((r, name, world))
+        self._writers: list[tuple[Any, int]] = []
+        for name, world in self.topics.state_topics().items():
+            w = DataWriter(dp, topic(name, msgs.JointState), qos=_qos(10))
+            self._entities.append(w)
+            self._writers.append((w, world))
+        self._clock = DataWriter(dp, topic(topics.CLOCK_TOPIC, msgs.Clock), qos=_qos(1))
+        self._entities.append(self._clock)
+        self._msgs = msgs
+
+        self._waitset = WaitSet(dp)
+        self._guard = GuardCondition(dp)
+        any_sample = SampleState.Any | ViewState.Any | InstanceState.Any
+        for r, _, _ in self._readers:
+            condition = ReadCondition(r, any_sample)  # set while the reader holds samples
+            self._waitset.attach(condition)
+            self._entities.append(condition)
+        self._waitset.attach(self._guard)
+        self._entities += [self._guard, self._waitset]
+
+        self._running = True
+        self._threads = [
+            threading.Thread(target=self._read_loop, name="armfleet-ros2-in", daemon=True),
+            threading.Thread(target=self._publish_loop, name="armfleet-ros2-out", daemon=True),
+        ]
+        for t in self._threads:
+            t.start()
+        loop.add_sink(self)
+        log.info(
+            "ROS 2 (DDS domain %d, %s): commands on %s; states on %s at %.0f Hz; /clock",
+            cfg.domain_id,
+            cfg.scope,
+            ", ".join(self.topics.command_topics()),
+            ", ".join(self.topics.state_topics()),
+            self.rate,
+        )
+
+    def stop(self) -> None:
+        if not self._running:
+            return
+        with self._cond:
+            self._running = False
+            self._cond.notify_all()
+        self._guard.set(True)
+        for t in self._threads:
+            t.join(timeout=5)
+        # cyclonedds keeps every entity in a class-level table until it is deleted explicitly.
+        for entity in reversed(self._entities):
+            entity.__del__()
+        self._entities.clear()
+
+    def status(self) -> dict[str, Any]:
+        """What GET /v1/ros shows for DDS."""
+        cfg = self.config
+        return {
+            "enabled": self._running,
+            "domain_id": cfg.domain_id if cfg else None,
+            "scope": cfg.scope if cfg else None,
+            "rate_hz": self.rate,
+            "topics": self.topics.all_topics() if self.topics else {},
+            "commands_accepted": self.received,
+            "states_published": self.published,
+            "rejected": self.bad.counts(),
+        }
+
+    # -- snapshot sink (sim thread: store a reference, nothing more) -------------------------
+
+    def wants_snapshot(self, now: float) -> bool:
+        return self._running and now >= self._next_due - 0.1 * self._period
+
+    def publish(self, snapshot: Snapshot) -> None:
+        # Every snapshot is kept (newest wins), also ones taken for other sinks: the publisher
+        # thread paces itself, so the last state before a pause is always published.
+        now = time.monotonic()
+        if now >= self._next_due - 0.1 * self._period:
+            self._next_due = max(self._next_due + self._period, now)
+        with self._cond:
+            self._latest = snapshot
+            self._cond.notify()
+
+    # -- threads ----------------------------------------------------------------------------
+
+    def _read_loop(self) -> None:
+        while self._running:
+            self._waitset.wait(1_000_000_000)
+            for reader, name, world in self._readers:
+                while self._running and self._take_one(reader, name, world):
+                    pass
+
+    def _take_one(self, reader: Any, topic: str, world: int) -> bool:
+        """Take and apply one command; False when the reader is empty.
+
+        One at a time so that bytes that do not decode as a JointState cost only themselves.
+        """
+        try:
+            samples = reader.take(N=1)
+        except Exception as exc:  # the sample is consumed; its bytes were not a JointState
+            self.bad.report("malformed", topic, f"undecodable CDR ({type(exc).__name__}: {exc})")
+            return True
+        if not samples:
+            return False
+        msg = samples[0]
+        if not isinstance(msg, self._msgs.JointState):
+            return True  # a dispose/unregister notice, not a message
+        try:
+            names, values = topics.command_from_joint_state(self._joints, msg.name, msg.position)
+            self._control.set_targets(world, names, values, Source.ROS2)
+        except BadMessage as exc:
+            self.bad.report(exc.kind, topic, exc.detail)
+        except ArmfleetError as exc:
+            self.bad.report("rejected", topic, str(exc))
+        except Exception:
+            log.exception("ROS 2 command on %s failed", topic)
+        else:
+            self.received += 1
+        return True
+
+    def _publish_loop(self) -> None:
+        """Write the newest snapshot, then rest one period: at most `rate` per second."""
+        last_tick = -1
+        while True:
+            with self._cond:
+                while self._running and (self._latest is None or self._latest.tick == last_tick):
+                    self._cond.wait()
+                if not self._running:
+                    return
+                snap = self._latest
+            started = time.monotonic()
+            try:
+                self._write_states(snap)
+            except Exception:  # a DDS error must not end the stream; the next snapshot retries
+                log.exception("ROS 2 publish failed")
+            last_tick = snap.tick
+            with self._cond:
+                self._cond.wait_for(
+                    lambda: not self._running, started + self._period - time.monotonic()
+                )
+
+    def _write_states(self, snap: Snapshot) -> None:
+        msgs = self._msgs
+        sec, nanosec = topics.stamp(topics.sim_seconds(snap, self._tick_dt))
+        stamp = msgs.Time(sec=sec, nanosec=nanosec)
+        self._clock.write(msgs.Clock(clock=stamp))
+        for writer, world in self._writers:
+            writer.write(
+                msgs.JointState(
+                    header=msgs.Header(stamp=stamp, frame_id=""),
+                    name=self._joint_list,
+                    position=snap.position[world].tolist(),
+                    velocity=snap.velocity[world].tolist(),
+                    effort=snap.effort[world].tolist(),
+                )
+            )
+            self.published += 1
+
+
+def _qos(depth: int, accept_xcdr2: bool = False) -> Any:
+    """rclpy's default QoS (RELIABLE, VOLATILE, KEEP_LAST depth) in plain CDR (XCDR1).
+
+    XCDR1 is what ROS 2 Humble writes and reads (XCDR2 lays the string sequence out
+    differently), so writers offer only that; readers also take XCDR2 from newer peers.
+    """
+    from cyclonedds.qos import Policy, Qos
+    from cyclonedds.util import duration
+
+    return Qos(
+        Policy.Reliability.Reliable(max_blocking_time=duration(seconds=_WRITE_BLOCK_S)),
+        Policy.Durability.Volatile,
+        Policy.History.KeepLast(depth),
+        Policy.DataRepresentation(
+            use_cdrv0_representation=True, use_xcdrv2_representation=accept_xcdr2
+        ),
+    )

@@ -1,0 +1,112 @@
+// The seed's button panel: seven rows "[i] joint_name", target, measured, Up (+0.1), Down (-0.1),
+// plus world selector, Reset, gripper Open/Close, a message line and a status line.
+// It only shows what it is told and reports what the user asked for (`actions`).
+
+export const STEP = 0.1; // rad per press, as in the seed
+
+const $ = (id) => document.getElementById(id);
+// Writing the same text again still costs a layout and a paint: write only changes.
+const setText = (el, text) => {
+  if (el.textContent !== text) el.textContent = text;
+};
+const fmt = (v) => (Math.abs(v) < 0.005 ? 0 : v).toFixed(2); // no "-0.00"
+
+export class Panel {
+  /** actions: step(joint, delta), reset(), gripper(closed), world(id), toggleView() */
+  constructor(actions) {
+    this.actions = actions;
+    this.rows = new Map();
+    this.names = [];
+    this.selected = 0;
+    $('reset').addEventListener('click', () => actions.reset());
+    $('open').addEventListener('click', () => actions.gripper(false));
+    $('close').addEventListener('click', () => actions.gripper(true));
+    $('viewToggle').addEventListener('click', () => actions.toggleView());
+    $('world').addEventListener('change', () => {
+      const w = Number($('world').value);
+      if (Number.isInteger(w)) actions.world(w);
+    });
+    document.addEventListener('keydown', (e) => this._key(e));
+  }
+
+  /** One row per joint, in command order. */
+  setJoints(names) {
+    if (names.join() === this.names.join()) return;
+    this.names = names;
+    const body = document.querySelector('#joints tbody');
+    body.replaceChildren();
+    this.rows.clear();
+    names.forEach((name, i) => {
+      const tr = document.createElement('tr');
+      tr.dataset.joint = name;
+      tr.innerHTML =
+        `<td class="name">[${i}] ${name}</td><td class="num target">–</td>` +
+        `<td class="num measured">–</td><td><button class="up">Up (+${STEP})</button></td>` +
+        `<td><button class="down">Down (-${STEP})</button></td>`;
+      tr.querySelector('.up').addEventListener('click', () => this.actions.step(name, STEP));
+      tr.querySelector('.down').addEventListener('click', () => this.actions.step(name, -STEP));
+      tr.addEventListener('click', () => this._select(i));
+      body.append(tr);
+      this.rows.set(name, { tr, target: tr.querySelector('.target'), measured: tr.querySelector('.measured') });
+    });
+    this._select(this.selected);
+  }
+
+  setWorld(world, nworld) {
+    const box = $('world');
+    box.value = String(world);
+    if (nworld) box.max = String(nworld - 1);
+  }
+
+  setView(view) {
+    $('viewToggle').textContent = view === 'fleet' ? 'World view' : 'Fleet view';
+  }
+
+  showTargets(target) {
+    this.names.forEach((n, i) => setText(this.rows.get(n).target, fmt(target[i])));
+  }
+
+  showMeasured(position) {
+    this.names.forEach((n, i) => setText(this.rows.get(n).measured, fmt(position[i])));
+  }
+
+  clearValues() {
+    for (const row of this.rows.values()) row.target.textContent = row.measured.textContent = '–';
+  }
+
+  message(text, ok = false) {
+    const el = $('message');
+    el.textContent = text;
+    el.className = ok ? 'ok' : '';
+  }
+
+  status(text, down = false) {
+    const el = $('status');
+    setText(el, text);
+    el.className = down ? 'down' : '';
+  }
+
+  enable(on) {
+    for (const b of document.querySelectorAll('#panel button:not(#viewToggle)')) b.disabled = !on;
+  }
+
+  _select(i) {
+    this.selected = i;
+    [...this.rows.values()].forEach((r, k) => r.tr.classList.toggle('selected', k === i));
+  }
+
+  _key(e) {
+    if (e.target instanceof HTMLInputElement || e.ctrlKey || e.metaKey || e.altKey) return;
+    const k = e.key;
+    if (k >= '1' && k <= String(this.names.length)) this._select(Number(k) - 1);
+    else if (k === 'ArrowUp' || k === 'ArrowDown') {
+      this.actions.step(this.names[this.selected], k === 'ArrowUp' ? STEP : -STEP);
+    } else if (k === 'r' || k === 'R') this.actions.reset();
+    else if (k === 'o' || k === 'O') this.actions.gripper(false);
+    else if (k === 'c' || k === 'C') this.actions.gripper(true);
+    else if (k === 'f' || k === 'F') this.actions.toggleView();
+    else if (k === '[' || k === ']') this.actions.world(Number($('world').value) + (k === ']' ? 1 : -1));
+    else return;
+    e.preventDefault();
+  }
+}
