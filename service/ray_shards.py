@@ -31,9 +31,10 @@ import ray
 from ray.exceptions import RayActorError
 
 from mjcf import SCENE_XML
-from service.engine import WorldBatch, configure
+from service.engine import SnapshotArrays, WorldBatch, snapshot_from
+from service.physics import configure
 from service.robot import load_robot
-from service.sharding import ShardPlan, StagedCommands, apply_and_step, join_snapshots
+from service.sharding import ShardPlan, StagedCommands, apply_and_step
 from service.shards import MIN_WORLDS_PER_SHARD
 from service.types import Batch, Snapshot
 
@@ -124,8 +125,9 @@ class ShardActor:
         faulted = apply_and_step(self._batch, resets, dirty, targets, ticks)
         return faulted, time.perf_counter() - t0
 
-    def snapshot(self) -> Snapshot:
-        return self._batch.snapshot()
+    def snapshot(self) -> SnapshotArrays:
+        """Contiguous arrays, not a Snapshot: Ray ships them without copying field by field."""
+        return self._batch.snapshot_arrays()
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
         return self._batch.qpos(), self._batch.qvel()
@@ -142,7 +144,7 @@ class _Shard:
     """The driver's view of one shard: its actor, and while it is being rebuilt, its readiness."""
 
     actor: Any
-    last: Snapshot | None = None  # the shard's last snapshot, shown while it is rebuilt
+    last: SnapshotArrays | None = None  # the shard's last snapshot, shown while it is rebuilt
     building: Any = None  # ObjectRef of the new actor's info() while it is being built
     failures: int = 0  # consecutive failed builds
     lost: list[float] = field(default_factory=list)  # wall times at which the actor was lost
@@ -203,6 +205,9 @@ class RayBatch(Batch):
         self._targets = np.tile(self.home_target, (nworld, 1))
         self._faults = np.zeros(nworld, dtype=np.int64)
         self._staged = StagedCommands(shards)
+        self._asked = (-1, -1)  # ticks of the last two snapshot() calls
+        self.prefetched = 0  # snapshots that came with their step (diagnostics, bench)
+        self._prefetch: tuple[int, dict[int, Any]] | None = None  # (tick, shard → snapshot ref)
         first = ray.get([s.actor.snapshot.remote() for s in self._shards])
         for s, part in zip(self._shards, first, strict=True):
             s.last = part
@@ -253,6 +258,11 @@ class RayBatch(Batch):
             resets, dirty = self._staged.take(i)
             targets = self._targets[dirty + self._plan.starts[i]]
             refs[i] = s.actor.step.remote(resets, dirty, targets, ticks)
+        after = self._tick + ticks
+        if self._snapshot_expected(after):
+            # Asked for now, the snapshot follows the step's reply at once (an actor runs its
+            # calls in order) instead of costing a second round trip after it.
+            self._prefetch = (after, {i: self._shards[i].actor.snapshot.remote() for i in refs})
         slowest = 0.0
         for i, ref in refs.items():
             try:
@@ -316,17 +326,39 @@ class RayBatch(Batch):
 
     # -- reading ----------------------------------------------------------------------------
 
+    def _snapshot_expected(self, tick: int) -> bool:
+        """Whether the loop will ask for a snapshot at `tick`: the last two asks were as far
+        apart as `tick` is from the last (every tick in fast mode on big batches, every other
+        tick at 60 Hz with a 30 Hz stream). A wrong guess costs one unused copy, never a stale
+        snapshot: snapshot() uses a prefetch only for the tick it was taken at."""
+        before, last = self._asked
+        return before >= 0 and tick - last == last - before > 0
+
     def snapshot(self) -> Snapshot:
         """Every shard's snapshot, joined; a shard being rebuilt shows its last one."""
+        if self._tick != self._asked[1]:
+            self._asked = (self._asked[1], self._tick)
+        ready = self._prefetch[1] if self._prefetch and self._prefetch[0] == self._tick else {}
+        self._prefetch = None
+        self.prefetched += bool(ready)
         live = [i for i, s in enumerate(self._shards) if s.building is None]
-        refs = {i: self._shards[i].actor.snapshot.remote() for i in live}
+        refs = {
+            i: ready[i] if i in ready else self._shards[i].actor.snapshot.remote() for i in live
+        }
         for i, ref in refs.items():
             try:
                 self._shards[i].last = ray.get(ref)
             except RayActorError as exc:
                 self._lose(i, exc)
-        parts = [s.last for s in self._shards]
-        return join_snapshots(parts, self._tick, self._targets, self._faults)
+        parts = [s.last for s in self._shards if s.last is not None]
+        joined = SnapshotArrays(
+            self._tick,
+            np.concatenate([p.sim_time for p in parts]),
+            np.concatenate([p.state for p in parts]),
+            np.concatenate([p.bodies for p in parts]),
+            self._faults.copy(),  # kept here, so that a rebuilt shard keeps its worlds' history
+        )
+        return snapshot_from(joined, self._targets.copy())
 
     def qpos(self) -> np.ndarray:
         return self._gather_state()[0]

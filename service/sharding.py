@@ -104,20 +104,13 @@ def apply_and_step(
     return batch.step(ticks)
 
 
-def join_snapshots(
-    parts: Sequence[Snapshot], tick: int, targets: np.ndarray, faults: np.ndarray | None = None
-) -> Snapshot:
-    """One Snapshot from the shards' snapshots, in shard order.
-
-    `targets` is the caller's table (what was commanded, the same for every engine); `faults`
-    replaces the shards' own counts when the caller keeps them (RayBatch does, so that a rebuilt
-    shard does not forget its worlds' history).
-    """
+def join_snapshots(parts: Sequence[Snapshot], tick: int, targets: np.ndarray) -> Snapshot:
+    """One Snapshot from the shards' snapshots, in shard order; `targets` is the caller's table."""
     joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in WORLD_FIELDS}
     return Snapshot(
         tick=tick,
         target=targets.copy(),
-        faults=np.concatenate([p.faults for p in parts]) if faults is None else faults.copy(),
+        faults=np.concatenate([p.faults for p in parts]),
         **joined,
     )
 

@@ -66,6 +66,25 @@ def test_ray_shards_step_bit_identically_to_one_batch(pair):
     assert_identical(sharded, single)
 
 
+def test_snapshots_asked_every_tick_or_every_other_are_those_of_one_batch(pair):
+    """These cadences are prefetched with the step (see RayBatch._snapshot_expected)."""
+    sharded, single = pair
+    prefetched = sharded.prefetched
+    rng = np.random.default_rng(11)
+    for tick in range(24):
+        targets = single.home_target + rng.uniform(-0.2, 0.2, size=(NWORLD, 7))
+        for b in pair:
+            b.set_targets(np.arange(NWORLD), targets)
+            b.step(1)
+        if tick < 12 or tick % 2:
+            a, b = sharded.snapshot(), single.snapshot()
+            assert a.tick == b.tick
+            for f in FIELDS + ("body_pos", "body_quat"):
+                np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    assert sharded.prefetched - prefetched >= 15  # all but the first of each cadence
+    assert_identical(sharded, single)
+
+
 def test_reset_after_targets_in_the_same_tick_wins(pair):
     sharded, single = pair
     for b in pair:
