@@ -30,7 +30,7 @@ from mujoco import batch as mjbatch
 from mjcf import SCENE_XML
 from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
 from service.robot import LoadedRobot, load_robot
-from service.types import Snapshot
+from service.types import PHYSICS_FIELDS, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.native")
 
@@ -222,6 +222,43 @@ class NativeBatch:
             body_pos=self._xpos.astype(np.float32),  # astype copies
             body_quat=self._xquat.astype(np.float32),
         )
+
+    # -- state ------------------------------------------------------------------------------
+
+    def _state_field(self, name: str) -> np.ndarray:
+        """A live row view of an integration-state field (qfrc_actuator: read-only output)."""
+        return self._b.bind(name)
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        return {f: tuple(self._state_field(f).shape[1:]) for f in PHYSICS_FIELDS}
+
+    def get_state(self) -> BatchState:
+        """Every world's full state (see `BatchState`); float64 rows, eq_active as bool."""
+        physics = {f: np.array(self._state_field(f), copy=True) for f in PHYSICS_FIELDS}
+        physics["eq_active"] = physics["eq_active"] != 0
+        # The effort the snapshot reports is the last tick's, kept in _effort: store it there.
+        physics["qfrc_actuator"][:, self._dof] = self._effort
+        return BatchState(
+            tick=self._tick,
+            world_ticks=self._world_ticks.copy(),
+            faults=self._faults.copy(),
+            targets=self._targets.copy(),
+            physics=physics,
+        )
+
+    def set_state(self, state: BatchState) -> None:
+        """Continue from `state`; checked fully first (ValueError, nothing changed)."""
+        state.check_compatible(self.nworld, self.physics_shapes())
+        for f in PHYSICS_FIELDS:
+            if f != "qfrc_actuator" and state.physics[f].size:
+                self._state_field(f)[:] = state.physics[f]
+        self._tick = int(state.tick)
+        self._world_ticks = np.array(state.world_ticks, dtype=np.int64)
+        self._faults = np.array(state.faults, dtype=np.int64)
+        self._targets = np.array(state.targets, dtype=np.float64)
+        self._effort[:] = state.physics["qfrc_actuator"][:, self._dof]
+        self._warnings_seen[:] = self._warnings()
+        self._kinematics_stale = True
 
     # -- test and diagnostics hooks ---------------------------------------------------------
 
