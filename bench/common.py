@@ -1,6 +1,6 @@
-"""Shared pieces of the benchmark sections: machine info, result files, timing, a server process.
+"""Shared pieces of the benchmark sections: machine info, result files, timing, a served service.
 
-Nothing here imports Warp or MuJoCo at module level, so that the sections that only talk to a
+Nothing here imports Warp at module level, so that the sections that only talk to a
 server subprocess stay light on the (shared, 2-core) machine they measure.
 """
 
@@ -14,9 +14,6 @@ import math
 import os
 import platform
 import socket
-import subprocess
-import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -25,12 +22,15 @@ from typing import Any
 
 import httpx
 
-ROOT = Path(__file__).resolve().parents[1]
+from service.physics import DEFAULT_PHYSICS_DT
+
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 
-# The engine's defaults (service.settings.Settings): 60 Hz control, ~2 ms physics.
+# The engine's defaults (service.settings.Settings): 60 Hz control, the default physics step.
 CONTROL_HZ = 60.0
-PHYSICS_DT = 0.002
+PHYSICS_DT = DEFAULT_PHYSICS_DT
+# The physics step before the step study of issue 13 (8 substeps of 2.083 ms per 60 Hz tick).
+OLD_PHYSICS_DT = 0.002
 
 
 # -- results ---------------------------------------------------------------------------------
@@ -144,18 +144,6 @@ def finite(x: float | None) -> float | None:
     return float(x)
 
 
-def section_payload(section: str, device: str, data: Mapping[str, Any], started: str) -> dict:
-    """The envelope every section file shares: what ran, where, when."""
-    return {
-        "section": section,
-        "command": [Path(sys.argv[0]).name, *sys.argv[1:]],
-        "started": started,
-        "finished": now_iso(),
-        "machine": machine_info(device),
-        **data,
-    }
-
-
 # -- statistics and timing -------------------------------------------------------------------
 
 
@@ -233,143 +221,44 @@ def time_calls(
     return Timing(reps, elapsed)
 
 
-# -- the service as a subprocess ---------------------------------------------------------------
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class ServerError(RuntimeError):
-    pass
+# -- the service as a subprocess (clients.testing.serve) ----------------------------------------
 
 
 @dataclass
-class Server:
-    """A running `armfleet serve` subprocess."""
+class Served:
+    """A running `armfleet serve` (clients.testing's Server) with what the bench reads off it."""
 
-    url: str
-    ws_url: str
-    process: subprocess.Popen[bytes]
-    log_path: Path
+    server: Any  # clients.testing.Server: url, ws_url, process, log()
+    url: str  # http://127.0.0.1:<port>
+    ws_url: str  # ws://127.0.0.1:<port>
     nworld: int
-    mode: str
-    device: str
-    started: float  # perf_counter at Popen
-    ready_s: float = math.nan  # Popen → first /readyz 200
+    ready_s: float  # entering serve() → it returned after the first /readyz 200
     info: dict[str, Any] = field(default_factory=dict)  # /v1/info at ready
 
-    def log_tail(self, nchars: int = 4000) -> str:
-        with contextlib.suppress(OSError):
-            return self.log_path.read_text(errors="replace")[-nchars:]
-        return ""
-
-    def get_info(self, client: httpx.Client | None = None) -> tuple[float, dict[str, Any]]:
+    def get_info(self) -> tuple[float, dict[str, Any]]:
         """(perf_counter at the middle of the request, /v1/info)."""
         t0 = time.perf_counter()
-        if client is None:
-            r = httpx.get(f"{self.url}/v1/info", timeout=30)
-        else:
-            r = client.get(f"{self.url}/v1/info", timeout=30)
+        r = httpx.get(f"{self.url}/v1/info", timeout=30)
         t1 = time.perf_counter()
         r.raise_for_status()
         return (t0 + t1) / 2, r.json()
 
 
-def server_command(
-    nworld: int, mode: str, port: int, device: str = "cpu", extra: Sequence[str] = ()
-) -> list[str]:
-    return [
-        sys.executable,
-        "-m",
-        "service.cli",
-        "serve",
-        "--worlds",
-        str(nworld),
-        "--mode",
-        mode,
-        "--port",
-        str(port),
-        "--device",
-        device,
-        "--log-level",
-        "warning",
-        *extra,
-    ]
-
-
 @contextlib.contextmanager
-def running_server(
-    nworld: int,
-    mode: str = "realtime",
-    device: str = "cpu",
-    env: Mapping[str, str] | None = None,
-    ready_timeout: float = 900.0,
-    poll: float = 0.05,
-    log_dir: Path | None = None,
-) -> Iterator[Server]:
-    """Start `python -m service.cli serve`, wait for /readyz 200, stop it (SIGINT) afterwards.
+def served(
+    nworld: int, mode: str, device: str, env: Mapping[str, str] | None = None
+) -> Iterator[Served]:
+    """`python -m service.cli serve` on `device` via clients.testing.serve (stopped with SIGINT)."""
+    from clients.testing import serve
 
-    `ready_s` is the wall time from Popen to the first 200, polled every `poll` seconds.
-    """
-    port = free_port()
-    tmp = None
-    if log_dir is None:
-        tmp = tempfile.TemporaryDirectory(prefix="armfleet-bench-")
-        log_dir = Path(tmp.name)
-    log_path = log_dir / f"server-{nworld}-{mode}-{port}.log"
-    proc_env = {**os.environ, **(env or {})}
-    with open(log_path, "wb") as log:
-        started = time.perf_counter()
-        proc = subprocess.Popen(
-            server_command(nworld, mode, port, device),
-            cwd=ROOT,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            env=proc_env,
-        )
-    url = f"http://127.0.0.1:{port}"
-    server = Server(
-        url=url,
-        ws_url=f"ws://127.0.0.1:{port}",
-        process=proc,
-        log_path=log_path,
-        nworld=nworld,
-        mode=mode,
-        device=device,
-        started=started,
-    )
-    try:
-        deadline = started + ready_timeout
-        with httpx.Client(timeout=2.0) as client:
-            while True:
-                if proc.poll() is not None:
-                    raise ServerError(f"server exited with {proc.returncode}:\n{server.log_tail()}")
-                with contextlib.suppress(httpx.HTTPError):
-                    if client.get(f"{url}/readyz").status_code == 200:
-                        server.ready_s = time.perf_counter() - started
-                        break
-                if time.perf_counter() > deadline:
-                    raise ServerError(f"server not ready in {ready_timeout:.0f} s")
-                time.sleep(poll)
-            server.info = client.get(f"{url}/v1/info").json()
-        yield server
-    finally:
-        stop_server(proc)
-        if tmp is not None:
-            tmp.cleanup()
-
-
-def stop_server(proc: subprocess.Popen[bytes]) -> None:
-    if proc.poll() is None:
-        proc.send_signal(2)  # SIGINT, like Ctrl-C: uvicorn shuts down gracefully
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    args = ("--device", device, "--log-level", "warning")
+    t0 = time.perf_counter()
+    # A cold kernel cache compiles every kernel: minutes on a small CPU, more for CUDA.
+    with serve(nworld, mode, extra_args=args, env=env, ready_timeout=900) as server:
+        ready_s = time.perf_counter() - t0
+        srv = Served(server, server.url, server.ws_url, nworld, ready_s)
+        srv.info = srv.get_info()[1]
+        yield srv
 
 
 def world_steps(ticks: int, nworld: int, substeps: int) -> int:
@@ -379,6 +268,22 @@ def world_steps(ticks: int, nworld: int, substeps: int) -> int:
 def rtf(ticks: int, control_hz: float, wall_s: float) -> float:
     """Real-time factor: simulated seconds per wall second."""
     return (ticks / control_hz) / wall_s if wall_s > 0 else math.nan
+
+
+def rtf_between(a: tuple[float, dict[str, Any]], b: tuple[float, dict[str, Any]]) -> float:
+    """Real-time factor between two (time, /v1/info) readings."""
+    return rtf(b[1]["tick"] - a[1]["tick"], b[1]["control_hz"], b[0] - a[0])
+
+
+def cuda_available() -> bool:
+    import warp as wp
+
+    import service.engine  # noqa: F401  (sets Warp's log level: no banner)
+
+    try:
+        return wp.is_cuda_available()
+    except Exception:
+        return False
 
 
 # -- printing ----------------------------------------------------------------------------------
@@ -394,8 +299,15 @@ def si(x: float | None, digits: int = 3) -> str:
     return f"{x:.{digits}g}"
 
 
-def ratio(x: float | None) -> str:
-    return "-" if x is None or not math.isfinite(x) else f"{x:.2f}x"
+def cell(x: Any) -> str:
+    """A table cell: None → '-', bools yes/no, floats with 3 significant digits (k, M, G)."""
+    if x is None:
+        return "-"
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, float):
+        return si(x)
+    return str(x)
 
 
 def console():

@@ -4,28 +4,22 @@ Each client is a thread with its own ``httpx.Client`` (one keep-alive connection
 ``POST /v1/worlds/{w}/increments`` with ``wrist_3_joint`` ±0.1 alternating, back to back, for a
 fixed time; client i commands world i mod nworld. Latency is per request, send to reply.
 
-Standalone: ``python -m bench.http_bench --worlds 16 --duration 10``.
+Standalone: ``python -m bench.http_bench --quick``.
 """
 
 from __future__ import annotations
 
-import argparse
 import threading
 import time
-from collections.abc import Callable, Sequence
 from typing import Any
 
 import httpx
 
 from bench import common
+from bench.registry import Context, Result, section
 
-SECTION = "http"
 JOINT = "wrist_3_joint"
 CLIENTS = (1, 8)
-
-
-def defaults(quick: bool) -> dict[str, Any]:
-    return {"worlds": 16, "duration": 3.0 if quick else 10.0, "warmup": 0.5 if quick else 1.0}
 
 
 def _client(
@@ -57,7 +51,7 @@ def _client(
                 status[r.status_code] = status.get(r.status_code, 0) + 1
 
 
-def measure(server: common.Server, clients: int, duration: float, warmup: float) -> dict:
+def measure(server: common.Served, clients: int, duration: float, warmup: float) -> dict:
     """`clients` threads posting increments for `duration` s (after `warmup` s unmeasured)."""
     lats: list[list[float]] = [[] for _ in range(clients)]
     statuses: list[dict[int, int]] = [{} for _ in range(clients)]
@@ -120,7 +114,7 @@ end
 """
 
 
-def measure_wrk(server: common.Server, connections: int, duration: float) -> dict | None:
+def measure_wrk(server: common.Served, connections: int, duration: float) -> dict | None:
     """The same request from wrk (a C load generator), so the client is not what is measured."""
     import shutil
     import subprocess
@@ -144,115 +138,62 @@ def measure_wrk(server: common.Server, connections: int, duration: float) -> dic
     }
 
 
-def run(
-    nworld: int = 16,
-    duration: float = 10.0,
-    warmup: float = 1.0,
-    clients: Sequence[int] = CLIENTS,
-    device: str = "cpu",
-    server: common.Server | None = None,
-    progress: Callable[[str], None] | None = print,
-) -> dict[str, Any]:
-    """Section 5 against `server` (realtime), or a realtime server of `nworld` started here."""
-    started = common.now_iso()
-    say = progress or (lambda _msg: None)
-    results: dict[str, Any] = {}
-    rtf: dict[str, float] = {}
+def row(name: str, r: dict[str, Any]) -> dict[str, Any]:
+    lat = r["latency"]
+    if r.get("client") == "wrk":
+        bad, errors = r["non_2xx"], r["errors"]
+    else:
+        bad = sum(v for code, v in r["status"].items() if code != "200")
+        errors = r["nerrors"]
+    return {
+        "client": name if "/" in name else f"httpx/{name}",
+        "increments/s": r["requests_per_s"],
+        "p50 ms": lat["p50_ms"],
+        "p99 ms": lat["p99_ms"],
+        "max ms": lat.get("max_ms"),
+        "non-200": bad,
+        "errors": errors,
+    }
 
-    def go(srv: common.Server) -> None:
-        t_info0, info0 = srv.get_info()
-        for k in clients:
-            res = measure(srv, k, duration, warmup)
-            results[str(k)] = res
-            say(
+
+@section(5, "http", "HTTP increments, realtime mode")
+def http(ctx: Context) -> Result:
+    """Python clients (threads with httpx), then wrk when installed, against one realtime server."""
+    nworld = ctx.sizes((16,))[0]
+    duration, warmup = ctx.pick((10.0, 1.0), (3.0, 0.5))
+    results: dict[str, Any] = {}
+    with ctx.serve(nworld, "realtime") as server:
+        before = server.get_info()
+        for k in CLIENTS:
+            results[str(k)] = res = measure(server, k, duration, warmup)
+            ctx.say(
                 f"  {k} client(s)  {res['requests_per_s']:,.0f} increments/s, "
                 f"p50 {res['latency']['p50_ms']} ms, p99 {res['latency']['p99_ms']} ms"
             )
-            fast = measure_wrk(srv, k, duration)
+            fast = measure_wrk(server, k, duration)
             if fast is not None:
                 results[f"wrk/{k}"] = fast
-                say(
+                ctx.say(
                     f"  wrk, {k} connection(s)  {fast['requests_per_s']:,.0f} increments/s, "
                     f"p50 {fast['latency']['p50_ms']} ms, p99 {fast['latency']['p99_ms']} ms"
                 )
-        t_info1, info1 = srv.get_info()
-        rtf["value"] = common.rtf(
-            info1["tick"] - info0["tick"], info1["control_hz"], t_info1 - t_info0
-        )
-
-    if server is not None:
-        go(server)
-        nworld = server.nworld
-    else:
-        with common.running_server(nworld, "realtime", device) as srv:
-            go(srv)
+        rtf = common.rtf_between(before, server.get_info())
     data = {
-        "device": device,
         "mode": "realtime",
         "nworld": nworld,
         "request": f"POST /v1/worlds/{{w}}/increments {{joint: {JOINT}, delta: ±0.1}}",
         "duration_s": duration,
         "warmup_s": warmup,
-        "realtime_factor": common.finite(rtf.get("value")),
+        "realtime_factor": common.finite(rtf),
         "results": results,
     }
-    return common.section_payload(SECTION, device, data, started)
-
-
-def table(payload: dict[str, Any]):
-    from rich import box
-    from rich.table import Table
-
-    rtf = payload.get("realtime_factor")
-    t = Table(
-        title=(
-            f"5. HTTP increments, {payload['nworld']} worlds realtime "
-            f"(RTF {'-' if rtf is None else f'{rtf:.2f}'} meanwhile; {payload['device']})"
-        ),
-        box=box.SIMPLE_HEAD,
-    )
-    for col in ("clients", "increments/s", "p50 ms", "p99 ms", "max ms", "non-200", "errors"):
-        t.add_column(col, justify="right")
-    for k, r in payload["results"].items():
-        lat = r["latency"]
-        if r.get("client") == "wrk":
-            bad, errors = r["non_2xx"], r["errors"]
-        else:
-            bad = sum(v for code, v in r["status"].items() if code != "200")
-            errors = r["nerrors"]
-        t.add_row(
-            k if "/" in k else f"httpx/{k}",
-            f"{r['requests_per_s']:,.0f}",
-            f"{lat['p50_ms']}",
-            f"{lat['p99_ms']}",
-            f"{lat.get('max_ms', '-')}",
-            str(bad),
-            str(errors),
-        )
-    return t
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.http_bench", description=__doc__)
-    p.add_argument("--worlds", type=int, help="worlds in the server (default 16)")
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--duration", type=float, help="seconds measured per client count")
-    p.add_argument("--clients", type=int, nargs="+", default=list(CLIENTS))
-    p.add_argument("--device", default="cpu")
-    args = p.parse_args(argv)
-    d = defaults(args.quick)
-    payload = run(
-        args.worlds or d["worlds"],
-        args.duration or d["duration"],
-        d["warmup"],
-        args.clients,
-        args.device,
-    )
-    path = common.write_json(f"{SECTION}{common.suffix_for(args.device)}.json", payload)
-    common.console().print(table(payload))
-    print(f"wrote {path}")
-    return 0
+    notes = [f"{nworld} worlds; the loop ran at RTF {common.cell(data['realtime_factor'])}"]
+    if not any(k.startswith("wrk/") for k in results):
+        notes.append("wrk is not installed: Python clients only")
+    return Result([row(k, r) for k, r in results.items()], data, notes)
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from bench.runner import main
+
+    raise SystemExit(main(module=__name__))

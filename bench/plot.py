@@ -115,19 +115,23 @@ def plot(
     return path
 
 
+def redraw(out_dir: Path, device: str = "cpu") -> Path | None:
+    """throughput[_cuda].png from the result files of sections 1, 2 and 3 in `out_dir`."""
+    suffix = common.suffix_for(device)
+    cap = common.read_json(f"realtime_capacity{suffix}.json", out_dir) or {}
+    return plot(
+        common.read_json(f"throughput{suffix}.json", out_dir),
+        common.read_json(f"service_fast{suffix}.json", out_dir),
+        out_dir / f"throughput{suffix}.png",
+        cap.get("capacity_worlds"),
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.plot", description=__doc__)
     p.add_argument("--device", default="cpu", help="which result files: cpu or cuda")
-    args = p.parse_args(argv)
-    suffix = common.suffix_for(args.device)
-    cap = common.read_json(f"realtime_capacity{suffix}.json") or {}
-    path = plot(
-        common.read_json(f"throughput{suffix}.json"),
-        common.read_json(f"service_fast{suffix}.json"),
-        common.RESULTS_DIR / f"throughput{suffix}.png",
-        cap.get("capacity_worlds"),
-    )
-    print(f"wrote {path}" if path else "nothing to plot: run bench.throughput first")
+    path = redraw(common.RESULTS_DIR, p.parse_args(argv).device)
+    print(f"wrote {path}" if path else "nothing to plot: run sections 1 and 2 first")
     return 0 if path else 1
 
 

@@ -13,12 +13,11 @@
   the service accepted (`GET /v1/ros`).
 
 Everything runs on loopback, in a DDS domain of its own. Standalone:
-``python -m bench.ros_bench [--quick]``.
+``python -m bench.ros_bench [--quick]`` or ``armfleet bench --section 8``.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import random
 import time
@@ -29,6 +28,7 @@ import httpx
 import orjson
 
 from bench import common
+from bench.registry import Context, Result, section
 
 SECTION = "ros"
 JOINT = "wrist_3_joint"
@@ -39,13 +39,8 @@ MOVED = 0.01
 TIMEOUT = 5.0
 
 
-def defaults(quick: bool) -> dict[str, Any]:
-    return {
-        "worlds": 16,
-        "round_trips": 50 if quick else 200,
-        "flood_rate": 1000.0,
-        "flood_s": 5.0 if quick else 20.0,
-    }
+WORLDS = 16
+FLOOD_RATE = 1000.0
 
 
 # -- DDS client ------------------------------------------------------------------------------
@@ -195,7 +190,7 @@ def rosbridge_round_trip(ws_url: str, n: int) -> dict[str, Any]:
         return _round_trips(send, next_state, n)
 
 
-def flood(server: common.Server, client: DdsClient, rate: float, seconds: float) -> dict[str, Any]:
+def flood(server: common.Served, client: DdsClient, rate: float, seconds: float) -> dict[str, Any]:
     """`rate` commands/s over the world topics for `seconds`; RTF and acceptance meanwhile."""
     names = ["finger_joint"]
     before = httpx.get(f"{server.url}/v1/ros").json()["dds"]
@@ -229,91 +224,76 @@ def flood(server: common.Server, client: DdsClient, rate: float, seconds: float)
     }
 
 
-def idle_rtf(server: common.Server, seconds: float) -> float:
-    t0, info0 = server.get_info()
-    time.sleep(seconds)
-    t1, info1 = server.get_info()
-    return common.rtf(info1["tick"] - info0["tick"], info1["control_hz"], t1 - t0)
-
-
-def run(
-    worlds: int = 16,
-    round_trips: int = 200,
-    flood_rate: float = 1000.0,
-    flood_s: float = 20.0,
-    device: str = "cpu",
-    progress: Callable[[str], None] | None = print,
-) -> dict[str, Any]:
-    started = common.now_iso()
-    say = progress or (lambda _msg: None)
-    domain = random.SystemRandom().randrange(1, 233)
+@section(8, "ros", "ROS 2 over DDS and rosbridge: JointState round trip, 1000 commands/s")
+def ros(ctx: Context) -> Result:
+    """One realtime server with `--ros2` on every world; round trips, then the flood."""
+    worlds = (ctx.worlds or [WORLDS])[0]
+    round_trips = ctx.pick(200, 50)
+    flood_s = ctx.pick(20.0, 5.0)
+    domain = random.SystemRandom().randrange(1, 233)  # a DDS domain of its own
     env = {
         "ROS_DOMAIN_ID": str(domain),
         "ARMFLEET_ROS2": "true",
         "ARMFLEET_ROS2_WORLDS": f"0-{worlds - 1}",
         "ARMFLEET_ROS2_RATE": "60",
     }
-    data: dict[str, Any] = {"device": device, "worlds": worlds, "state_rate_hz": 60}
-    with common.running_server(worlds, "realtime", device, env=env) as server:
+    data: dict[str, Any] = {"worlds": worlds, "state_rate_hz": 60, "errors": {}}
+    with ctx.serve(worlds, "realtime", env) as server:
         client = DdsClient(domain, worlds)
         try:
-            data["rtf_idle"] = idle_rtf(server, 3.0)
-            data["dds"] = dds_round_trip(client, round_trips)
-            say(f"  DDS round trip: responds p50 {data['dds']['responds']['p50_ms']} ms")
-            data["rosbridge"] = rosbridge_round_trip(server.ws_url, round_trips)
-            say(f"  rosbridge round trip: p50 {data['rosbridge']['responds']['p50_ms']} ms")
-            data["flood"] = flood(server, client, flood_rate, flood_s)
-            say(
-                f"  flood {data['flood']['sent_per_s']:.0f}/s: RTF "
-                f"{data['flood']['realtime_factor']:.3f}, accepted {data['flood']['accepted']}"
-            )
+            data["rtf_idle"] = common.rtf_between(server.get_info(), _after(server, 3.0))
+            for key, measure in (
+                ("dds", lambda: dds_round_trip(client, round_trips)),
+                ("rosbridge", lambda: rosbridge_round_trip(server.ws_url, round_trips)),
+                ("flood", lambda: flood(server, client, FLOOD_RATE, flood_s)),
+            ):
+                try:
+                    data[key] = measure()
+                except Exception as exc:
+                    data["errors"][key] = f"{type(exc).__name__}: {exc}"
+                    ctx.say(f"  {key} FAILED: {data['errors'][key]}")
+                else:
+                    ctx.say(f"  {key}: done")
         finally:
             client.close()
-    return common.section_payload(SECTION, device, data, started)
-
-
-def table(payload: dict[str, Any]):
-    from rich import box
-    from rich.table import Table
-
-    t = Table(title=f"ROS 2 / rosbridge ({payload['device']})", box=box.SIMPLE_HEAD)
-    for col in ("measure", "p50 ms", "p99 ms", "n", "notes"):
-        t.add_column(col, justify="right" if col != "measure" else "left")
+    rows: list[dict[str, Any]] = []
     for key, label in (("dds", "DDS"), ("rosbridge", "rosbridge")):
-        r = payload.get(key)
-        if not r:
-            continue
-        for what in ("responds", "moved"):
-            s = r[what]
-            t.add_row(
-                f"{label} round trip ({what})",
-                str(s["p50_ms"]),
-                str(s["p99_ms"]),
-                str(s["n"]),
-                f"timeouts {r['timeouts']}",
+        r = data.get(key)
+        for what in ("responds", "moved") if r else ():
+            rows.append(
+                {
+                    "measure": f"{label} round trip, {what}",
+                    "p50 ms": r[what]["p50_ms"],
+                    "p99 ms": r[what]["p99_ms"],
+                    "n": r[what]["n"],
+                    "notes": f"timeouts {r['timeouts']}",
+                }
             )
-    f = payload.get("flood")
+    f = data.get("flood")
     if f:
-        t.add_row(
-            f"DDS flood {f['sent_per_s']:.0f} cmd/s, {f['worlds']} worlds",
-            "",
-            "",
-            str(f["sent"]),
-            f"RTF {f['realtime_factor']:.3f} (idle {payload['rtf_idle']:.3f}), "
-            f"accepted {f['accepted']}, rejected {f['rejected']}",
+        rows.append(
+            {
+                "measure": f"DDS {f['sent_per_s']:.0f} commands/s over {f['worlds']} worlds",
+                "p50 ms": "",
+                "p99 ms": "",
+                "n": f["sent"],
+                "notes": f"RTF {f['realtime_factor']:.3f} (idle {data['rtf_idle']:.3f}), "
+                f"accepted {f['accepted']}, rejected {f['rejected']}",
+            }
         )
-    return t
+    notes = [
+        f"{worlds} worlds, realtime, states at 60 Hz; responds = first state moved >= "
+        f"{RESPONDS:g} rad toward the command, moved = >= {MOVED:g} rad"
+    ]
+    return Result(rows, data, notes)
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--device", default="cpu")
-    args = parser.parse_args()
-    payload = run(**defaults(args.quick), device=args.device)
-    common.write_json(SECTION, payload)
-    common.console().print(table(payload))
+def _after(server: common.Served, seconds: float) -> tuple[float, dict[str, Any]]:
+    time.sleep(seconds)
+    return server.get_info()
 
 
 if __name__ == "__main__":
-    main()
+    from bench.runner import main
+
+    raise SystemExit(main(module=__name__))

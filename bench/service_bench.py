@@ -1,37 +1,36 @@
-"""Sections 2 and 3: the service as a subprocess, measured from a client.
+"""Sections 2, 3 and 7: the service as a subprocess, measured from a client.
 
-2. ``fast``: ``armfleet serve --mode fast`` with every world streamed to one WebSocket client
-   (``/v1/ws?rate=30``). World-steps/s come from the tick advance over wall time (``/v1/info``
+2. ``service_fast``: ``armfleet serve --mode fast`` with every world streamed to one WebSocket
+   client (``/v1/ws?rate=30``); section 7, ``service_fast_binary``, the same with binary frames
+   (``&format=binary``). World-steps/s come from the tick advance over wall time (``/v1/info``
    before and after the window; the frames' ticks are reported too) and are compared with the
    engine and raw captured MuJoCo Warp numbers of section 1: the service's overhead.
-3. ``capacity``: the largest batch for which ``realtime`` mode holds a real-time factor >= 0.99
-   over a window, 60 Hz control, ~2 ms physics, one subscriber (``/v1/ws?worlds=a-b&rate=30``)
-   per 16 worlds. Doubling, then bisection; the RTF of every candidate is reported.
+3. ``realtime_capacity``: the largest batch for which ``realtime`` mode holds a real-time factor
+   >= 0.99 over a window, 60 Hz control, ~2 ms physics, one subscriber
+   (``/v1/ws?worlds=a-b&rate=30``) per 16 worlds. Doubling from what section 1 predicts (or from
+   ``--worlds N``), then bisection; the RTF of every candidate is reported.
 
 The client shares the machine with the server: on a 2-core box its frame handling competes with
 the server's threads, as a real co-located client would.
 
-Standalone: ``python -m bench.service_bench fast --worlds 16 256`` or
-``python -m bench.service_bench capacity --window 10``.
+Standalone: ``python -m bench.service_bench --section 2 --worlds 16 256``.
 """
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import math
 import re
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import httpx
 import websockets.asyncio.client as ws_client
 
 from bench import common
+from bench.registry import Context, Result, section
 
-SECTION_FAST = "service_fast"
-SECTION_CAPACITY = "realtime_capacity"
 CPU_SIZES = (1, 16, 64, 256, 1024, 4096)
 CPU_SIZES_QUICK = (16, 256)
 CUDA_SIZES = (1024, 4096, 16384, 65536)
@@ -51,23 +50,6 @@ def frame_tick(frame: str | bytes) -> int | None:
     head = frame[:96] if isinstance(frame, str) else frame[:96].decode(errors="replace")
     m = _TICK.search(head)
     return int(m.group(1)) if m else None
-
-
-def defaults_fast(quick: bool, device: str) -> dict[str, Any]:
-    cuda = device.startswith("cuda")
-    if quick:
-        return {
-            "sizes": CUDA_SIZES_QUICK if cuda else CPU_SIZES_QUICK,
-            "duration": 3.0,
-            "warmup": 1.0,
-        }
-    return {"sizes": CUDA_SIZES if cuda else CPU_SIZES, "duration": 8.0, "warmup": 2.0}
-
-
-def defaults_capacity(quick: bool) -> dict[str, Any]:
-    if quick:
-        return {"window": 10.0, "warmup": 2.0, "refine": 1}
-    return {"window": 60.0, "warmup": 3.0, "refine": 2}
 
 
 # -- a streaming client --------------------------------------------------------------------------
@@ -123,7 +105,7 @@ async def _info(client: httpx.AsyncClient, url: str) -> tuple[float, dict[str, A
 
 
 async def _measure_fast(
-    server: common.Server, duration: float, warmup: float, fmt: str = "json"
+    server: common.Served, duration: float, warmup: float, fmt: str = "json"
 ) -> dict[str, Any]:
     counter = FrameCounter()
     reader = asyncio.create_task(counter.run(f"{server.ws_url}/v1/ws?rate=30&format={fmt}"))
@@ -167,106 +149,97 @@ async def _measure_fast(
     return out
 
 
-def measure_fast(
-    nworld: int, device: str, duration: float, warmup: float, fmt: str = "json"
-) -> dict[str, Any]:
-    with common.running_server(nworld, "fast", device) as server:
-        return asyncio.run(_measure_fast(server, duration, warmup, fmt))
+REFERENCES = {  # section 1's engines the service is compared with, and their column headings
+    "engine": "svc/engine",
+    "engine_cores": "svc/eng cores",
+    "warp_captured": "svc/warp capt",
+    "rollout_all": "svc/mj all",
+}
 
 
-def run_fast(
-    sizes: Sequence[int],
-    device: str = "cpu",
-    duration: float = 8.0,
-    warmup: float = 2.0,
-    throughput: dict[str, Any] | None = None,
-    progress: Callable[[str], None] | None = print,
-    fmt: str = "json",
-) -> dict[str, Any]:
-    """Section 2 at every size; ratios against section 1's payload when given."""
-    started = common.now_iso()
-    say = progress or (lambda _msg: None)
-    results: dict[str, Any] = {}
-    errors: dict[str, str] = {}
-    base = (throughput or {}).get("results", {})
-    for n in sizes:
-        t0 = time.perf_counter()
-        try:
-            res = measure_fast(n, device, duration, warmup, fmt)
-        except Exception as exc:
-            errors[str(n)] = f"{type(exc).__name__}: {exc}"
-            say(f"  {n:>6} worlds  service fast FAILED: {exc}")
-            continue
+def fast(ctx: Context, fmt: str) -> Result:
+    """Fast mode at every size, `fmt` frames; ratios to section 1's last results on this device."""
+    sizes = ctx.sizes(
+        CUDA_SIZES if ctx.cuda else CPU_SIZES, CUDA_SIZES_QUICK if ctx.cuda else CPU_SIZES_QUICK
+    )
+    duration, warmup = ctx.pick((8.0, 2.0), (3.0, 1.0))
+    base = (ctx.earlier("throughput") or {}).get("results", {})
+
+    def one(n: int) -> dict[str, Any]:
+        with ctx.serve(n, "fast") as server:
+            res = asyncio.run(_measure_fast(server, duration, warmup, fmt))
         engines = base.get(str(n), {}).get("engines", {})
-        for key in ("engine", "engine_cores", "warp_captured", "rollout_all"):
+        for key in REFERENCES:
             ref = engines.get(key, {}).get("world_steps_per_s")
             res[f"ratio_to_{key}"] = res["world_steps_per_s"] / ref if ref else None
-        results[str(n)] = res
-        say(
-            f"  {n:>6} worlds  service fast {res['world_steps_per_s']:>14,.0f} world-steps/s "
-            f"({res['frames_per_s']:.1f} frames/s, {time.perf_counter() - t0:.1f} s)"
-        )
+        return res
+
+    results, errors = ctx.each(
+        sizes,
+        one,
+        lambda r: (
+            f"{r['world_steps_per_s']:>14,.0f} world-steps/s, {r['frames_per_s']:.1f} frames/s"
+        ),
+    )
+    rows = []
+    for n, r in results.items():
+        kb = r.get("frame_bytes_mean")
+        row = {
+            "worlds": int(n),
+            "world-steps/s": r["world_steps_per_s"],
+            "ticks/s": r["ticks_per_s"],
+            "frames/s": r["frames_per_s"],
+            "frame KB": None if kb is None else kb / 1e3,
+        }
+        rows.append(row | {col: r[f"ratio_to_{key}"] for key, col in REFERENCES.items()})
     data = {
-        "device": device,
         "mode": "fast",
         "stream": f"/v1/ws?rate=30&format={fmt} (all worlds, one client)",
         "format": fmt,
-        "sizes": list(sizes),
+        "sizes": sizes,
         "duration_s": duration,
         "warmup_s": warmup,
         "results": results,
         "errors": errors,
     }
-    return common.section_payload(SECTION_FAST, device, data, started)
+    return Result(rows, data)
 
 
-def table_fast(payload: dict[str, Any]):
-    from rich import box
-    from rich.table import Table
+@section(
+    2,
+    "service_fast",
+    "Service, fast mode, all worlds streamed at 30 Hz, JSON frames",
+    ("cpu", "cuda"),
+)
+def service_fast(ctx: Context) -> Result:
+    return fast(ctx, "json")
 
-    t = Table(
-        title=(
-            f"2. Service, fast mode, all worlds streamed at 30 Hz, {payload.get('format', 'json')}"
-            f" frames ({payload['device']})"
-        ),
-        box=box.SIMPLE_HEAD,
-    )
-    for col in ("worlds", "world-steps/s", "ticks/s", "frames/s", "frame KB", "svc/engine"):
-        t.add_column(col, justify="right")
-    t.add_column("svc/eng cores", justify="right")
-    t.add_column("svc/warp capt", justify="right")
-    t.add_column("svc/mj all", justify="right")
-    for n, r in payload["results"].items():
-        kb = r.get("frame_bytes_mean")
-        t.add_row(
-            n,
-            common.si(r["world_steps_per_s"]),
-            f"{r['ticks_per_s']:.1f}",
-            f"{r['frames_per_s']:.1f}",
-            "-" if kb is None else f"{kb / 1e3:.1f}",
-            common.ratio(r.get("ratio_to_engine")),
-            common.ratio(r.get("ratio_to_engine_cores")),
-            common.ratio(r.get("ratio_to_warp_captured")),
-            common.ratio(r.get("ratio_to_rollout_all")),
-        )
-    return t
+
+@section(
+    7,
+    "service_fast_binary",
+    "Service, fast mode, all worlds streamed at 30 Hz, binary frames",
+    ("cpu", "cuda"),
+    default_on=("cuda",),
+)
+def service_fast_binary(ctx: Context) -> Result:
+    return fast(ctx, "binary")
 
 
 # -- section 3: real-time capacity ------------------------------------------------------------
 
 
 async def _measure_realtime(
-    server: common.Server,
+    server: common.Served,
     window: float,
     warmup: float,
     check_every: float = 2.0,
     abort_below: float = 0.95,
     abort_after: float = 5.0,
+    per_subscriber: int = WORLDS_PER_SUBSCRIBER,
 ) -> dict[str, Any]:
     n = server.nworld
-    groups = [
-        (lo, min(n, lo + WORLDS_PER_SUBSCRIBER) - 1) for lo in range(0, n, WORLDS_PER_SUBSCRIBER)
-    ]
+    groups = [(lo, min(n, lo + per_subscriber) - 1) for lo in range(0, n, per_subscriber)]
     counters = [FrameCounter() for _ in groups]
     readers = [
         asyncio.create_task(c.run(f"{server.ws_url}/v1/ws?worlds={lo}-{hi}&rate=30"))
@@ -310,11 +283,6 @@ async def _measure_realtime(
         "world_steps_per_s": common.world_steps(ticks, n, info1["substeps"]) / wall,
         "ready_s": server.ready_s,
     }
-
-
-def measure_realtime(nworld: int, device: str, window: float, warmup: float) -> dict[str, Any]:
-    with common.running_server(nworld, "realtime", device) as server:
-        return asyncio.run(_measure_realtime(server, window, warmup))
 
 
 def _round_to(x: float, step: int) -> int:
@@ -394,29 +362,25 @@ def start_from_throughput(throughput: dict[str, Any] | None, control_hz: float =
     return 2 ** math.floor(math.log2(best / 2))
 
 
-def run_capacity(
-    device: str = "cpu",
-    window: float = 60.0,
-    warmup: float = 3.0,
-    refine: int = 2,
-    start: int = WORLDS_PER_SUBSCRIBER,
-    max_worlds: int = 4096,
-    progress: Callable[[str], None] | None = print,
-) -> dict[str, Any]:
-    started = common.now_iso()
-    say = progress or (lambda _msg: None)
+@section(3, "realtime_capacity", "Real-time capacity (RTF >= 0.99)")
+def realtime_capacity(ctx: Context) -> Result:
+    """Doubling from what section 1 predicts, then bisection; every candidate is reported."""
+    window, warmup, refine = ctx.pick((60.0, 3.0, 2), (10.0, 2.0, 1))
+    start = ctx.worlds[0] if ctx.worlds else start_from_throughput(ctx.earlier("throughput"))
+    max_worlds = 4096
     errors: dict[str, str] = {}
 
     def measure(n: int) -> dict[str, Any]:
         t0 = time.perf_counter()
         try:
-            res = measure_realtime(n, device, window, warmup)
+            with ctx.serve(n, "realtime") as server:
+                res = asyncio.run(_measure_realtime(server, window, warmup))
         except Exception as exc:
             errors[str(n)] = f"{type(exc).__name__}: {exc}"
-            say(f"  {n:>6} worlds  realtime FAILED: {exc}")
+            ctx.say(f"  {n:>6} worlds  realtime FAILED: {exc}")
             return {"nworld": n, "realtime_factor": None, "error": errors[str(n)]}
         verdict = "ok" if res["realtime_factor"] >= RTF_GOAL else "short"
-        say(
+        ctx.say(
             f"  {n:>6} worlds  realtime RTF {res['realtime_factor']:.3f} over "
             f"{res['wall_s']:.1f} s ({verdict}{', stopped early' if res['aborted_early'] else ''};"
             f" {time.perf_counter() - t0:.1f} s)"
@@ -424,8 +388,20 @@ def run_capacity(
         return res
 
     best, candidates = capacity_search(measure, start, max_worlds, refine)
+    rows = [
+        {
+            "worlds": r["nworld"],
+            "RTF": r.get("realtime_factor"),
+            "min 1 s RTF": r.get("min_loop_rtf_1s"),
+            "wall s": r.get("wall_s"),
+            "stopped early": r.get("aborted_early"),
+            "subscribers": r.get("subscribers"),
+            "frames/s/sub": r.get("frames_per_s_per_subscriber_mean"),
+            "ok": r.get("passed"),
+        }
+        for r in candidates
+    ]
     data = {
-        "device": device,
         "mode": "realtime",
         "rtf_goal": RTF_GOAL,
         "window_s": window,
@@ -437,96 +413,11 @@ def run_capacity(
         "candidates": candidates,
         "errors": errors,
     }
-    return common.section_payload(SECTION_CAPACITY, device, data, started)
-
-
-def table_capacity(payload: dict[str, Any]):
-    from rich import box
-    from rich.table import Table
-
-    best = payload.get("capacity_worlds")
-    t = Table(
-        title=(
-            f"3. Real-time capacity: {best if best is not None else 'none'} worlds at RTF >= "
-            f"{payload['rtf_goal']} over {payload['window_s']:.0f} s ({payload['device']})"
-        ),
-        box=box.SIMPLE_HEAD,
-    )
-    for col in ("worlds", "RTF", "min 1 s RTF", "wall s", "subscribers", "frames/s/sub", "ok"):
-        t.add_column(col, justify="right")
-    for r in payload["candidates"]:
-        rtf = r.get("realtime_factor")
-        mn = r.get("min_loop_rtf_1s")
-        fps = r.get("frames_per_s_per_subscriber_mean")
-        t.add_row(
-            str(r["nworld"]),
-            "-" if rtf is None else f"{rtf:.3f}",
-            "-" if mn is None else f"{mn:.3f}",
-            f"{r.get('wall_s', 0):.1f}" + ("*" if r.get("aborted_early") else ""),
-            str(r.get("subscribers", "-")),
-            "-" if fps is None else f"{fps:.1f}",
-            "yes" if r.get("passed") else "no",
-        )
-    return t
-
-
-# -- command line ------------------------------------------------------------------------------
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.service_bench", description=__doc__)
-    sub = p.add_subparsers(dest="what", required=True)
-    f = sub.add_parser("fast", help="section 2: fast mode, all worlds streamed at 30 Hz")
-    f.add_argument("--worlds", type=int, nargs="+")
-    f.add_argument("--device", default="cpu")
-    f.add_argument("--quick", action="store_true")
-    f.add_argument("--duration", type=float)
-    f.add_argument("--warmup", type=float)
-    f.add_argument("--format", choices=("json", "binary"), default="json", dest="fmt")
-    c = sub.add_parser("capacity", help="section 3: largest batch at RTF >= 0.99")
-    c.add_argument("--device", default="cpu")
-    c.add_argument("--quick", action="store_true")
-    c.add_argument("--window", type=float)
-    c.add_argument("--warmup", type=float)
-    c.add_argument("--refine", type=int, help="bisection steps after doubling")
-    c.add_argument("--start", type=int, default=WORLDS_PER_SUBSCRIBER)
-    c.add_argument("--max-worlds", type=int, default=4096)
-    args = p.parse_args(argv)
-    if args.device.startswith("cuda"):
-        from bench.throughput import cuda_available
-
-        if not cuda_available():
-            print(f"bench: no CUDA device is available here; --device {args.device} cannot run.")
-            return 2
-    suffix = common.suffix_for(args.device)
-    if args.what == "fast":
-        d = defaults_fast(args.quick, args.device)
-        payload = run_fast(
-            args.worlds or d["sizes"],
-            args.device,
-            args.duration or d["duration"],
-            args.warmup if args.warmup is not None else d["warmup"],
-            throughput=common.read_json(f"throughput{suffix}.json"),
-            fmt=args.fmt,
-        )
-        tag = "" if args.fmt == "json" else f"_{args.fmt}"
-        path = common.write_json(f"{SECTION_FAST}{tag}{suffix}.json", payload)
-        common.console().print(table_fast(payload))
-    else:
-        d = defaults_capacity(args.quick)
-        payload = run_capacity(
-            args.device,
-            args.window or d["window"],
-            args.warmup if args.warmup is not None else d["warmup"],
-            d["refine"] if args.refine is None else args.refine,
-            args.start,
-            args.max_worlds,
-        )
-        path = common.write_json(f"{SECTION_CAPACITY}{suffix}.json", payload)
-        common.console().print(table_capacity(payload))
-    print(f"wrote {path}")
-    return 0
+    note = f"capacity: {best if best is not None else 'none'} worlds at RTF >= {RTF_GOAL}"
+    return Result(rows, data, [f"{note} over {window:.0f} s windows"])
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from bench.runner import main
+
+    raise SystemExit(main(module=__name__))

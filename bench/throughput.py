@@ -13,12 +13,11 @@ world-steps/s = worlds x physics steps per second. Every engine steps the same m
 * ``rollout_1t`` / ``rollout_<n>t``: native MuJoCo, ``mujoco.rollout.Rollout`` on the calling
   thread and on a pool of all usable cores (on the CPU also when --device cuda).
 
-Standalone: ``python -m bench.throughput --worlds 1 16 --min-time 1``.
+Standalone: ``python -m bench.throughput --quick --worlds 1 16``.
 """
 
 from __future__ import annotations
 
-import argparse
 import gc
 import math
 import time
@@ -28,8 +27,8 @@ from typing import Any
 import numpy as np
 
 from bench import common
+from bench.registry import Context, Result, section
 
-SECTION = "throughput"
 CPU_SIZES = (1, 16, 64, 256, 1024, 4096)
 CPU_SIZES_QUICK = (1, 16, 64, 256)
 CUDA_SIZES = (1024, 4096, 16384, 65536)
@@ -53,19 +52,11 @@ DESCRIPTIONS = {
 }
 
 
-def physics_dt(control_hz: float = common.CONTROL_HZ, dt: float = common.PHYSICS_DT) -> tuple:
-    """(substeps, physics_dt) exactly as WorldBatch derives them."""
-    tick_dt = 1.0 / control_hz
-    substeps = max(1, round(tick_dt / dt))
-    return substeps, tick_dt / substeps
+def physics_dt() -> tuple[int, float]:
+    """(substeps, physics_dt) of the engine's defaults, exactly as WorldBatch derives them."""
+    from service.physics import tick_timing
 
-
-def defaults(quick: bool, device: str) -> dict[str, Any]:
-    cuda = device.startswith("cuda")
-    if quick:
-        sizes = CUDA_SIZES_QUICK if cuda else CPU_SIZES_QUICK
-        return {"sizes": sizes, "min_time": 0.4, "warmup_time": 0.1}
-    return {"sizes": CUDA_SIZES if cuda else CPU_SIZES, "min_time": 1.5, "warmup_time": 0.3}
+    return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
 
 
 # -- the engines -------------------------------------------------------------------------------
@@ -256,7 +247,7 @@ def bench_rollout(
     )
 
 
-# -- orchestration -----------------------------------------------------------------------------
+# -- the section -------------------------------------------------------------------------------
 
 
 def _one(name: str, fn: Callable[..., dict]) -> Callable[..., dict[str, dict]]:
@@ -268,90 +259,58 @@ def _one(name: str, fn: Callable[..., dict]) -> Callable[..., dict[str, dict]]:
     return call
 
 
-def cuda_available() -> bool:
-    import warp as wp
-
-    import service.engine  # noqa: F401  (sets Warp's log level: no banner)
-
-    try:
-        return wp.is_cuda_available()
-    except Exception:
-        return False
-
-
-def run(
-    sizes: Sequence[int],
-    device: str = "cpu",
-    min_time: float = 1.5,
-    warmup_time: float = 0.3,
-    engines: Sequence[str] = ENGINES,
-    rollout_threads: int | None = None,
-    progress: Callable[[str], None] | None = print,
+def measure_size(
+    n: int,
+    device: str,
+    min_time: float,
+    warmup_time: float,
+    engines: Sequence[str],
+    nthread: int,
+    errors: dict[str, str],
+    say: Callable[[str], None],
 ) -> dict[str, Any]:
-    """Measure every engine at every size; returns the section's JSON-ready dict."""
-    started = common.now_iso()
-    nthread = rollout_threads or common.usable_cores()
-    substeps, dt = physics_dt()
-    results: dict[str, dict[str, Any]] = {}
-    errors: dict[str, str] = {}
-    say = progress or (lambda _msg: None)
+    """Every engine at `n` worlds: {"engines": {name: result}, "ratios": {...}}."""
+    row: dict[str, Any] = {}
     warp_which = [e for e in (WARP_PYTHON, WARP_CAPTURED) if e in engines]
-    for n in sizes:
-        row: dict[str, Any] = {}
-        plan: list[tuple[str, Callable[..., dict[str, dict]], tuple]] = []
-        if ENGINE in engines:
-            plan.append((ENGINE, _one(ENGINE, bench_engine), (n, device)))
-        if ENGINE_CORES in engines and device.startswith("cpu"):
-            plan.append((ENGINE_CORES, _one(ENGINE_CORES, bench_engine_cores), (n, device)))
-        if warp_which:
-            plan.append(("/".join(warp_which), bench_warp, (n, device)))
-        if ROLLOUT_1T in engines:
-            plan.append((ROLLOUT_1T, _one(ROLLOUT_1T, bench_rollout), (n, 0)))
-        if ROLLOUT_ALL in engines:
-            plan.append((ROLLOUT_ALL, _one(ROLLOUT_ALL, bench_rollout), (n, nthread)))
-        for label, fn, args in plan:
-            t0 = time.perf_counter()
-            extra = (warp_which,) if fn is bench_warp else ()
-            try:
-                got = fn(*args, min_time, warmup_time, *extra)
-            except Exception as exc:  # one engine failing must not lose the others
-                errors[f"{n}/{label}"] = f"{type(exc).__name__}: {exc}"
-                say(f"  {n:>6} worlds  {label:<28} FAILED: {exc}")
-                continue
-            finally:
-                gc.collect()
-            for name, res in got.items():
-                row[name] = res
-                say(
-                    f"  {n:>6} worlds  {name:<14} {res['world_steps_per_s']:>14,.0f} "
-                    f"world-steps/s  ({time.perf_counter() - t0:.1f} s)"
-                )
-        ratios = {}
-        base = row.get(ENGINE, {}).get("world_steps_per_s")
-        if base:
-            for name, res in row.items():
-                if name != ENGINE:
-                    ratios[f"engine_vs_{name}"] = base / res["world_steps_per_s"]
-        cores = row.get(ENGINE_CORES, {}).get("world_steps_per_s")
-        native_all = row.get(ROLLOUT_ALL, {}).get("world_steps_per_s")
-        if cores and native_all:
-            ratios["engine_cores_vs_rollout_all"] = cores / native_all
-        results[str(n)] = {"engines": row, "ratios": ratios}
-    data = {
-        "device": device,
-        "model": model_options(engine_model()[0]),
-        "rollout_device": "cpu",
-        "rollout_threads": nthread,
-        "substeps": substeps,
-        "physics_dt": dt,
-        "sizes": list(sizes),
-        "min_time_s": min_time,
-        "warmup_time_s": warmup_time,
-        "engines": {e: DESCRIPTIONS[e] for e in engines},
-        "results": results,
-        "errors": errors,
-    }
-    return common.section_payload(SECTION, device, data, started)
+    plan: list[tuple[str, Callable[..., dict[str, dict]], tuple]] = []
+    if ENGINE in engines:
+        plan.append((ENGINE, _one(ENGINE, bench_engine), (n, device)))
+    if ENGINE_CORES in engines and device.startswith("cpu"):
+        plan.append((ENGINE_CORES, _one(ENGINE_CORES, bench_engine_cores), (n, device)))
+    if warp_which:
+        plan.append(("/".join(warp_which), bench_warp, (n, device)))
+    if ROLLOUT_1T in engines:
+        plan.append((ROLLOUT_1T, _one(ROLLOUT_1T, bench_rollout), (n, 0)))
+    if ROLLOUT_ALL in engines:
+        plan.append((ROLLOUT_ALL, _one(ROLLOUT_ALL, bench_rollout), (n, nthread)))
+    for label, fn, args in plan:
+        t0 = time.perf_counter()
+        extra = (warp_which,) if fn is bench_warp else ()
+        try:
+            got = fn(*args, min_time, warmup_time, *extra)
+        except Exception as exc:  # one engine failing must not lose the others
+            errors[f"{n}/{label}"] = f"{type(exc).__name__}: {exc}"
+            say(f"  {n:>6} worlds  {label:<28} FAILED: {exc}")
+            continue
+        finally:
+            gc.collect()
+        for name, res in got.items():
+            row[name] = res
+            say(
+                f"  {n:>6} worlds  {name:<14} {res['world_steps_per_s']:>14,.0f} "
+                f"world-steps/s  ({time.perf_counter() - t0:.1f} s)"
+            )
+    ratios = {}
+    base = row.get(ENGINE, {}).get("world_steps_per_s")
+    if base:
+        for name, res in row.items():
+            if name != ENGINE:
+                ratios[f"engine_vs_{name}"] = base / res["world_steps_per_s"]
+    cores = row.get(ENGINE_CORES, {}).get("world_steps_per_s")
+    native_all = row.get(ROLLOUT_ALL, {}).get("world_steps_per_s")
+    if cores and native_all:
+        ratios["engine_cores_vs_rollout_all"] = cores / native_all
+    return {"engines": row, "ratios": ratios}
 
 
 SHORT = {
@@ -370,62 +329,55 @@ def short_label(name: str, nthread: int) -> str:
     return SHORT.get(name, name)
 
 
-def table(payload: dict[str, Any]):
-    """A rich Table of world-steps/s (rows: sizes, columns: engines) and the engine's ratios."""
-    from rich import box
-    from rich.table import Table
-
-    engines = list(payload["engines"])
-    nthread = payload.get("rollout_threads", 0)
-    t = Table(
-        title=f"1. Throughput, world-steps/s ({payload['device']}; mj = native MuJoCo rollout)",
-        box=box.SIMPLE_HEAD,
-    )
-    t.add_column("worlds", justify="right")
-    for e in engines:
-        t.add_column(short_label(e, nthread), justify="right")
-    others = [e for e in engines if e != ENGINE]
-    if ENGINE in engines:
-        for e in others:
-            t.add_column(f"eng/{short_label(e, nthread)}", justify="right", style="cyan")
-    for n, entry in payload["results"].items():
-        row = entry["engines"]
-        cells = [n] + [common.si(row.get(e, {}).get("world_steps_per_s")) for e in engines]
+def rows(results: dict[str, Any], engines: Sequence[str], nthread: int) -> list[dict[str, Any]]:
+    """World-steps/s by size and engine, then the engine's ratio to each other engine."""
+    out = []
+    for n, entry in results.items():
+        row: dict[str, Any] = {"worlds": int(n)}
+        for e in engines:
+            row[short_label(e, nthread)] = entry["engines"].get(e, {}).get("world_steps_per_s")
         if ENGINE in engines:
-            cells += [common.ratio(entry["ratios"].get(f"engine_vs_{e}")) for e in others]
-        t.add_row(*cells)
-    return t
+            for e in engines:
+                if e != ENGINE:
+                    row[f"eng/{short_label(e, nthread)}"] = entry["ratios"].get(f"engine_vs_{e}")
+        out.append(row)
+    return out
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.throughput", description=__doc__)
-    p.add_argument("--worlds", type=int, nargs="+", help="batch sizes (default: by device)")
-    p.add_argument("--device", default="cpu", help="cpu or cuda[:N] (Warp engines only)")
-    p.add_argument("--quick", action="store_true", help="fewer sizes, shorter timing")
-    p.add_argument("--min-time", type=float, help="seconds timed per measurement")
-    p.add_argument("--warmup", type=float, help="seconds of warm-up per measurement")
-    p.add_argument("--engines", nargs="+", choices=ENGINES, default=list(ENGINES))
-    p.add_argument("--threads", type=int, help="threads for rollout_all (default: all cores)")
-    p.add_argument("--out", help="JSON file name in bench/results (default throughput.json)")
-    args = p.parse_args(argv)
-    if args.device.startswith("cuda") and not cuda_available():
-        print(f"bench: no CUDA device is available here; --device {args.device} cannot run.")
-        return 2
-    d = defaults(args.quick, args.device)
-    payload = run(
-        args.worlds or d["sizes"],
-        args.device,
-        d["min_time"] if args.min_time is None else args.min_time,
-        d["warmup_time"] if args.warmup is None else args.warmup,
-        args.engines,
-        args.threads,
+@section(1, "throughput", "Throughput, world-steps/s (mj = native MuJoCo rollout)", ("cpu", "cuda"))
+def throughput(ctx: Context) -> Result:
+    """Every engine at every size; a failing engine is recorded and the others still run."""
+    sizes = ctx.sizes(
+        CUDA_SIZES if ctx.cuda else CPU_SIZES, CUDA_SIZES_QUICK if ctx.cuda else CPU_SIZES_QUICK
     )
-    name = args.out or f"{SECTION}{common.suffix_for(args.device)}.json"
-    path = common.write_json(name, payload)
-    common.console().print(table(payload))
-    print(f"wrote {path}")
-    return 0
+    min_time, warmup_time = ctx.pick((1.5, 0.3), (0.4, 0.1))
+    nthread = common.usable_cores()
+    substeps, dt = physics_dt()
+    errors: dict[str, str] = {}
+    results = {
+        str(n): measure_size(
+            n, ctx.device, min_time, warmup_time, ENGINES, nthread, errors, ctx.say
+        )
+        for n in sizes
+    }
+    engines = [e for e in ENGINES if e != ENGINE_CORES or not ctx.cuda]
+    data = {
+        "model": model_options(engine_model()[0]),
+        "rollout_device": "cpu",
+        "rollout_threads": nthread,
+        "substeps": substeps,
+        "physics_dt": dt,
+        "sizes": sizes,
+        "min_time_s": min_time,
+        "warmup_time_s": warmup_time,
+        "engines": {e: DESCRIPTIONS[e] for e in engines},
+        "results": results,
+        "errors": errors,
+    }
+    return Result(rows(results, engines, nthread), data)
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from bench.runner import main
+
+    raise SystemExit(main(module=__name__))

@@ -5,31 +5,37 @@ and a live watcher.
     with ArmfleetClient("http://127.0.0.1:8000") as arm:
         ack = arm.increment(0, "elbow_joint", 0.1)
 
-The UIs (`clients.tk_controller`, `clients.tui`, `clients.watch`) are imported on demand.
+The UIs (`clients.tk_controller`, `clients.tui`, `clients.watch`) are imported on demand, as
+is `clients.testing` (a real server for your own tests; `armfleet_server` fixture for pytest).
+
+Layout: `errors` (exceptions), `models` (typed replies), `_http` and `_stream` (requests, frames
+and reconnects, without I/O), `client` and `async_client` (the I/O twins).
 """
 
-from clients._core import (
+from clients._stream import Backoff
+from clients.async_client import AsyncArmfleetClient, AsyncWorldSession
+from clients.client import ArmfleetClient, WorldSession
+from clients.errors import (
     ArmfleetError,
-    Backoff,
-    BatchAck,
-    BatchStates,
-    CommandAck,
     CommandRejected,
     Conflict,
-    ConnectionStatus,
-    Info,
     InvalidRequest,
-    JointInfo,
     NotFound,
     NotReady,
     PayloadTooLarge,
+    Unreachable,
+)
+from clients.models import (
+    BatchAck,
+    BatchStates,
+    CommandAck,
+    ConnectionStatus,
+    Info,
+    JointInfo,
     ResetResult,
     SimStatus,
-    Unreachable,
     WorldState,
 )
-from clients.async_client import AsyncArmfleetClient, AsyncWorldSession
-from clients.client import ArmfleetClient, WorldSession
 
 __all__ = [
     "ArmfleetClient",

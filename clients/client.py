@@ -7,6 +7,8 @@
             print(state.tick, state.position)
 
 The asynchronous twin, with the same methods, is `clients.async_client.AsyncArmfleetClient`.
+Both only do the I/O: requests and replies are built and read in `clients._http`, WebSocket
+frames and the reconnect policy in `clients._stream`.
 """
 
 from __future__ import annotations
@@ -15,34 +17,33 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator, Mapping
-from typing import Any
+from typing import Any, Self, Unpack
 
 import httpx
-from websockets.exceptions import ConnectionClosed, InvalidURI
+from websockets.exceptions import InvalidURI
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as ws_connect
 
-from clients import _core
-from clients._core import (
-    DEFAULT_TIMEOUT,
-    DEFAULT_URL,
-    ArmfleetError,
-    BatchAck,
-    BatchStates,
-    Call,
-    CommandAck,
-    Info,
-    JointRef,
-    NotReady,
-    ResetResult,
-    SimStatus,
-    Unreachable,
-    WorldSpec,
-    WorldState,
-)
+from clients import _http, _stream, models
+from clients._http import DEFAULT_TIMEOUT, DEFAULT_URL, Call
+from clients.errors import ArmfleetError, Unreachable
+from clients.models import JointRef, WorldSpec
 
 
-class ArmfleetClient:
+class _Closes:
+    """`with thing:` closes the thing at the end."""
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class ArmfleetClient(_Closes):
     """REST + WebSocket client for one armfleet service. Thread-safe for HTTP calls."""
 
     def __init__(self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT) -> None:
@@ -50,86 +51,74 @@ class ArmfleetClient:
         self.timeout = timeout
         self._http = httpx.Client(base_url=self.url, timeout=timeout)
 
-    # -- plumbing ----------------------------------------------------------------------------
-
     def _call(self, call: Call) -> Any:
-        kwargs: dict[str, Any] = {"params": call.params, "json": call.json}
-        if call.read_timeout is not False:
-            kwargs["timeout"] = httpx.Timeout(self.timeout, read=call.read_timeout)
         try:
-            reply = self._http.request(call.method, call.path, **kwargs)
+            reply = self._http.request(call.method, call.path, **call.request_kwargs(self.timeout))
         except httpx.TransportError as exc:
-            raise Unreachable(None, f"{self.url}: {exc or type(exc).__name__}") from exc
-        return _core.parse_reply(call, reply.status_code, reply.content)
+            raise _http.transport_error(self.url, exc) from exc
+        return call.result(reply)
 
     def close(self) -> None:
         self._http.close()
 
-    def __enter__(self) -> ArmfleetClient:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     # -- REST --------------------------------------------------------------------------------
 
-    def info(self) -> Info:
-        return self._call(_core.info_call())
+    def info(self) -> models.Info:
+        """The robot (joint names, limits, home), batch size, device, mode and speed."""
+        return self._call(_http.info_call())
 
-    def state(self, world: int) -> WorldState:
-        return self._call(_core.state_call(world))
+    def state(self, world: int) -> models.WorldState:
+        return self._call(_http.state_call(world))
 
-    def states(self, worlds: WorldSpec = None) -> BatchStates:
+    def states(self, worlds: WorldSpec = None) -> models.BatchStates:
         """Several worlds (None: all; or [0, 3], or "0-63") as column arrays."""
-        return self._call(_core.states_call(worlds))
+        return self._call(_http.states_call(worlds))
 
-    def increment(self, world: int, joint: JointRef, delta: float) -> CommandAck:
+    def increment(self, world: int, joint: JointRef, delta: float) -> models.CommandAck:
         """Add `delta` [rad] to one joint's target (the seed's Up/Down buttons)."""
-        return self._call(_core.increment_call(world, joint, delta))
+        return self._call(_http.increment_call(world, joint, delta))
 
-    def set_targets(self, world: int, targets: Mapping[JointRef, float]) -> CommandAck:
+    def set_targets(self, world: int, targets: Mapping[JointRef, float]) -> models.CommandAck:
         """Set some joints' targets, e.g. {"finger_joint": 0.7}; the others keep theirs."""
-        return self._call(_core.set_targets_call(world, targets))
+        return self._call(_http.set_targets_call(world, targets))
 
-    def set_many(self, worlds: Iterable[int], positions: Any) -> BatchAck:
+    def set_many(self, worlds: Iterable[int], positions: Any) -> models.BatchAck:
         """Full 7-joint targets for many worlds, applied at one tick; positions is (n, 7)."""
-        return self._call(_core.set_many_call(worlds, positions))
+        return self._call(_http.set_many_call(worlds, positions))
 
-    def reset(self, world: int | Iterable[int] | None = None) -> ResetResult:
+    def reset(self, world: int | Iterable[int] | None = None) -> models.ResetResult:
         """Reset one world, a list of worlds, or (None) all worlds to home."""
-        return self._call(_core.reset_call(world))
+        return self._call(_http.reset_call(world))
 
-    def pause(self) -> SimStatus:
-        return self._call(_core.pause_call())
+    def pause(self) -> models.SimStatus:
+        return self._call(_http.pause_call())
 
-    def resume(self) -> SimStatus:
-        return self._call(_core.resume_call())
+    def resume(self) -> models.SimStatus:
+        return self._call(_http.resume_call())
 
-    def set_mode(self, mode: str) -> SimStatus:
-        return self._call(_core.set_mode_call(mode))
+    def set_mode(self, mode: str) -> models.SimStatus:
+        return self._call(_http.set_mode_call(mode))
 
-    def step(self, n: int = 1) -> SimStatus:
+    def step(self, n: int = 1) -> models.SimStatus:
         """Paused only: advance exactly n ticks; returns once they are done."""
-        return self._call(_core.step_call(n))
+        return self._call(_http.step_call(n))
 
     def ready(self) -> bool:
         try:
-            self._call(_core.readyz_call())
-        except (NotReady, Unreachable):
+            self._call(_http.readyz_call())
+        except _http.NOT_YET:
             return False
         return True
 
     def wait_ready(self, timeout: float = 60.0, poll: float = 0.2) -> None:
         """Block until /readyz says ready; NotReady (with the last reason) after `timeout`."""
-        deadline = time.monotonic() + timeout
+        wait = _http.ReadyWait(timeout)
         while True:
             try:
-                self._call(_core.readyz_call())
+                self._call(_http.readyz_call())
                 return
-            except (NotReady, Unreachable) as exc:
-                last = exc
-            if time.monotonic() >= deadline:
-                raise NotReady(last.status, last.detail, f"not ready after {timeout} s: {last}")
+            except _http.NOT_YET as exc:
+                wait.failed(exc)
             time.sleep(poll)
 
     # -- WebSocket ---------------------------------------------------------------------------
@@ -138,12 +127,7 @@ class ArmfleetClient:
         self,
         worlds: WorldSpec,
         rate: float | None = None,
-        *,
-        reconnect: bool = True,
-        on_status: _core.StatusCallback | None = None,
-        backoff: _core.Backoff | None = None,
-        give_up_after: float | None = None,
-        binary: bool = False,
+        **options: Unpack[_stream.StreamOptions],
     ) -> Iterator[Any]:
         """Yield states from the WebSocket: WorldState for one world (an int), BatchStates for
         a list / range string / None (all).
@@ -154,36 +138,32 @@ class ArmfleetClient:
         raises NotFound at once. `binary=True` asks batch streams for float32 frames (same
         BatchStates, a fraction of the bytes and parse time).
         """
-        url = _core.ws_url(self.url, worlds, rate, binary)
-        policy = _core.Reconnector(url, reconnect, on_status, backoff, give_up_after)
+        policy = _stream.Reconnector.for_stream(self.url, worlds, rate, options)
         while True:
             try:
-                with _open(url, self.timeout) as ws:
+                with _open(policy.url, self.timeout) as ws:
                     policy.opened()
                     for text in ws:
-                        msg = policy.frame(text)
-                        if msg is not None:
+                        if (msg := policy.frame(text)) is not None:
                             yield msg
-                    reason = _core.close_reason(ws.close_code, ws.close_reason)
-            except ConnectionClosed as exc:
-                reason = _core.closed_exc_reason(exc)
-            except _core.WS_DROPPED as exc:
-                reason = _core.drop_reason(exc)
+                    reason = _stream.close_reason(ws.close_code, ws.close_reason)
+            except _stream.LOST as exc:
+                reason = _stream.reason_for(exc)
             time.sleep(policy.dropped(reason))
 
     def connect(self, world: int, rate: float | None = None) -> WorldSession:
         """Open a WebSocket to one world: send commands, get their acks, iterate states."""
-        return WorldSession(_core.ws_url(self.url, world, rate), world, self.timeout)
+        return WorldSession(_stream.ws_url(self.url, world, rate), world, self.timeout)
 
 
 def _open(url: str, timeout: float) -> ClientConnection:
     try:
-        return ws_connect(url, open_timeout=timeout, max_size=_core.WS_MAX_SIZE, proxy=None)
+        return ws_connect(url, open_timeout=timeout, max_size=_stream.MAX_SIZE, proxy=None)
     except InvalidURI as exc:
         raise ArmfleetError(None, str(exc)) from exc
 
 
-class WorldSession:
+class WorldSession(_Closes):
     """One world over one WebSocket: commands get their acks back (matched by id) and state
     frames that arrive meanwhile are kept for iteration. Does not reconnect: a command on a
     dropped socket raises Unreachable. Use from one thread at a time (a lock enforces it).
@@ -197,51 +177,51 @@ class WorldSession:
         self.url = url
         self.world = world
         self.timeout = timeout
-        self._ids = _core.CommandIds()
-        self._states: deque[WorldState] = deque(maxlen=256)
+        self._ids = _stream.CommandIds()
+        self._states: deque[models.WorldState] = deque(maxlen=256)
         self._lock = threading.Lock()
         try:
             self._ws = _open(url, timeout).__enter__()  # closed by close()
-        except _core.WS_DROPPED as exc:
-            raise Unreachable(None, f"{url}: {_core.drop_reason(exc)}") from exc
-        self.latest: WorldState | None = None
+        except _stream.DROPPED as exc:
+            raise _stream.lost(url, exc) from exc
+        self.latest: models.WorldState | None = None
 
     def _recv(self, timeout: float | None) -> Any:
         try:
-            msg = _core.parse_ws(self._ws.recv(timeout))
-        except ConnectionClosed as exc:
-            raise Unreachable(None, f"{self.url}: {_core.closed_exc_reason(exc)}") from exc
-        if isinstance(msg, WorldState):
+            msg = _stream.parse(self._ws.recv(timeout))
+        except _stream.LOST as exc:
+            raise _stream.lost(self.url, exc) from exc
+        if isinstance(msg, models.WorldState):
             self.latest = msg
         return msg
 
-    def _command(self, msg_id: int, text: str) -> CommandAck:
+    def _command(self, msg_id: int, text: str) -> models.CommandAck:
         with self._lock:
             try:
                 self._ws.send(text)
-            except ConnectionClosed as exc:
-                raise Unreachable(None, f"{self.url}: {_core.closed_exc_reason(exc)}") from exc
+            except _stream.LOST as exc:
+                raise _stream.lost(self.url, exc) from exc
             deadline = time.monotonic() + self.timeout
             while True:
                 left = deadline - time.monotonic()
                 if left <= 0:
                     raise TimeoutError(f"no ack for command {msg_id} in {self.timeout} s")
                 msg = self._recv(left)
-                if isinstance(msg, WorldState):
+                if isinstance(msg, models.WorldState):
                     self._states.append(msg)
-                elif isinstance(msg, CommandAck | _core.WsError) and msg.id == msg_id:
-                    return _core.ack_or_raise(msg)
+                elif isinstance(msg, models.CommandAck | models.WsError) and msg.id == msg_id:
+                    return _stream.ack_or_raise(msg)
 
-    def increment(self, joint: JointRef, delta: float) -> CommandAck:
+    def increment(self, joint: JointRef, delta: float) -> models.CommandAck:
         return self._command(*self._ids.increment(joint, delta))
 
-    def set_targets(self, targets: Mapping[JointRef, float]) -> CommandAck:
+    def set_targets(self, targets: Mapping[JointRef, float]) -> models.CommandAck:
         return self._command(*self._ids.set_targets(targets))
 
-    def reset(self) -> CommandAck:
+    def reset(self) -> models.CommandAck:
         return self._command(*self._ids.reset())
 
-    def recv_state(self, timeout: float | None = None) -> WorldState:
+    def recv_state(self, timeout: float | None = None) -> models.WorldState:
         """The next state frame (buffered ones first); TimeoutError after `timeout`."""
         with self._lock:
             if self._states:
@@ -250,10 +230,10 @@ class WorldSession:
             while True:
                 left = None if deadline is None else max(0.0, deadline - time.monotonic())
                 msg = self._recv(left)
-                if isinstance(msg, WorldState):
+                if isinstance(msg, models.WorldState):
                     return msg
 
-    def __iter__(self) -> Iterator[WorldState]:
+    def __iter__(self) -> Iterator[models.WorldState]:
         while True:
             try:
                 yield self.recv_state()
@@ -262,9 +242,3 @@ class WorldSession:
 
     def close(self) -> None:
         self._ws.close()
-
-    def __enter__(self) -> WorldSession:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -18,33 +18,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from clients._core import (
-    ArmfleetError,
-    CommandAck,
-    ConnectionStatus,
-    Info,
-    NotFound,
-    ResetResult,
-    Unreachable,
-    WorldState,
-)
 from clients.async_client import AsyncArmfleetClient
+from clients.errors import ArmfleetError, NotFound, Unreachable
+from clients.models import CommandAck, ConnectionStatus, Info, ResetResult, WorldState
 
 TITLE = "Robot Joint Controller"
 STEP = 0.1  # rad per Up/Down press, as in the seed
-GRIPPER_JOINT = "finger_joint"
-GRIPPER_OPEN = 0.0
-GRIPPER_CLOSED = 0.7
-# The seed's joints, shown until /v1/info answers with the served robot's.
-DEFAULT_JOINTS = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-    "finger_joint",
-)
+GRIPPER_JOINT = "finger_joint"  # Open/Close drive it to its lower/upper limit (from /v1/info)
 STREAM_RATE = 30.0  # state frames per second for the live "measured" column
 
 
@@ -85,7 +65,7 @@ class ControllerModel:
         self.url = url
         self.world = world
         self.nworld: int | None = None
-        self.names: list[str] = list(DEFAULT_JOINTS)
+        self.names: list[str] = []  # no rows until /v1/info (or a state) names the joints
         self.home: list[float] | None = None
         self.targets: list[float | None] = [None] * len(self.names)
         self.positions: list[float | None] = [None] * len(self.names)
@@ -120,7 +100,7 @@ class ControllerModel:
             self.names = info.names
             self.targets = [None] * len(self.names)
             self.positions = [None] * len(self.names)
-            self.selected = min(self.selected, len(self.names) - 1)
+            self.selected = min(self.selected, max(0, len(self.names) - 1))
         self.home = [j.home for j in info.joints]
 
     def apply_state(self, state: WorldState) -> None:
@@ -177,8 +157,13 @@ class ControllerModel:
     # -- user input --------------------------------------------------------------------------
 
     def move_selection(self, step: int) -> int:
-        self.selected = (self.selected + step) % len(self.names)
+        if self.names:
+            self.selected = (self.selected + step) % len(self.names)
         return self.selected
+
+    def selected_joint(self) -> str | None:
+        """The joint the keyboard acts on (None until the joints are known)."""
+        return self.names[self.selected] if self.names else None
 
     def clamp_world(self, world: int) -> int:
         """A world id the server has (wraps around when nworld is known)."""
@@ -230,6 +215,7 @@ class ControllerBackend:
         self.client = AsyncArmfleetClient(url, timeout=timeout)
         self._switch = asyncio.Event()
         self._info_task: asyncio.Task[None] | None = None
+        self.info: Info | None = None  # the last /v1/info read
 
     async def run(self) -> None:
         """Stream the current world until cancelled; restart the stream on a world switch."""
@@ -270,7 +256,8 @@ class ControllerBackend:
 
     async def _load_info(self) -> None:
         with contextlib.suppress(ArmfleetError):
-            self.emit(await self.client.info())
+            self.info = await self.client.info()
+            self.emit(self.info)
 
     # -- commands (each reports its reply or its failure) ------------------------------------
 
@@ -287,9 +274,16 @@ class ControllerBackend:
         await self._command(sign, self.client.increment(self.world, joint, delta))
 
     async def gripper(self, closed: bool) -> None:
-        value = GRIPPER_CLOSED if closed else GRIPPER_OPEN
-        what = "Close" if closed else "Open"
-        await self._command(what, self.client.set_targets(self.world, {GRIPPER_JOINT: value}))
+        """Close: the gripper joint to its upper limit; Open: to its lower (as the served
+        model states them)."""
+
+        async def command() -> CommandAck:
+            info = self.info or await self.client.info()
+            joint = info.joint(GRIPPER_JOINT)
+            value = joint.upper if closed else joint.lower
+            return await self.client.set_targets(self.world, {joint.name: value})
+
+        await self._command("Close" if closed else "Open", command())
 
     async def reset(self) -> None:
         await self._command("Reset", self.client.reset(self.world))

@@ -95,7 +95,9 @@ class ControllerApp(App[None]):
         self.refresh_view()
 
     def action_step(self, sign: int) -> None:
-        self._spawn(self.backend.increment(self.model.names[self.model.selected], sign * STEP))
+        joint = self.model.selected_joint()
+        if joint is not None:
+            self._spawn(self.backend.increment(joint, sign * STEP))
 
     def action_gripper(self, closed: bool) -> None:
         self._spawn(self.backend.gripper(closed))

@@ -17,8 +17,9 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from clients._core import ArmfleetError, ConnectionStatus, WorldState
 from clients.client import ArmfleetClient
+from clients.errors import ArmfleetError
+from clients.models import ConnectionStatus, WorldState
 
 
 def state_json(state: WorldState) -> dict[str, object]:

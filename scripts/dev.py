@@ -22,8 +22,15 @@ ROOT = Path(__file__).resolve().parents[1]
 VENV = ROOT / ".venv"
 BIN = VENV / "bin"
 STAMP = VENV / ".armfleet-installed"
-# What the UI tests drive: a virtual X display, a pointer, a terminal multiplexer.
-TEST_DEBS = {"Xvfb": "xvfb", "xdotool": "xdotool", "tmux": "tmux", "xwd": "x11-apps"}
+# What the UI tests drive: a virtual X display, a pointer, a terminal multiplexer, and the
+# browser the page's tests load it in (Playwright drives it; its own download is not used).
+TEST_DEBS = {
+    "Xvfb": "xvfb",
+    "xdotool": "xdotool",
+    "tmux": "tmux",
+    "xwd": "x11-apps",
+    "chromium": "chromium",
+}
 
 
 def say(msg: str) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -47,6 +48,7 @@ def serve(
     port: Annotated[int | None, _opt("port")] = None,
     mode: Annotated[Mode | None, _opt("mode")] = None,
     shards: Annotated[int | None, _opt("shards")] = None,
+    ray: Annotated[str | None, _opt("ray")] = None,
     control_hz: Annotated[float | None, _opt("control_hz")] = None,
     physics_dt: Annotated[float | None, _opt("physics_dt")] = None,
     log_level: Annotated[str | None, _opt("log_level")] = None,
@@ -129,16 +131,26 @@ def watch(
 
 @app.command()
 def bench(
-    quick: Annotated[bool, typer.Option(help="smaller sizes and shorter runs")] = False,
-    device: Annotated[str, typer.Option(help="cpu or cuda")] = "cpu",
-    sections: Annotated[
-        list[int] | None, typer.Option("--section", help="run only these (1-6); repeatable")
+    section: Annotated[
+        list[int] | None, typer.Option(help="run this section (repeatable; --list shows them)")
     ] = None,
+    quick: Annotated[bool, typer.Option(help="smaller sizes and shorter runs")] = False,
+    device: Annotated[str, typer.Option(help="cpu or cuda[:N]")] = "cpu",
+    worlds: Annotated[
+        list[int] | None, typer.Option(help="batch size instead of the sections' (repeatable)")
+    ] = None,
+    out: Annotated[Path | None, typer.Option(help="results folder (default bench/results)")] = None,
+    list_: Annotated[bool, typer.Option("--list", help="list the sections and exit")] = False,
 ) -> None:
     """Benchmarks against native MuJoCo and raw MuJoCo Warp; writes bench/results/."""
-    from bench.suite import run_suite
+    from bench import registry, runner
 
-    run_suite(quick=quick, device=device, sections=sections or None)
+    if list_:
+        print(runner.listing(registry.discover()))
+        return
+    report = runner.run(section or None, quick, device, worlds or None, out)
+    if report["errors"]:
+        raise typer.Exit(1)
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ import logging
 import os
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import mujoco
 import mujoco_warp as mjw
@@ -116,6 +117,40 @@ def _gather_bodies(
         out[w, b, i] = p[i]
     for i in range(4):
         out[w, b, 3 + i] = q[i]
+
+
+class SnapshotArrays(NamedTuple):
+    """A Snapshot before it is cut into fields: contiguous host arrays, as the gather kernels
+    write them, so that shipping one between processes copies no field on its own.
+
+    state: position, velocity, effort, flange_pos, flange_quat side by side   (nworld, 28) f32
+    bodies: body_pos then body_quat of every body                          (nworld, nbody, 7) f32
+    sim_time, faults: as in Snapshot                                                 (nworld,)
+    """
+
+    tick: int
+    sim_time: np.ndarray
+    state: np.ndarray
+    bodies: np.ndarray
+    faults: np.ndarray
+
+
+def snapshot_from(a: SnapshotArrays, target: np.ndarray) -> Snapshot:
+    """The Snapshot whose fields are views of `a`'s arrays (no copy); `target` is the caller's."""
+    state, bodies = a.state, a.bodies
+    return Snapshot(
+        tick=a.tick,
+        sim_time=a.sim_time,
+        position=state[:, _POS],
+        velocity=state[:, _VEL],
+        effort=state[:, _EFF],
+        target=target,
+        flange_pos=state[:, _FPOS],
+        flange_quat=state[:, _FQUAT],
+        faults=a.faults,
+        body_pos=bodies[:, :, :3],
+        body_quat=bodies[:, :, 3:],
+    )
 
 
 class WorldBatch(Batch):
@@ -300,23 +335,17 @@ class WorldBatch(Batch):
 
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, copied to host memory."""
+        return snapshot_from(self.snapshot_arrays(), self._targets.copy())
+
+    def snapshot_arrays(self) -> SnapshotArrays:
+        """The snapshot as the few contiguous host arrays it is made of (cheap to ship: Ray)."""
         state = self._state.numpy()
         bodies = self._bodies.numpy()
         if self.device.is_cpu:
             # On the CPU .numpy() is a view the next tick overwrites.
             state, bodies = state.copy(), bodies.copy()
-        return Snapshot(
-            tick=self._tick,
-            sim_time=self._world_ticks * self.tick_dt,
-            position=state[:, _POS],
-            velocity=state[:, _VEL],
-            effort=state[:, _EFF],
-            target=self._targets.copy(),
-            flange_pos=state[:, _FPOS],
-            flange_quat=state[:, _FQUAT],
-            faults=self._faults.copy(),
-            body_pos=bodies[:, :, :3],
-            body_quat=bodies[:, :, 3:],
+        return SnapshotArrays(
+            self._tick, self._world_ticks * self.tick_dt, state, bodies, self._faults.copy()
         )
 
     # -- test and diagnostics hooks ---------------------------------------------------------

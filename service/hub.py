@@ -38,6 +38,7 @@ class Subscription:
         self.render = render
         self.next_due = 0.0
         self.latest: Snapshot | None = None
+        self.owed_tick: int | None = None  # the earliest tick an acked command takes effect
         self.acks: deque[bytes] = deque()
         self.ready = asyncio.Event()
 
@@ -45,10 +46,21 @@ class Subscription:
         # A little slack so that a 30 Hz stream on a 60 Hz loop really gets every other tick.
         return now >= self.next_due - 0.1 * self.period
 
+    def owe(self, tick: int) -> None:
+        """A command from this socket takes effect at `tick`: send the first frame that carries
+        it whatever the cadence (called on the event loop when the command is acked)."""
+        self.owed_tick = tick if self.owed_tick is None else min(self.owed_tick, tick)
+
+    def wants(self, snap: Snapshot, now: float) -> bool:
+        return self.due(now) or (self.owed_tick is not None and snap.tick >= self.owed_tick)
+
     def offer(self, snap: Snapshot, now: float) -> None:
         self.latest = snap  # replaces one the reader has not taken yet
-        if self.period:
-            # Keep the cadence; after a stall start afresh instead of sending a burst.
+        if self.owed_tick is not None and snap.tick >= self.owed_tick:
+            self.owed_tick = None
+        if self.period and self.due(now):
+            # Keep the cadence; after a stall start afresh instead of sending a burst. A frame
+            # sent early because a command was owed does not move the cadence.
             self.next_due += self.period
             if self.next_due < now:
                 self.next_due = now + self.period
@@ -83,7 +95,7 @@ class StreamHub(SnapshotSink):
     # -- sim thread -------------------------------------------------------------------------
 
     def wants_snapshot(self, now: float) -> bool:
-        return any(s.due(now) for s in self._subs)
+        return any(s.due(now) or s.owed_tick is not None for s in self._subs)
 
     def publish(self, snapshot: Snapshot) -> None:
         if not self._subs:
@@ -105,7 +117,7 @@ class StreamHub(SnapshotSink):
             return
         now = time.monotonic()
         for sub in self._subs:
-            if sub.due(now):
+            if sub.wants(snap, now):
                 sub.offer(snap, now)
 
     def frame(self, sub: Subscription, snap: Snapshot) -> bytes:

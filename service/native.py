@@ -111,6 +111,7 @@ class NativeBatch:
         self._qfrc_actuator = self._b.bind("qfrc_actuator")  # outputs, refreshed per call
         self._site_xpos = self._b.bind("site_xpos")
         self._xquat = self._b.bind("xquat")
+        self._xpos = self._b.bind("xpos")
 
         self._tick = 0
         self._world_ticks = np.zeros(nworld, dtype=np.int64)
@@ -218,6 +219,8 @@ class NativeBatch:
             flange_pos=self._flange_pos.copy(),
             flange_quat=self._flange_quat.copy(),
             faults=self._faults.copy(),
+            body_pos=self._xpos.astype(np.float32),  # astype copies
+            body_quat=self._xquat.astype(np.float32),
         )
 
     # -- test and diagnostics hooks ---------------------------------------------------------

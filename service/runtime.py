@@ -49,6 +49,10 @@ def build_batch(s: Settings) -> Batch:
 
     shards = s.shards or auto_shards(s.worlds, s.device)
     kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
+    if s.ray:
+        from service.ray_shards import RayBatch  # imports Ray only when asked for
+
+        return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
     if shards > 1:
         return ShardedBatch(s.worlds, shards, **kwargs)
     return WorldBatch(s.worlds, **kwargs)

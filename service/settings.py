@@ -32,6 +32,12 @@ class Settings(BaseSettings):
         le=256,
         description="warp: CPU worker processes (one per core), mujoco: threads; 0 = auto",
     )
+    ray: str | None = Field(
+        None,
+        description="put the shards on Ray actors: auto (the cluster `ray start` runs here), "
+        "local (a private instance on 127.0.0.1) or HOST:PORT of a head node; "
+        "unset = in-process shards",
+    )
     mode: Mode = Field(Mode.REALTIME, description="how time advances: realtime, fast or paused")
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
     physics_dt: float = Field(
@@ -51,6 +57,12 @@ class Settings(BaseSettings):
     ros2_network: bool = Field(
         False, description="open DDS to the network (default: loopback only, like the HTTP bind)"
     )
+
+    @model_validator(mode="after")
+    def _ray_runs_the_warp_engine(self) -> Settings:
+        if self.ray and self.engine != "warp":
+            raise ValueError("ray: Ray actors run the warp engine only (use --engine warp)")
+        return self
 
     @model_validator(mode="after")
     def _ros2_worlds_exist(self) -> Settings:

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from service.engine import WorldBatch
+from service.sharding import ShardPlan, StagedCommands, apply_and_step, join_snapshots
 from service.types import Batch, Snapshot
 
 # The Batch facts that are the same for every shard (read from the local one).
@@ -60,11 +61,7 @@ def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
         except EOFError:  # parent gone
             return
         if op == "step":
-            resets, dirty, targets, ticks = args
-            batch.reset(resets)
-            if dirty.size:
-                batch.set_targets(dirty, targets)
-            conn.send(batch.step(ticks))
+            conn.send(apply_and_step(batch, *args))
         elif op == "snapshot":
             conn.send(batch.snapshot())
         elif op == "write_qpos":
@@ -79,11 +76,8 @@ class ShardedBatch(Batch):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
     def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
-        if not 1 <= shards <= nworld:
-            raise ValueError(f"shards must be in 1..{nworld}, got {shards}")
-        bounds = np.linspace(0, nworld, shards + 1).astype(int)
-        self._starts = bounds[:-1]
-        self._sizes = np.diff(bounds)
+        self._plan = ShardPlan(nworld, shards)
+        self._starts, self._sizes = self._plan.starts, self._plan.sizes
         ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
         self._conns: list[Connection] = []
         self._procs = []
@@ -109,8 +103,7 @@ class ShardedBatch(Batch):
         for name in _FACTS_OF_LOCAL:  # every shard is built alike: the local one speaks for all
             setattr(self, name, getattr(self._local, name))
         self._targets = np.tile(self.home_target, (nworld, 1))
-        self._pending_resets: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
-        self._pending_dirty: list[np.ndarray] = [np.zeros(0, dtype=np.int64)] * shards
+        self._staged = StagedCommands(shards)
 
     @property
     def captured(self) -> bool:
@@ -124,44 +117,32 @@ class ShardedBatch(Batch):
     def targets(self) -> np.ndarray:
         return self._targets.copy()
 
-    def _split(self, worlds: np.ndarray) -> list[np.ndarray]:
-        """Global world ids → per-shard local ids."""
-        worlds = np.asarray(worlds, dtype=np.int64)
-        return [
-            worlds[(worlds >= start) & (worlds < start + size)] - start
-            for start, size in zip(self._starts, self._sizes, strict=True)
-        ]
-
     def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
         """The local shard gets its targets now, worker shards with their next step."""
         worlds = np.asarray(worlds, dtype=np.int64)
         self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        parts = self._split(worlds)
+        parts = self._plan.split(worlds)
         if parts[0].size:
             self._local.set_targets(parts[0], self._targets[parts[0]])
         for i, local_ids in enumerate(parts[1:], start=1):
-            self._pending_dirty[i] = np.union1d(self._pending_dirty[i], local_ids)
+            self._staged.targets(i, local_ids)
 
     def reset(self, worlds: np.ndarray) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
         if worlds.size == 0:
             return
         self._targets[worlds] = self.home_target
-        parts = self._split(worlds)
+        parts = self._plan.split(worlds)
         self._local.reset(parts[0])
         for i, local_ids in enumerate(parts[1:], start=1):
-            self._pending_resets[i] = np.union1d(self._pending_resets[i], local_ids)
-            # A reset overrides targets staged before it in the same tick.
-            self._pending_dirty[i] = np.setdiff1d(self._pending_dirty[i], local_ids)
+            self._staged.reset(i, local_ids)
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance all shards together; returns the (global) worlds reset for faults."""
         for i, conn in enumerate(self._conns, start=1):
-            dirty = self._pending_dirty[i]
+            resets, dirty = self._staged.take(i)
             targets = self._targets[dirty + self._starts[i]]
-            conn.send(("step", self._pending_resets[i], dirty, targets, ticks))
-            self._pending_resets[i] = np.zeros(0, dtype=np.int64)
-            self._pending_dirty[i] = np.zeros(0, dtype=np.int64)
+            conn.send(("step", resets, dirty, targets, ticks))
         faulted = [self._local.step(ticks)]
         for i, conn in enumerate(self._conns, start=1):
             faulted.append(conn.recv() + self._starts[i])
@@ -173,23 +154,7 @@ class ShardedBatch(Batch):
         for conn in self._conns:
             conn.send(("snapshot",))
         parts = [self._local.snapshot()] + [conn.recv() for conn in self._conns]
-        fields = (
-            "sim_time",
-            "position",
-            "velocity",
-            "effort",
-            "flange_pos",
-            "flange_quat",
-            "body_pos",
-            "body_quat",
-        )
-        joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}
-        return Snapshot(
-            tick=parts[0].tick,
-            target=self._targets.copy(),
-            faults=np.concatenate([p.faults for p in parts]),
-            **joined,
-        )
+        return join_snapshots(parts, parts[0].tick, self._targets)
 
     def qpos(self) -> np.ndarray:
         return self._gather_qpos()[0]

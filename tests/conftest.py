@@ -1,40 +1,54 @@
-"""Shared fixtures: a real `armfleet serve` process on a free loopback port.
+"""Shared test helpers. Servers come from the harness we offer users (`clients.testing`,
+fixtures in `clients.pytest_plugin`): a real `armfleet serve` process on a free loopback
+port; end-to-end tests talk to it over real sockets and nothing of the engine is mocked.
 
-End-to-end tests talk to it over real sockets; nothing of the engine or server is mocked.
+The joint names and home pose are read from the model (the one source of truth), so a test
+that compares what the service publishes with them checks the service, not a copy.
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
-import socket
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import httpx
 import pytest
 
 from clients import ArmfleetClient, WorldState
+from clients import pytest_plugin as armfleet_plugin
+from clients.testing import Server, free_port, serve
+from service.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# The commanded joints and the `home` keyframe, as the tests expect the service to publish them.
-JOINTS = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-    "finger_joint",
-]
-HOME = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0, 0.0]
-ELBOW, FINGER = 2, 6
+SPEC = load_robot().spec
+JOINTS: list[str] = list(SPEC.names)
+HOME: list[float] = SPEC.home.tolist()
+ELBOW, FINGER = SPEC.index("elbow_joint"), SPEC.index("finger_joint")
+
+__all__ = ["ELBOW", "FINGER", "HOME", "JOINTS", "ROOT", "Server", "free_port", "serve"]
+
+
+def running_server(
+    tmp_path: Path,
+    worlds: int = 4,
+    mode: str = "realtime",
+    port: int | None = None,
+    extra: tuple[str, ...] = (),
+) -> contextlib.AbstractContextManager[Server]:
+    """The old name and argument order of `serve`, kept for branches written against it."""
+    return serve(worlds=worlds, mode=mode, port=port, extra_args=extra, log_dir=tmp_path)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Our fixtures are the `armfleet` plugin users get through the pytest11 entry point;
+    register it here too when that entry point is not installed (a plain checkout), so the
+    suite does not depend on how armfleet was installed. (`pytest_plugins = [...]` would
+    clash with the entry point: pytest refuses a module registered under two names.)"""
+    if not config.pluginmanager.is_registered(armfleet_plugin):
+        config.pluginmanager.register(armfleet_plugin, "armfleet")
 
 
 def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
@@ -59,65 +73,7 @@ def target_after(client: ArmfleetClient, world: int, pred: Callable[[WorldState]
     return wait_for(check, f"world {world}'s target to change").target
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@dataclass
-class Server:
-    url: str
-    ws_url: str
-    process: subprocess.Popen[bytes]
-    log_path: Path
-
-    def log(self) -> str:
-        return self.log_path.read_text(errors="replace")
-
-
-@contextlib.contextmanager
-def running_server(
-    tmp_path: Path,
-    worlds: int = 4,
-    mode: str = "realtime",
-    port: int | None = None,
-    extra: tuple[str, ...] = (),
-) -> Iterator[Server]:
-    """Start `armfleet serve` and wait for /readyz; stop it (SIGINT, like Ctrl-C) afterwards."""
-    port = port or free_port()
-    log_path = tmp_path / f"server-{port}.log"
-    cmd = [sys.executable, "-m", "service.cli", "serve", "--worlds", str(worlds)]
-    cmd += ["--port", str(port), "--mode", mode, *extra]
-    with open(log_path, "ab") as log:
-        proc = subprocess.Popen(
-            cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, env=os.environ.copy()
-        )
-    url = f"http://127.0.0.1:{port}"
-    server = Server(url=url, ws_url=f"ws://127.0.0.1:{port}", process=proc, log_path=log_path)
-    try:
-        deadline = time.monotonic() + 300  # a cold kernel cache compiles for a while
-        while True:
-            if proc.poll() is not None:
-                raise RuntimeError(f"server exited with {proc.returncode}:\n{server.log()}")
-            with contextlib.suppress(httpx.HTTPError):
-                if httpx.get(f"{url}/readyz", timeout=1).status_code == 200:
-                    break
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"server not ready in time:\n{server.log()}")
-            time.sleep(0.2)
-        yield server
-    finally:
-        proc.send_signal(2)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
 @pytest.fixture(scope="module")
-def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    """A 4-world realtime server shared by the tests of one module."""
-    with running_server(tmp_path_factory.mktemp("server")) as srv:
-        yield srv
+def server(armfleet_server: Server) -> Iterator[Server]:
+    """The 4-world realtime server shared by the tests of one module (`armfleet_server`)."""
+    yield armfleet_server

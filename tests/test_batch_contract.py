@@ -21,9 +21,19 @@ from service.types import Batch
 
 NWORLD = 4
 
+
+def _ray_batch(n: int) -> Batch:
+    """Two CPU actors on the module's local Ray instance (4 logical CPUs: two batches of two)."""
+    from service.ray_shards import RayBatch, connect
+
+    connect("local", num_cpus=4)
+    return RayBatch(n, shards=2)
+
+
 ENGINES: dict[str, Callable[[int], Batch]] = {
     "warp": lambda n: WorldBatch(n),
     "warp-sharded": lambda n: ShardedBatch(n, shards=2),
+    "warp-ray": _ray_batch,
     "mujoco": lambda n: NativeBatch(n, nthread=2),
 }
 

@@ -1,26 +1,49 @@
-"""Smoke test of the benchmark's throughput section: every engine runs and reports a rate.
+"""The bench end to end: the runner runs section 1 (throughput) quick at two tiny sizes.
 
-Tiny sizes and durations; no assertion on how fast anything is (the CI box is shared).
+Real engines, real result files; no assertion on how fast anything is (the CI box is shared).
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 
-from bench import common, throughput
+import pytest
+
+from bench import common, registry, runner, throughput
+from service.physics import tick_timing
 
 
-def test_throughput_section_reports_every_engine(tmp_path):
-    payload = throughput.run(
-        [1, 4], "cpu", min_time=0.01, warmup_time=0.0, rollout_threads=2, progress=None
-    )
-    path = common.write_json("throughput.json", payload, tmp_path)
-    data = json.loads(path.read_text())
+def test_every_section_is_registered_once_with_a_stable_file_name():
+    sections = registry.discover()
+    names = {s.number: s.name for s in sections.values()}
+    assert names == {
+        1: "throughput",
+        2: "service_fast",
+        3: "realtime_capacity",
+        4: "latency",
+        5: "http",
+        6: "startup",
+        7: "service_fast_binary",
+    } | {k: v for k, v in names.items() if k > 7}  # sections added later keep these
+    with pytest.raises(ValueError, match="section 1 is taken"):
+        registry.section(1, "another", "another")(lambda ctx: registry.Result([]))
+    with pytest.raises(SystemExit, match="no section"):
+        runner.choose(sections, [999], "cpu")
+
+
+def test_throughput_section_through_the_runner(tmp_path):
+    report = runner.run([1], quick=True, worlds=[1, 4], out_dir=tmp_path, say=lambda _m: None)
+    assert report["errors"] == {} and report["sections_run"] == [1]
+    data = json.loads((tmp_path / "throughput.json").read_text())
+    assert json.loads((tmp_path / "results.json").read_text())["sections"]["throughput"] == data
 
     assert data["errors"] == {}
+    assert data["section"] == "throughput" and data["number"] == 1 and data["quick"]
     assert set(data["engines"]) == set(throughput.ENGINES)
-    assert data["substeps"] == 8 and math.isclose(data["physics_dt"], 1 / 480)
+    substeps, dt = tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
+    assert data["substeps"] == substeps and math.isclose(data["physics_dt"], dt)
     assert math.isclose(data["model"]["timestep"], data["physics_dt"])
     assert data["machine"]["mujoco"] and data["machine"]["warp"]
     for n in ("1", "4"):
@@ -33,3 +56,25 @@ def test_throughput_section_reports_every_engine(tmp_path):
         assert engines[throughput.ENGINE]["captured"]
         assert engines[throughput.ENGINE]["faults"] == 0
         assert all(r > 0 for r in data["results"][n]["ratios"].values())
+    # The table's rows: one per size, a rate for every engine and the engine's ratios.
+    assert [row["worlds"] for row in data["rows"]] == [1, 4]
+    assert all(v > 0 for row in data["rows"] for v in row.values())
+    assert len(data["rows"][0]) == 1 + len(throughput.ENGINES) + len(throughput.ENGINES) - 1
+    if importlib.util.find_spec("matplotlib"):
+        assert report["plot"] == str(tmp_path / "throughput.png")
+        assert (tmp_path / "throughput.png").stat().st_size > 0
+
+
+def test_physics_step_and_kernel_sections_through_the_runner(tmp_path):
+    """Sections 12 and 13 (issue 13) at two worlds: both engines at both steps, warp's kernels."""
+    report = runner.run([12, 13], quick=True, worlds=[2], out_dir=tmp_path, say=lambda _m: None)
+    assert report["errors"] == {} and report["sections_run"] == [12, 13]
+    step = json.loads((tmp_path / "physics_step.json").read_text())
+    res = step["results"]["2"]
+    for engine in ("mujoco", "warp"):
+        assert res[f"{engine}_old"]["substeps"] == 8
+        assert res[f"{engine}_new"]["substeps"] == tick_timing(60.0, common.PHYSICS_DT)[0]
+        assert res[f"{engine}_gain"] > 0
+    prof = json.loads((tmp_path / "kernels.json").read_text())["results"]["2"]
+    assert prof["launches_per_tick"] > 50  # every substep's kernels were seen
+    assert math.isclose(sum(k["share"] for k in prof["kernels"]), 1.0)

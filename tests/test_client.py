@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import ELBOW, FINGER, HOME, JOINTS, Server, free_port, running_server
+from conftest import ELBOW, FINGER, HOME, JOINTS, Server, free_port, serve
 
 from clients import (
     ArmfleetClient,
@@ -89,6 +89,33 @@ def test_info_describes_the_robot_joints_and_world_count(api: Any) -> None:
     finger = info.joints[FINGER]
     assert (finger.lower, finger.upper) == (0.0, pytest.approx(0.7))
     assert [j.home for j in info.joints] == pytest.approx(HOME)
+    assert info.home == pytest.approx(HOME)
+    assert info.joint("elbow_joint") is info.joints[ELBOW]
+    assert info.shards >= 1
+
+
+def _fields(cls: Any) -> set[str]:
+    return set(getattr(cls, "model_fields", None) or cls.__dataclass_fields__)
+
+
+def test_client_models_follow_the_server_schemas() -> None:
+    """Every reply field the server documents is a field of the client's result type (the
+    client's Info once lacked `shards`): a field added on one side only fails here."""
+    from clients import models
+    from service import schemas
+
+    pairs = [
+        (models.Info, schemas.Info, set()),
+        (models.CommandAck, schemas.CommandReply, {"id"}),  # id: WebSocket acks only
+        (models.BatchAck, schemas.BatchCommandReply, set()),
+        (models.ResetResult, schemas.ResetReply, set()),
+        (models.SimStatus, schemas.SimReply, set()),
+    ]
+    for ours, theirs, extra in pairs:
+        assert _fields(ours) - extra == _fields(theirs), ours.__name__
+    assert models.JointInfo is schemas.JointSpec  # one joint description, not a copy
+    flange = {f"flange_{k}" for k in _fields(schemas.Flange)}
+    assert _fields(models.WorldState) == _fields(schemas.WorldState) - {"flange"} | flange
 
 
 def test_state_holds_seven_joints_and_the_flange_pose(api: Any) -> None:
@@ -343,7 +370,7 @@ def test_stream_reconnects_after_the_server_restarts(
 
     readers = [threading.Thread(target=f, daemon=True) for f in (sync_reader, async_reader)]
     try:
-        with running_server(tmp_path, 1, port=port) as first:
+        with serve(worlds=1, port=port, log_dir=tmp_path) as first:
             assert first.url == url
             for t in readers:
                 t.start()
@@ -356,7 +383,7 @@ def test_stream_reconnects_after_the_server_restarts(
             "the drop to be reported",
         )
         before = {k: n_states(k) for k in seen}
-        with running_server(tmp_path, 1, port=port):
+        with serve(worlds=1, port=port, log_dir=tmp_path):
             wait_for(
                 lambda: all(n_states(k) >= before[k] + 3 for k in seen), "frames after restart"
             )

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-from conftest import HOME
+from conftest import HOME, JOINTS
 
 from clients import CommandAck, ConnectionStatus, Info, JointInfo, ResetResult, WorldState
-from clients.controller import DEFAULT_JOINTS, ControllerModel, Notice
+from clients.controller import ControllerModel, Notice
 
 URL = "http://127.0.0.1:8000"
 
@@ -16,7 +16,7 @@ def state(world: int, tick: int, target: list[float], position: list[float] | No
         world=world,
         tick=tick,
         sim_time=tick / 60,
-        name=DEFAULT_JOINTS,
+        name=JOINTS,
         position=np.array(position or target),
         velocity=np.zeros(7),
         effort=np.zeros(7),
@@ -32,16 +32,35 @@ def ack(world: int, tick: int, target: list[float], clamped: tuple[str, ...] = (
 
 
 def info(nworld: int = 4) -> Info:
-    pairs = zip(DEFAULT_JOINTS, HOME, strict=True)
+    pairs = zip(JOINTS, HOME, strict=True)
     joints = tuple(JointInfo(n, -6.28, 6.28, h, 2.0, 100.0) for n, h in pairs)
-    return Info("UR10e", joints, nworld, "cpu", 60.0, 0.002, 8, "realtime", 0, 0.0, 60, 1, True)
+    return Info(
+        robot="UR10e",
+        joints=joints,
+        nworld=nworld,
+        device="cpu",
+        shards=1,
+        control_hz=60.0,
+        physics_dt=0.002,
+        substeps=8,
+        mode="realtime",
+        tick=0,
+        sim_time=0.0,
+        ticks_per_s=60.0,
+        realtime_factor=1.0,
+        captured=True,
+    )
 
 
-def test_rows_start_with_the_seed_joints_and_no_values() -> None:
+def test_rows_come_from_the_served_model_and_start_without_values() -> None:
     m = ControllerModel(URL, 1)
+    assert m.names == [] and m.selected_joint() is None  # nothing known before /v1/info
+    assert m.move_selection(1) == 0
+    assert m.status_text() == f"{URL}: connecting to {URL}..."
+    m.apply(info())
     assert [m.joint_label(i) for i in range(7)][2] == "[2] elbow_joint"
     assert m.target_text(0) == "--" and m.measured_text(0) == "--"
-    assert m.status_text() == f"{URL}: connecting to {URL}..."
+    assert m.move_selection(-1) == 6 and m.selected_joint() == JOINTS[6]
 
 
 def test_target_shows_the_replied_value_and_older_frames_do_not_undo_it() -> None:
@@ -119,5 +138,3 @@ def test_failed_command_notices_clear_only_when_about_the_connection() -> None:
     assert "server unreachable" in m.status_text()
     m.apply(ConnectionStatus(True, "ws://x"))
     assert "failed" not in m.status_text()
-    m.move_selection(-1)
-    assert m.selected == 6

@@ -29,7 +29,7 @@ from conftest import (
     ROOT,
     Server,
     free_port,
-    running_server,
+    serve,
     target_after,
     wait_for,
 )
@@ -126,7 +126,7 @@ def tk_app(
             "the status line to report the server gone",
         )
         app.statuses.append(gone)
-        server = stack.enter_context(running_server(tmp, 4, port=port))
+        server = stack.enter_context(serve(worlds=4, port=port, log_dir=tmp))
         connected = wait_for(
             lambda: app.probe().get("connected") and app.probe()["status"],
             "the window to connect",

@@ -1,6 +1,7 @@
 """Behavioural tests of the MJCF work cell (UR10e + Robotiq 2F-140, table, cube).
 
-Native ``mujoco`` only.  Dynamic tests run at the engine's timestep, (1/60)/8 s.
+Native ``mujoco`` only.  Dynamic tests run at the engine's timestep and solver options
+(service/physics.py), so that they judge the physics the service steps.
 """
 
 import sys
@@ -15,8 +16,9 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from mjcf import MJCF_DIR, ROBOT_XML, SCENE_XML  # noqa: E402
+from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing  # noqa: E402
 
-ENGINE_DT = (1.0 / 60.0) / 8.0
+ENGINE_DT = tick_timing(60.0, DEFAULT_PHYSICS_DT)[1]
 TWO_PI = 2.0 * np.pi
 
 ARM_JOINTS = (
@@ -54,7 +56,7 @@ DH_ALPHA = (np.pi / 2, 0.0, 0.0, np.pi / 2, -np.pi / 2, 0.0)
 @pytest.fixture(scope="module")
 def model():
     m = mujoco.MjModel.from_xml_path(str(SCENE_XML))
-    m.opt.timestep = ENGINE_DT
+    configure(m, ENGINE_DT)
     return m
 
 

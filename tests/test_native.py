@@ -7,11 +7,12 @@ engine's in tests/test_engine.py; this checks that the service runs it end to en
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 
 import httpx
 import numpy as np
 import pytest
-from conftest import ELBOW, HOME, running_server, wait_for
+from conftest import ELBOW, HOME, Server, serve, wait_for
 from websockets.sync.client import connect
 
 from service.native import NativeBatch, usable_cores
@@ -29,9 +30,16 @@ def test_native_engine_refuses_a_gpu_device():
         NativeBatch(1, device="cuda")
 
 
-def test_service_runs_the_native_engine_end_to_end(tmp_path):
-    with running_server(tmp_path, worlds=4, extra=("--engine", "mujoco")) as srv:
-        http = httpx.Client(base_url=srv.url, timeout=10)
+@pytest.fixture(scope="module")
+def native_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    log_dir = tmp_path_factory.mktemp("native")
+    with serve(worlds=4, extra_args=("--engine", "mujoco"), log_dir=log_dir) as srv:
+        yield srv
+
+
+def test_service_runs_the_native_engine_end_to_end(native_server):
+    srv = native_server
+    with httpx.Client(base_url=srv.url, timeout=10) as http:
         info = http.get("/v1/info").json()
         assert "native MuJoCo" in info["device"]
         assert info["substeps"] * info["physics_dt"] == pytest.approx(1 / 60)
@@ -56,6 +64,22 @@ def test_service_runs_the_native_engine_end_to_end(tmp_path):
             lambda: http.get("/v1/worlds/3/state").json()["target"][ELBOW] == HOME[ELBOW],
             "world 3's reset",
         )
+
+
+def test_a_slow_stream_gets_the_frame_carrying_its_command_at_once(native_server):
+    """At rate=0.2 the next regular frame is 5 s away; the one carrying an acked command is not
+    held back for it: it is the first frame after the ack, from the command's own tick."""
+    with connect(f"{native_server.ws_url}/v1/ws/worlds/1?rate=0.2") as ws:
+        first = json.loads(ws.recv(timeout=5))
+        assert first["op"] == "state"
+        ws.send('{"op": "increment", "joint": "wrist_3_joint", "delta": 0.1, "id": 7}')
+        ack = json.loads(ws.recv(timeout=5))
+        assert ack["op"] == "ack" and ack["id"] == 7
+        frame = json.loads(ws.recv(timeout=5))
+        assert frame["op"] == "state" and frame["tick"] >= ack["tick"]
+        assert frame["target"] == ack["target"]
+        # Not the regular frame 5 s (300 ticks) later: a few ticks at most after the command's.
+        assert frame["tick"] - ack["tick"] < 30, (frame["tick"], ack["tick"])
 
 
 def _next_ack(ws) -> dict | None:

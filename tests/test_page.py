@@ -7,14 +7,25 @@ WebGL) and use it as a person would: click its buttons, read what it shows, comp
 
 from __future__ import annotations
 
+import io
 import json
+import re
+import time
 
 import httpx
 import numpy as np
 import pytest
-from conftest import JOINTS, free_port, running_server
+from conftest import HOME, JOINTS, free_port, serve, wait_for
+from PIL import Image
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
+
+from clients import headless
+
+try:
+    from playwright.sync_api import expect
+except ImportError:  # the `browser` fixture skips the page tests and says why
+    expect = None
 
 NWORLD = 4
 
@@ -29,7 +40,7 @@ class RestartableServer:
         self.server = None
 
     def start(self) -> None:
-        self._cm = running_server(self.tmp_path, worlds=NWORLD, port=self.port)
+        self._cm = serve(worlds=NWORLD, port=self.port, log_dir=self.tmp_path)
         self.server = self._cm.__enter__()
 
     def stop(self) -> None:
@@ -133,3 +144,168 @@ def test_view_socket_refuses_what_does_not_exist_with_a_reason(srv, query, needl
     ):
         ws.recv(timeout=5)
     assert closed.value.rcvd.code == 1008 and needle in closed.value.rcvd.reason
+
+
+# ------------------------------------------------------------------- the page in Chromium
+
+
+@pytest.fixture(scope="module")
+def browser():
+    reason = headless.why_unavailable()
+    if reason:
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        chromium = headless.launch(p)
+        yield chromium
+        chromium.close()
+
+
+@pytest.fixture
+def page(browser):
+    context = browser.new_context(viewport={"width": 1000, "height": 640})
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    yield page
+    context.close()
+    assert not errors, f"JavaScript errors in the page: {errors}"
+
+
+def open_page(page, srv, query: str) -> None:
+    """Load the page and wait until it has drawn a streamed frame."""
+    page.goto(f"{srv.url}/{query}")
+    page.wait_for_function(
+        "window.armfleet && window.armfleet.connected && window.armfleet.renders > 0",
+        timeout=30_000,
+    )
+
+
+def wait_still(page, quiet_s: float = 1.0) -> None:
+    """Until the page has drawn nothing new for `quiet_s` (the arm came to rest)."""
+    last, since = -1, time.monotonic()
+    deadline = since + 20
+    while time.monotonic() - since < quiet_s:
+        renders = page.evaluate("window.armfleet.renders")
+        if renders != last:
+            last, since = renders, time.monotonic()
+        assert time.monotonic() < deadline, "the page kept redrawing"
+        time.sleep(0.1)
+
+
+def canvas_pixels(page) -> np.ndarray:
+    png = page.locator("#view").screenshot()
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
+
+
+def target(http, world: int) -> list[float]:
+    return http.get(f"/v1/worlds/{world}/state").json()["target"]
+
+
+def test_up_on_shoulder_pan_adds_a_tenth_and_down_on_a_closed_gripper_stays_at_zero(
+    srv, http, page
+):
+    open_page(page, srv, "?world=0")
+    before = target(http, 0)
+    pan = page.locator('tr[data-joint="shoulder_pan_joint"]')
+    pan.get_by_role("button", name="Up (+0.1)").click()
+    after = wait_for(lambda: (t := target(http, 0))[0] != before[0] and t, "world 0's target")
+    assert after[0] == pytest.approx(before[0] + 0.1)
+    assert after[1:] == pytest.approx(before[1:])
+    expect(pan.locator(".target")).to_have_text("0.10")  # the ack's target, shown at once
+
+    finger = page.locator('tr[data-joint="finger_joint"]')
+    finger.get_by_role("button", name="Down (-0.1)").click()
+    expect(page.locator("#message")).to_contain_text("finger_joint")  # the ack said: clamped
+    assert target(http, 0)[6] == 0.0
+    expect(finger.locator(".target")).to_have_text("0.00")
+
+
+def test_the_canvas_changes_when_the_arm_moves_and_not_while_it_is_still(srv, http, page):
+    open_page(page, srv, "?world=1")
+    wait_still(page)
+    still = canvas_pixels(page)
+    time.sleep(1.0)
+    assert np.array_equal(canvas_pixels(page), still), "the view changed with nothing moving"
+
+    move = {"name": ["shoulder_pan_joint", "elbow_joint"], "position": [1.2, 0.6]}
+    http.put("/v1/worlds/1/targets", json=move).raise_for_status()
+    wait_for(
+        lambda: abs(http.get("/v1/worlds/1/state").json()["position"][0] - 1.2) < 0.02,
+        "the arm to reach its new pose",
+    )
+    wait_still(page)
+    moved = canvas_pixels(page)
+    changed = np.abs(moved - still).sum(axis=2) > 30
+    assert changed.mean() > 0.01, f"only {changed.mean():.4f} of the pixels changed"
+    measured = page.locator('tr[data-joint="shoulder_pan_joint"] .measured')
+    expect(measured).to_have_text("1.20")
+
+
+def test_fleet_view_shows_every_world_and_a_click_focuses_the_clicked_one(srv, http, page):
+    open_page(page, srv, "?world=0")
+    one_world_draws = page.evaluate("window.armfleet.drawCalls")
+    open_page(page, srv, "?view=fleet")
+    labels = page.locator(".wlabel")
+    expect(labels).to_have_count(NWORLD)
+    assert [labels.nth(i).inner_text() for i in range(NWORLD)] == [str(w) for w in range(NWORLD)]
+    # Instancing: the fleet costs the same draws per frame as one world (one per geom).
+    assert page.evaluate("window.armfleet.drawCalls") == one_world_draws > 20
+    page.locator('.wlabel[data-world="3"]').click()
+    expect(page.locator("#world")).to_have_value("3")
+    expect(page.locator('.wlabel[data-world="3"]')).to_have_class(re.compile(r"\bfocus\b"))
+    expect(page.locator("#status")).to_contain_text("world 3", timeout=10_000)
+    assert "world=3" in page.url and "view=fleet" in page.url
+    # The focused world is the one the panel drives.
+    elbow = page.locator('tr[data-joint="elbow_joint"]')
+    elbow.get_by_role("button", name="Up (+0.1)").click()
+    wait_for(lambda: target(http, 3)[2] == pytest.approx(HOME[2] + 0.1), "world 3's elbow")
+    assert target(http, 0)[2] == pytest.approx(HOME[2])
+    expect(labels).to_have_count(NWORLD)  # the layout stays while the focus moves
+
+
+def test_a_world_that_does_not_exist_says_so(srv, page):
+    page.goto(f"{srv.url}/?world=99")
+    banner = page.locator("#banner")
+    expect(banner).to_be_visible(timeout=15_000)
+    expect(banner).to_contain_text("World 99 does not exist")
+    expect(banner).to_contain_text(f"this service runs worlds 0–{NWORLD - 1}")
+    expect(page.get_by_role("button", name="Up (+0.1)").first).to_be_disabled()
+
+
+def test_gripper_buttons_keyboard_shortcuts_and_reset_drive_the_world(srv, http, page):
+    open_page(page, srv, "?world=1")
+    page.get_by_role("button", name="Close gripper").click()
+    wait_for(lambda: target(http, 1)[6] == pytest.approx(0.7), "world 1's gripper to close")
+    page.get_by_role("button", name="Open gripper").click()
+    wait_for(lambda: target(http, 1)[6] == 0.0, "world 1's gripper to open")
+    # 3 picks row [2] (elbow_joint); the arrow keys press its Up / Down.
+    page.keyboard.press("3")
+    expect(page.locator('tr[data-joint="elbow_joint"]')).to_have_class(re.compile("selected"))
+    page.keyboard.press("ArrowUp")
+    page.keyboard.press("ArrowUp")
+    page.keyboard.press("ArrowDown")
+    page.keyboard.press("ArrowUp")
+    wait_for(lambda: target(http, 1)[2] == pytest.approx(HOME[2] + 0.2), "two net presses")
+    page.keyboard.press("c")
+    wait_for(lambda: target(http, 1)[6] == pytest.approx(0.7), "C to close the gripper")
+    page.get_by_role("button", name="Reset").click()
+    wait_for(lambda: target(http, 1) == pytest.approx(HOME), "Reset to bring world 1 home")
+    assert target(http, 0) == pytest.approx(HOME)  # the other worlds saw nothing
+
+
+def test_a_killed_server_shows_disconnected_and_the_page_recovers_when_it_is_back(srv, page):
+    """Last in the module: it replaces the module's server with a new one on the same port."""
+    open_page(page, srv, "?world=2")
+    status = page.locator("#status")
+    srv.server.process.kill()
+    srv.stop()
+    expect(status).to_contain_text("disconnected", timeout=15_000)
+    srv.start()
+    expect(status).to_contain_text("connected · world 2", timeout=60_000)
+    with httpx.Client(base_url=srv.url, timeout=10) as http:
+        before = target(http, 2)
+        wrist = page.locator('tr[data-joint="wrist_1_joint"]')
+        wrist.get_by_role("button", name="Down (-0.1)").click()
+        wait_for(lambda: target(http, 2)[3] == pytest.approx(before[3] - 0.1), "world 2's wrist_1")

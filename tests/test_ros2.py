@@ -26,7 +26,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from service.ros import msgs, topics
 from service.ros.dds import LOOPBACK_CONFIG, choose_config
-from tests.conftest import ELBOW, FINGER, JOINTS, Server, running_server, wait_for
+from tests.conftest import ELBOW, FINGER, JOINTS, Server, serve, wait_for
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 PEER = Path(__file__).with_name("ros2_peer.py")
@@ -202,11 +202,11 @@ def domain() -> int:
 
 @pytest.fixture(scope="module")
 def ros_server(tmp_path_factory: pytest.TempPathFactory, domain: int) -> Iterator[Server]:
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("ROS_DOMAIN_ID", str(domain))
-        extra = ("--ros2", "--ros2-worlds", "1-2", "--ros2-rate", "30")
-        with running_server(tmp_path_factory.mktemp("ros2"), worlds=4, extra=extra) as srv:
-            yield srv
+    extra = ("--ros2", "--ros2-worlds", "1-2", "--ros2-rate", "30")
+    env = {"ROS_DOMAIN_ID": str(domain)}
+    log_dir = tmp_path_factory.mktemp("ros2")
+    with serve(worlds=4, extra_args=extra, env=env, log_dir=log_dir) as srv:
+        yield srv
 
 
 @pytest.fixture(scope="module")

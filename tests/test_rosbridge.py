@@ -22,7 +22,7 @@ import roslibpy
 import roslibpy.ros2
 from websockets.sync.client import connect
 
-from tests.conftest import ELBOW, FINGER, JOINTS, Server, running_server, wait_for
+from tests.conftest import ELBOW, FINGER, JOINTS, Server, serve, wait_for
 
 JS_DIR = Path(__file__).with_name("js")
 
@@ -30,7 +30,7 @@ JS_DIR = Path(__file__).with_name("js")
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     extra = ("--ros2-worlds", "1-2")
-    with running_server(tmp_path_factory.mktemp("rosbridge"), worlds=4, extra=extra) as srv:
+    with serve(worlds=4, extra_args=extra, log_dir=tmp_path_factory.mktemp("rosbridge")) as srv:
         yield srv
 
 

@@ -168,6 +168,8 @@ async def _serve(
                 reply = wire.error_frame(None, "send JSON as text frames")
             else:
                 reply = _handle(control, text, default_world, source)
+                if reply.get("op") == "ack" and isinstance(reply.get("tick"), int):
+                    sub.owe(reply["tick"])  # its first frame goes out whatever the cadence
             sub.push_ack(wire.dumps(reply))
     except (WebSocketDisconnect, RuntimeError):
         pass

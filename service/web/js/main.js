@@ -17,9 +17,21 @@ const page = {
   rate: Number(params.get('rate')) || 30,
   info: null,
   shown: '',
+  sceneText: '',
+  reconnected: false,
   lastAck: null,
   // What tests and the bench read (window.armfleet): counts only, nothing to drive.
-  stats: { connected: false, tick: null, frames: 0, renders: 0, fps: 0, streamFps: 0, firstRenderMs: null },
+  stats: {
+    connected: false,
+    tick: null,
+    frames: 0,
+    renders: 0,
+    fps: 0,
+    streamFps: 0,
+    firstRenderMs: null,
+    softwareGL: false,
+    drawCalls: 0,
+  },
 };
 window.armfleet = page.stats;
 
@@ -42,9 +54,12 @@ const conn = new Connection({
   open: () => {
     page.stats.connected = true;
     hideBanner();
+    if (page.reconnected) refresh();
+    page.reconnected = false;
   },
   down: (reason, final) => {
     page.stats.connected = false;
+    page.reconnected = true;
     panel.status(`disconnected: ${reason}${final ? '' : ' (reconnecting…)'}`, true);
     if (final) showBanner(reason);
   },
@@ -92,6 +107,20 @@ async function fetchReady(path) {
   }
 }
 
+/** After a reconnect: the service may have restarted with other worlds or another model. */
+async function refresh() {
+  const [info, scene] = [await fetchReady('/v1/info'), await fetchReady('/v1/scene')];
+  const sceneText = JSON.stringify(scene);
+  const changed = info.nworld !== page.info.nworld || sceneText !== page.sceneText;
+  page.info = info;
+  if (sceneText !== page.sceneText) {
+    page.sceneText = sceneText;
+    viewer.setScene(scene);
+    page.shown = ''; // lay the worlds out again with the next frame
+  }
+  if (changed) go();
+}
+
 /** Open the stream for the current world and view (or say why not). */
 function go() {
   const n = page.info.nworld;
@@ -121,61 +150,95 @@ function go() {
   conn.open({ worlds, focus: w, rate: page.rate });
 }
 
+// Text in the panel changes at most this often (each change costs a layout and a paint); the
+// status line (tick, speed) at most twice a second.
+const PANEL_MS = 100;
+const STATUS_MS = 500;
+let panelShown = 0, statusShown = 0;
+
 function onFrame(f) {
   const s = page.stats;
   s.frames++;
   s.tick = f.header.tick;
+  const now = performance.now();
   const key = f.worlds.join(',');
   if (key !== page.shown) {
     page.shown = key;
     track.reset();
     viewer.setWorlds(Array.from(f.worlds), f.poses.subarray(0, f.header.nbody * 7));
   }
-  track.push(f.poses, performance.now() / 1000);
+  track.push(f.poses, now / 1000);
+  if (track.moving || viewer.dirty) wake();
   viewer.setFaults(f.faults);
+  if (now - panelShown < PANEL_MS) return;
+  panelShown = now;
   const st = f.header.focus;
   if (st && st.world === page.world) {
     panel.showMeasured(st.position);
     // A target acked for a later tick is newer than this frame's.
     if (!page.lastAck || st.tick >= page.lastAck.tick) panel.showTargets(st.target);
   }
+  if (now - statusShown < STATUS_MS) return;
+  statusShown = now;
   const m = f.header.stats;
   const speed = m ? ` · RTF ${m.realtime_factor.toFixed(2)} · ${m.mode}` : '';
-  panel.status(`connected · world ${page.world} · tick ${s.tick}${speed} · ${s.fps} fps`);
+  const gl = s.softwareGL ? ' (software GL)' : '';
+  panel.status(`connected · world ${page.world} · tick ${s.tick}${speed} · ${s.fps} fps${gl}`);
 }
 
-let windowStart = performance.now(), windowRenders = 0, windowFrames = 0;
+let lastDraw = 0, drawPending = false;
+// With software WebGL every frame drawn is CPU time (shared with the simulation when both run
+// on one machine): draw at most at the stream's rate there instead of at the display's.
+const minDrawMs = () => (viewer.software ? 1000 / page.rate - 2 : 0);
+
+/** Ask for a draw at the next display frame. Nothing is scheduled while nothing changes, so a
+ * page watching still arms costs only the frames it receives. */
+function wake() {
+  if (!drawPending) {
+    drawPending = true;
+    requestAnimationFrame(animate);
+  }
+}
 
 function animate() {
+  drawPending = false;
   const now = performance.now();
+  if (now - lastDraw < minDrawMs()) return wake();
   if (track.cur && track.moving) {
     const { poses, done } = track.sample(now / 1000);
     viewer.setPoses(poses);
     if (done) track.moving = false;
   }
   if (viewer.render()) {
+    lastDraw = now;
     page.stats.renders++;
+    page.stats.drawCalls = viewer.drawCalls;
     if (page.stats.firstRenderMs === null) page.stats.firstRenderMs = Math.round(now);
   }
-  if (now - windowStart >= 1000) {
-    const dt = (now - windowStart) / 1000;
-    page.stats.fps = Math.round((page.stats.renders - windowRenders) / dt);
-    page.stats.streamFps = Math.round((page.stats.frames - windowFrames) / dt);
-    windowStart = now;
-    windowRenders = page.stats.renders;
-    windowFrames = page.stats.frames;
-  }
-  requestAnimationFrame(animate);
+  if (track.moving) wake();
 }
+
+// Frames received and drawn per second, for the status line and window.armfleet.
+let counted = { at: performance.now(), renders: 0, frames: 0 };
+setInterval(() => {
+  const now = performance.now(), s = page.stats;
+  const dt = (now - counted.at) / 1000;
+  s.fps = Math.round((s.renders - counted.renders) / dt);
+  s.streamFps = Math.round((s.frames - counted.frames) / dt);
+  counted = { at: now, renders: s.renders, frames: s.frames };
+}, 1000);
 
 document.addEventListener('visibilitychange', () => (document.hidden ? conn.pause() : conn.resume()));
 
 async function main() {
   const [info, scene] = [await fetchReady('/v1/info'), await fetchReady('/v1/scene')];
   page.info = info;
+  page.sceneText = JSON.stringify(scene);
+  page.stats.softwareGL = viewer.software;
   panel.setJoints(info.joints.map((j) => j.name));
   viewer.setScene(scene);
-  requestAnimationFrame(animate);
+  viewer.controls.addEventListener('change', wake); // orbit, zoom, pan
+  new ResizeObserver(wake).observe(document.getElementById('view'));
   go();
 }
 

@@ -41,6 +41,13 @@ function geometryOf(g) {
   }
 }
 
+/** WebGL drawn by the CPU (SwiftShader, llvmpipe): every frame drawn costs CPU time. */
+function isSoftware(gl) {
+  const ext = gl.getExtension('WEBGL_debug_renderer_info');
+  const name = ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
+  return /swiftshader|llvmpipe|softpipe|software/i.test(String(name));
+}
+
 export class Viewer {
   constructor(canvas, labels, onPick) {
     this.canvas = canvas;
@@ -48,6 +55,7 @@ export class Viewer {
     this.onPick = onPick;
     this.renderer = new THREE.WebGLRenderer({ canvas, antialias: false });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+    this.software = isSoftware(this.renderer.getContext());
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0x30343c);
     this.camera = new THREE.PerspectiveCamera(45, 1, 0.05, 500);
@@ -156,7 +164,7 @@ export class Viewer {
   setFaults(faults) {
     faults.forEach((f, i) => {
       const el = this.labelEls[i];
-      if (!el) return;
+      if (!el || el.dataset.faults === String(f)) return; // touch the DOM only on a change
       el.classList.toggle('faulted', f > 0);
       el.dataset.faults = String(f);
     });
@@ -173,8 +181,8 @@ export class Viewer {
     const rows = Math.ceil(n / this.cols);
     const cx = ((this.cols - 1) * this.spacing) / 2 + this.center[0];
     const cy = (-(rows - 1) * this.spacing) / 2 + this.center[1];
-    const r = n > 1 ? Math.max(this.cols, rows) * this.spacing * 0.8 : 2.0;
-    this.controls.target.set(cx, cy, n > 1 ? 0.2 : 0.7);
+    const r = n > 1 ? Math.max(this.cols, rows) * this.spacing * 0.8 : 2.3;
+    this.controls.target.set(cx, cy, n > 1 ? 0.2 : 0.6);
     this.camera.position.set(cx + 0.75 * r, cy - 1.0 * r, 0.4 + 0.8 * r);
     this.camera.far = 10 * r + 50;
     this.camera.updateProjectionMatrix();
@@ -196,6 +204,7 @@ export class Viewer {
     if (!this.dirty || !this.worlds.length) return false;
     this.dirty = false;
     this.renderer.render(this.scene, this.camera);
+    this.drawCalls = this.renderer.info.render.calls; // per frame: one per geom, any world count
     this._placeLabels();
     this.renders++;
     return true;

@@ -1,0 +1,188 @@
+"""The REST half of the client without I/O: each API call as a `Call`, and its reply parsed.
+
+`ArmfleetClient` runs a `Call` with `httpx.Client`, `AsyncArmfleetClient` with
+`httpx.AsyncClient`; everything else (paths, bodies, validation before sending, turning a
+reply or a transport failure into a result or an `ArmfleetError`) is here, once.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import httpx
+import numpy as np
+import orjson
+
+from clients.errors import ArmfleetError, NotReady, Unreachable, error_for, unreachable
+from clients.models import (
+    BatchAck,
+    BatchStates,
+    CommandAck,
+    Info,
+    JointRef,
+    ResetResult,
+    SimStatus,
+    WorldSpec,
+    WorldState,
+)
+
+DEFAULT_URL = "http://127.0.0.1:8000"
+DEFAULT_TIMEOUT = 10.0
+MODES = ("realtime", "fast", "paused")
+
+
+@dataclass(frozen=True)
+class Call:
+    """One HTTP request and how to turn its JSON reply into a result."""
+
+    method: str
+    path: str
+    parse: Callable[[Any], Any]
+    json: Any = None
+    params: Mapping[str, str] | None = None
+    read_timeout: float | bool | None = False  # False: the client's timeout; None: no limit
+
+    def request_kwargs(self, timeout: float) -> dict[str, Any]:
+        """Keyword arguments for `httpx.(Async)Client.request` besides method and path."""
+        kwargs: dict[str, Any] = {"params": self.params, "json": self.json}
+        if self.read_timeout is not False:
+            kwargs["timeout"] = httpx.Timeout(timeout, read=self.read_timeout)
+        return kwargs
+
+    def result(self, reply: httpx.Response) -> Any:
+        """The parsed result of a reply, or the `ArmfleetError` its status means."""
+        if reply.status_code >= 400:
+            raise error_for(reply.status_code, reply.content)
+        return self.parse(orjson.loads(reply.content))
+
+
+def transport_error(url: str, exc: httpx.TransportError) -> Unreachable:
+    """What a request that got no reply at all raises."""
+    return unreachable(url, exc)
+
+
+class ReadyWait:
+    """The polling policy of `wait_ready`: which failures mean "not yet", and when to stop."""
+
+    def __init__(self, timeout: float) -> None:
+        self.timeout = timeout
+        self.deadline = time.monotonic() + timeout
+
+    def failed(self, exc: ArmfleetError) -> None:
+        """After a failed poll: return to poll again, or raise NotReady (with the last reason)."""
+        if time.monotonic() >= self.deadline:
+            raise NotReady(exc.status, exc.detail, f"not ready after {self.timeout} s: {exc}")
+
+
+NOT_YET = (NotReady, Unreachable)  # what /readyz raises while the service is starting
+
+
+# -- request bodies -----------------------------------------------------------------------------
+
+
+def _joint_key(joint: JointRef) -> str | int:
+    if isinstance(joint, bool) or not isinstance(joint, str | int | np.integer):
+        raise TypeError(f"a joint is a name or an index, not {joint!r}")
+    return int(joint) if isinstance(joint, np.integer) else joint
+
+
+def worlds_param(worlds: WorldSpec) -> str | None:
+    """None → None (all); 3 → "3"; [0, 3, 7] → "0,3,7"; "0-63" stays as it is."""
+    if worlds is None:
+        return None
+    if isinstance(worlds, str):
+        return worlds
+    if isinstance(worlds, int | np.integer):
+        return str(int(worlds))
+    return ",".join(str(int(w)) for w in worlds)
+
+
+def increment_body(joint: JointRef, delta: float) -> dict[str, Any]:
+    return {"joint": _joint_key(joint), "delta": float(delta)}
+
+
+def targets_body(targets: Mapping[JointRef, float]) -> dict[str, Any]:
+    """`{"elbow_joint": 1.2, 6: 0.7}` → JointState-shaped `{"name": [...], "position": [...]}`.
+
+    Indices travel as digit strings; the server resolves either."""
+    if not targets:
+        raise ValueError("set_targets needs at least one joint")
+    names = [str(_joint_key(j)) for j in targets]
+    return {"name": names, "position": [float(v) for v in targets.values()]}
+
+
+# -- the calls ----------------------------------------------------------------------------------
+
+
+def _identity(d: Any) -> Any:
+    return d
+
+
+def info_call() -> Call:
+    return Call("GET", "/v1/info", Info.from_json)
+
+
+def state_call(world: int) -> Call:
+    return Call("GET", f"/v1/worlds/{int(world)}/state", WorldState.from_json)
+
+
+def states_call(worlds: WorldSpec = None) -> Call:
+    spec = worlds_param(worlds)
+    params = None if spec is None else {"worlds": spec}
+    return Call("GET", "/v1/worlds/state", BatchStates.from_rows, params=params)
+
+
+def increment_call(world: int, joint: JointRef, delta: float) -> Call:
+    path = f"/v1/worlds/{int(world)}/increments"
+    return Call("POST", path, CommandAck.from_json, json=increment_body(joint, delta))
+
+
+def set_targets_call(world: int, targets: Mapping[JointRef, float]) -> Call:
+    path = f"/v1/worlds/{int(world)}/targets"
+    return Call("PUT", path, CommandAck.from_json, json=targets_body(targets))
+
+
+def set_many_call(worlds: Iterable[int], positions: Any) -> Call:
+    ids = [int(w) for w in worlds]
+    rows = np.asarray(positions, dtype=np.float64)
+    if rows.ndim != 2 or rows.shape[0] != len(ids):
+        raise ValueError(f"positions must be ({len(ids)}, 7), got shape {rows.shape}")
+    body = {"worlds": ids, "position": rows.tolist()}
+    return Call("POST", "/v1/targets", BatchAck.from_json, json=body)
+
+
+def reset_call(world: int | Iterable[int] | None = None) -> Call:
+    if world is None:
+        return Call("POST", "/v1/reset", ResetResult.from_json)
+    if isinstance(world, int | np.integer):
+        return Call("POST", f"/v1/worlds/{int(world)}/reset", ResetResult.from_json)
+    body = {"worlds": [int(w) for w in world]}
+    return Call("POST", "/v1/reset", ResetResult.from_json, json=body)
+
+
+def pause_call() -> Call:
+    return Call("POST", "/v1/sim/pause", SimStatus.from_json)
+
+
+def resume_call() -> Call:
+    return Call("POST", "/v1/sim/resume", SimStatus.from_json)
+
+
+def set_mode_call(mode: str) -> Call:
+    mode = str(getattr(mode, "value", mode))
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    return Call("POST", "/v1/sim/mode", SimStatus.from_json, json={"mode": mode})
+
+
+def step_call(ticks: int = 1) -> Call:
+    # The reply comes once the ticks are done: no read limit.
+    body = {"ticks": int(ticks)}
+    return Call("POST", "/v1/sim/step", SimStatus.from_json, json=body, read_timeout=None)
+
+
+def readyz_call() -> Call:
+    return Call("GET", "/readyz", _identity)

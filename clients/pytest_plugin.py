@@ -1,0 +1,44 @@
+"""pytest fixtures that run a real armfleet server (see `clients.testing.serve`).
+
+Registered as the `armfleet` pytest plugin when armfleet is installed, so a project that
+depends on armfleet gets the fixtures without any conftest:
+
+    def test_elbow_moves(armfleet_server):
+        with armfleet_server.client() as arm:
+            arm.increment(0, "elbow_joint", 0.1)
+
+- `armfleet_server`: one 4-world realtime server shared by the tests of a module.
+- `armfleet_server_factory`: `factory(worlds=16, mode="paused", ...)` (the arguments of
+  `serve()`) starts a server for one test; all it started stop when the test ends.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack
+from typing import Any
+
+import pytest
+
+from clients.testing import Server, serve
+
+ServerFactory = Callable[..., Server]
+
+
+@pytest.fixture(scope="module")
+def armfleet_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """A 4-world realtime server for the tests of one module (its log in pytest's tmp dir)."""
+    with serve(worlds=4, log_dir=tmp_path_factory.mktemp("armfleet")) as server:
+        yield server
+
+
+@pytest.fixture
+def armfleet_server_factory(tmp_path: Any) -> Iterator[ServerFactory]:
+    """Start servers of other sizes or options inside one test: `factory(worlds=16)`."""
+    with ExitStack() as stack:
+
+        def start(**kwargs: Any) -> Server:
+            kwargs.setdefault("log_dir", tmp_path)
+            return stack.enter_context(serve(**kwargs))
+
+        yield start

@@ -1,0 +1,152 @@
+"""A real armfleet server for tests: `serve()` starts one, waits until it is ready, stops it.
+
+    from clients.testing import serve
+
+    with serve(worlds=4) as server:
+        with server.client() as arm:
+            arm.increment(0, "elbow_joint", 0.1)
+
+The server is `python -m service.cli serve` run by this same interpreter, so it is the armfleet
+this Python imports (an installed wheel, or a source checkout), on a free 127.0.0.1 port. It is
+a separate process with its own simulation loop, exactly as users run it: tests through it
+talk over real sockets. With pytest, the `armfleet_server` fixture (clients/pytest_plugin.py)
+wraps it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+
+from clients.client import ArmfleetClient
+
+READY_TIMEOUT = 300.0  # [s] a cold kernel cache compiles for minutes on a small CPU
+STOP_TIMEOUT = 15.0  # [s] after SIGINT, before the process is killed
+_PACKAGE_ROOT = Path(__file__).resolve().parents[1]  # holds clients/ and service/
+
+
+class ServerFailed(RuntimeError):
+    """The server exited or did not become ready; the message ends with its log."""
+
+
+@dataclass
+class Server:
+    """A running server: where to reach it, its process and its log."""
+
+    url: str  # http://127.0.0.1:PORT
+    ws_url: str  # ws://127.0.0.1:PORT
+    process: subprocess.Popen[bytes]
+    log_path: Path  # stdout and stderr of the server
+
+    @property
+    def port(self) -> int:
+        return int(self.url.rsplit(":", 1)[1])
+
+    def log(self) -> str:
+        """Everything the server printed so far."""
+        return self.log_path.read_text(errors="replace")
+
+    def client(self, timeout: float = 10.0) -> ArmfleetClient:
+        """A blocking client for this server (close it, or use it in `with`)."""
+        return ArmfleetClient(self.url, timeout=timeout)
+
+
+def free_port() -> int:
+    """A TCP port that nothing listens on at 127.0.0.1 right now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _child_env(env: Mapping[str, str] | None, data_dir: Path) -> dict[str, str]:
+    """os.environ plus `env`; what the server saves (snapshots, recordings) goes to `data_dir`
+    unless ARMFLEET_DATA_DIR is set, so a test never writes into the user's own data; a source
+    checkout's root goes first on PYTHONPATH so the child imports the same armfleet as this
+    process even when started from another directory."""
+    out = {"ARMFLEET_DATA_DIR": str(data_dir), **os.environ, **(env or {})}
+    if _PACKAGE_ROOT.name not in ("site-packages", "dist-packages"):
+        out["PYTHONPATH"] = os.pathsep.join(
+            p for p in (str(_PACKAGE_ROOT), out.get("PYTHONPATH")) if p
+        )
+    return out
+
+
+def _wait_ready(server: Server, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    with httpx.Client(timeout=1.0) as http:
+        while True:
+            if server.process.poll() is not None:
+                raise ServerFailed(
+                    f"server exited with {server.process.returncode}:\n{server.log()}"
+                )
+            with contextlib.suppress(httpx.HTTPError):
+                if http.get(f"{server.url}/readyz").status_code == 200:
+                    return
+            if time.monotonic() > deadline:
+                raise ServerFailed(f"server not ready after {timeout} s:\n{server.log()}")
+            time.sleep(0.2)
+
+
+def stop(process: subprocess.Popen[bytes], timeout: float = STOP_TIMEOUT) -> int:
+    """SIGINT (as Ctrl-C: the server shuts down cleanly), then SIGKILL after `timeout` s.
+    Returns the exit status."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    return process.returncode
+
+
+@contextlib.contextmanager
+def serve(
+    worlds: int = 4,
+    mode: str = "realtime",
+    port: int | None = None,
+    extra_args: Sequence[str] = (),
+    env: Mapping[str, str] | None = None,
+    log_dir: str | os.PathLike[str] | None = None,
+    ready_timeout: float = READY_TIMEOUT,
+    stop_timeout: float = STOP_TIMEOUT,
+) -> Iterator[Server]:
+    """Start `armfleet serve` on 127.0.0.1, yield it once /readyz answers 200, stop it after.
+
+    worlds, mode: as `armfleet serve --worlds --mode`
+    port: a fixed port (to restart a server where clients expect it); None picks a free one
+    extra_args: more `armfleet serve` options, e.g. ("--control-hz", "120")
+    env: variables added to this process's environment for the server (ARMFLEET_* settings)
+    log_dir: where `server-PORT.log` goes (appended to), and `data-PORT/` (the server's
+        ARMFLEET_DATA_DIR unless set); None: a temporary folder, removed when it stops
+
+    Raises ServerFailed (with the log) when the server exits or is not ready in time.
+    """
+    with contextlib.ExitStack() as stack:
+        if log_dir is None:
+            log_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="armfleet-"))
+        port = port or free_port()
+        log_path = Path(log_dir) / f"server-{port}.log"
+        data_dir = Path(log_dir) / f"data-{port}"
+        cmd = [sys.executable, "-m", "service.cli", "serve", "--worlds", str(worlds)]
+        cmd += ["--host", "127.0.0.1", "--port", str(port), "--mode", str(mode), *extra_args]
+        with open(log_path, "ab") as log:
+            process = subprocess.Popen(
+                cmd, stdout=log, stderr=subprocess.STDOUT, env=_child_env(env, data_dir)
+            )
+        stack.callback(stop, process, stop_timeout)
+        url = f"http://127.0.0.1:{port}"
+        server = Server(url, f"ws://127.0.0.1:{port}", process, log_path)
+        _wait_ready(server, ready_timeout)
+        yield server
