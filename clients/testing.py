@@ -69,10 +69,12 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def _child_env(env: Mapping[str, str] | None) -> dict[str, str]:
-    """os.environ plus `env`; a source checkout's root goes first on PYTHONPATH so the child
-    imports the same armfleet as this process even when started from another directory."""
-    out = {**os.environ, **(env or {})}
+def _child_env(env: Mapping[str, str] | None, data_dir: Path) -> dict[str, str]:
+    """os.environ plus `env`; what the server saves (snapshots, recordings) goes to `data_dir`
+    unless ARMFLEET_DATA_DIR is set, so a test never writes into the user's own data; a source
+    checkout's root goes first on PYTHONPATH so the child imports the same armfleet as this
+    process even when started from another directory."""
+    out = {"ARMFLEET_DATA_DIR": str(data_dir), **os.environ, **(env or {})}
     if _PACKAGE_ROOT.name not in ("site-packages", "dist-packages"):
         out["PYTHONPATH"] = os.pathsep.join(
             p for p in (str(_PACKAGE_ROOT), out.get("PYTHONPATH")) if p
@@ -126,8 +128,8 @@ def serve(
     port: a fixed port (to restart a server where clients expect it); None picks a free one
     extra_args: more `armfleet serve` options, e.g. ("--control-hz", "120")
     env: variables added to this process's environment for the server (ARMFLEET_* settings)
-    log_dir: where `server-PORT.log` goes (appended to); None: a temporary folder, removed
-        when the server stops
+    log_dir: where `server-PORT.log` goes (appended to), and `data-PORT/` (the server's
+        ARMFLEET_DATA_DIR unless set); None: a temporary folder, removed when it stops
 
     Raises ServerFailed (with the log) when the server exits or is not ready in time.
     """
@@ -136,11 +138,12 @@ def serve(
             log_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="armfleet-"))
         port = port or free_port()
         log_path = Path(log_dir) / f"server-{port}.log"
+        data_dir = Path(log_dir) / f"data-{port}"
         cmd = [sys.executable, "-m", "service.cli", "serve", "--worlds", str(worlds)]
         cmd += ["--host", "127.0.0.1", "--port", str(port), "--mode", str(mode), *extra_args]
         with open(log_path, "ab") as log:
             process = subprocess.Popen(
-                cmd, stdout=log, stderr=subprocess.STDOUT, env=_child_env(env)
+                cmd, stdout=log, stderr=subprocess.STDOUT, env=_child_env(env, data_dir)
             )
         stack.callback(stop, process, stop_timeout)
         url = f"http://127.0.0.1:{port}"

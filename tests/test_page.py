@@ -244,10 +244,14 @@ def test_the_canvas_changes_when_the_arm_moves_and_not_while_it_is_still(srv, ht
 
 
 def test_fleet_view_shows_every_world_and_a_click_focuses_the_clicked_one(srv, http, page):
+    open_page(page, srv, "?world=0")
+    one_world_draws = page.evaluate("window.armfleet.drawCalls")
     open_page(page, srv, "?view=fleet")
     labels = page.locator(".wlabel")
     expect(labels).to_have_count(NWORLD)
-    assert page.evaluate("window.armfleet.frames") > 0
+    assert [labels.nth(i).inner_text() for i in range(NWORLD)] == [str(w) for w in range(NWORLD)]
+    # Instancing: the fleet costs the same draws per frame as one world (one per geom).
+    assert page.evaluate("window.armfleet.drawCalls") == one_world_draws > 20
     page.locator('.wlabel[data-world="3"]').click()
     expect(page.locator("#world")).to_have_value("3")
     expect(page.locator('.wlabel[data-world="3"]')).to_have_class(re.compile(r"\bfocus\b"))
@@ -268,6 +272,27 @@ def test_a_world_that_does_not_exist_says_so(srv, page):
     expect(banner).to_contain_text("World 99 does not exist")
     expect(banner).to_contain_text(f"this service runs worlds 0–{NWORLD - 1}")
     expect(page.get_by_role("button", name="Up (+0.1)").first).to_be_disabled()
+
+
+def test_gripper_buttons_keyboard_shortcuts_and_reset_drive_the_world(srv, http, page):
+    open_page(page, srv, "?world=1")
+    page.get_by_role("button", name="Close gripper").click()
+    wait_for(lambda: target(http, 1)[6] == pytest.approx(0.7), "world 1's gripper to close")
+    page.get_by_role("button", name="Open gripper").click()
+    wait_for(lambda: target(http, 1)[6] == 0.0, "world 1's gripper to open")
+    # 3 picks row [2] (elbow_joint); the arrow keys press its Up / Down.
+    page.keyboard.press("3")
+    expect(page.locator('tr[data-joint="elbow_joint"]')).to_have_class(re.compile("selected"))
+    page.keyboard.press("ArrowUp")
+    page.keyboard.press("ArrowUp")
+    page.keyboard.press("ArrowDown")
+    page.keyboard.press("ArrowUp")
+    wait_for(lambda: target(http, 1)[2] == pytest.approx(HOME[2] + 0.2), "two net presses")
+    page.keyboard.press("c")
+    wait_for(lambda: target(http, 1)[6] == pytest.approx(0.7), "C to close the gripper")
+    page.get_by_role("button", name="Reset").click()
+    wait_for(lambda: target(http, 1) == pytest.approx(HOME), "Reset to bring world 1 home")
+    assert target(http, 0) == pytest.approx(HOME)  # the other worlds saw nothing
 
 
 def test_a_killed_server_shows_disconnected_and_the_page_recovers_when_it_is_back(srv, page):

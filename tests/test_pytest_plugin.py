@@ -3,10 +3,16 @@ user would. The first test is the README's example, word for word: keep the two 
 
 from __future__ import annotations
 
+import importlib
+import os
 import signal
+import tomllib
+from pathlib import Path
 
 import pytest
+from conftest import ROOT
 
+from clients import pytest_plugin
 from clients.testing import ServerFailed, serve, stop
 
 
@@ -41,6 +47,10 @@ def test_factory_serves_a_paused_batch_that_steps_exactly(armfleet_server_factor
         assert states.tick == stepped.tick
         assert states.target[0] == pytest.approx(ack.target)
         assert states.target[1] == pytest.approx(info.home)  # the other world never noticed
+    # what the server saves stays with the test unless the caller chose a place
+    environ = (Path("/proc") / str(server.process.pid) / "environ").read_bytes().split(b"\0")
+    data_dir = os.environ.get("ARMFLEET_DATA_DIR", str(tmp_path / f"data-{server.port}"))
+    assert f"ARMFLEET_DATA_DIR={data_dir}".encode() in environ
     # stopped as Ctrl-C stops it (the fixture would do the same after the test)
     assert stop(server.process) in (0, -signal.SIGINT)
     assert (tmp_path / f"server-{server.port}.log").read_text() == server.log()
@@ -50,3 +60,12 @@ def test_factory_serves_a_paused_batch_that_steps_exactly(armfleet_server_factor
 def test_serve_reports_a_server_that_cannot_start(tmp_path):
     with pytest.raises(ServerFailed, match="worlds"), serve(worlds=0, log_dir=tmp_path):
         pass
+
+
+def test_the_pytest11_entry_point_names_this_plugin():
+    """What `pip install armfleet` registers with pytest is the module with our fixtures."""
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    target = meta["project"]["entry-points"]["pytest11"]["armfleet"]
+    plugin = importlib.import_module(target)
+    assert plugin is pytest_plugin
+    assert {"armfleet_server", "armfleet_server_factory"} <= set(vars(plugin))

@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
+import os
+import pty
 import queue
+import re
+import select
 import signal
+import struct
 import subprocess
 import sys
+import termios
 import threading
 import time
 from collections.abc import Iterator
@@ -16,6 +24,8 @@ import pytest
 from conftest import JOINTS, ROOT, Server
 
 from clients import ArmfleetClient
+
+ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")  # colours and cursor moves of a terminal
 
 
 def watch(url: str, *args: str) -> subprocess.Popen[str]:
@@ -80,15 +90,41 @@ def test_json_lines_show_a_target_set_through_the_api(server: Server, json_watch
 
 
 def test_table_mode_shows_the_joint_rows(server: Server) -> None:
-    proc = watch(server.url, "--world", "0", "--rate", "10")
-    time.sleep(1.5)  # start up and show a few frames
-    proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=10)
-    assert proc.returncode == 0, err
-    assert "world 0" in out and "tick" in out
-    for name in JOINTS:
-        assert name in out
-    assert "flange" in out
+    """The live table in a terminal (a pty, so Rich redraws as it would for a user); Ctrl-C
+    once it shows a frame ends it cleanly."""
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 160, 0, 0))
+    cmd = [sys.executable, "-m", "service.cli", "watch", "--url", server.url]
+    env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "160", "LINES": "40"}
+    proc = subprocess.Popen(
+        [*cmd, "--world", "0", "--rate", "10"],
+        cwd=ROOT,
+        env=env,
+        stdin=slave,
+        stdout=slave,
+        stderr=subprocess.PIPE,
+    )
+    os.close(slave)
+    screen = ""
+    try:
+        wanted = ["world 0", "tick", "flange", *JOINTS]
+        deadline = time.monotonic() + 60
+        while not all(w in screen for w in wanted):
+            assert time.monotonic() < deadline, f"the table never showed {wanted}: {screen!r}"
+            if select.select([master], [], [], 0.5)[0]:
+                screen += ANSI.sub("", os.read(master, 65536).decode(errors="replace"))
+        proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + 15
+        while proc.poll() is None and time.monotonic() < deadline:  # keep reading: never block it
+            if select.select([master], [], [], 0.2)[0]:
+                with contextlib.suppress(OSError):  # EIO once the child has closed the pty
+                    os.read(master, 65536)
+        assert proc.wait(timeout=5) == 0, proc.stderr.read() if proc.stderr else ""
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        os.close(master)
 
 
 def test_unknown_world_exits_with_the_server_detail(server: Server) -> None:

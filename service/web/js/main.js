@@ -30,6 +30,7 @@ const page = {
     streamFps: 0,
     firstRenderMs: null,
     softwareGL: false,
+    drawCalls: 0,
   },
 };
 window.armfleet = page.stats;
@@ -149,9 +150,11 @@ function go() {
   conn.open({ worlds, focus: w, rate: page.rate });
 }
 
-// Text in the panel changes at most this often (each change costs a layout and a paint).
+// Text in the panel changes at most this often (each change costs a layout and a paint); the
+// status line (tick, speed) at most twice a second.
 const PANEL_MS = 100;
-let panelShown = 0;
+const STATUS_MS = 500;
+let panelShown = 0, statusShown = 0;
 
 function onFrame(f) {
   const s = page.stats;
@@ -165,6 +168,7 @@ function onFrame(f) {
     viewer.setWorlds(Array.from(f.worlds), f.poses.subarray(0, f.header.nbody * 7));
   }
   track.push(f.poses, now / 1000);
+  if (track.moving || viewer.dirty) wake();
   viewer.setFaults(f.faults);
   if (now - panelShown < PANEL_MS) return;
   panelShown = now;
@@ -174,21 +178,32 @@ function onFrame(f) {
     // A target acked for a later tick is newer than this frame's.
     if (!page.lastAck || st.tick >= page.lastAck.tick) panel.showTargets(st.target);
   }
+  if (now - statusShown < STATUS_MS) return;
+  statusShown = now;
   const m = f.header.stats;
   const speed = m ? ` · RTF ${m.realtime_factor.toFixed(2)} · ${m.mode}` : '';
   const gl = s.softwareGL ? ' (software GL)' : '';
   panel.status(`connected · world ${page.world} · tick ${s.tick}${speed} · ${s.fps} fps${gl}`);
 }
 
-let windowStart = performance.now(), windowRenders = 0, windowFrames = 0, lastDraw = 0;
+let lastDraw = 0, drawPending = false;
 // With software WebGL every frame drawn is CPU time (shared with the simulation when both run
 // on one machine): draw at most at the stream's rate there instead of at the display's.
 const minDrawMs = () => (viewer.software ? 1000 / page.rate - 2 : 0);
 
+/** Ask for a draw at the next display frame. Nothing is scheduled while nothing changes, so a
+ * page watching still arms costs only the frames it receives. */
+function wake() {
+  if (!drawPending) {
+    drawPending = true;
+    requestAnimationFrame(animate);
+  }
+}
+
 function animate() {
-  requestAnimationFrame(animate);
+  drawPending = false;
   const now = performance.now();
-  if (now - lastDraw < minDrawMs()) return;
+  if (now - lastDraw < minDrawMs()) return wake();
   if (track.cur && track.moving) {
     const { poses, done } = track.sample(now / 1000);
     viewer.setPoses(poses);
@@ -197,17 +212,21 @@ function animate() {
   if (viewer.render()) {
     lastDraw = now;
     page.stats.renders++;
+    page.stats.drawCalls = viewer.drawCalls;
     if (page.stats.firstRenderMs === null) page.stats.firstRenderMs = Math.round(now);
   }
-  if (now - windowStart >= 1000) {
-    const dt = (now - windowStart) / 1000;
-    page.stats.fps = Math.round((page.stats.renders - windowRenders) / dt);
-    page.stats.streamFps = Math.round((page.stats.frames - windowFrames) / dt);
-    windowStart = now;
-    windowRenders = page.stats.renders;
-    windowFrames = page.stats.frames;
-  }
+  if (track.moving) wake();
 }
+
+// Frames received and drawn per second, for the status line and window.armfleet.
+let counted = { at: performance.now(), renders: 0, frames: 0 };
+setInterval(() => {
+  const now = performance.now(), s = page.stats;
+  const dt = (now - counted.at) / 1000;
+  s.fps = Math.round((s.renders - counted.renders) / dt);
+  s.streamFps = Math.round((s.frames - counted.frames) / dt);
+  counted = { at: now, renders: s.renders, frames: s.frames };
+}, 1000);
 
 document.addEventListener('visibilitychange', () => (document.hidden ? conn.pause() : conn.resume()));
 
@@ -218,7 +237,8 @@ async function main() {
   page.stats.softwareGL = viewer.software;
   panel.setJoints(info.joints.map((j) => j.name));
   viewer.setScene(scene);
-  requestAnimationFrame(animate);
+  viewer.controls.addEventListener('change', wake); // orbit, zoom, pan
+  new ResizeObserver(wake).observe(document.getElementById('view'));
   go();
 }
 

@@ -5,6 +5,10 @@
 export const STEP = 0.1; // rad per press, as in the seed
 
 const $ = (id) => document.getElementById(id);
+// Writing the same text again still costs a layout and a paint: write only changes.
+const setText = (el, text) => {
+  if (el.textContent !== text) el.textContent = text;
+};
 const fmt = (v) => (Math.abs(v) < 0.005 ? 0 : v).toFixed(2); // no "-0.00"
 
 export class Panel {
@@ -59,11 +63,11 @@ export class Panel {
   }
 
   showTargets(target) {
-    this.names.forEach((n, i) => (this.rows.get(n).target.textContent = fmt(target[i])));
+    this.names.forEach((n, i) => setText(this.rows.get(n).target, fmt(target[i])));
   }
 
   showMeasured(position) {
-    this.names.forEach((n, i) => (this.rows.get(n).measured.textContent = fmt(position[i])));
+    this.names.forEach((n, i) => setText(this.rows.get(n).measured, fmt(position[i])));
   }
 
   clearValues() {
@@ -78,7 +82,7 @@ export class Panel {
 
   status(text, down = false) {
     const el = $('status');
-    el.textContent = text;
+    setText(el, text);
     el.className = down ? 'down' : '';
   }
 

@@ -204,6 +204,7 @@ export class Viewer {
     if (!this.dirty || !this.worlds.length) return false;
     this.dirty = false;
     this.renderer.render(this.scene, this.camera);
+    this.drawCalls = this.renderer.info.render.calls; // per frame: one per geom, any world count
     this._placeLabels();
     this.renders++;
     return true;
