@@ -218,12 +218,14 @@ class NativeBatch:
         return Snapshot(
             tick=self._tick,
             sim_time=self._world_ticks * self.tick_dt,
-            position=self._qpos[:, self._qpos_adr].astype(f32),  # fancy indexing and astype copy
-            velocity=self._qvel[:, self._dof].astype(f32),
-            effort=self._effort.astype(f32),
+            # New C-ordered arrays (the wire serialises rows of them; fancy indexing alone
+            # may hand back a column-major array).
+            position=np.ascontiguousarray(self._qpos[:, self._qpos_adr], dtype=f32),
+            velocity=np.ascontiguousarray(self._qvel[:, self._dof], dtype=f32),
+            effort=self._effort.astype(f32, order="C"),
             target=self._targets.copy(),
-            flange_pos=self._flange_pos.astype(f32),
-            flange_quat=self._flange_quat.astype(f32),
+            flange_pos=self._flange_pos.astype(f32, order="C"),
+            flange_quat=self._flange_quat.astype(f32, order="C"),
             faults=self._faults.copy(),
             body_pos=self._xpos.astype(np.float32),  # astype copies
             body_quat=self._xquat.astype(np.float32),
