@@ -11,7 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.api import health, info, scene, sim, web, worlds, ws
+from service.api import health, info, recordings, scene, sim, snapshots, web, worlds, ws
 from service.errors import ArmfleetError, BadCommand
 from service.ros import rosbridge
 from service.ros.topics import TopicMap, parse_world_list
@@ -115,7 +115,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         TopicMap(parse_world_list(settings.ros2_worlds, settings.worlds)), settings.ros2_rate
     )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    for module in (health, info, worlds, sim, scene, ws, web, rosbridge):
+    for module in (health, info, worlds, sim, scene, ws, web, rosbridge, snapshots, recordings):
         app.include_router(module.router)
     web.mount_static(app)
     return app

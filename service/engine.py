@@ -23,7 +23,7 @@ import warp as wp
 from mjcf import SCENE_XML
 from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
 from service.robot import LoadedRobot, load_robot
-from service.types import Batch, Snapshot
+from service.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.engine")
 
@@ -100,6 +100,13 @@ def _gather_state(
         wp.atomic_add(nfault_out, 0, 1)
     else:
         fault_out[w] = 0
+
+
+def _host_layout(arr: wp.array) -> tuple[tuple[int, ...], type]:
+    """(shape, numpy dtype) of `arr.numpy()` without copying a device array to find out."""
+    scalar = getattr(arr.dtype, "_wp_scalar_type_", arr.dtype)
+    inner = tuple(getattr(arr.dtype, "_shape_", ()))
+    return (*arr.shape, *inner), wp.dtype_to_numpy(scalar)
 
 
 @wp.kernel(enable_backward=False)
@@ -347,6 +354,44 @@ class WorldBatch(Batch):
         return SnapshotArrays(
             self._tick, self._world_ticks * self.tick_dt, state, bodies, self._faults.copy()
         )
+
+    # -- state -----------------------------------------------------------------------------
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        """Per-world shape of each physics field of `BatchState` for this model."""
+        return {f: _host_layout(getattr(self._d, f))[0][1:] for f in PHYSICS_FIELDS}
+
+    def get_state(self) -> BatchState:
+        """Every world's full state at the last tick boundary (host copies), see `BatchState`."""
+        physics = {f: np.array(getattr(self._d, f).numpy(), copy=True) for f in PHYSICS_FIELDS}
+        return BatchState(
+            tick=self._tick,
+            world_ticks=self._world_ticks.copy(),
+            faults=self._faults.copy(),
+            targets=self._targets.copy(),
+            physics=physics,
+        )
+
+    def set_state(self, state: BatchState) -> None:
+        """Continue from `state` (same model and nworld): checked fully before anything changes.
+
+        Raises ValueError naming the first mismatch; the batch is then untouched.
+        """
+        state.check_compatible(self.nworld, self.physics_shapes())
+        with wp.ScopedDevice(self.device):
+            for f in PHYSICS_FIELDS:
+                arr = state.physics[f]
+                if arr.size:
+                    dst = getattr(self._d, f)
+                    dst.assign(arr.astype(_host_layout(dst)[1], copy=False))
+            # Overflow flags are sticky until a reset; at a tick boundary no world has a
+            # capacity overflow (it would have been reset), so the restored batch starts clean.
+            self._d.overflow.zero_()
+            self._tick = int(state.tick)
+            self._world_ticks = np.array(state.world_ticks, dtype=np.int64)
+            self._faults = np.array(state.faults, dtype=np.int64)
+            self._targets = np.array(state.targets, dtype=np.float64)
+            self._gather()  # the snapshot shows the restored state at once
 
     # -- test and diagnostics hooks ---------------------------------------------------------
 

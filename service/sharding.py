@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from service.engine import WorldBatch
-from service.types import Snapshot
+from service.types import BatchState, Snapshot
 
 _EMPTY = np.zeros(0, dtype=np.int64)
 
@@ -112,4 +112,26 @@ def join_snapshots(parts: Sequence[Snapshot], tick: int, targets: np.ndarray) ->
         target=targets.copy(),
         faults=np.concatenate([p.faults for p in parts]),
         **joined,
+    )
+
+
+def slice_state(state: BatchState, start: int, stop: int) -> BatchState:
+    """Worlds start..stop of a state, as a state of its own (one shard's part)."""
+    return BatchState(
+        tick=state.tick,
+        world_ticks=state.world_ticks[start:stop],
+        faults=state.faults[start:stop],
+        targets=state.targets[start:stop],
+        physics={k: v[start:stop] for k, v in state.physics.items()},
+    )
+
+
+def join_states(parts: Sequence[BatchState], targets: np.ndarray) -> BatchState:
+    """One state from the shards' states, in shard order; `targets` is the caller's table."""
+    return BatchState(
+        tick=parts[0].tick,
+        world_ticks=np.concatenate([p.world_ticks for p in parts]),
+        faults=np.concatenate([p.faults for p in parts]),
+        targets=targets.copy(),
+        physics={k: np.concatenate([p.physics[k] for p in parts]) for k in parts[0].physics},
     )
