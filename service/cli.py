@@ -17,6 +17,10 @@ import typer
 
 from service.types import Mode
 
+# Nothing here renders with MuJoCo's OpenGL: without this, `import mujoco` loads GLFW (~0.1-0.3 s
+# of every start). A value the user set wins.
+os.environ.setdefault("MUJOCO_GL", "disable")
+
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,

@@ -207,17 +207,25 @@ class NativeBatch:
         return self._targets.copy()
 
     def snapshot(self) -> Snapshot:
-        """All worlds at the end of the last completed tick, copied."""
+        """All worlds at the end of the last completed tick, copied.
+
+        States are float32 as the warp engine's are: the same frames on the wire (a float64
+        JSON number is ~twice as long, and serialising frames is what a CPU service spends
+        most on besides physics); targets stay float64, as commanded.
+        """
         self._refresh_kinematics()
+        f32 = np.float32
         return Snapshot(
             tick=self._tick,
             sim_time=self._world_ticks * self.tick_dt,
-            position=self._qpos[:, self._qpos_adr].copy(),
-            velocity=self._qvel[:, self._dof].copy(),
-            effort=self._effort.copy(),
+            # New C-ordered arrays (the wire serialises rows of them; fancy indexing alone
+            # may hand back a column-major array).
+            position=np.ascontiguousarray(self._qpos[:, self._qpos_adr], dtype=f32),
+            velocity=np.ascontiguousarray(self._qvel[:, self._dof], dtype=f32),
+            effort=self._effort.astype(f32, order="C"),
             target=self._targets.copy(),
-            flange_pos=self._flange_pos.copy(),
-            flange_quat=self._flange_quat.copy(),
+            flange_pos=self._flange_pos.astype(f32, order="C"),
+            flange_quat=self._flange_quat.astype(f32, order="C"),
             faults=self._faults.copy(),
             body_pos=self._xpos.astype(np.float32),  # astype copies
             body_quat=self._xquat.astype(np.float32),
