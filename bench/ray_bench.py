@@ -11,9 +11,11 @@ Two measurements, both of the engine as the loop drives it (no HTTP in between):
   scheduling, the reply), reported as p50 / p99 / mean; the snapshot fetch (all shards' states
   into the API process) is timed beside it.
 
-Standalone, e.g. on the GPU machine:
-``python -m bench.ray_bench --device cuda --worlds 32768 --out ray_cuda.json``.
-Imports Ray, Warp and MuJoCo inside functions so that importing this module stays light.
+Section 15 of ``armfleet bench`` (``--section 15``; on by default with ``--device cuda``), or
+``python -m bench.ray_bench --device cuda``. Where the bench runner's dependencies are missing
+(the lent GPU machine): ``python -c "import sys; from bench.ray_bench import standalone;
+standalone(sys.argv[1:])" --device cuda --out ray_cuda.json``. Ray, Warp and MuJoCo are imported
+inside functions so that importing this module stays light.
 """
 
 from __future__ import annotations
@@ -36,9 +38,12 @@ def _pct(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
-def fast_rate(batch: Any, seconds: float, warmup: float = 1.0) -> dict[str, Any]:
-    """Ticks/s and world-steps/s stepping flat out with a snapshot every 1/30 s."""
-    period = 1.0 / SNAPSHOT_HZ
+def fast_rate(
+    batch: Any, seconds: float, warmup: float = 1.0, snapshot_hz: float = SNAPSHOT_HZ
+) -> dict[str, Any]:
+    """Ticks/s and world-steps/s stepping flat out with a snapshot every 1/`snapshot_hz` s
+    (none when 0: what the shards' compute alone scales to)."""
+    period = 1.0 / snapshot_hz if snapshot_hz else float("inf")
     end_warm = time.perf_counter() + warmup
     while time.perf_counter() < end_warm:
         batch.step(1)
@@ -59,7 +64,9 @@ def fast_rate(batch: Any, seconds: float, warmup: float = 1.0) -> dict[str, Any]
         "ticks": ticks,
         "snapshots": snaps,
         "ticks_per_s": round(ticks / elapsed, 2),
-        "world_steps_per_s": round(ticks * batch.nworld / elapsed, 1),
+        # worlds x physics steps, as in section 1
+        "world_steps_per_s": round(ticks * batch.substeps * batch.nworld / elapsed, 1),
+        "snapshots_with_step": getattr(batch, "prefetched", None),
     }
 
 
@@ -70,6 +77,7 @@ def round_trip(batch: Any, ticks: int) -> dict[str, Any]:
     deadline = time.perf_counter()
     next_snap = deadline
     late = 0
+    start = time.perf_counter()
     for _ in range(ticks):
         delay = deadline - time.perf_counter()
         if delay > 0:
@@ -101,7 +109,9 @@ def round_trip(batch: Any, ticks: int) -> dict[str, Any]:
         "shards": batch.shards,
         "control_hz": batch.control_hz,
         "ticks": ticks,
+        "achieved_hz": round(ticks / (time.perf_counter() - start), 2),
         "late_ticks": late,
+        "snapshots_with_step": batch.prefetched,
         "ray_overhead": stats(overhead),
         "step_wall": stats(wall),
         "slowest_shard": stats(shard),
@@ -127,7 +137,12 @@ def run(
     from service.ray_shards import RayBatch, connect
 
     out = {} if out is None else out
-    out.update({"device": device, "worlds_per_shard": worlds, "fast": {}, "rt": {}})
+    out.update({"device": device, "worlds_per_shard": worlds, "fast": {}, "steps": {}, "rt": {}})
+
+    def both(key: str, batch: Any) -> dict[str, Any]:
+        out["fast"][key] = res = fast_rate(batch, seconds)
+        out["steps"][key] = fast_rate(batch, seconds / 2, warmup=0.2, snapshot_hz=0)
+        return res
 
     def saved(msg: str) -> None:
         say(msg)
@@ -138,13 +153,13 @@ def run(
     # The in-process baseline first: on a cold machine it compiles the kernels the actors load.
     wb = WorldBatch(worlds, device=device)
     say(f"in-process WorldBatch({worlds}) built in {time.perf_counter() - t0:.1f} s")
-    out["fast"]["in_process_1x"] = fast_rate(wb, seconds)
+    both("in_process_1x", wb)
     saved(f"  in-process: {out['fast']['in_process_1x']}")
     del wb
     gc.collect()
     if single_gpu_double:
         wb = WorldBatch(worlds * shards, device=device)
-        out["fast"]["in_process_all_worlds"] = fast_rate(wb, seconds)
+        both("in_process_all_worlds", wb)
         saved(f"  in-process, {worlds * shards} worlds: {out['fast']['in_process_all_worlds']}")
         del wb
         gc.collect()
@@ -157,10 +172,9 @@ def run(
         t1 = time.perf_counter()
         rb = RayBatch(worlds * k, k, device=device)
         build = time.perf_counter() - t1
-        res = fast_rate(rb, seconds)
+        res = both(f"ray_{k}_shard", rb)
         res["build_s"] = round(build, 2)
         res["device_name"] = rb.device_name
-        out["fast"][f"ray_{k}_shard"] = res
         saved(f"  ray {k} shard(s): {res}")
         rb.close()
         del rb
@@ -170,6 +184,11 @@ def run(
     out["scaling"] = round(many / one, 3)
     out["scaling_vs_in_process"] = round(
         many / out["fast"]["in_process_1x"]["world_steps_per_s"], 3
+    )
+    steps = {k: v["world_steps_per_s"] for k, v in out["steps"].items()}
+    out["steps_scaling"] = round(steps[f"ray_{shards}_shard"] / steps["ray_1_shard"], 3)
+    out["steps_scaling_vs_in_process"] = round(
+        steps[f"ray_{shards}_shard"] / steps["in_process_1x"], 3
     )
     for n in rt_worlds:
         rb = RayBatch(n * shards, shards, device=device)
@@ -197,43 +216,117 @@ def machine() -> dict[str, Any]:
     return info
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--device", default="cpu")
-    ap.add_argument("--worlds", type=int, default=64, help="worlds per shard (fast mode)")
-    ap.add_argument("--shards", type=int, default=2)
-    ap.add_argument("--seconds", type=float, default=8.0, help="fast-mode window per config")
-    ap.add_argument("--rt-ticks", type=int, default=600, help="ticks paced at 60 Hz")
-    ap.add_argument(
-        "--rt-worlds", type=int, nargs="*", default=[64], help="worlds per shard at 60 Hz"
-    )
-    ap.add_argument("--no-double", action="store_true", help="skip one device with all worlds")
-    ap.add_argument("--out", default=None, help="JSON file to write")
-    a = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    payload: dict[str, Any] = {"machine": machine(), "command": " ".join(sys.argv)}
+def _rows(payload: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per configuration: fast-mode rates, then the 60 Hz round trips."""
+    labels = {
+        "in_process_1x": "in-process",
+        "in_process_all_worlds": "in-process, all",
+        "ray_1_shard": "Ray 1 shard",
+    }
+    rows = []
+    for group, title in (("fast", "fast, 30 Hz snapshots"), ("steps", "steps only")):
+        one = payload[group].get("ray_1_shard", {}).get("world_steps_per_s")
+        for key, res in payload[group].items():
+            label = labels.get(key, f"Ray {res['shards']} shards")
+            rows.append(
+                {
+                    "run": f"{title}, {label}",
+                    "worlds": res["nworld"],
+                    "ticks/s": res["ticks_per_s"],
+                    "world-steps/s": round(res["world_steps_per_s"]),
+                    "vs Ray 1 shard": round(res["world_steps_per_s"] / one, 2) if one else "",
+                    "Ray ms/tick p50": "",
+                    "Ray ms/tick p99": "",
+                    "snapshot ms p50": "",
+                }
+            )
+    for n, res in payload["rt"].items():
+        rows.append(
+            {
+                "run": f"60 Hz, Ray {res['shards']} shards",
+                "worlds": int(n),
+                "ticks/s": res["achieved_hz"],
+                "world-steps/s": "",
+                "vs Ray 1 shard": "",
+                "Ray ms/tick p50": res["ray_overhead"]["p50_ms"],
+                "Ray ms/tick p99": res["ray_overhead"]["p99_ms"],
+                "snapshot ms p50": res["snapshot_fetch"]["p50_ms"],
+            }
+        )
+    return rows
 
-    def save(data: dict[str, Any]) -> None:
-        data["took_s"] = round(time.perf_counter() - t0, 1)
-        if a.out:
-            with open(a.out, "w") as fh:
-                json.dump(data, fh, indent=1)
 
+def measure(
+    quick: bool, device: str, worlds: int | None, say: Any = print, save: Any = None
+) -> dict[str, Any]:
+    """The section's work with its default sizes: 2 x 32768 worlds on CUDA, small on the CPU."""
+    cuda = device.startswith("cuda")
+    per_shard = worlds or (32768 if cuda else (16 if quick else 64))
+    small = 64 if cuda else 8
+    payload: dict[str, Any] = {"machine": machine()}
     run(
-        a.device,
-        a.worlds,
-        a.seconds,
-        a.rt_ticks,
-        a.rt_worlds,
-        a.shards,
-        not a.no_double,
+        device,
+        per_shard,
+        seconds=3.0 if quick else 8.0,
+        rt_ticks=120 if quick else 600,
+        rt_worlds=sorted({small, per_shard}),
+        say=say,
         out=payload,
         save=save,
     )
+    return payload
+
+
+try:  # the registry is part of the bench package; the device machine may run this file alone
+    from bench.registry import Context, Result, section
+except ImportError:  # pragma: no cover
+    section = None
+
+if section is not None:
+
+    @section(
+        15,
+        "ray",
+        "Ray shards: one vs two in fast mode; the Ray round trip per tick at 60 Hz",
+        ("cpu", "cuda"),
+        default_on=("cuda",),
+    )
+    def ray_shards(ctx: Context) -> Result:
+        payload = measure(ctx.quick, ctx.device, ctx.worlds[0] if ctx.worlds else None, ctx.say)
+        notes = [
+            f"two shards / one shard (Ray): {payload['scaling']}x with 30 Hz snapshots, "
+            f"{payload['steps_scaling']}x steps only; / in-process one device: "
+            f"{payload['scaling_vs_in_process']}x, {payload['steps_scaling_vs_in_process']}x",
+            "Ray ms/tick: driver's step wall time minus the slowest shard's own step time; "
+            "snapshot: all shards' states into the API process (30 Hz)",
+        ]
+        return Result(_rows(payload), data=payload, notes=notes)
+
+
+def standalone(argv: list[str] | None = None) -> int:
+    """Without the bench runner (e.g. on a machine lacking its dependencies): JSON to --out."""
+    ap = argparse.ArgumentParser(description="Ray shards benchmark, standalone")
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--worlds", type=int, default=None, help="worlds per shard")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default=None, help="JSON file to write")
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+
+    def save(payload: dict[str, Any]) -> None:
+        payload["took_s"] = round(time.perf_counter() - t0, 1)
+        if a.out:
+            with open(a.out, "w") as fh:
+                json.dump(payload, fh, indent=1)
+
+    payload = measure(a.quick, a.device, a.worlds, save=save)
+    payload["rows"] = _rows(payload)
     save(payload)
-    print(json.dumps(payload, indent=1))
+    print(json.dumps(payload["rows"], indent=1))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from bench.runner import main
+
+    raise SystemExit(main(module=__name__))

@@ -3,6 +3,7 @@
 * cold: Warp's kernel cache is an empty temporary directory (``WARP_CACHE_PATH``, which Warp 1.19
   reads at ``wp.init()`` and uses as ``<path>/<warp version>``), so every kernel the tick uses is
   generated and compiled;
+* native: ``--engine mujoco``, which compiles nothing (median of the same number of starts);
 * warm: the default cache (``wp.config.kernel_cache_dir``, ~/.cache/warp/<version> on Linux),
   after the cold run or any earlier use has filled it; the median of 3 starts (1 with
   ``--quick``).
@@ -55,6 +56,14 @@ def startup(ctx: Context) -> Result:
             "min_s": min(warm),
             "max_s": max(warm),
         }
+    # The native engine (--engine mujoco) compiles nothing: its start is imports and the build.
+    native = [
+        t
+        for i in range(repeats)
+        if (t := start(f"native{i}", {"ARMFLEET_ENGINE": "mujoco"})) is not None
+    ]
+    if native:
+        out["native"] = {"ready_s": statistics.median(native), "runs_s": native}
     data = {
         "nworld": nworld,
         "measured": "start of clients.testing.serve(`python -m service.cli serve`) → it returned "
@@ -71,6 +80,15 @@ def startup(ctx: Context) -> Result:
         runs = ", ".join(f"{x:.1f}" for x in warm)
         rows.append(
             {"kernel cache": "warm (median)", "seconds": out["warm"]["ready_s"], "runs": runs}
+        )
+    if native:
+        runs = ", ".join(f"{x:.1f}" for x in native)
+        rows.append(
+            {
+                "kernel cache": "native engine (median)",
+                "seconds": out["native"]["ready_s"],
+                "runs": runs,
+            }
         )
     return Result(rows, data, [f"{nworld} worlds"])
 

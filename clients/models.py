@@ -3,7 +3,8 @@
 Each class follows one reply schema of the server (service/schemas.py); `from_json` reads the
 fields it knows and ignores the rest, so a newer server that adds a field does not break an
 older client. Nothing about the robot is written here: joint names, limits and home come from
-`/v1/info` (`Info.joints`) and every state carries its joint names (`name`).
+`/v1/info` (`Info.joints`, each the service's own `JointSpec`) and every state carries its
+joint names (`name`).
 
 Arrays are numpy float64; JSON null (a NaN on the server side) becomes NaN.
 """
@@ -15,6 +16,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from service.types import JointSpec
 
 JointRef = str | int  # a joint by name ("elbow_joint") or by index in `Info.joints` (2)
 WorldSpec = int | str | Iterable[int] | None  # one world, "0-63", [0, 3, 7], or None: all
@@ -42,16 +45,9 @@ def joint_index(names: Sequence[str], joint: JointRef) -> int:
         raise KeyError(f"unknown joint {joint!r}; joints are {list(names)}") from None
 
 
-@dataclass(frozen=True)
-class JointInfo:
-    """One commanded joint as the served model defines it (radians, rad/s, N·m or N)."""
-
-    name: str
-    lower: float  # target range low end [rad]
-    upper: float  # target range high end [rad]
-    home: float  # target after a reset [rad]
-    velocity_limit: float  # [rad/s]
-    effort_limit: float  # actuator force/torque limit
+# One commanded joint (name, lower, upper, home, velocity_limit, effort_limit): the service's
+# own description, so the two cannot drift apart.
+JointInfo = JointSpec
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,18 @@ from fastapi.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service import access
-from service.api import health, info, metrics, scene, sim, web, worlds, ws
+from service.api import (
+    health,
+    info,
+    metrics,
+    recordings,
+    scene,
+    sim,
+    snapshots,
+    web,
+    worlds,
+    ws,
+)
 from service.errors import ArmfleetError, BadCommand
 from service.metrics import CommandCounter
 from service.ros import rosbridge
@@ -128,7 +139,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (health, metrics, web, rosbridge):
         app.include_router(module.router)
     # Every /v1 route can also answer 401/403 (token, origin) and 503 (not ready, client cap).
-    for module in (info, worlds, sim, scene, ws):
+    for module in (info, worlds, sim, scene, ws, snapshots, recordings):
         app.include_router(module.router, responses=errors(*ANY))
     web.mount_static(app)
     generate = app.openapi

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import os
+import socket
 import time
 from pathlib import Path
 from typing import Annotated, Any
@@ -15,6 +16,10 @@ from typing import Annotated, Any
 import typer
 
 from service.types import Mode
+
+# Nothing here renders with MuJoCo's OpenGL: without this, `import mujoco` loads GLFW (~0.1-0.3 s
+# of every start). A value the user set wins.
+os.environ.setdefault("MUJOCO_GL", "disable")
 
 app = typer.Typer(
     add_completion=False,
@@ -39,6 +44,21 @@ def _opt(name: str) -> Any:
     )
 
 
+def _check_port_free(host: str, port: int) -> None:
+    """Fail before building anything when the port is taken: a server that cannot listen would
+    otherwise still start, stop, and save its fresh state over snapshot `latest`."""
+    if port == 0:
+        return
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            typer.echo(f"armfleet serve: cannot listen on {host}:{port}: {exc}", err=True)
+            raise typer.Exit(1) from None
+
+
 @app.command()
 def serve(
     worlds: Annotated[int | None, _opt("worlds")] = None,
@@ -59,10 +79,22 @@ def serve(
     max_clients: Annotated[int | None, _opt("max_clients")] = None,
     command_rate: Annotated[float | None, _opt("command_rate")] = None,
     command_burst: Annotated[int | None, _opt("command_burst")] = None,
+    ws_compression: Annotated[bool | None, _opt("ws_compression")] = None,
     ros2: Annotated[bool | None, _opt("ros2")] = None,
     ros2_rate: Annotated[float | None, _opt("ros2_rate")] = None,
     ros2_worlds: Annotated[str | None, _opt("ros2_worlds")] = None,
     ros2_network: Annotated[bool | None, _opt("ros2_network")] = None,
+    data_dir: Annotated[str | None, _opt("data_dir")] = None,
+    restore: Annotated[str | None, _opt("restore")] = None,
+    save_on_exit: Annotated[bool | None, _opt("save_on_exit")] = None,
+    record: Annotated[str | None, _opt("record")] = None,
+    record_worlds: Annotated[str | None, _opt("record_worlds")] = None,
+    record_rate: Annotated[float | None, _opt("record_rate")] = None,
+    record_queue: Annotated[int | None, _opt("record_queue")] = None,
+    foxglove: Annotated[bool | None, _opt("foxglove")] = None,
+    foxglove_port: Annotated[int | None, _opt("foxglove_port")] = None,
+    foxglove_worlds: Annotated[str | None, _opt("foxglove_worlds")] = None,
+    foxglove_rate: Annotated[float | None, _opt("foxglove_rate")] = None,
 ) -> None:
     """Start the service: N worlds, a real-time loop, REST + WebSocket on http://HOST:PORT.
 
@@ -75,6 +107,7 @@ def serve(
     from service.settings import Settings
 
     settings = Settings(**given)
+    _check_port_free(settings.host, settings.port)
     level = settings.log_level
     logging.basicConfig(level=level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:
@@ -88,8 +121,42 @@ def serve(
         port=settings.port,
         log_level=level,
         ws_max_size=1 << 20,
+        # Browsers offer permessage-deflate on every socket; deflating binary frames for each
+        # viewer was the largest server cost of many viewers (bench section 9).
+        ws_per_message_deflate=settings.ws_compression,
         timeout_graceful_shutdown=3,
     )
+
+
+@app.command()
+def replay(
+    recording: Annotated[str, typer.Argument(help="an MCAP file written by --record")],
+    out: Annotated[str | None, typer.Option(help="also write the replayed run here")] = None,
+    device: Annotated[str, typer.Option(help="warp device (bit-exact on the same one)")] = "cpu",
+) -> None:
+    """Re-run a recording's commands at their ticks (fast) and check every recorded state
+    bit for bit; exit 1 naming the first tick, world and joint that differ."""
+    logging.basicConfig(level="WARNING", format="%(asctime)s %(name)s %(message)s")
+    from service.replay import ReplayError
+    from service.replay import replay as run_replay
+
+    try:
+        report = run_replay(recording, out=out, device=device)
+    except ReplayError as exc:
+        typer.echo(f"armfleet replay: {exc}", err=True)
+        raise typer.Exit(2) from None
+    if report.truncated:
+        typer.echo(f"note: the recording ends early ({report.truncated}); replayed what it holds")
+    typer.echo(
+        f"replayed {report.ticks} ticks of {report.nworld} worlds in {report.wall_s:.2f} s "
+        f"({report.ticks_per_s:.0f} ticks/s): {report.commands} commands, "
+        f"{report.restores} restores, {report.states_compared} recorded states compared"
+        + (f"; wrote {report.out}" if report.out else "")
+    )
+    if report.divergence is not None:
+        typer.echo(f"DIVERGED: {report.divergence}", err=True)
+        raise typer.Exit(1)
+    typer.echo("identical: every recorded state reproduced bit for bit")
 
 
 @app.command()

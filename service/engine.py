@@ -13,6 +13,7 @@ import logging
 import os
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import mujoco
 import mujoco_warp as mjw
@@ -22,7 +23,7 @@ import warp as wp
 from mjcf import SCENE_XML
 from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
 from service.robot import LoadedRobot, load_robot
-from service.types import Batch, Snapshot
+from service.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.engine")
 
@@ -101,6 +102,13 @@ def _gather_state(
         fault_out[w] = 0
 
 
+def _host_layout(arr: wp.array) -> tuple[tuple[int, ...], type]:
+    """(shape, numpy dtype) of `arr.numpy()` without copying a device array to find out."""
+    scalar = getattr(arr.dtype, "_wp_scalar_type_", arr.dtype)
+    inner = tuple(getattr(arr.dtype, "_shape_", ()))
+    return (*arr.shape, *inner), wp.dtype_to_numpy(scalar)
+
+
 @wp.kernel(enable_backward=False)
 def _gather_bodies(
     xpos: wp.array2d(dtype=wp.vec3),
@@ -116,6 +124,40 @@ def _gather_bodies(
         out[w, b, i] = p[i]
     for i in range(4):
         out[w, b, 3 + i] = q[i]
+
+
+class SnapshotArrays(NamedTuple):
+    """A Snapshot before it is cut into fields: contiguous host arrays, as the gather kernels
+    write them, so that shipping one between processes copies no field on its own.
+
+    state: position, velocity, effort, flange_pos, flange_quat side by side   (nworld, 28) f32
+    bodies: body_pos then body_quat of every body                          (nworld, nbody, 7) f32
+    sim_time, faults: as in Snapshot                                                 (nworld,)
+    """
+
+    tick: int
+    sim_time: np.ndarray
+    state: np.ndarray
+    bodies: np.ndarray
+    faults: np.ndarray
+
+
+def snapshot_from(a: SnapshotArrays, target: np.ndarray) -> Snapshot:
+    """The Snapshot whose fields are views of `a`'s arrays (no copy); `target` is the caller's."""
+    state, bodies = a.state, a.bodies
+    return Snapshot(
+        tick=a.tick,
+        sim_time=a.sim_time,
+        position=state[:, _POS],
+        velocity=state[:, _VEL],
+        effort=state[:, _EFF],
+        target=target,
+        flange_pos=state[:, _FPOS],
+        flange_quat=state[:, _FQUAT],
+        faults=a.faults,
+        body_pos=bodies[:, :, :3],
+        body_quat=bodies[:, :, 3:],
+    )
 
 
 class WorldBatch(Batch):
@@ -300,24 +342,56 @@ class WorldBatch(Batch):
 
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, copied to host memory."""
+        return snapshot_from(self.snapshot_arrays(), self._targets.copy())
+
+    def snapshot_arrays(self) -> SnapshotArrays:
+        """The snapshot as the few contiguous host arrays it is made of (cheap to ship: Ray)."""
         state = self._state.numpy()
         bodies = self._bodies.numpy()
         if self.device.is_cpu:
             # On the CPU .numpy() is a view the next tick overwrites.
             state, bodies = state.copy(), bodies.copy()
-        return Snapshot(
-            tick=self._tick,
-            sim_time=self._world_ticks * self.tick_dt,
-            position=state[:, _POS],
-            velocity=state[:, _VEL],
-            effort=state[:, _EFF],
-            target=self._targets.copy(),
-            flange_pos=state[:, _FPOS],
-            flange_quat=state[:, _FQUAT],
-            faults=self._faults.copy(),
-            body_pos=bodies[:, :, :3],
-            body_quat=bodies[:, :, 3:],
+        return SnapshotArrays(
+            self._tick, self._world_ticks * self.tick_dt, state, bodies, self._faults.copy()
         )
+
+    # -- state -----------------------------------------------------------------------------
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        """Per-world shape of each physics field of `BatchState` for this model."""
+        return {f: _host_layout(getattr(self._d, f))[0][1:] for f in PHYSICS_FIELDS}
+
+    def get_state(self) -> BatchState:
+        """Every world's full state at the last tick boundary (host copies), see `BatchState`."""
+        physics = {f: np.array(getattr(self._d, f).numpy(), copy=True) for f in PHYSICS_FIELDS}
+        return BatchState(
+            tick=self._tick,
+            world_ticks=self._world_ticks.copy(),
+            faults=self._faults.copy(),
+            targets=self._targets.copy(),
+            physics=physics,
+        )
+
+    def set_state(self, state: BatchState) -> None:
+        """Continue from `state` (same model and nworld): checked fully before anything changes.
+
+        Raises ValueError naming the first mismatch; the batch is then untouched.
+        """
+        state.check_compatible(self.nworld, self.physics_shapes())
+        with wp.ScopedDevice(self.device):
+            for f in PHYSICS_FIELDS:
+                arr = state.physics[f]
+                if arr.size:
+                    dst = getattr(self._d, f)
+                    dst.assign(arr.astype(_host_layout(dst)[1], copy=False))
+            # Overflow flags are sticky until a reset; at a tick boundary no world has a
+            # capacity overflow (it would have been reset), so the restored batch starts clean.
+            self._d.overflow.zero_()
+            self._tick = int(state.tick)
+            self._world_ticks = np.array(state.world_ticks, dtype=np.int64)
+            self._faults = np.array(state.faults, dtype=np.int64)
+            self._targets = np.array(state.targets, dtype=np.float64)
+            self._gather()  # the snapshot shows the restored state at once
 
     # -- test and diagnostics hooks ---------------------------------------------------------
 

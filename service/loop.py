@@ -17,14 +17,18 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 
 from service import commands
 from service.errors import NotPaused, UnknownWorld
-from service.types import Batch, Mode, Snapshot
+from service.types import Batch, BatchState, Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
+T = TypeVar("T")
+# Called on the sim thread after a restore: (tick before, the state restored, its name).
+RestoreListener = Callable[[int, BatchState, str], None]
 
 # In fast mode with nobody streaming, a snapshot is still taken this often so that reads are
 # never older than this; readers that need the current tick ask for one explicitly.
@@ -99,6 +103,9 @@ class SimLoop:
         self._last_snapshot_wall = 0.0
         self._stats = LoopStats(self._tick, self._mode, 0.0, 0.0)
         self._window: tuple[float, int] = (time.monotonic(), self._tick)
+        # Work for the sim thread between two ticks (state, restore, reads of the batch).
+        self._requests: list[tuple[Callable[[Batch], Any], concurrent.futures.Future[Any]]] = []
+        self._restore_listeners: tuple[RestoreListener, ...] = ()
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -120,6 +127,7 @@ class SimLoop:
             self._wake.notify_all()
         if self._thread is not None:
             self._thread.join(timeout=10)
+        self._serve_requests()  # the thread is gone: requests that raced the stop are served here
         for _, fut in self._step_waiters:
             fut.cancel()
         for _, fut in self._snapshot_waiters:
@@ -187,6 +195,69 @@ class SimLoop:
         """Targets as of every command accepted so far (some may not be in effect yet)."""
         with self._lock:
             return self._pending[world].copy()
+
+    # -- work between ticks (any thread) ---------------------------------------------------
+
+    def call(self, fn: Callable[[Batch], T]) -> concurrent.futures.Future[T]:
+        """Run `fn(batch)` on the sim thread between two ticks; the future gets its result.
+
+        The batch belongs to the sim thread, so this is how other threads read or change it. In
+        paused mode the request is served at once. Never wait on it from the sim thread itself.
+        """
+        fut: concurrent.futures.Future[T] = concurrent.futures.Future()
+        with self._wake:
+            if self._running:
+                self._requests.append((fn, fut))
+                self._wake.notify_all()
+                return fut
+        _run_request(fn, fut, self.batch)  # not running: no other thread touches the batch
+        return fut
+
+    def request_state(self) -> concurrent.futures.Future[BatchState]:
+        """Every world's full state at the next tick boundary (`Batch.get_state`)."""
+        return self.call(lambda batch: batch.get_state())
+
+    def restore(self, state: BatchState, name: str = "") -> concurrent.futures.Future[int]:
+        """Continue from `state` at the next tick boundary; the future gets the restored tick.
+
+        Commands accepted but not yet applied are dropped (they belonged to the replaced state);
+        step requests waiting in paused mode complete at the restored tick. A state that does not
+        fit fails the future with ValueError, and nothing changes.
+        """
+        return self.call(lambda batch: self._restore(batch, state, name))
+
+    def add_restore_listener(self, listener: RestoreListener) -> None:
+        self._restore_listeners = (*self._restore_listeners, listener)
+
+    def remove_restore_listener(self, listener: RestoreListener) -> None:
+        self._restore_listeners = tuple(x for x in self._restore_listeners if x is not listener)
+
+    def _restore(self, batch: Batch, state: BatchState, name: str) -> int:
+        tick_before = batch.tick
+        batch.set_state(state)  # checks everything before changing anything
+        with self._lock:
+            self._tick = batch.tick
+            self._step_goal = self._tick
+            self._pending = batch.targets
+            self._dirty[:] = False
+            self._reset[:] = False
+            self._window = (time.monotonic(), self._tick)
+            waiting, self._step_waiters = self._step_waiters, []
+        for listener in self._restore_listeners:
+            try:
+                listener(tick_before, state, name)
+            except Exception:
+                log.exception("restore listener %r failed", listener)
+        self._publish(time.monotonic())
+        for _, fut in waiting:
+            fut.set_result(self._tick)
+        return self._tick
+
+    def _serve_requests(self) -> None:
+        with self._lock:
+            requests, self._requests = self._requests, []
+        for fn, fut in requests:
+            _run_request(fn, fut, self.batch)
 
     # -- time control -----------------------------------------------------------------------
 
@@ -277,9 +348,12 @@ class SimLoop:
     def _run(self) -> None:
         next_deadline = time.perf_counter()
         while True:
+            self._serve_requests()
             with self._wake:
                 if not self._running:
                     return
+                if self._requests:  # arrived while serving: serve before waiting or stepping
+                    continue
                 mode = self._mode
                 if mode is Mode.PAUSED and self._tick >= self._step_goal:
                     self._wake.wait()
@@ -411,3 +485,12 @@ def _resolve(fut: concurrent.futures.Future[Snapshot], snap: Snapshot) -> None:
     if not fut.done():  # a reader that gave up may have cancelled it
         with contextlib.suppress(concurrent.futures.InvalidStateError):
             fut.set_result(snap)
+
+
+def _run_request(fn: Callable[[Batch], T], fut: concurrent.futures.Future[T], batch: Batch) -> None:
+    if not fut.set_running_or_notify_cancel():
+        return
+    try:
+        fut.set_result(fn(batch))
+    except BaseException as exc:  # handed to whoever waits on the future
+        fut.set_exception(exc)

@@ -30,7 +30,7 @@ from mujoco import batch as mjbatch
 from mjcf import SCENE_XML
 from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
 from service.robot import LoadedRobot, load_robot
-from service.types import Snapshot
+from service.types import PHYSICS_FIELDS, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.native")
 
@@ -207,21 +207,66 @@ class NativeBatch:
         return self._targets.copy()
 
     def snapshot(self) -> Snapshot:
-        """All worlds at the end of the last completed tick, copied."""
+        """All worlds at the end of the last completed tick, copied.
+
+        States are float32 as the warp engine's are: the same frames on the wire (a float64
+        JSON number is ~twice as long, and serialising frames is what a CPU service spends
+        most on besides physics); targets stay float64, as commanded.
+        """
         self._refresh_kinematics()
+        f32 = np.float32
         return Snapshot(
             tick=self._tick,
             sim_time=self._world_ticks * self.tick_dt,
-            position=self._qpos[:, self._qpos_adr].copy(),
-            velocity=self._qvel[:, self._dof].copy(),
-            effort=self._effort.copy(),
+            # New C-ordered arrays (the wire serialises rows of them; fancy indexing alone
+            # may hand back a column-major array).
+            position=np.ascontiguousarray(self._qpos[:, self._qpos_adr], dtype=f32),
+            velocity=np.ascontiguousarray(self._qvel[:, self._dof], dtype=f32),
+            effort=self._effort.astype(f32, order="C"),
             target=self._targets.copy(),
-            flange_pos=self._flange_pos.copy(),
-            flange_quat=self._flange_quat.copy(),
+            flange_pos=self._flange_pos.astype(f32, order="C"),
+            flange_quat=self._flange_quat.astype(f32, order="C"),
             faults=self._faults.copy(),
             body_pos=self._xpos.astype(np.float32),  # astype copies
             body_quat=self._xquat.astype(np.float32),
         )
+
+    # -- state ------------------------------------------------------------------------------
+
+    def _state_field(self, name: str) -> np.ndarray:
+        """A live row view of an integration-state field (qfrc_actuator: read-only output)."""
+        return self._b.bind(name)
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        return {f: tuple(self._state_field(f).shape[1:]) for f in PHYSICS_FIELDS}
+
+    def get_state(self) -> BatchState:
+        """Every world's full state (see `BatchState`); float64 rows, eq_active as bool."""
+        physics = {f: np.array(self._state_field(f), copy=True) for f in PHYSICS_FIELDS}
+        physics["eq_active"] = physics["eq_active"] != 0
+        # The effort the snapshot reports is the last tick's, kept in _effort: store it there.
+        physics["qfrc_actuator"][:, self._dof] = self._effort
+        return BatchState(
+            tick=self._tick,
+            world_ticks=self._world_ticks.copy(),
+            faults=self._faults.copy(),
+            targets=self._targets.copy(),
+            physics=physics,
+        )
+
+    def set_state(self, state: BatchState) -> None:
+        """Continue from `state`; checked fully first (ValueError, nothing changed)."""
+        state.check_compatible(self.nworld, self.physics_shapes())
+        for f in PHYSICS_FIELDS:
+            if f != "qfrc_actuator" and state.physics[f].size:
+                self._state_field(f)[:] = state.physics[f]
+        self._tick = int(state.tick)
+        self._world_ticks = np.array(state.world_ticks, dtype=np.int64)
+        self._faults = np.array(state.faults, dtype=np.int64)
+        self._targets = np.array(state.targets, dtype=np.float64)
+        self._effort[:] = state.physics["qfrc_actuator"][:, self._dof]
+        self._warnings_seen[:] = self._warnings()
+        self._kinematics_stale = True
 
     # -- test and diagnostics hooks ---------------------------------------------------------
 

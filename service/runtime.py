@@ -13,17 +13,23 @@ import contextlib
 import logging
 import signal
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import orjson
 
+from service import provenance
 from service.access import ClientSlots
 from service.control import Accepted, Control
+from service.errors import Conflict, NotFound
 from service.hub import StreamHub
 from service.loop import SimLoop
 from service.metrics import Metrics
 from service.settings import Settings
+from service.snapshots import LATEST, SnapshotStore, check_state_support
 from service.types import Batch
+
+if TYPE_CHECKING:
+    from service.recorder import Recorder
 
 log = logging.getLogger("armfleet")
 
@@ -65,13 +71,27 @@ def build_batch(s: Settings) -> Batch:
     return WorldBatch(s.worlds, **kwargs)
 
 
+def optional_surfaces(s: Settings) -> list[Surface]:
+    """The add-ons the settings ask for (imported only when asked for)."""
+    out: list[Surface] = []
+    if s.record is not None:
+        from service.recorder import Recorder
+
+        out.append(Recorder(s.record, s.record_worlds, s.record_rate, s.record_queue))
+    if s.foxglove:
+        from service.foxglove_live import FoxgloveLive
+
+        out.append(FoxgloveLive(s.host, s.foxglove_port, s.foxglove_worlds, s.foxglove_rate))
+    return out
+
+
 class Runtime:
     def __init__(self, settings: Settings, surfaces: tuple[Surface, ...] = ()):
         self.settings = settings
         self.loop: SimLoop | None = None
         self.control: Control | None = None
         self.hub: StreamHub | None = None
-        self.surfaces: list[Surface] = list(surfaces)
+        self.surfaces: list[Surface] = [*surfaces, *optional_surfaces(settings)]
         self.error: str | None = None
         self.metrics = Metrics()
         self.slots = ClientSlots(settings.max_clients)  # shared by HTTP and every socket surface
@@ -79,6 +99,16 @@ class Runtime:
         self._watchdog: asyncio.Task[None] | None = None
         self._stopping: asyncio.Task[None] | None = None
         self._register_levels()
+        self.snapshots = SnapshotStore(settings.data_dir)
+        self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
+
+    @property
+    def recorder(self) -> Recorder | None:
+        """The recording that is running or last ran (None if there was none)."""
+        from service.recorder import Recorder
+
+        found = [x for x in self.surfaces if isinstance(x, Recorder)]
+        return found[-1] if found else None
 
     @property
     def ready(self) -> bool:
@@ -160,6 +190,10 @@ class Runtime:
             self.error = f"{type(exc).__name__}: {exc}"
             log.exception("engine failed to start")
             return
+        self.header = provenance.batch_header(batch)
+        if s.restore and not await asyncio.to_thread(self._restore_at_start, batch, s.restore):
+            batch.close()
+            return
         self.hub = StreamHub(asyncio.get_running_loop())
         loop = SimLoop(batch, s.mode, (self.hub,))
         self.control = Control(loop)
@@ -212,6 +246,28 @@ class Runtime:
         with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
             aio.add_signal_handler(signal.SIGTERM, on_term)
 
+    def _restore_at_start(self, batch: Batch, name: str) -> bool:
+        """`--restore NAME` before the loop starts; False (and `error` set) if it cannot be.
+
+        A missing `latest` only means there was no earlier run: the batch starts from home.
+        """
+        try:
+            check_state_support(batch)
+            state = self.snapshots.load(name, self.header)
+            batch.set_state(state)
+        except NotFound:
+            if name == LATEST:
+                log.warning("no snapshot latest in %s yet: starting at home", self.snapshots.dir)
+                return True
+            self.error = f"--restore {name}: no such snapshot in {self.snapshots.dir}"
+        except Exception as exc:  # Conflict (other model, size, corrupt), ValueError
+            self.error = f"--restore {name}: {exc}"
+        else:
+            log.info("restored snapshot %r at tick %d", name, state.tick)
+            return True
+        log.error("%s", self.error)
+        return False
+
     def stop(self) -> None:
         if self._watchdog is not None:
             self._watchdog.cancel()
@@ -222,4 +278,24 @@ class Runtime:
                 log.exception("surface %s failed to stop", surface.name)
         if self.loop is not None:
             self.loop.stop()
+            if self.settings.save_on_exit and self._can_save():
+                self._save_latest()
             self.loop.batch.close()
+
+    def _can_save(self) -> bool:
+        assert self.loop is not None
+        try:
+            check_state_support(self.loop.batch)
+        except Conflict as exc:
+            log.warning("not saving snapshot latest: %s", exc)
+            return False
+        return True
+
+    def _save_latest(self) -> None:
+        """Snapshot `latest` of the stopped batch; a failure is logged, never raised at exit."""
+        assert self.loop is not None
+        try:
+            info = self.snapshots.save(LATEST, self.loop.batch.get_state(), self.header)
+            log.info("saved snapshot 'latest' at tick %d (%d bytes)", info.tick, info.size_bytes)
+        except Exception:
+            log.exception("could not save snapshot 'latest' in %s", self.snapshots.dir)

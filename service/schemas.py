@@ -387,6 +387,64 @@ class StepRequest(_Strict):
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"ticks": 60}]})
 
 
+# -- snapshots and recordings -----------------------------------------------------------------
+
+# Names become file names under the data directory (see service/snapshots.py).
+SNAPSHOT_NAME = r"^[A-Za-z0-9_][A-Za-z0-9._-]{0,63}$"
+SnapshotName = Annotated[
+    str,
+    Field(
+        pattern=SNAPSHOT_NAME,
+        min_length=1,
+        max_length=64,
+        description="1-64 letters, digits, '.', '_', '-'; not starting with '.' or '-'",
+    ),
+]
+
+
+class SnapshotRequest(_Strict):
+    name: SnapshotName
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"name": "before"}]})
+
+
+class SnapshotInfo(BaseModel):
+    name: str
+    size_bytes: int
+    created: str = Field(description="UTC, ISO 8601")
+    tick: int = Field(description="batch tick the snapshot was taken at")
+    nworld: int
+    model_hash: str = Field(description="sha256 of the compiled model (MJB)")
+
+
+class RestoreReply(BaseModel):
+    name: str
+    tick: int = Field(description="the tick the batch continues from")
+
+
+class RecordingRequest(_Strict):
+    name: SnapshotName = Field(description="file <data-dir>/recordings/<name>.mcap")
+    worlds: str | None = Field(
+        default=None, description="worlds whose states are recorded, e.g. '0-7,12'; default first 8"
+    )
+    rate: float = Field(default=30.0, gt=0, le=1000, description="states per simulated second")
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"name": "run1", "worlds": "0-3", "rate": 30}]},
+    )
+
+
+class RecordingStatus(BaseModel):
+    path: str
+    worlds: list[int]
+    every_ticks: int = Field(description="a state every this many ticks")
+    start_tick: int
+    active: bool = Field(description="still writing")
+    written: int = Field(description="items written so far")
+    error: str | None = Field(description="why the recording stopped early, if it did")
+
+
 # -- the drawable scene (GET /v1/scene; built by service/scene.py) ------------------------------
 
 

@@ -5,6 +5,7 @@ Precedence: a `armfleet serve` option the user typed > ARMFLEET_* variable > the
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Literal
 
 from pydantic import Field, model_validator
@@ -44,6 +45,11 @@ class Settings(BaseSettings):
         DEFAULT_PHYSICS_DT, gt=0, le=0.01, description="approximate physics step [s]"
     )
     max_body_bytes: int = Field(1 << 20, description="larger request bodies get 413")
+    ws_compression: bool = Field(
+        False,
+        description="permessage-deflate on WebSockets (off: a 34 KB float32 pose frame costs "
+        "milliseconds to deflate, per socket, and shrinks by 7%)",
+    )
     log_level: Literal["debug", "info", "warning", "error"] = Field(
         "info", description="debug, info, warning or error"
     )
@@ -64,6 +70,34 @@ class Settings(BaseSettings):
     command_burst: int | None = Field(
         None, ge=1, description="commands a connection may send at once (default: one second's)"
     )
+    data_dir: Path = Field(
+        Path("~/.local/share/armfleet"), description="where snapshots and recordings are kept"
+    )
+    restore: str | None = Field(
+        None, description="start from this snapshot: latest or a snapshot name"
+    )
+    save_on_exit: bool = Field(
+        True, description="save snapshot `latest` on a clean stop (SIGTERM, Ctrl-C)"
+    )
+    record: Path | None = Field(None, description="record to this MCAP file from the start")
+    record_worlds: str | None = Field(
+        None, description="worlds whose states are recorded, e.g. 0-7,12 (default: first 8)"
+    )
+    record_rate: float = Field(
+        30.0, gt=0, le=1000, description="recorded states per simulated second"
+    )
+    record_queue: int = Field(
+        2048,
+        ge=16,
+        le=1_000_000,
+        description="items a recording may hold waiting for the disk; when full it stops",
+    )
+    foxglove: bool = Field(False, description="serve Foxglove's WebSocket protocol")
+    foxglove_port: int = Field(8765, ge=0, le=65535, description="Foxglove WebSocket port")
+    foxglove_worlds: str | None = Field(
+        None, description="worlds shown in Foxglove, e.g. 0-3 (default: first 8)"
+    )
+    foxglove_rate: float = Field(30.0, gt=0, le=240, description="Foxglove frames per second")
     ros2: bool = Field(False, description="join the ROS 2 graph over DDS (Cyclone DDS)")
     ros2_rate: float = Field(
         60.0, gt=0, le=1000, description="/joint_states and /clock rate over DDS and rosbridge [Hz]"

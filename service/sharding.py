@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from service.engine import WorldBatch
-from service.types import Snapshot
+from service.types import BatchState, Snapshot
 
 _EMPTY = np.zeros(0, dtype=np.int64)
 
@@ -104,19 +104,34 @@ def apply_and_step(
     return batch.step(ticks)
 
 
-def join_snapshots(
-    parts: Sequence[Snapshot], tick: int, targets: np.ndarray, faults: np.ndarray | None = None
-) -> Snapshot:
-    """One Snapshot from the shards' snapshots, in shard order.
-
-    `targets` is the caller's table (what was commanded, the same for every engine); `faults`
-    replaces the shards' own counts when the caller keeps them (RayBatch does, so that a rebuilt
-    shard does not forget its worlds' history).
-    """
+def join_snapshots(parts: Sequence[Snapshot], tick: int, targets: np.ndarray) -> Snapshot:
+    """One Snapshot from the shards' snapshots, in shard order; `targets` is the caller's table."""
     joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in WORLD_FIELDS}
     return Snapshot(
         tick=tick,
         target=targets.copy(),
-        faults=np.concatenate([p.faults for p in parts]) if faults is None else faults.copy(),
+        faults=np.concatenate([p.faults for p in parts]),
         **joined,
+    )
+
+
+def slice_state(state: BatchState, start: int, stop: int) -> BatchState:
+    """Worlds start..stop of a state, as a state of its own (one shard's part)."""
+    return BatchState(
+        tick=state.tick,
+        world_ticks=state.world_ticks[start:stop],
+        faults=state.faults[start:stop],
+        targets=state.targets[start:stop],
+        physics={k: v[start:stop] for k, v in state.physics.items()},
+    )
+
+
+def join_states(parts: Sequence[BatchState], targets: np.ndarray) -> BatchState:
+    """One state from the shards' states, in shard order; `targets` is the caller's table."""
+    return BatchState(
+        tick=parts[0].tick,
+        world_ticks=np.concatenate([p.world_ticks for p in parts]),
+        faults=np.concatenate([p.faults for p in parts]),
+        targets=targets.copy(),
+        physics={k: np.concatenate([p.physics[k] for p in parts]) for k in parts[0].physics},
     )

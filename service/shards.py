@@ -21,8 +21,15 @@ from typing import Any
 import numpy as np
 
 from service.engine import WorldBatch
-from service.sharding import ShardPlan, StagedCommands, apply_and_step, join_snapshots
-from service.types import Batch, Snapshot
+from service.sharding import (
+    ShardPlan,
+    StagedCommands,
+    apply_and_step,
+    join_snapshots,
+    join_states,
+    slice_state,
+)
+from service.types import Batch, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.shards")
 
@@ -67,6 +74,18 @@ def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
             return
         if op == "step":
             conn.send(apply_and_step(batch, *args))
+        elif op == "get_state":
+            resets, dirty, targets = args  # staged commands are part of the state
+            batch.reset(resets)
+            if dirty.size:
+                batch.set_targets(dirty, targets)
+            conn.send(batch.get_state())
+        elif op == "set_state":
+            try:
+                batch.set_state(args[0])
+                conn.send(None)
+            except ValueError as exc:
+                conn.send(str(exc))
         elif op == "snapshot":
             conn.send(batch.snapshot())
         elif op == "write_qpos":
@@ -216,6 +235,31 @@ class ShardedBatch(Batch):
             [p.faults + b for p, b in zip(parts, self._fault_base, strict=True)]
         )
         return join_snapshots(parts, parts[0].tick, self._targets, faults)
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        return self._local.physics_shapes()
+
+    def get_state(self) -> BatchState:
+        """Every shard's state (staged commands applied first), joined in world order."""
+        for i, conn in enumerate(self._conns, start=1):
+            resets, dirty = self._staged.take(i)
+            conn.send(("get_state", resets, dirty, self._targets[dirty + self._starts[i]]))
+        parts = [self._local.get_state()] + [conn.recv() for conn in self._conns]
+        return join_states(parts, self._targets)
+
+    def set_state(self, state: BatchState) -> None:
+        """Split `state` over the shards; checked whole first so no shard is half-restored."""
+        state.check_compatible(self.nworld, self.physics_shapes())
+        for i in range(1, self.shards):
+            self._staged.take(i)  # staged commands belonged to the state being replaced
+        bounds = [*self._starts.tolist(), self.nworld]
+        for i, conn in enumerate(self._conns, start=1):
+            conn.send(("set_state", slice_state(state, bounds[i], bounds[i + 1])))
+        self._local.set_state(slice_state(state, 0, bounds[1]))
+        errors = [err for err in (conn.recv() for conn in self._conns) if err]
+        if errors:  # cannot happen after the check above; say so loudly if it does
+            raise RuntimeError(f"shard refused a checked state: {errors[0]}")
+        self._targets = np.array(state.targets, dtype=np.float64)
 
     def qpos(self) -> np.ndarray:
         return self._gather_qpos()[0]

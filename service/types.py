@@ -120,6 +120,87 @@ class Mode(enum.StrEnum):
     PAUSED = "paused"  # only on an explicit step request
 
 
+# MuJoCo's integration state (mjSTATE_INTEGRATION minus plugins, which neither engine uses), as
+# named mjData fields. Everything else in mjData is recomputed from these within a step, so these
+# plus the batch's own counters are what a restored batch needs to continue bit-identically.
+PHYSICS_FIELDS = (
+    "time",
+    "qpos",
+    "qvel",
+    "act",
+    "history",
+    "plastic",
+    "qacc_warmstart",
+    "ctrl",
+    "qfrc_applied",
+    "xfrc_applied",
+    "eq_active",
+    "mocap_pos",
+    "mocap_quat",
+    "userdata",
+    # Not integration state: the actuator forces of the last step, restored so that the snapshot
+    # at the restored tick reports the same effort as the one taken when the state was saved.
+    "qfrc_actuator",
+)
+
+
+@dataclass(frozen=True)
+class BatchState:
+    """Everything a batch needs to continue exactly where it was, at a tick boundary.
+
+    `Batch.get_state()` returns one, `Batch.set_state()` takes one of the same model and number
+    of worlds: after set_state, stepping with the same commands gives bit-identical states to
+    stepping the batch the state was taken from (same engine and device). Arrays are host copies.
+
+    tick: control ticks completed by the batch when the state was taken
+    world_ticks: ticks since each world's last reset (sim_time = world_ticks × tick_dt) (nworld,)
+    faults: how often each world has been reset for NaN or capacity overflow           (nworld,)
+    targets: the commanded position targets [rad], float64 host mirror                 (nworld, 7)
+    physics: MuJoCo integration state, keyed by mjData field name (`PHYSICS_FIELDS`), each
+        (nworld, ...) in the engine's own dtype (float32 on MuJoCo Warp) so that nothing is
+        rounded: time [s] (nworld,), qpos (nworld, nq), qvel (nworld, nv), act (nworld, na),
+        history, plastic, qacc_warmstart (the solver's warm start, nworld × nv), ctrl
+        (nworld, nu), qfrc_applied (nworld, nv), xfrc_applied (nworld, nbody, 6), eq_active
+        (nworld, neq) bool, mocap_pos (nworld, nmocap, 3), mocap_quat (nworld, nmocap, 4),
+        userdata (nworld, nuserdata); and qfrc_actuator (nworld, nv) [N·m], the last step's
+        actuator forces, so that the restored tick's snapshot shows the same effort
+    """
+
+    tick: int
+    world_ticks: np.ndarray
+    faults: np.ndarray
+    targets: np.ndarray
+    physics: dict[str, np.ndarray]
+
+    @property
+    def nworld(self) -> int:
+        return int(self.targets.shape[0])
+
+    def check_compatible(self, nworld: int, shapes: dict[str, tuple[int, ...]]) -> None:
+        """Raise ValueError naming the mismatch unless this state fits a batch of that shape.
+
+        `shapes` maps each physics field to its per-world shape in the receiving batch.
+        """
+        if self.nworld != nworld:
+            raise ValueError(f"state has {self.nworld} worlds, the batch has {nworld}")
+        rows = {"world_ticks": self.world_ticks, "faults": self.faults, "targets": self.targets}
+        for name, arr in rows.items():
+            if arr.shape[0] != nworld:
+                raise ValueError(f"{name} has {arr.shape[0]} rows, expected {nworld}")
+        if self.targets.ndim != 2 or self.targets.shape[1] != 7:
+            raise ValueError(f"targets has shape {self.targets.shape}, expected ({nworld}, 7)")
+        for name, shape in shapes.items():
+            arr = self.physics.get(name)
+            if arr is None:
+                raise ValueError(f"physics field {name!r} missing")
+            if arr.shape != (nworld, *shape):
+                raise ValueError(
+                    f"physics field {name!r} has shape {arr.shape}, expected {(nworld, *shape)}"
+                )
+            if arr.dtype != bool and not np.isfinite(arr).all():
+                raise ValueError(f"physics field {name!r} holds non-finite values")
+
+
 @runtime_checkable
 class Batch(Protocol):
     """N worlds of one model advanced together in control ticks: what the loop needs of an engine.
@@ -168,6 +249,15 @@ class Batch(Protocol):
 
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, in host memory."""
+        ...
+
+    def get_state(self) -> BatchState:
+        """Everything needed to continue bit-identically (see `BatchState`), host copies."""
+        ...
+
+    def set_state(self, state: BatchState) -> None:
+        """Continue from `state` (same model and nworld); ValueError naming the mismatch, and
+        nothing changed, when it does not fit."""
         ...
 
     def qpos(self) -> np.ndarray:

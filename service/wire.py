@@ -233,6 +233,14 @@ def parse_worlds(spec: str, nworld: int) -> np.ndarray:
 _WORLDS = "query.worlds"
 
 
+def pick_worlds(spec: str | None, nworld: int, default_count: int = 8) -> list[int]:
+    """Worlds an add-on (recorder, Foxglove) covers: `spec` parsed strictly, or by default the
+    first `default_count` (all of a smaller batch)."""
+    if spec is None:
+        return list(range(min(default_count, nworld)))
+    return [int(w) for w in parse_worlds(spec, nworld)]
+
+
 # -- reading client messages leniently (to answer them properly) ------------------------------
 
 _ID_RE = re.compile(r'"id"\s*:\s*("(?:[^"\\]|\\.)*"|-?[0-9]+(?:\.[0-9]+)?)')

@@ -16,6 +16,7 @@ Protocol: one JSON request per stdin line, one JSON reply per stdout line.
 """
 
 import json
+import os
 import sys
 import threading
 import time
@@ -102,7 +103,7 @@ def decode(raw: bytes, kind: str) -> dict:
 
 class Peer:
     def __init__(self) -> None:
-        self.dp = DomainParticipant(0)
+        self.dp = DomainParticipant(int(os.environ.get("ROS_DOMAIN_ID", "0")))
         self.topics: dict[str, Topic] = {}
         self.writers: dict[str, DataWriter] = {}
         self.readers: dict[str, tuple[DataReader, str]] = {}

@@ -15,6 +15,7 @@ import pytest
 from conftest import ELBOW, HOME, Server, serve, wait_for
 from websockets.sync.client import connect
 
+from service import wire
 from service.native import NativeBatch, usable_cores
 
 
@@ -23,6 +24,20 @@ def test_native_batch_uses_every_usable_core_by_default():
     assert batch.nthread == min(8, usable_cores())
     assert NativeBatch(8, nthread=1).nthread == 1
     assert NativeBatch(1, nthread=4).nthread == 1  # no more threads than worlds
+
+
+def test_native_snapshot_is_float32_and_c_ordered_like_the_warp_engines():
+    """The wire serialises rows of these arrays: they must be C-ordered, and float32 keeps the
+    frames the size the warp engine's are."""
+    batch = NativeBatch(3)
+    batch.step(1)
+    snap = batch.snapshot()
+    for name in ("position", "velocity", "effort", "flange_pos", "flange_quat"):
+        array = getattr(snap, name)
+        assert array.dtype == np.float32 and array.flags.c_contiguous, name
+    assert snap.target.dtype == np.float64  # what was commanded, exactly
+    frame = json.loads(wire.single_frame(snap, 2, batch.spec.names))
+    assert frame["position"] == pytest.approx(snap.position[2].tolist())
 
 
 def test_native_engine_refuses_a_gpu_device():

@@ -114,7 +114,9 @@ def test_view_socket_sends_pose_frames_with_the_focus_worlds_state(srv, http):
     scene = http.get("/v1/scene").json()
     nbody = scene["nbody"]
     gripper = next(b["id"] for b in scene["bodies"] if b["name"] == "gripper_base")
-    with connect(f"{srv.server.ws_url}/v1/ws/view?worlds=0-3&focus=2&rate=30") as ws:
+    url = f"{srv.server.ws_url}/v1/ws/view?worlds=0-3&focus=2&rate=30"
+    with connect(url, compression="deflate") as ws:  # offered, as browsers do; declined
+        assert "permessage-deflate" not in str(ws.response.headers)
         header, worlds, faults, poses = read_pose_frame(ws.recv(timeout=5))
         # Commands go over the same socket, with ids, and are acknowledged.
         ws.send(json.dumps({"op": "increment", "world": 1, "joint": 0, "delta": 0.1, "id": 7}))
@@ -293,6 +295,32 @@ def test_gripper_buttons_keyboard_shortcuts_and_reset_drive_the_world(srv, http,
     page.get_by_role("button", name="Reset").click()
     wait_for(lambda: target(http, 1) == pytest.approx(HOME), "Reset to bring world 1 home")
     assert target(http, 0) == pytest.approx(HOME)  # the other worlds saw nothing
+
+
+def test_a_hidden_tab_stops_its_stream_and_resumes_when_shown(srv, page):
+    """Headless Chromium never hides a tab, so the page is told the way a browser tells it:
+    `visibilityState` reads "hidden" and `visibilitychange` fires (then the reverse)."""
+    open_page(page, srv, "?world=0")
+
+    def set_visibility(state: str) -> None:
+        page.evaluate(
+            """(state) => {
+                const as = (value) => ({ value, configurable: true });
+                Object.defineProperty(document, 'visibilityState', as(state));
+                Object.defineProperty(document, 'hidden', as(state === 'hidden'));
+                document.dispatchEvent(new Event('visibilitychange'));
+            }""",
+            state,
+        )
+
+    set_visibility("hidden")
+    page.wait_for_function("!window.armfleet.connected")
+    frames = page.evaluate("window.armfleet.frames")
+    time.sleep(0.5)
+    assert page.evaluate("window.armfleet.frames") == frames  # no frame while hidden
+    expect(page.locator("#status")).to_contain_text("tab hidden")
+    set_visibility("visible")
+    page.wait_for_function(f"window.armfleet.connected && window.armfleet.frames > {frames}")
 
 
 def test_a_killed_server_shows_disconnected_and_the_page_recovers_when_it_is_back(srv, page):

@@ -1,0 +1,65 @@
+"""Recordings: start and stop an MCAP recording of commands and world states while serving."""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+from typing import Annotated
+
+from fastapi import APIRouter, Depends
+
+from service.api.deps import Loop, get_runtime
+from service.errors import Conflict, NotFound
+from service.recorder import Recorder
+from service.runtime import Runtime
+from service.schemas import RecordingRequest, RecordingStatus
+from service.snapshots import check_state_support
+
+router = APIRouter(prefix="/v1/recordings", tags=["recordings"])
+Rt = Annotated[Runtime, Depends(get_runtime)]
+_starting = asyncio.Lock()  # one start at a time: two POSTs must not both see "none active"
+
+
+def _status(recorder: Recorder) -> RecordingStatus:
+    return RecordingStatus(**dataclasses.asdict(recorder.status))
+
+
+@router.post(
+    "",
+    response_model=RecordingStatus,
+    status_code=201,
+    summary="Start recording to <data-dir>/recordings/<name>.mcap",
+    responses={409: {"description": "a recording is already running"}},
+)
+async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
+    async with _starting:
+        current = runtime.recorder
+        if current is not None and current.status.active:
+            raise Conflict(f"a recording is already running ({current.path}); stop it first")
+        check_state_support(loop.batch)  # a recording starts from the full state
+        path = runtime.snapshots.dir.parent / "recordings" / f"{body.name}.mcap"
+        recorder = Recorder(path, body.worlds, body.rate, runtime.settings.record_queue)
+        await asyncio.to_thread(recorder.start, runtime)  # waits for a tick boundary
+        runtime.surfaces.append(recorder)
+        return _status(recorder)
+
+
+@router.get("/current", response_model=RecordingStatus, summary="The running (or last) recording")
+async def current(runtime: Rt) -> RecordingStatus:
+    if runtime.recorder is None:
+        raise NotFound("no recording has been started")
+    return _status(runtime.recorder)
+
+
+@router.delete(
+    "/current",
+    response_model=RecordingStatus,
+    summary="Stop the running recording; replies once the file is complete",
+    responses={404: {"description": "no recording is running"}},
+)
+async def stop(runtime: Rt) -> RecordingStatus:
+    recorder = runtime.recorder
+    if recorder is None or not recorder.status.active:
+        raise NotFound("no recording is running")
+    await asyncio.to_thread(recorder.stop)
+    return _status(recorder)

@@ -1,0 +1,59 @@
+"""Snapshots: save every world's full state to a file, list them, restore one at a tick boundary."""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Path
+
+from service.api.deps import Loop, get_runtime
+from service.errors import Conflict
+from service.runtime import Runtime
+from service.schemas import RestoreReply, SnapshotInfo, SnapshotName, SnapshotRequest
+from service.snapshots import check_state_support
+
+router = APIRouter(prefix="/v1/snapshots", tags=["snapshots"])
+Rt = Annotated[Runtime, Depends(get_runtime)]
+
+
+@router.post(
+    "",
+    response_model=SnapshotInfo,
+    status_code=201,
+    summary="Save the full state of every world as snapshot `name` (replaces one of that name)",
+    responses={422: {"description": "bad name (separators, empty, over 64 characters)"}},
+)
+async def save(runtime: Rt, loop: Loop, body: SnapshotRequest) -> SnapshotInfo:
+    check_state_support(loop.batch)
+    state = await asyncio.wrap_future(loop.request_state())
+    info = await asyncio.to_thread(runtime.snapshots.save, body.name, state, runtime.header)
+    return SnapshotInfo(**dataclasses.asdict(info))
+
+
+@router.get("", response_model=list[SnapshotInfo], summary="Saved snapshots, newest first")
+async def listing(runtime: Rt) -> list[SnapshotInfo]:
+    infos = await asyncio.to_thread(runtime.snapshots.list)
+    return [SnapshotInfo(**dataclasses.asdict(i)) for i in infos]
+
+
+@router.post(
+    "/{name}/restore",
+    response_model=RestoreReply,
+    summary="Continue every world from snapshot `name`, at the next tick boundary",
+    responses={
+        404: {"description": "no snapshot of that name"},
+        409: {"description": "another model or number of worlds, or a truncated/corrupt file"},
+        422: {"description": "bad name"},
+    },
+)
+async def restore(runtime: Rt, loop: Loop, name: Annotated[SnapshotName, Path()]) -> RestoreReply:
+    check_state_support(loop.batch)
+    # Read and check the whole file first: a bad one changes nothing.
+    state = await asyncio.to_thread(runtime.snapshots.load, name, runtime.header)
+    try:
+        tick = await asyncio.wrap_future(loop.restore(state, name))
+    except ValueError as exc:
+        raise Conflict(f"cannot restore snapshot {name!r}: {exc}") from None
+    return RestoreReply(name=name, tick=tick)

@@ -1,0 +1,130 @@
+"""get_state / set_state beyond the contract test: warm start, refusals, shards ↔ one batch."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from service.engine import WorldBatch
+from service.shards import ShardedBatch
+from service.types import PHYSICS_FIELDS, BatchState
+
+NWORLD = 4
+
+
+def drive(batch: WorldBatch | ShardedBatch, ticks: int, seed: int) -> list[np.ndarray]:
+    """Random targets (gripper included, so the linkage's constraints work) and a reset midway;
+    the full qpos and qvel after every tick."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for t in range(ticks):
+        worlds = rng.choice(batch.nworld, size=2, replace=False)
+        targets = batch.home_target + rng.uniform(-0.4, 0.4, size=(2, 7))
+        targets[:, 6] = rng.uniform(0.0, 0.7, size=2)
+        batch.set_targets(worlds, targets)
+        if t == ticks // 2:
+            batch.reset(np.array([batch.nworld - 1]))
+        batch.step(1)
+        out.append(np.concatenate([batch.qpos(), batch.qvel()], axis=1))
+    return out
+
+
+@pytest.fixture(scope="module")
+def batch() -> WorldBatch:
+    return WorldBatch(NWORLD)
+
+
+def test_the_solver_warm_start_is_part_of_the_state(batch):
+    """Without qacc_warmstart the continuation differs: the test above would catch its loss."""
+    drive(batch, 10, seed=3)
+    state = batch.get_state()
+    first = drive(batch, 5, seed=4)
+    cold = dict(state.physics, qacc_warmstart=np.zeros_like(state.physics["qacc_warmstart"]))
+    batch.set_state(dataclasses.replace(state, physics=cold))
+    again = drive(batch, 5, seed=4)
+    assert any(not np.array_equal(a, b) for a, b in zip(first, again, strict=True))
+
+
+def test_state_holds_every_integration_field_with_documented_shapes(batch):
+    state = batch.get_state()
+    assert set(state.physics) == set(PHYSICS_FIELDS)
+    nq, nv = batch.robot.mjm.nq, batch.robot.mjm.nv
+    assert state.physics["qpos"].shape == (NWORLD, nq)
+    assert state.physics["qacc_warmstart"].shape == (NWORLD, nv)
+    assert state.physics["xfrc_applied"].shape == (NWORLD, batch.robot.mjm.nbody, 6)
+    assert state.physics["eq_active"].dtype == bool
+    assert state.targets.dtype == np.float64 and state.targets.shape == (NWORLD, 7)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda s: dataclasses.replace(s, targets=s.targets[:2]), "state has 2 worlds"),
+        (
+            lambda s: dataclasses.replace(
+                s, physics={**s.physics, "qpos": s.physics["qpos"][:, :5]}
+            ),
+            "'qpos' has shape",
+        ),
+        (
+            lambda s: dataclasses.replace(
+                s, physics={k: v for k, v in s.physics.items() if k != "qvel"}
+            ),
+            "'qvel' missing",
+        ),
+        (
+            lambda s: dataclasses.replace(
+                s, physics={**s.physics, "qvel": np.full_like(s.physics["qvel"], np.nan)}
+            ),
+            "non-finite",
+        ),
+    ],
+)
+def test_a_state_that_does_not_fit_changes_nothing(batch, change, message):
+    drive(batch, 3, seed=5)
+    before = batch.get_state()
+    bad: BatchState = change(batch.get_state())
+    with pytest.raises(ValueError, match=message):
+        batch.set_state(bad)
+    after = batch.get_state()
+    assert after.tick == before.tick
+    for k in PHYSICS_FIELDS:
+        np.testing.assert_array_equal(after.physics[k], before.physics[k])
+
+
+def test_sharded_state_round_trips_and_matches_one_batch():
+    sharded = ShardedBatch(6, shards=2)
+    try:
+        single = WorldBatch(6)
+        drive(sharded, 10, seed=6)
+        drive(single, 10, seed=6)
+        # A command staged for a worker shard but not yet stepped is part of the state.
+        for b in (sharded, single):
+            b.set_targets(np.array([5]), b.home_target[None] + 0.1)
+        s_state, w_state = sharded.get_state(), single.get_state()
+        for k in PHYSICS_FIELDS:
+            np.testing.assert_array_equal(s_state.physics[k], w_state.physics[k])
+        np.testing.assert_array_equal(s_state.targets, w_state.targets)
+        first = drive(sharded, 10, seed=7)
+        sharded.set_state(w_state)  # a state of one batch restores into shards, and back
+        again = drive(sharded, 10, seed=7)
+        single.set_state(s_state)
+        alone = drive(single, 10, seed=7)
+        for a, b, c in zip(first, again, alone, strict=True):
+            np.testing.assert_array_equal(a, b)
+            np.testing.assert_array_equal(a, c)
+    finally:
+        sharded.close()
+
+
+def test_the_snapshot_at_the_restored_tick_is_the_saved_one(batch):
+    drive(batch, 7, seed=8)
+    state, snap = batch.get_state(), batch.snapshot()
+    fresh = WorldBatch(NWORLD)
+    fresh.set_state(state)
+    again = fresh.snapshot()
+    assert again.tick == snap.tick
+    for field in ("position", "velocity", "effort", "target", "flange_pos", "sim_time", "faults"):
+        np.testing.assert_array_equal(getattr(again, field), getattr(snap, field), err_msg=field)
