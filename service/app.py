@@ -8,8 +8,11 @@ from collections.abc import AsyncIterator
 from typing import Any
 
 from fastapi import FastAPI, HTTPException, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service import access
@@ -88,6 +91,31 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
     return JSONResponse({"detail": detail}, status_code=422)
 
 
+async def _http_error(request: Request, exc: Exception) -> Response:
+    """FastAPI's own handling, except that a 405 lists every method the path takes.
+
+    (Starlette's lists only those of the first route whose path matched, when GET and POST of
+    one path are separate routes, as in /v1/snapshots.)
+    """
+    assert isinstance(exc, StarletteHTTPException)
+    if exc.status_code == 405:
+        allowed = _methods_of(request.app, request.url.path)
+        if allowed:
+            exc.headers = {**(exc.headers or {}), "Allow": ", ".join(allowed)}
+    return await http_exception_handler(request, exc)
+
+
+def _methods_of(app: FastAPI, path: str) -> list[str]:
+    """Every method the OpenAPI description lists for `path` (HEAD with GET)."""
+    found: set[str] = set()
+    for template, operations in app.openapi().get("paths", {}).items():
+        if compile_path(template)[0].match(path):
+            found.update(m.upper() for m in operations if m != "parameters")
+    if "GET" in found:
+        found.add("HEAD")
+    return sorted(found)
+
+
 async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
     """The one mapping of domain errors to HTTP: status from the class, detail from the error."""
     assert isinstance(exc, ArmfleetError)
@@ -125,6 +153,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
         exception_handlers={
             RequestValidationError: _validation_error,
+            StarletteHTTPException: _http_error,
             ArmfleetError: _armfleet_error,
         },
     )

@@ -241,6 +241,7 @@ class SimLoop:
             self._pending = batch.targets
             self._dirty[:] = False
             self._reset[:] = False
+            self._effective[:] = self._tick  # what was accepted before belongs to the old state
             self._window = (time.monotonic(), self._tick)
             waiting, self._step_waiters = self._step_waiters, []
         for listener in self._restore_listeners:
@@ -249,6 +250,10 @@ class SimLoop:
             except Exception:
                 log.exception("restore listener %r failed", listener)
         self._publish(time.monotonic())
+        with self._lock:  # readers waiting for a tick of the old timeline get the restored state
+            readers, self._snapshot_waiters = self._snapshot_waiters, []
+        for _, reader in readers:
+            _resolve(reader, self._latest)
         for _, fut in waiting:
             fut.set_result(self._tick)
         return self._tick

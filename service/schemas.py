@@ -483,10 +483,25 @@ class Scene(BaseModel):
     skipped: int = Field(description="visible geoms of types not described (height fields, SDFs)")
 
 
+_ERROR_CONTENT = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorReply"}}}
+
+
 def fit_openapi(spec: dict[str, Any], nworld: int) -> dict[str, Any]:
     """Tighten the generated OpenAPI to this service's size: a batch lists distinct worlds, so
     it never holds more than `nworld` of them; listing only the lengths that can occur keeps
     the equal-length rule exact and the document small."""
+    # Whatever route a surface adds: a JSON body can be unreadable (400) or too large (413), and
+    # every /v1 route is behind the token, origin and client-cap checks and needs the engine.
+    for path, operations in spec.get("paths", {}).items():
+        for op in operations.values():
+            if not isinstance(op, dict) or "responses" not in op:
+                continue
+            codes = [*ANY] if path.startswith("/v1/") else []
+            if "requestBody" in op:
+                codes += [400, 413]
+            for code, response in errors(*codes).items():
+                response = {"description": response["description"], "content": _ERROR_CONTENT}
+                op["responses"].setdefault(str(code), response)
     batch = spec.get("components", {}).get("schemas", {}).get("BatchTargets")
     if batch is not None:
         most = min(nworld, MAX_BATCH_WORLDS)
