@@ -105,9 +105,14 @@ def origin_allowed(settings: Settings, headers: Mapping[str, str]) -> bool:
     return host is not None and urlsplit(origin).netloc.lower() == host.lower()
 
 
+def is_open(path: str) -> bool:
+    """Paths anyone may read whatever the settings (OPEN_PATHS, OPEN_PREFIXES)."""
+    return path in OPEN_PATHS or path.startswith(OPEN_PREFIXES)
+
+
 def check_http(settings: Settings, method: str, path: str, headers: Mapping[str, str]) -> None:
     """Raise AccessError unless this request may go on (see the module docstring)."""
-    if path in OPEN_PATHS or path.startswith(OPEN_PREFIXES):
+    if is_open(path):
         return
     write = method.upper() not in _READ_METHODS
     if (write or settings.token_reads) and not token_matches(settings, bearer(headers)):
@@ -255,7 +260,7 @@ class AccessMiddleware:
             extra = {"WWW-Authenticate": "Bearer"} if exc.status == 401 else None
             reply = JSONResponse({"detail": exc.detail}, status_code=exc.status, headers=extra)
             return await reply(scope, receive, send)
-        if scope["path"] in OPEN_PATHS:
+        if is_open(scope["path"]):  # probes and page files: cheap, never refused for load
             return await self.app(scope, receive, send)
         if not self.slots.acquire():
             reply = JSONResponse(

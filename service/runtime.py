@@ -183,6 +183,14 @@ class Runtime:
         self.metrics.command_accepted(accepted.source, accepted.kind, accepted.tick)
 
     async def start(self) -> None:
+        """Build the engine and start everything; a failure is kept in `error` (see /readyz)."""
+        try:
+            await self._start()
+        except Exception as exc:  # never leave /readyz saying "starting" forever
+            self.error = f"{type(exc).__name__}: {exc}"
+            log.exception("service failed to start")
+
+    async def _start(self) -> None:
         s = self.settings
         try:
             batch = await asyncio.to_thread(build_batch, s)

@@ -10,6 +10,7 @@ the result is bit-identical to one WorldBatch of the same size (tests/test_shard
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import multiprocessing as mp
 import os
@@ -46,6 +47,11 @@ _FACTS_OF_LOCAL = (
     "capture_s",
     "capture_error",
 )
+
+# How often each worker shard's full state is copied into this process (after a step, on the
+# sim thread: a host copy of that shard's arrays), so that a lost shard's worlds resume from at
+# most this long ago instead of from home.
+STATE_COPY_PERIOD = 2.0
 
 # Below this many worlds per shard the pipe round trip (~0.1 ms) outweighs the second core.
 MIN_WORLDS_PER_SHARD = 16
@@ -150,6 +156,7 @@ class ShardedBatch(Batch):
         self._last_parts: dict[int, Snapshot] = {}
         self._fault_base = [np.zeros(int(n), dtype=np.int64) for n in self._sizes]
         self.restarts = 0
+        self._copies: dict[int, tuple[float, BatchState]] = {}  # shard → (when, its state)
 
     @property
     def captured(self) -> bool:
@@ -204,6 +211,7 @@ class ShardedBatch(Batch):
                 faulted.append(self._conns[i - 1].recv() + self._starts[i])
             except (EOFError, OSError):
                 self._lost(i, self._exit_reason(i))
+        self._copy_states(sent)
         out = np.concatenate(faulted)
         self._targets[out] = self.home_target
         return out
@@ -234,7 +242,9 @@ class ShardedBatch(Batch):
         faults = np.concatenate(
             [p.faults + b for p, b in zip(parts, self._fault_base, strict=True)]
         )
-        return join_snapshots(parts, parts[0].tick, self._targets, faults)
+        return dataclasses.replace(
+            join_snapshots(parts, parts[0].tick, self._targets), faults=faults
+        )
 
     def physics_shapes(self) -> dict[str, tuple[int, ...]]:
         return self._local.physics_shapes()
@@ -250,6 +260,7 @@ class ShardedBatch(Batch):
     def set_state(self, state: BatchState) -> None:
         """Split `state` over the shards; checked whole first so no shard is half-restored."""
         state.check_compatible(self.nworld, self.physics_shapes())
+        self._copies.clear()  # copies of the replaced timeline must not come back after a loss
         for i in range(1, self.shards):
             self._staged.take(i)  # staged commands belonged to the state being replaced
         bounds = [*self._starts.tolist(), self.nworld]
@@ -330,6 +341,33 @@ class ShardedBatch(Batch):
             time.sleep(1.0)
         log.error("shard %d could not be rebuilt: %s", i, self._problems.get(i))
 
+    def _copy_states(self, shards: list[int]) -> None:
+        """Refresh the state copy of every live worker shard whose copy is older than the period."""
+        now = time.monotonic()
+        for i in shards:
+            if not self._alive[i] or now - self._copies.get(i, (-1e9, None))[0] < STATE_COPY_PERIOD:
+                continue
+            empty = np.zeros(0, dtype=np.int64)
+            try:
+                self._conns[i - 1].send(("get_state", empty, empty, np.zeros((0, 7))))
+                self._copies[i] = (now, self._conns[i - 1].recv())
+            except (EOFError, OSError):
+                self._lost(i, self._exit_reason(i))
+
+    def _resume(self, i: int, conn: Connection) -> bool:
+        """Put shard i's last state copy (with today's targets) into its new worker."""
+        copy = self._copies.get(i)
+        if copy is None:
+            return False
+        lo, hi = int(self._starts[i]), int(self._starts[i] + self._sizes[i])
+        state = dataclasses.replace(copy[1], targets=self._targets[lo:hi].copy())
+        conn.send(("set_state", state))
+        error = conn.recv()
+        if error:
+            log.error("shard %d: its state copy did not fit the new worker: %s", i, error)
+            return False
+        return True
+
     def _swap_in(self) -> None:
         """Put rebuilt workers in place at a tick boundary (sim thread), targets restored."""
         if not self._replacements:
@@ -343,18 +381,26 @@ class ShardedBatch(Batch):
             if old_proc.is_alive():
                 old_proc.kill()
             self._conns[i - 1], self._procs[i - 1] = conn, proc
-            # The new worker starts at home: every world of it gets its commanded target back,
-            # and the loss counts as one fault for each of them.
-            self._staged.take(i)  # resets staged meanwhile are moot: it starts at home
+            # Its worlds resume from the last state copy (else from home) with the targets
+            # commanded since, and the loss counts as one fault for each of them.
+            self._staged.take(i)  # staged resets are moot: the worlds restart anyway
+            try:
+                resumed = self._resume(i, conn)
+            except (EOFError, OSError):
+                resumed = False
             self._staged.targets(i, np.arange(int(self._sizes[i]), dtype=np.int64))
             last = self._last_parts.get(i)
+            restarted_at = self._copies[i][1].faults if resumed else 0
             if last is not None:
-                self._fault_base[i] = self._fault_base[i] + last.faults + 1
+                self._fault_base[i] = self._fault_base[i] + last.faults + 1 - restarted_at
+            if not resumed:
+                self._copies.pop(i, None)  # a copy of the old worker's counts no longer fits
             with self._health_lock:
                 self._alive[i] = True
                 self._problems.pop(i, None)
                 self.restarts += 1
-            log.warning("shard %d rebuilt and back in the batch", i)
+            how = "from its state copy" if resumed else "from home"
+            log.warning("shard %d rebuilt and back in the batch; its worlds resume %s", i, how)
 
     def close(self) -> None:
         with self._health_lock:

@@ -53,6 +53,8 @@ def test_a_killed_shard_worker_is_noticed_rebuilt_and_its_worlds_restored(tmp_pa
         watcher = threading.Thread(target=watch, daemon=True)
         watcher.start()
         watching.wait(10)
+        # Long enough for a state copy of the worker's shard (taken every couple of seconds).
+        wait_for(lambda: http.get("/v1/worlds/3/state").json()["sim_time"] > 4.0, "4 s simulated")
         (worker,) = _shard_workers(srv.process.pid)
         t0 = time.monotonic()
         os.kill(worker.pid, signal.SIGKILL)
@@ -79,9 +81,11 @@ def test_a_killed_shard_worker_is_noticed_rebuilt_and_its_worlds_restored(tmp_pa
         assert [s["ready"] for s in statuses] == [False, True], statuses
         assert "shard 1" in statuses[0]["problems"][0]
 
-        # Its worlds are back: commanded targets kept, the loss counted as a fault, stepping.
+        # Its worlds are back from their last state copy (not from home: their simulated time
+        # goes on from seconds in), with the commanded targets; the loss counts as a fault.
         s3 = http.get("/v1/worlds/3/state").json()
-        assert s3["target"][2] == pytest.approx(1.2) and s3["faults"] >= 1
+        assert s3["target"][2] == pytest.approx(1.2) and s3["faults"] == 1
+        assert s3["sim_time"] > 2.0
         assert moved.status_code == 200
         wait_for(
             lambda: abs(http.get("/v1/worlds/3/state").json()["position"][2] - 1.2) < 0.05,
@@ -94,7 +98,7 @@ def test_a_killed_shard_worker_is_noticed_rebuilt_and_its_worlds_restored(tmp_pa
         assert new_worker.pid != worker.pid
         log = srv.log()
         assert log.count("lost: killed by signal 9") <= 2  # the loss is logged, not every tick
-        assert "tick failed" not in log
+        assert "tick failed" not in log and "resume from its state copy" in log
     print(f"killed worker noticed after {noticed:.2f} s, ready again after {recovered:.1f} s")
 
 
