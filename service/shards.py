@@ -201,8 +201,8 @@ class ShardedBatch(Batch):
             targets = self._targets[dirty + self._starts[i]]
             try:
                 conn.send(("step", resets, dirty, targets, ticks))
-            except OSError as exc:
-                self._lost(i, f"pipe broken ({exc})")
+            except OSError:
+                self._lost(i, self._exit_reason(i))
                 continue
             sent.append(i)
         faulted = [self._local.step(ticks)]
@@ -224,8 +224,8 @@ class ShardedBatch(Batch):
                 try:
                     conn.send(("snapshot",))
                     asked.append(i)
-                except OSError as exc:
-                    self._lost(i, f"pipe broken ({exc})")
+                except OSError:
+                    self._lost(i, self._exit_reason(i))
         parts = [self._local.snapshot()]
         for i in range(1, self.shards):
             part = None
