@@ -179,6 +179,7 @@ class DdsBridge:
         for t in self._threads:
             t.start()
         loop.add_sink(self)
+        self._loop = loop
         log.info(
             "ROS 2 (DDS domain %d, %s): commands on %s; states on %s at %.0f Hz; /clock",
             cfg.domain_id,
@@ -191,6 +192,7 @@ class DdsBridge:
     def stop(self) -> None:
         if not self._running:
             return
+        self._loop.remove_sink(self)
         with self._cond:
             self._running = False
             self._cond.notify_all()
