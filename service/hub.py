@@ -41,6 +41,8 @@ class Subscription:
         self.owed_tick: int | None = None  # the earliest tick an acked command takes effect
         self.acks: deque[bytes] = deque()
         self.ready = asyncio.Event()
+        # The writer drops a frame when this says so (the page's socket: nothing moved).
+        self.skip: Callable[[Snapshot], bool] | None = None
 
     def due(self, now: float) -> bool:
         # A little slack so that a 30 Hz stream on a 60 Hz loop really gets every other tick.
