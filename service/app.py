@@ -15,7 +15,7 @@ from service.api import health, info, recordings, scene, sim, snapshots, web, wo
 from service.errors import ArmfleetError, BadCommand
 from service.ros import rosbridge
 from service.ros.topics import TopicMap, parse_world_list
-from service.runtime import Runtime, Surface
+from service.runtime import Runtime
 from service.settings import Settings
 
 DESCRIPTION = """
@@ -90,7 +90,7 @@ async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
 
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
-    runtime = Runtime(settings, _surfaces(settings))
+    runtime = Runtime(settings)
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -119,13 +119,3 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.include_router(module.router)
     web.mount_static(app)
     return app
-
-
-def _surfaces(settings: Settings) -> tuple[Surface, ...]:
-    """The optional add-ons the settings switch on, in start order."""
-    surfaces: list[Surface] = []
-    if settings.ros2:
-        from service.ros.dds import DdsBridge
-
-        surfaces.append(DdsBridge(settings.ros2_rate, settings.ros2_worlds, settings.ros2_network))
-    return tuple(surfaces)

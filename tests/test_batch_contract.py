@@ -25,11 +25,12 @@ NWORLD = 4
 
 
 def _ray_batch(n: int) -> Batch:
-    """Two CPU actors on the module's local Ray instance (4 logical CPUs: two batches of two)."""
+    """One CPU actor on a local Ray instance (shared with tests/test_ray_shards.py, which covers
+    worlds split over several actors); one actor keeps this module's cost down."""
     from service.ray_shards import RayBatch, connect
 
     connect("local", num_cpus=4)
-    return RayBatch(n, shards=2)
+    return RayBatch(n, shards=1)
 
 
 ENGINES: dict[str, Callable[[int], Batch]] = {

@@ -46,6 +46,7 @@ LOOPBACK_CONFIG = (
     "<MaxAutoParticipantIndex>50</MaxAutoParticipantIndex></Discovery>"
     "</Domain></CycloneDDS>"
 )
+NODE_NAME = "armfleet"  # how ROS 2 tools name the bridge (`ros2 node list` shows /armfleet)
 _READER_DEPTH = 64  # commands buffered per topic between two wake-ups of the reader thread
 _WRITE_BLOCK_S = 0.01  # a reliable write never holds the publisher thread longer than this
 
@@ -161,6 +162,8 @@ class DdsBridge:
         self._entities.append(self._clock)
         self._msgs = msgs
 
+        self._announce_node(dp, msgs)
+
         self._waitset = WaitSet(dp)
         self._guard = GuardCondition(dp)
         any_sample = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -179,6 +182,7 @@ class DdsBridge:
         for t in self._threads:
             t.start()
         loop.add_sink(self)
+        self._loop = loop
         log.info(
             "ROS 2 (DDS domain %d, %s): commands on %s; states on %s at %.0f Hz; /clock",
             cfg.domain_id,
@@ -188,9 +192,45 @@ class DdsBridge:
             self.rate,
         )
 
+    def _announce_node(self, dp: Any, msgs: Any) -> None:
+        """Name our readers and writers as node `/armfleet` on `ros_discovery_info`.
+
+        ROS 2 tools learn node names from this rmw topic (`ros2 node list`, the node column of
+        `ros2 topic info -v`); topics work without it. Transient-local, so late joiners get it.
+        """
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.qos import Policy, Qos
+        from cyclonedds.topic import Topic
+
+        def gid(entity: Any) -> Any:
+            return msgs.Gid(list(entity.get_guid().bytes) + [0] * 8)
+
+        info = msgs.ParticipantEntitiesInfo(
+            gid=gid(dp),
+            node_entities_info_seq=[
+                msgs.NodeEntitiesInfo(
+                    node_namespace="/",
+                    node_name=NODE_NAME,
+                    reader_gid_seq=[gid(r) for r, _, _ in self._readers],
+                    writer_gid_seq=[gid(w) for w, _ in self._writers] + [gid(self._clock)],
+                )
+            ],
+        )
+        qos = Qos(
+            Policy.Reliability.Reliable(max_blocking_time=0),
+            Policy.Durability.TransientLocal,
+            Policy.History.KeepLast(1),
+            Policy.DataRepresentation(use_cdrv0_representation=True),
+        )
+        topic = Topic(dp, "ros_discovery_info", msgs.ParticipantEntitiesInfo)
+        writer = DataWriter(dp, topic, qos=qos)
+        self._entities += [topic, writer]
+        writer.write(info)
+
     def stop(self) -> None:
         if not self._running:
             return
+        self._loop.remove_sink(self)
         with self._cond:
             self._running = False
             self._cond.notify_all()
