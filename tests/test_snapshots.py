@@ -11,6 +11,7 @@ import httpx
 import numpy as np
 import pytest
 from conftest import ELBOW, FINGER, Server, running_server
+from mcap.reader import make_reader
 
 from clients.testing import stop
 from service.errors import Conflict
@@ -151,9 +152,13 @@ def test_stop_saves_latest_and_restore_latest_starts_from_it(paused, http):
     latest.unlink(missing_ok=True)
     assert stop(srv.process) == 0
     assert read_header(latest.read_bytes())["tick"] == final["tick"]  # saved on SIGINT
-    extra = ("--data-dir", str(data), "--restore", "latest")
+    run = data / "from-latest.mcap"  # and `serve --record`: the recording starts there too
+    extra = ("--data-dir", str(data), "--restore", "latest", "--record", str(run))
     with running_server(data.parent, worlds=NWORLD, mode="paused", extra=extra) as again:
         assert everything(httpx.Client(base_url=again.url, timeout=30)) == final
+    with open(run, "rb") as f:
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}["armfleet"]
+    assert int(meta["start_tick"]) == final["tick"] and int(meta["nworld"]) == NWORLD
     # Another number of worlds: the runtime refuses to start from it and says why (/readyz).
     runtime = Runtime(Settings(worlds=2, data_dir=data, restore="latest", save_on_exit=True))
     asyncio.run(runtime.start())
