@@ -18,6 +18,7 @@ like the HTTP bind; `ROS_LOCALHOST_ONLY=1` always keeps it on loopback.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import threading
 import time
@@ -51,6 +52,7 @@ NODE_NAME = "armfleet"  # how ROS 2 tools name the bridge (`ros2 node list` show
 # it off for a while); rclpy's depth 10 would drop commands under a burst.
 _READER_DEPTH = 1000
 _TAKE_BATCH = 64
+_MATCH_CHECK_S = 0.5  # a new subscriber gets its first state within this
 _WRITE_BLOCK_S = 0.01  # a reliable write never holds the publisher thread longer than this
 
 
@@ -112,6 +114,10 @@ class DdsBridge:
         self._running = False
         self._threads: list[threading.Thread] = []
         self._entities: list[Any] = []  # DDS entities, deleted children first on stop
+        # State topics somebody subscribes to, refreshed every _MATCH_CHECK_S: a message nobody
+        # reads is not even built (many --ros2-worlds cost nothing until someone listens).
+        self._subscribed: list[tuple[Any, int]] = []
+        self._matched_at = -math.inf
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -339,7 +345,15 @@ class DdsBridge:
         sec, nanosec = topics.stamp(topics.sim_seconds(snap, self._tick_dt))
         stamp = msgs.Time(sec=sec, nanosec=nanosec)
         self._clock.write(msgs.Clock(clock=stamp))
-        for writer, world in self._writers:
+        now = time.monotonic()
+        if now - self._matched_at >= _MATCH_CHECK_S:
+            self._matched_at = now
+            self._subscribed = [
+                (w, world)
+                for w, world in self._writers
+                if w.get_publication_matched_status().current_count
+            ]
+        for writer, world in self._subscribed:
             writer.write(
                 msgs.JointState(
                     header=msgs.Header(stamp=stamp, frame_id=""),
