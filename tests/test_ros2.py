@@ -341,3 +341,15 @@ def test_ros2_tools_see_node_armfleet_owning_its_endpoints(peer: Peer) -> None:
         ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
         assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
     assert len(node["writers"]) == 4 and len(node["readers"]) == 3  # world 0, 1, 2 (+ /clock)
+
+
+def test_ros2_worlds_must_exist() -> None:
+    from pydantic import ValidationError
+
+    from service.settings import Settings
+
+    assert topics.parse_world_list("0-2,3", 4) == (0, 1, 2, 3)
+    with pytest.raises(ValidationError, match="ros2_worlds '2-9'"):
+        Settings(worlds=4, ros2_worlds="2-9")
+    with pytest.raises(ValidationError, match="ros2_worlds 'x'"):
+        Settings(worlds=4, ros2_worlds="x")
