@@ -32,7 +32,7 @@ from service.errors import ArmfleetError, BadCommand
 from service.metrics import CommandCounter
 from service.ros import rosbridge
 from service.ros.topics import TopicMap, parse_world_list
-from service.runtime import Runtime, Surface
+from service.runtime import Runtime
 from service.schemas import ANY, errors, fit_openapi
 from service.settings import Settings
 
@@ -135,7 +135,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     """The service as an ASGI app; ValueError when the settings are unsafe (see access)."""
     settings = settings or Settings()
     access.check_bind(settings)
-    runtime = Runtime(settings, _surfaces(settings))
+    runtime = Runtime(settings)
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -180,13 +180,3 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app.openapi = openapi  # type: ignore[method-assign]
     return app
-
-
-def _surfaces(settings: Settings) -> tuple[Surface, ...]:
-    """The optional add-ons the settings switch on, in start order."""
-    surfaces: list[Surface] = []
-    if settings.ros2:
-        from service.ros.dds import DdsBridge
-
-        surfaces.append(DdsBridge(settings.ros2_rate, settings.ros2_worlds, settings.ros2_network))
-    return tuple(surfaces)

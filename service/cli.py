@@ -145,6 +145,11 @@ def replay(
     except ReplayError as exc:
         typer.echo(f"armfleet replay: {exc}", err=True)
         raise typer.Exit(2) from None
+    if report.recorded_on != report.replayed_on:
+        typer.echo(
+            f"note: recorded on {report.recorded_on}, replayed on {report.replayed_on}; "
+            "bit-identical results are only expected on the same device"
+        )
     if report.truncated:
         typer.echo(f"note: the recording ends early ({report.truncated}); replayed what it holds")
     typer.echo(

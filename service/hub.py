@@ -44,6 +44,8 @@ class Subscription:
         # Set by the socket that owns it: close the socket (code, reason), e.g. 1001 at shutdown.
         self.close: Callable[[int, str], Awaitable[None]] | None = None
         self.status_frames = False  # the socket speaks our protocol: send it status frames
+        # The writer drops a frame when this says so (the page's socket: nothing moved).
+        self.skip: Callable[[Snapshot], bool] | None = None
 
     def due(self, now: float) -> bool:
         # A little slack so that a 30 Hz stream on a 60 Hz loop really gets every other tick.

@@ -82,6 +82,10 @@ def optional_surfaces(s: Settings) -> list[Surface]:
         from service.foxglove_live import FoxgloveLive
 
         out.append(FoxgloveLive(s.host, s.foxglove_port, s.foxglove_worlds, s.foxglove_rate))
+    if s.ros2:
+        from service.ros.dds import DdsBridge
+
+        out.append(DdsBridge(s.ros2_rate, s.ros2_worlds, s.ros2_network))
     return out
 
 

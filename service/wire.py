@@ -168,7 +168,8 @@ def batch_frame_binary(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> 
 #   int32[n]  faults per world (times reset for NaN or capacity overflow)
 #   float32[n, nbody, 7]  per world, per body (MjModel order, 0 = world; see GET /v1/scene):
 #             x y z [m], then the orientation quaternion w x y z, world frame
-# All little-endian. 64 worlds of our 19-body scene: ~34 KB per frame.
+# All little-endian. 64 worlds of our 19-body scene: ~34 KB per frame. While nothing shown
+# changes (poses within 1e-4, targets, faults) the socket sends one frame every 0.5 s only.
 POSE_MAGIC = b"AFP1"
 
 

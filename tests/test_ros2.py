@@ -321,3 +321,35 @@ def test_status_shows_domain_scope_and_topics(ros_server: Server, domain: int) -
     assert dds["enabled"] and dds["domain_id"] == domain and dds["scope"] == "loopback"
     assert dds["topics"]["/world_2/joint_commands"] == "sensor_msgs/msg/JointState"
     assert "/world_3/joint_states" not in dds["topics"] and dds["rate_hz"] == 30
+
+
+def test_ros2_tools_see_node_armfleet_owning_its_endpoints(peer: Peer) -> None:
+    """`ros_discovery_info` (rosbags-decoded) names node /armfleet with the GIDs of exactly the
+    readers and writers DDS discovery reports on its topics: how `ros2 node list` and
+    `ros2 topic info -v` attribute them."""
+    seen = peer.ask(op="discovery")
+    (node,) = [n for n in seen["nodes"] if n["name"] == "armfleet"]
+    assert node["namespace"] == "/"
+    owned = {
+        "rt/joint_states": "writers",
+        "rt/world_1/joint_states": "writers",
+        "rt/clock": "writers",
+        "rt/joint_commands": "readers",
+        "rt/world_2/joint_commands": "readers",
+    }
+    for topic, kind in owned.items():
+        ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
+        assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
+    assert len(node["writers"]) == 4 and len(node["readers"]) == 3  # world 0, 1, 2 (+ /clock)
+
+
+def test_ros2_worlds_must_exist() -> None:
+    from pydantic import ValidationError
+
+    from service.settings import Settings
+
+    assert topics.parse_world_list("0-2,3", 4) == (0, 1, 2, 3)
+    with pytest.raises(ValidationError, match="ros2_worlds '2-9'"):
+        Settings(worlds=4, ros2_worlds="2-9")
+    with pytest.raises(ValidationError, match="ros2_worlds 'x'"):
+        Settings(worlds=4, ros2_worlds="x")

@@ -82,6 +82,39 @@ async def batch_socket(
     await _serve(ws, loop, control, hub, sub, default_world=None)
 
 
+class StillFilter:
+    """Drops a view socket's frame when nothing it shows changed (poses, targets, faults) since
+    the last frame sent, except one every HEARTBEAT_S (tick and speed for the status line).
+
+    A page watching resting arms then wakes twice a second instead of thirty times: most of a
+    still viewer's cost, in the browser and in the server. Any motion, command or fault sends
+    at once. Per socket state, used on the event loop only.
+    """
+
+    HEARTBEAT_S = 0.5
+    STILL = 1e-4  # m or quaternion units: below what a page draws differently
+
+    def __init__(self, worlds: np.ndarray) -> None:
+        self.worlds = worlds
+        self.sent: tuple[np.ndarray, ...] | None = None
+        self.sent_at = 0.0
+
+    def __call__(self, snap: Snapshot) -> bool:
+        w, now = self.worlds, time.monotonic()
+        state = (snap.body_pos[w], snap.body_quat[w], snap.target[w], snap.faults[w])
+        if self.sent is not None and now - self.sent_at < self.HEARTBEAT_S:
+            pos, quat, target, faults = self.sent
+            if (
+                np.array_equal(state[2], target)
+                and np.array_equal(state[3], faults)
+                and np.abs(state[0] - pos).max() < self.STILL
+                and np.abs(state[1] - quat).max() < self.STILL
+            ):
+                return True
+        self.sent, self.sent_at = state, now
+        return False
+
+
 MAX_VIEW_WORLDS = 256  # what the page's fleet view draws; ~136 KB per pose frame
 
 
@@ -128,6 +161,7 @@ async def view_socket(
         return wire.pose_frame(snap, ids, names, focus, stats)
 
     sub = Subscription(ids, rate, render, f"view:{focus}", binary=True)
+    sub.skip = StillFilter(ids)
     await _serve(ws, loop, control, hub, sub, default_world=None, source=Source.BROWSER)
 
 
@@ -217,7 +251,7 @@ async def _write(ws: WebSocket, hub: StreamHub, sub: Subscription) -> None:
         while sub.acks:
             await ws.send_text(sub.acks.popleft().decode())
         snap, sub.latest = sub.latest, None
-        if snap is None:
+        if snap is None or (sub.skip is not None and sub.skip(snap)):
             continue
         frame = hub.frame(sub, snap)
         if sub.binary:

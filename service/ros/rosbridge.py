@@ -220,7 +220,7 @@ class Session:
 
     def op_subscribe(self, msg: dict[str, Any]) -> None:
         topic = _topic_name(msg.get("topic"))
-        render, world, kind = self._renderer(topic)
+        _, _, kind = self._renderer(topic)  # unknown topics fail here, before any change
         given = msg.get("type")
         if given is not None and (not isinstance(given, str) or not _same_type(given, kind)):
             raise ProtocolError(f"type: {topic} carries {kind}, not {given!r}")
@@ -235,17 +235,7 @@ class Session:
         existing = self.subs.get(topic)
         ids = dict(existing.ids) if existing else {}
         ids[msg.get("id")] = throttle
-        rate = self._rate(min(ids.values()))
-        if existing is not None:
-            if existing.hub_sub.period == 1.0 / rate:
-                existing.ids = ids
-                return
-            self.hub.remove(existing.hub_sub)
-        sub = Subscription(np.array([world]), rate, render, f"rosbridge {topic}")
-        sub.ready = self.ready  # one writer per socket wakes for replies and any topic
-        self.subs[topic] = _TopicSub(sub, ids)
-        self.hub.add(sub)
-        sub.offer(self.loop.latest, time.monotonic())  # the current state at once
+        self._deliver(topic, ids)
 
     def op_unsubscribe(self, msg: dict[str, Any]) -> None:
         topic = _topic_name(msg.get("topic"))
@@ -253,11 +243,35 @@ class Session:
         if existing is None:
             return  # rosbridge ignores unsubscribing what was not subscribed
         msg_id = msg.get("id")
-        if msg_id is not None and msg_id in existing.ids and len(existing.ids) > 1:
-            del existing.ids[msg_id]
+        if msg_id is None:
+            ids: dict[Any, int] = {}  # no id: every subscription of this client to the topic
+        elif msg_id in existing.ids:
+            ids = {k: v for k, v in existing.ids.items() if k != msg_id}
+        else:
+            return  # an id this client never subscribed with changes nothing
+        self._deliver(topic, ids)
+
+    def _deliver(self, topic: str, ids: dict[Any, int]) -> None:
+        """Send `topic` at the fastest rate its subscribe ids ask for; none left: stop sending."""
+        existing = self.subs.pop(topic, None)
+        if not ids:
+            if existing is not None:
+                self.hub.remove(existing.hub_sub)
             return
-        self.hub.remove(existing.hub_sub)
-        del self.subs[topic]
+        rate = self._rate(min(ids.values()))
+        if existing is not None and existing.hub_sub.period == 1.0 / rate:
+            existing.ids = ids
+            self.subs[topic] = existing
+            return
+        if existing is not None:
+            self.hub.remove(existing.hub_sub)
+        render, world, _ = self._renderer(topic)
+        sub = Subscription(np.array([world]), rate, render, f"rosbridge {topic}")
+        sub.ready = self.ready  # one writer per socket wakes for replies and any topic
+        self.subs[topic] = _TopicSub(sub, ids)
+        self.hub.add(sub)
+        if existing is None:
+            sub.offer(self.loop.latest, time.monotonic())  # the current state at once
 
     def op_call_service(self, msg: dict[str, Any]) -> None:
         name = _topic_name(msg.get("service"), "service")

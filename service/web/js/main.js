@@ -39,7 +39,7 @@ const page = {
 };
 window.armfleet = page.stats;
 
-const track = new PoseTrack();
+const track = new PoseTrack(page.rate);
 const panel = new Panel({
   step: (joint, delta) => command({ op: 'increment', joint, delta }),
   reset: () => command({ op: 'reset' }),
