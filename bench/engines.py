@@ -123,11 +123,16 @@ class _Rollout:
 
 
 async def _served_vs_rollout(
-    server: common.Served, rollout: _Rollout, rounds: int, window: float, block_s: float
+    server: common.Served,
+    rollout: _Rollout,
+    rounds: int,
+    window: float,
+    block_s: float,
+    fmt: str = "json",
 ) -> dict[str, Any]:
     """Rounds of: service paused → a rollout block → service in fast mode for `window`.
 
-    The service streams every world at 30 Hz (JSON, one client) throughout; pausing it while
+    The service streams every world at 30 Hz (`fmt` frames, one client) throughout; pausing it while
     rollout runs keeps the two from sharing the cores. Best of the rounds for each.
     """
     import httpx
@@ -135,7 +140,7 @@ async def _served_vs_rollout(
     from bench.service_bench import FrameCounter, _info
 
     counter = FrameCounter()
-    reader = asyncio.create_task(counter.run(f"{server.ws_url}/v1/ws?rate=30&format=json"))
+    reader = asyncio.create_task(counter.run(f"{server.ws_url}/v1/ws?rate=30&format={fmt}"))
     served: list[float] = []
     raw: list[float] = []
     try:
@@ -195,10 +200,18 @@ def engines(ctx: Context) -> Result:
                     out[f"{engine}_service"] = asyncio.run(
                         _served_vs_rollout(server, rollout, rounds, window, block_s)
                     )
+                    if engine == "mujoco":  # the same server, binary frames (service/wire.py)
+                        out["mujoco_service_binary"] = asyncio.run(
+                            _served_vs_rollout(server, rollout, rounds, window, block_s, "binary")
+                        )
         finally:
             rollout.close()
         out["rollout"] = rollout_best = max(
-            out[f"{e}_service"]["rollout_world_steps_per_s"] for e in ENGINE_NAMES
+            out[k]["rollout_world_steps_per_s"]
+            for k in ("mujoco_service", "mujoco_service_binary", "warp_service")
+        )
+        out["mujoco_service_binary_vs_rollout"] = (
+            out["mujoco_service_binary"]["world_steps_per_s"] / rollout_best
         )
         for engine in ENGINE_NAMES:
             served = out[f"{engine}_service"]["world_steps_per_s"]
@@ -225,6 +238,7 @@ def engines(ctx: Context) -> Result:
             "native served": r["mujoco_service"]["world_steps_per_s"],
             "warp served": r["warp_service"]["world_steps_per_s"],
             "native svc/rollout": r["mujoco_service_vs_rollout"],
+            "native binary svc/rollout": r["mujoco_service_binary_vs_rollout"],
             "warp svc/rollout": r["warp_service_vs_rollout"],
         }
         for n, r in results.items()
