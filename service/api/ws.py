@@ -16,7 +16,7 @@ import numpy as np
 import orjson
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
-from service import wire
+from service import access, wire
 from service.control import Control, Source
 from service.errors import ArmfleetError, BadCommand
 from service.hub import StreamHub, Subscription
@@ -173,8 +173,12 @@ def _running(ws: WebSocket) -> tuple[SimLoop, Control, StreamHub] | None:
 
 
 async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
-    await ws.accept()
+    await ws.accept(subprotocol=_grant(ws).subprotocol)
     await ws.close(code=code, reason=reason[:120])
+
+
+def _grant(ws: WebSocket) -> access.Grant:
+    return access.check_websocket(ws.app.state.runtime.settings, ws)
 
 
 async def _serve(
@@ -186,7 +190,17 @@ async def _serve(
     default_world: int | None,
     source: Source = Source.WS,
 ) -> None:
-    await ws.accept()
+    runtime = ws.app.state.runtime
+    grant = _grant(ws)
+    limiter = access.RateLimiter(runtime.settings.command_rate, runtime.settings.command_burst)
+    metrics = runtime.metrics
+    await ws.accept(subprotocol=grant.subprotocol)
+
+    async def close(code: int, reason: str) -> None:
+        await ws.close(code=code, reason=reason[:120])
+
+    sub.close = close
+    sub.status_frames = True
     hub.add(sub)
     sub.offer(loop.latest, time.monotonic())  # the current state at once, then the stream
     writer = asyncio.create_task(_write(ws, hub, sub))
@@ -200,10 +214,26 @@ async def _serve(
             text = message.get("text")
             if text is None:
                 reply = wire.error_frame(None, "send JSON as text frames")
+                metrics.command_rejected(source, "unknown")
+            elif not grant.command:
+                reply = wire.error_frame(wire.read_id(text), grant.reason)
+                metrics.command_rejected(source, "unknown", "refused")
             else:
-                reply = _handle(control, text, default_world, source)
-                if reply.get("op") == "ack" and isinstance(reply.get("tick"), int):
-                    sub.owe(reply["tick"])  # its first frame goes out whatever the cadence
+                verdict = limiter.take()
+                if verdict == "ok":
+                    reply = _handle(control, text, default_world, source)
+                    if reply.get("op") == "error":
+                        metrics.command_rejected(source, _op(text))
+                    elif reply.get("op") == "ack" and isinstance(reply.get("tick"), int):
+                        sub.owe(reply["tick"])  # its first frame goes out whatever the cadence
+                else:
+                    reply = wire.error_frame(wire.read_id(text), limiter.detail)
+                    metrics.command_rejected(source, _op(text), "refused")
+                    if verdict == "close":
+                        sub.push_ack(wire.dumps(reply))
+                        await _drain(sub)
+                        await close(access.CLOSE_POLICY, "over the command rate")
+                        break
             sub.push_ack(wire.dumps(reply))
     except (WebSocketDisconnect, RuntimeError):
         pass
@@ -237,5 +267,24 @@ def _handle(
     try:
         msg = orjson.loads(text)
     except orjson.JSONDecodeError as exc:
-        return wire.error_frame(None, f"malformed JSON: {exc}")
+        # NaN/Infinity are not JSON, but the rest of such a message is readable: parse it
+        # leniently so that the error names the field and echoes the client's id.
+        msg = wire.loads_lenient(text)
+        if msg is None:
+            return wire.error_frame(wire.read_id(text), f"malformed JSON: {exc}")
     return control.handle(msg, default_world, source)
+
+
+def _op(text: str) -> str:
+    """The `op` of a message for counting (cheap, never raises)."""
+    for op in ("increment", "set_targets", "reset"):
+        if f'"{op}"' in text:
+            return op
+    return "unknown"
+
+
+async def _drain(sub: Subscription, timeout: float = 1.0) -> None:
+    """Give the writer a moment to send what is queued (the last error) before closing."""
+    deadline = time.monotonic() + timeout
+    while sub.acks and time.monotonic() < deadline:
+        await asyncio.sleep(0.01)

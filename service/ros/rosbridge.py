@@ -27,6 +27,7 @@ import numpy as np
 import orjson
 from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect
 
+from service import access
 from service.control import Source
 from service.errors import ArmfleetError
 from service.hub import StreamHub, Subscription
@@ -123,6 +124,11 @@ class Session:
         self.subs: dict[str, _TopicSub] = {}
         self.advertised: dict[str, str] = {}
         self.ready = asyncio.Event()
+        # One access policy for every surface (service/access.py): may it publish, how fast.
+        settings = runtime.settings
+        self.grant = access.check_websocket(settings, ws)
+        self.limiter = access.RateLimiter(settings.command_rate, settings.command_burst)
+        self.over_rate = False  # set when the client kept publishing over its rate: close 1008
 
     # -- inbound ----------------------------------------------------------------------------
 
@@ -182,6 +188,12 @@ class Session:
             raise ProtocolError(f"topic: {topic} was not advertised by this client")
 
     def op_publish(self, msg: dict[str, Any]) -> None:
+        if not self.grant.command:
+            raise BadMessage("refused", self.grant.reason)
+        verdict = self.limiter.take()
+        if verdict != "ok":
+            self.over_rate = verdict == "close"
+            raise BadMessage("refused", self.limiter.detail)
         topic = _topic_name(msg.get("topic"))
         world = self.server.topic_map.command_topics().get(topic)
         if world is None:
@@ -392,7 +404,7 @@ def server_of(app: Any) -> RosbridgeServer:
 async def rosbridge_socket(ws: WebSocket) -> None:
     """rosbridge v2 clients (roslibpy, roslib.js): JSON ops in text frames."""
     runtime = ws.app.state.runtime
-    await ws.accept()
+    await ws.accept(subprotocol=access.check_websocket(runtime.settings, ws).subprotocol)
     if runtime.loop is None or runtime.hub is None:
         await ws.close(code=1013, reason="simulation is starting")
         return
@@ -413,6 +425,10 @@ async def rosbridge_socket(ws: WebSocket) -> None:
                 session.status("error", "send JSON as text frames (binary frames are not read)")
             else:
                 session.handle_text(text)
+                if session.over_rate:
+                    await asyncio.sleep(0.2)  # let the writer send the refusal first
+                    await ws.close(code=access.CLOSE_POLICY, reason="over the command rate")
+                    break
     except (WebSocketDisconnect, RuntimeError):
         pass
     finally:
