@@ -10,6 +10,8 @@ Two measurements, both of the engine as the loop drives it (no HTTP in between):
   `step` minus the slowest shard's own time is what Ray adds (serialising the staged commands,
   scheduling, the reply), reported as p50 / p99 / mean; the snapshot fetch (all shards' states
   into the API process) is timed beside it.
+* a lost actor: one of the shards' actors is killed; how long until its replacement has resumed
+  from the last state copy, and how the other shards stepped meanwhile.
 
 Section 15 of ``armfleet bench`` (``--section 15``; on by default with ``--device cuda``), or
 ``python -m bench.ray_bench --device cuda``. Where the bench runner's dependencies are missing
@@ -131,6 +133,7 @@ def run(
     say: Any = print,
     out: dict[str, Any] | None = None,
     save: Any = None,
+    loss_worlds: int = 0,
 ) -> dict[str, Any]:
     """Every measurement on one machine, into `out` (saved after each step); returns it."""
     from service.engine import WorldBatch
@@ -197,7 +200,50 @@ def run(
         rb.close()
         del rb
         gc.collect()
+    if loss_worlds:
+        rb = RayBatch(loss_worlds * shards, shards, device=device, checkpoint_s=1.0)
+        out["loss"] = lose_one(rb, warm_s=3.0)
+        saved(f"  one of {shards} actors killed: {out['loss']}")
+        rb.close()
     return out
+
+
+def lose_one(batch: Any, warm_s: float, limit_s: float = 300.0) -> dict[str, Any]:
+    """Kill the last shard's actor after `warm_s` of stepping (state copies every second);
+    step on until it is rebuilt: how long that took, and how the other shards fared meanwhile."""
+    import ray
+    from ray.exceptions import RayActorError
+
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < warm_s:
+        batch.step(1)
+    victim = batch.actors[-1]
+    ray.kill(victim, no_restart=True)
+    while True:  # ray.kill is asynchronous: from here on, calls on the actor fail
+        try:
+            ray.get(victim.snapshot.remote())
+        except RayActorError:
+            break
+    t_kill, tick_kill, restored = time.perf_counter(), batch.tick, len(batch.restored)
+    steps: list[float] = []
+    home = 0
+    while len(batch.restored) == restored and time.perf_counter() - t_kill < limit_s:
+        t1 = time.perf_counter()
+        home = int(batch.step(1).size)
+        steps.append(time.perf_counter() - t1)
+        if home:
+            break
+    resumed = batch.restored[restored:]
+    return {
+        "nworld": batch.nworld,
+        "shards": batch.shards,
+        "rebuild_s": round(time.perf_counter() - t_kill, 2),
+        "ticks_meanwhile": batch.tick - tick_kill,
+        "slowest_step_meanwhile_ms": round(max(steps) * 1e3, 2) if steps else None,
+        "resumed_from_tick": resumed[0][1] if resumed else None,
+        "tick_at_loss": tick_kill,
+        "came_back_home": home,
+    }
 
 
 def machine() -> dict[str, Any]:
@@ -273,6 +319,7 @@ def measure(
         say=say,
         out=payload,
         save=save,
+        loss_worlds=4096 if cuda else 8,
     )
     return payload
 
@@ -300,6 +347,14 @@ if section is not None:
             "Ray ms/tick: driver's step wall time minus the slowest shard's own step time; "
             "snapshot: all shards' states into the API process (30 Hz)",
         ]
+        loss = payload.get("loss")
+        if loss:
+            notes.append(
+                f"one of {loss['shards']} actors killed ({loss['nworld']} worlds): rebuilt in "
+                f"{loss['rebuild_s']} s while the others stepped {loss['ticks_meanwhile']} ticks "
+                f"(slowest {loss['slowest_step_meanwhile_ms']} ms); resumed from tick "
+                f"{loss['resumed_from_tick']} (lost at {loss['tick_at_loss']})"
+            )
         return Result(_rows(payload), data=payload, notes=notes)
 
 

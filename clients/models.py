@@ -106,6 +106,8 @@ class WorldState:
     flange_position: np.ndarray  # (3,) x y z [m], world frame
     flange_quaternion: np.ndarray  # (4,) w x y z
     faults: int  # times this world was reset for NaN or capacity overflow
+    # Only while the service is paused: targets as of every accepted command (the next step's).
+    pending_target: np.ndarray | None = None
 
     def index(self, joint: JointRef) -> int:
         return joint_index(self.name, joint)
@@ -124,6 +126,7 @@ class WorldState:
             flange_position=_arr(d["flange"]["position"]),
             flange_quaternion=_arr(d["flange"]["quaternion"]),
             faults=int(d["faults"]),
+            pending_target=_arr(d["pending_target"]) if "pending_target" in d else None,
         )
 
 
@@ -148,6 +151,7 @@ class BatchStates:
     flange_position: np.ndarray  # (n, 3)
     flange_quaternion: np.ndarray  # (n, 4) w x y z
     faults: np.ndarray  # (n,) int
+    pending_target: np.ndarray | None = None  # (n, 7), only while the service is paused
 
     def __len__(self) -> int:
         return int(self.worlds.shape[0])
@@ -168,6 +172,7 @@ class BatchStates:
             sim_time=float(self.sim_time[i]),
             name=self.name,
             faults=int(self.faults[i]),
+            pending_target=None if self.pending_target is None else self.pending_target[i],
             **rows,
         )
 
@@ -188,6 +193,8 @@ class BatchStates:
             "flange_quaternion": [r["flange"]["quaternion"] for r in rows],
         }
         columns.update({k: [r[k] for r in rows] for k in _JOINT_COLUMNS})
+        if rows and "pending_target" in rows[0]:
+            columns["pending_target"] = [r["pending_target"] for r in rows]
         return cls.from_columns(columns)
 
     @classmethod
@@ -197,12 +204,14 @@ class BatchStates:
         n = len(d["worlds"])
         floats = {k: _arr2(d[k], len(names)) for k in _JOINT_COLUMNS}
         floats.update({k: _arr2(d[k], width) for k, width in _FLANGE_COLUMNS})
+        pending = d.get("pending_target")
         return cls(
             tick=int(d["tick"]),
             name=names,
             worlds=np.array(d["worlds"], dtype=np.int64).reshape(n),
             sim_time=_arr(d["sim_time"]),
             faults=np.array(d["faults"], dtype=np.int64).reshape(n),
+            pending_target=None if pending is None else _arr2(pending, len(names)),
             **floats,
         )
 

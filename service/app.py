@@ -5,17 +5,35 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import AsyncIterator
+from typing import Any
 
 from fastapi import FastAPI, HTTPException, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.api import health, info, recordings, scene, sim, snapshots, web, worlds, ws
+from service import access
+from service.api import (
+    health,
+    info,
+    metrics,
+    recordings,
+    scene,
+    sim,
+    snapshots,
+    web,
+    worlds,
+    ws,
+)
 from service.errors import ArmfleetError, BadCommand
+from service.metrics import CommandCounter
 from service.ros import rosbridge
 from service.ros.topics import TopicMap, parse_world_list
-from service.runtime import Runtime, Surface
+from service.runtime import Runtime
+from service.schemas import ANY, errors, fit_openapi
 from service.settings import Settings
 
 DESCRIPTION = """
@@ -73,6 +91,31 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
     return JSONResponse({"detail": detail}, status_code=422)
 
 
+async def _http_error(request: Request, exc: Exception) -> Response:
+    """FastAPI's own handling, except that a 405 lists every method the path takes.
+
+    (Starlette's lists only those of the first route whose path matched, when GET and POST of
+    one path are separate routes, as in /v1/snapshots.)
+    """
+    assert isinstance(exc, StarletteHTTPException)
+    if exc.status_code == 405:
+        allowed = _methods_of(request.app, request.url.path)
+        if allowed:
+            exc.headers = {**(exc.headers or {}), "Allow": ", ".join(allowed)}
+    return await http_exception_handler(request, exc)
+
+
+def _methods_of(app: FastAPI, path: str) -> list[str]:
+    """Every method the OpenAPI description lists for `path` (HEAD with GET)."""
+    found: set[str] = set()
+    for template, operations in app.openapi().get("paths", {}).items():
+        if compile_path(template)[0].match(path):
+            found.update(m.upper() for m in operations if m != "parameters")
+    if "GET" in found:
+        found.add("HEAD")
+    return sorted(found)
+
+
 async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
     """The one mapping of domain errors to HTTP: status from the class, detail from the error."""
     assert isinstance(exc, ArmfleetError)
@@ -89,12 +132,15 @@ async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
+    """The service as an ASGI app; ValueError when the settings are unsafe (see access)."""
     settings = settings or Settings()
-    runtime = Runtime(settings, _surfaces(settings))
+    access.check_bind(settings)
+    runtime = Runtime(settings)
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         starting = asyncio.create_task(runtime.start())
+        runtime.install_stop_signal()
         yield
         with contextlib.suppress(BaseException):
             await asyncio.wait_for(starting, timeout=120)
@@ -107,6 +153,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
         exception_handlers={
             RequestValidationError: _validation_error,
+            StarletteHTTPException: _http_error,
             ArmfleetError: _armfleet_error,
         },
     )
@@ -115,17 +162,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         TopicMap(parse_world_list(settings.ros2_worlds, settings.worlds)), settings.ros2_rate
     )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
-    for module in (health, info, worlds, sim, scene, ws, web, rosbridge, snapshots, recordings):
+    # Added last = runs first: count refused commands, then check token, origin and slots.
+    app.add_middleware(access.AccessMiddleware, settings=settings, slots=runtime.slots)
+    app.add_middleware(CommandCounter, metrics=runtime.metrics)
+    for module in (health, metrics, web, rosbridge):
         app.include_router(module.router)
+    # Every /v1 route can also answer 401/403 (token, origin) and 503 (not ready, client cap).
+    for module in (info, worlds, sim, scene, ws, snapshots, recordings):
+        app.include_router(module.router, responses=errors(*ANY))
     web.mount_static(app)
+    generate = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            app.openapi_schema = fit_openapi(generate(), settings.worlds)
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
     return app
-
-
-def _surfaces(settings: Settings) -> tuple[Surface, ...]:
-    """The optional add-ons the settings switch on, in start order."""
-    surfaces: list[Surface] = []
-    if settings.ros2:
-        from service.ros.dds import DdsBridge
-
-        surfaces.append(DdsBridge(settings.ros2_rate, settings.ros2_worlds, settings.ros2_network))
-    return tuple(surfaces)

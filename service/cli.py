@@ -72,6 +72,13 @@ def serve(
     control_hz: Annotated[float | None, _opt("control_hz")] = None,
     physics_dt: Annotated[float | None, _opt("physics_dt")] = None,
     log_level: Annotated[str | None, _opt("log_level")] = None,
+    token: Annotated[str | None, _opt("token")] = None,
+    insecure: Annotated[bool | None, _opt("insecure")] = None,
+    token_reads: Annotated[bool | None, _opt("token_reads")] = None,
+    allow_origins: Annotated[list[str] | None, _opt("allow_origins")] = None,
+    max_clients: Annotated[int | None, _opt("max_clients")] = None,
+    command_rate: Annotated[float | None, _opt("command_rate")] = None,
+    command_burst: Annotated[int | None, _opt("command_burst")] = None,
     ws_compression: Annotated[bool | None, _opt("ws_compression")] = None,
     ros2: Annotated[bool | None, _opt("ros2")] = None,
     ros2_rate: Annotated[float | None, _opt("ros2_rate")] = None,
@@ -89,7 +96,10 @@ def serve(
     foxglove_worlds: Annotated[str | None, _opt("foxglove_worlds")] = None,
     foxglove_rate: Annotated[float | None, _opt("foxglove_rate")] = None,
 ) -> None:
-    """Start the service: N worlds, a real-time loop, REST + WebSocket on http://HOST:PORT."""
+    """Start the service: N worlds, a real-time loop, REST + WebSocket on http://HOST:PORT.
+
+    Bound to anything but loopback it needs --token (or ARMFLEET_TOKEN) unless --insecure.
+    """
     given = {name: value for name, value in locals().items() if value is not None}
     import uvicorn
 
@@ -100,8 +110,13 @@ def serve(
     _check_port_free(settings.host, settings.port)
     level = settings.log_level
     logging.basicConfig(level=level.upper(), format="%(asctime)s %(name)s %(message)s")
+    try:
+        service = create_app(settings)
+    except ValueError as exc:  # an unsafe bind (service/access.py)
+        typer.echo(f"armfleet serve: {exc}", err=True)
+        raise typer.Exit(2) from None
     uvicorn.run(
-        create_app(settings),
+        service,
         host=settings.host,
         port=settings.port,
         log_level=level,
@@ -130,6 +145,11 @@ def replay(
     except ReplayError as exc:
         typer.echo(f"armfleet replay: {exc}", err=True)
         raise typer.Exit(2) from None
+    if report.recorded_on != report.replayed_on:
+        typer.echo(
+            f"note: recorded on {report.recorded_on}, replayed on {report.replayed_on}; "
+            "bit-identical results are only expected on the same device"
+        )
     if report.truncated:
         typer.echo(f"note: the recording ends early ({report.truncated}); replayed what it holds")
     typer.echo(

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -78,6 +79,9 @@ class Control:
     def __init__(self, loop: SimLoop) -> None:
         self.loop = loop
         self._listeners: tuple[Listener, ...] = ()
+        # Staging and announcing happen under one lock so that listeners hear commands in the
+        # order the loop staged them (a recording replays them in that order).
+        self._order = threading.Lock()
 
     @property
     def spec(self) -> RobotSpec:
@@ -132,8 +136,10 @@ class Control:
     ) -> CommandResult:
         """Add to the named joints' latest targets (the seed's Up/Down), clamped to range."""
         world = self.world(world)
-        result = self.loop.increment(world, resolve_joints(self.spec, deltas, field))
-        self._announce_result("increment", source, result)
+        values = resolve_joints(self.spec, deltas, field)
+        with self._order:
+            result = self.loop.increment(world, values)
+            self._announce_result("increment", source, result)
         return result
 
     def set_targets(
@@ -154,8 +160,9 @@ class Control:
         if len(set(name)) != len(name):
             raise BadCommand("name", "a joint may be named only once")
         values = resolve_joints(self.spec, dict(zip(name, position, strict=True)), "name")
-        result = self.loop.set_targets(world, values)
-        self._announce_result("set_targets", source, result)
+        with self._order:
+            result = self.loop.set_targets(world, values)
+            self._announce_result("set_targets", source, result)
         return result
 
     def set_many(
@@ -179,33 +186,36 @@ class Control:
             )
         if not np.isfinite(rows).all():
             raise BadCommand("position", "values must be finite (no NaN or Inf)")
-        results = self.loop.set_many(ids, rows)
-        if results:
-            self._announce(
-                Accepted(
-                    source,
-                    "set_targets",
-                    np.array(ids, dtype=np.int64),
-                    np.stack([r.target for r in results]),
-                    results[0].tick,
+        with self._order:
+            results = self.loop.set_many(ids, rows)
+            if results:
+                self._announce(
+                    Accepted(
+                        source,
+                        "set_targets",
+                        np.array(ids, dtype=np.int64),
+                        np.stack([r.target for r in results]),
+                        results[0].tick,
+                    )
                 )
-            )
         return results
 
     def reset(self, worlds: Sequence[int] | None, source: Source) -> ResetResult:
         """Send worlds (all when None) back to `home`, state and targets."""
         ids = list(range(self.nworld)) if worlds is None else self.worlds(worlds)
-        tick = self.loop.reset(ids)
         targets = np.tile(self.loop.batch.home_target, (len(ids), 1))
-        self._announce(Accepted(source, "reset", np.array(ids, dtype=np.int64), targets, tick))
+        with self._order:
+            tick = self.loop.reset(ids)
+            self._announce(Accepted(source, "reset", np.array(ids, dtype=np.int64), targets, tick))
         return ResetResult(ids, tick, targets)
 
     def set_mode(self, mode: Mode, source: Source) -> int:
         """Switch realtime / fast / paused; returns the tick at which the switch happened."""
-        self.loop.set_mode(mode)
-        tick = self.loop.tick
         empty = np.zeros(0, dtype=np.int64)
-        self._announce(Accepted(source, "mode", empty, np.zeros((0, 7)), tick, Mode(mode)))
+        with self._order:
+            self.loop.set_mode(mode)
+            tick = self.loop.tick
+            self._announce(Accepted(source, "mode", empty, np.zeros((0, 7)), tick, Mode(mode)))
         return tick
 
     def _announce_result(self, kind: str, source: Source, result: CommandResult) -> None:

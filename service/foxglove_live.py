@@ -120,7 +120,7 @@ def geom_entities(mjm: mujoco.MjModel, prefix: str, stamp: Timestamp) -> list[Sc
         prims = per_body.setdefault(
             int(mjm.geom_bodyid[g]), {"cubes": [], "cylinders": [], "spheres": []}
         )
-        kind = mjm.geom_type[g]
+        kind = mujoco.mjtGeom(int(mjm.geom_type[g]))
         if kind == mujoco.mjtGeom.mjGEOM_BOX:
             prims["cubes"].append(
                 CubePrimitive(pose=_pose(pos, quat), size=_vec(2 * size), color=color)

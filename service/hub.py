@@ -11,7 +11,7 @@ import asyncio
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 
 import numpy as np
 
@@ -41,6 +41,11 @@ class Subscription:
         self.owed_tick: int | None = None  # the earliest tick an acked command takes effect
         self.acks: deque[bytes] = deque()
         self.ready = asyncio.Event()
+        # Set by the socket that owns it: close the socket (code, reason), e.g. 1001 at shutdown.
+        self.close: Callable[[int, str], Awaitable[None]] | None = None
+        self.status_frames = False  # the socket speaks our protocol: send it status frames
+        # The writer drops a frame when this says so (the page's socket: nothing moved).
+        self.skip: Callable[[Snapshot], bool] | None = None
 
     def due(self, now: float) -> bool:
         # A little slack so that a 30 Hz stream on a 60 Hz loop really gets every other tick.
@@ -81,6 +86,7 @@ class StreamHub(SnapshotSink):
         self._incoming: Snapshot | None = None
         self._scheduled = False
         self._frame_cache: dict[tuple[int, tuple[str, bytes]], bytes] = {}
+        self.frames_skipped = 0  # frames replaced before a slow reader took them (metrics)
 
     def add(self, sub: Subscription) -> None:
         self._subs = (*self._subs, sub)
@@ -118,7 +124,20 @@ class StreamHub(SnapshotSink):
         now = time.monotonic()
         for sub in self._subs:
             if sub.wants(snap, now):
+                if sub.latest is not None:
+                    self.frames_skipped += 1
                 sub.offer(snap, now)
+
+    def broadcast(self, message: bytes) -> None:
+        """Queue a message (a status frame) for every subscriber, in order with its acks."""
+        for sub in self._subs:
+            if sub.status_frames:
+                sub.push_ack(message)
+
+    async def close_all(self, code: int, reason: str) -> None:
+        """Close every subscriber's socket with `code` (1001 when the service stops)."""
+        closing = [sub.close(code, reason) for sub in self._subs if sub.close is not None]
+        await asyncio.gather(*closing, return_exceptions=True)
 
     def frame(self, sub: Subscription, snap: Snapshot) -> bytes:
         """Serialise once per (tick, world selection) however many sockets share it."""

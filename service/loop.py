@@ -11,6 +11,7 @@ reply, and the first snapshot whose `tick` is >= it carries the new target.
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import logging
 import threading
 import time
@@ -92,7 +93,12 @@ class SimLoop:
         self._tick = batch.tick
         self._step_goal = self._tick  # paused mode: run until the tick counter reaches this
         self._step_waiters: list[tuple[int, concurrent.futures.Future[int]]] = []
-        self._snapshot_waiters: list[concurrent.futures.Future[Snapshot]] = []
+        # Readers waiting for a snapshot of at least this tick (read-your-writes).
+        self._snapshot_waiters: list[tuple[int, concurrent.futures.Future[Snapshot]]] = []
+        # Per world: the tick from which its latest accepted command is in effect.
+        self._effective = np.zeros(batch.nworld, dtype=np.int64)
+        self._tick_listeners: tuple[TickListener, ...] = ()
+        self.failure: str | None = None  # why the last tick failed; None while ticks succeed
         self._latest = batch.snapshot()
         self._last_snapshot_wall = 0.0
         self._stats = LoopStats(self._tick, self._mode, 0.0, 0.0)
@@ -124,7 +130,7 @@ class SimLoop:
         self._serve_requests()  # the thread is gone: requests that raced the stop are served here
         for _, fut in self._step_waiters:
             fut.cancel()
-        for fut in self._snapshot_waiters:
+        for _, fut in self._snapshot_waiters:
             fut.cancel()
 
     # -- commands (any thread) --------------------------------------------------------------
@@ -168,7 +174,9 @@ class SimLoop:
     def _stage(self, world: int, update: commands.TargetUpdate) -> CommandResult:
         self._pending[world] = update.target
         self._dirty[world] = True
-        return CommandResult(world, update.target.copy(), update.clamped, self._accept_tick())
+        tick = self._accept_tick()
+        self._effective[world] = tick
+        return CommandResult(world, update.target.copy(), update.clamped, tick)
 
     def reset(self, worlds: list[int] | None = None) -> int:
         """Reset worlds (all when None) to home, state and targets; returns the effective tick."""
@@ -179,9 +187,12 @@ class SimLoop:
             self._reset[idx] = True
             self._dirty[idx] = False
             self._pending[idx] = self.batch.home_target
-            return self._accept_tick()
+            tick = self._accept_tick()
+            self._effective[idx] = tick
+            return tick
 
-    def pending_targets(self, world: int) -> np.ndarray:
+    def pending_targets(self, world: int | np.ndarray) -> np.ndarray:
+        """Targets as of every command accepted so far (some may not be in effect yet)."""
         with self._lock:
             return self._pending[world].copy()
 
@@ -230,6 +241,7 @@ class SimLoop:
             self._pending = batch.targets
             self._dirty[:] = False
             self._reset[:] = False
+            self._effective[:] = self._tick  # what was accepted before belongs to the old state
             self._window = (time.monotonic(), self._tick)
             waiting, self._step_waiters = self._step_waiters, []
         for listener in self._restore_listeners:
@@ -238,6 +250,10 @@ class SimLoop:
             except Exception:
                 log.exception("restore listener %r failed", listener)
         self._publish(time.monotonic())
+        with self._lock:  # readers waiting for a tick of the old timeline get the restored state
+            readers, self._snapshot_waiters = self._snapshot_waiters, []
+        for _, reader in readers:
+            _resolve(reader, self._latest)
         for _, fut in waiting:
             fut.set_result(self._tick)
         return self._tick
@@ -259,6 +275,9 @@ class SimLoop:
             self._mode = Mode(mode)
             self._window = (time.monotonic(), self._tick)
             self._wake.notify_all()
+            waiters = self._stranded_waiters()
+        for fut in waiters:  # paused: the ticks they waited for will not come
+            _resolve(fut, self._latest)
 
     def step(self, ticks: int) -> concurrent.futures.Future[int]:
         """Paused only: advance exactly `ticks`; the future resolves with the tick reached."""
@@ -282,15 +301,46 @@ class SimLoop:
     def latest(self) -> Snapshot:
         return self._latest
 
-    def fresh_snapshot(self) -> concurrent.futures.Future[Snapshot]:
-        """A snapshot of the last completed tick: at once if there is one, else after the next."""
+    def fresh_snapshot(
+        self, worlds: np.ndarray | list[int] | None = None
+    ) -> concurrent.futures.Future[Snapshot]:
+        """A snapshot that includes every command accepted for `worlds` (all when None) so far.
+
+        Read-your-writes: it waits for the tick from which the latest accepted command of those
+        worlds is in effect (at most the tick in progress and the next one while running), and
+        never returns a tick older than the last completed one. While paused those ticks do not
+        come: the latest snapshot is returned at once and the caller shows `pending_targets`.
+        """
         fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
         with self._wake:
-            if self._latest.tick == self._tick or not self._running or self._mode is Mode.PAUSED:
+            need = self._tick + (1 if self._stepping else 0)
+            if self._effective.size:
+                chosen = self._effective if worlds is None else self._effective[worlds]
+                need = max(need, int(chosen.max(initial=0)))
+            if self._latest.tick >= need or not self._running or self._will_not_advance():
                 fut.set_result(self._latest)
             else:
-                self._snapshot_waiters.append(fut)
+                self._snapshot_waiters.append((need, fut))
         return fut
+
+    def _will_not_advance(self) -> bool:
+        """Paused with no step requested and no tick in progress (lock held)."""
+        return self._mode is Mode.PAUSED and self._tick >= self._step_goal and not self._stepping
+
+    def _stranded_waiters(self) -> list[concurrent.futures.Future[Snapshot]]:
+        """Readers whose tick will not come because time stands still (lock held)."""
+        if not self._will_not_advance():
+            return []
+        stranded = [f for _, f in self._snapshot_waiters]
+        self._snapshot_waiters = []
+        return stranded
+
+    def add_tick_listener(self, listener: TickListener) -> None:
+        """Call `listener(tick, seconds, faulted_count)` on the sim thread after every tick.
+
+        For counters (metrics): it must be quick and must not block.
+        """
+        self._tick_listeners = (*self._tick_listeners, listener)
 
     @property
     def stats(self) -> LoopStats:
@@ -321,9 +371,13 @@ class SimLoop:
                         continue
             try:
                 self._tick_once(mode)
-            except Exception:  # never let one bad tick kill the loop silently
-                log.exception("tick failed")
+            except Exception as exc:  # never let a bad tick kill the loop, nor flood the log
+                self._tick_failed(exc)
                 time.sleep(0.1)
+            else:
+                if self.failure is not None:
+                    log.warning("ticks succeed again after: %s", self.failure)
+                    self.failure = None
             if mode is Mode.REALTIME:
                 # Keep the cadence. A tick that overran is made up by starting the next one at
                 # once, but never more than one tick of lag is carried: further behind, the time
@@ -333,8 +387,23 @@ class SimLoop:
                 if now - next_deadline > self.batch.tick_dt:
                     next_deadline = now
 
+    def _tick_failed(self, exc: Exception) -> None:
+        """Log the first failure with its traceback, then stay quiet until ticks succeed."""
+        with self._lock:
+            self._stepping = False
+        why = f"{type(exc).__name__}: {exc}"
+        if self.failure is None:
+            log.error("tick failed; the service is not ready until ticks succeed", exc_info=exc)
+        elif why != self.failure:
+            log.error("tick still failing, now with: %s", why)
+        self.failure = why
+        for listener in self._tick_listeners:
+            with contextlib.suppress(Exception):
+                listener(self._tick, 0.0, -1)  # -1: the tick failed
+
     def _tick_once(self, mode: Mode) -> None:
         """One tick as named stages, each holding the lock only for its own bookkeeping."""
+        t0 = time.perf_counter()
         resets, dirty, targets = self._take_commands()
         self._apply(resets, dirty, targets)
         faulted = self.batch.step(1)
@@ -343,6 +412,12 @@ class SimLoop:
             self._publish(now)
         self._release_step_waiters()
         self._update_stats(now)
+        seconds = time.perf_counter() - t0
+        for listener in self._tick_listeners:
+            try:
+                listener(self._tick, seconds, int(faulted.size))
+            except Exception:
+                log.exception("tick listener %r failed", listener)
 
     def _take_commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Take what is pending from under the lock: (worlds to reset, dirty worlds, targets)."""
@@ -383,9 +458,11 @@ class SimLoop:
         with self._lock:
             self._latest = snap
             self._last_snapshot_wall = now
-            waiters, self._snapshot_waiters = self._snapshot_waiters, []
-        for fut in waiters:
-            fut.set_result(snap)
+            ready = [f for need, f in self._snapshot_waiters if need <= snap.tick]
+            self._snapshot_waiters = [(n, f) for n, f in self._snapshot_waiters if n > snap.tick]
+            ready += self._stranded_waiters()
+        for fut in ready:
+            _resolve(fut, snap)
         for sink in self._sinks:
             sink.publish(snap)
 
@@ -404,6 +481,15 @@ class SimLoop:
         rate = ticks / (now - t0)
         self._stats = LoopStats(self._tick, self._mode, rate, rate * self.batch.tick_dt)
         self._window = (now, self._tick)
+
+
+TickListener = Callable[[int, float, int], None]
+
+
+def _resolve(fut: concurrent.futures.Future[Snapshot], snap: Snapshot) -> None:
+    if not fut.done():  # a reader that gave up may have cancelled it
+        with contextlib.suppress(concurrent.futures.InvalidStateError):
+            fut.set_result(snap)
 
 
 def _run_request(fn: Callable[[Batch], T], fut: concurrent.futures.Future[T], batch: Batch) -> None:

@@ -11,14 +11,17 @@ WorldBatch of the same worlds (tests/test_ray_shards.py).
 
 A shard whose actor dies (node lost, process killed) is noticed by the next call that reaches it
 (`RayActorError`), and a new actor is started at once. The other shards keep stepping meanwhile;
-the lost shard's worlds keep their last reported state in snapshots until the new actor is ready,
-then come back at `home` (state and targets) and are returned by `step` as faulted worlds, the
+the lost shard's worlds keep their last reported state in snapshots until the new actor is ready.
+Every `checkpoint_s` (10 s) each shard's full state (`BatchState`) is copied into this process;
+the new actor resumes from the last copy, with the targets commanded since. Without a copy the
+worlds come back at `home` (state and targets) and are returned by `step` as faulted worlds, the
 same way a NaN world comes back, so the loop and its clients treat them alike.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import os
 import time
@@ -32,17 +35,27 @@ from ray.exceptions import RayActorError
 
 from mjcf import SCENE_XML
 from service.engine import SnapshotArrays, WorldBatch, snapshot_from
+from service.errors import Unavailable
 from service.physics import configure
 from service.robot import load_robot
-from service.sharding import ShardPlan, StagedCommands, apply_and_step
+from service.sharding import (
+    ShardPlan,
+    StagedCommands,
+    apply_and_step,
+    join_states,
+    slice_state,
+)
 from service.shards import MIN_WORLDS_PER_SHARD
-from service.types import Batch, Snapshot
+from service.types import Batch, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.ray")
 
 # The directory that holds the `service` package: actors import it from there when the node has
 # the same checkout (one machine, or a shared path); elsewhere armfleet must be installed.
 _CODE_ROOT = str(Path(__file__).resolve().parent.parent)
+# How often each shard's full state is copied into the API process, so that a lost shard comes
+# back where it was at most this long ago instead of at home (one state copy per shard each time).
+CHECKPOINT_S = 10.0
 # A shard whose new actor fails this many times in a row is left frozen (logged), not retried.
 MAX_REBUILD_ATTEMPTS = 3
 # A private local instance ("local") gets a small object store: snapshots are the largest
@@ -114,6 +127,7 @@ class ShardActor:
             "capture_error": b.capture_error,
             "compile_s": b.compile_s,
             "capture_s": b.capture_s,
+            "physics_shapes": b.physics_shapes(),
             "node": ray.get_runtime_context().get_node_id(),
         }
 
@@ -135,6 +149,14 @@ class ShardActor:
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         self._batch.write_qpos(world, qpos)
 
+    def get_state(self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray) -> BatchState:
+        """The shard's state after the commands staged for it (a step of zero ticks)."""
+        apply_and_step(self._batch, resets, dirty, targets, 0)
+        return self._batch.get_state()
+
+    def set_state(self, state: BatchState) -> None:
+        self._batch.set_state(state)
+
 
 _RemoteShard = ray.remote(ShardActor)
 
@@ -147,6 +169,7 @@ class _Shard:
     last: SnapshotArrays | None = None  # the shard's last snapshot, shown while it is rebuilt
     building: Any = None  # ObjectRef of the new actor's info() while it is being built
     failures: int = 0  # consecutive failed builds
+    checkpoint: BatchState | None = None  # the shard's last state copied here (CHECKPOINT_S)
     lost: list[float] = field(default_factory=list)  # wall times at which the actor was lost
 
 
@@ -164,6 +187,7 @@ class RayBatch(Batch):
         *,
         address: str | None = None,
         device: str = "cpu",
+        checkpoint_s: float = CHECKPOINT_S,
         **kwargs: Any,
     ) -> None:
         connect(address or "local")
@@ -198,6 +222,13 @@ class RayBatch(Batch):
         self.compile_s = max(i["compile_s"] for i in infos)
         self.capture_s = max(i["capture_s"] for i in infos)
         self.rebuilds = 0
+        self._physics_shapes = info["physics_shapes"]
+        # Seconds between copies of every shard's state into this process (0: after every
+        # step, for tests; inf: never, lost worlds come back at home).
+        self.checkpoint_s = checkpoint_s
+        self._checkpoint_at = time.monotonic()  # when the last copies were asked for
+        self._checkpoint_refs: tuple[int, dict[int, Any]] | None = None  # (tick, shard → ref)
+        self.restored: list[tuple[int, int]] = []  # (shard, tick of the state it came back at)
         # (driver wall seconds, slowest shard's own seconds) of the last step: the difference is
         # what the Ray round trip costs per tick (bench/ray_bench.py reports it).
         self.last_step: tuple[float, float] = (0.0, 0.0)
@@ -274,10 +305,60 @@ class RayBatch(Batch):
             faulted.append(local + self._plan.starts[i])
         self.last_step = (time.perf_counter() - t0, slowest)
         self._tick += ticks
+        self._checkpoint()
         out = np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
         self._targets[out] = self.home_target
         np.add.at(self._faults, out, 1)
         return out
+
+    def _checkpoint(self) -> None:
+        """Keep each shard's state of a recent tick here, so that a lost shard resumes from it.
+
+        The copy is asked for after a step and fetched once it is done (a later tick), so the
+        loop never waits for it; only the shard pays its device-to-host copy, once per period.
+        """
+        if self._checkpoint_refs is not None:
+            tick, refs = self._checkpoint_refs
+            done, _ = ray.wait(list(refs.values()), num_returns=len(refs), timeout=0)
+            if len(done) < len(refs):
+                return
+            self._checkpoint_refs = None
+            for i, ref in refs.items():
+                with contextlib.suppress(RayActorError):  # a loss shows at the next step
+                    self._shards[i].checkpoint = dataclasses.replace(ray.get(ref), tick=tick)
+        if time.monotonic() - self._checkpoint_at < self.checkpoint_s:
+            return
+        self._checkpoint_at = time.monotonic()
+        none = np.zeros(0, dtype=np.int64)
+        refs = {
+            i: s.actor.get_state.remote(none, none, np.zeros((0, 7)))
+            for i, s in enumerate(self._shards)
+            if s.building is None
+        }
+        self._checkpoint_refs = (self._tick, refs)
+
+    def _resume(self, shard: int) -> bool:
+        """Put the shard's last checkpoint into its new actor, with today's targets; False if
+        there is none (the worlds then start at home)."""
+        s = self._shards[shard]
+        if s.checkpoint is None:
+            return False
+        lo = int(self._plan.starts[shard])
+        hi = lo + int(self._plan.sizes[shard])
+        targets = self._targets[lo:hi].copy()
+        physics = dict(s.checkpoint.physics)
+        physics["ctrl"] = targets.astype(physics["ctrl"].dtype)  # what set_targets would push
+        resumed = dataclasses.replace(s.checkpoint, targets=targets, physics=physics)
+        ray.get(s.actor.set_state.remote(resumed))
+        self.restored.append((shard, s.checkpoint.tick))
+        log.warning(
+            "Ray shard %d rebuilt; worlds %s resume from tick %d (now %d), with their targets",
+            shard,
+            self._span(shard),
+            s.checkpoint.tick,
+            self._tick,
+        )
+        return True
 
     def _lose(self, shard: int, exc: BaseException) -> None:
         """The shard's actor is gone: start a new one now; step revives it once it is ready."""
@@ -315,6 +396,13 @@ class RayBatch(Batch):
                     self._rebuild(i)
                 continue
             s.building, s.failures = None, 0
+            try:
+                resumed = self._resume(i)
+            except RayActorError as exc:  # lost again while resuming: start over
+                self._lose(i, exc)
+                continue
+            if resumed:
+                continue  # staged commands go with the next step, as for any live shard
             self._staged.take(i)  # commands for the lost worlds are dropped with them
             log.warning("Ray shard %d rebuilt; worlds %s are back at home", i, self._span(i))
             revived.append(i)
@@ -371,6 +459,54 @@ class RayBatch(Batch):
             raise RuntimeError("a Ray shard is being rebuilt; its state is not available")
         parts = ray.get([s.actor.state.remote() for s in self._shards])
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        """Per-world shape of each physics field of `BatchState` for this model."""
+        return dict(self._physics_shapes)
+
+    def _all_live(self, what: str) -> None:
+        building = [i for i, s in enumerate(self._shards) if s.building is not None]
+        if building:
+            raise Unavailable(f"{what}: Ray shard(s) {building} are being rebuilt; try again")
+
+    def get_state(self) -> BatchState:
+        """Every shard's state (staged commands applied first), joined in world order."""
+        self._all_live("get_state")
+        refs = []
+        for i, s in enumerate(self._shards):
+            resets, dirty = self._staged.take(i)
+            targets = self._targets[dirty + self._plan.starts[i]]
+            refs.append(s.actor.get_state.remote(resets, dirty, targets))
+        try:
+            parts = ray.get(refs)
+        except RayActorError as exc:
+            raise Unavailable(f"get_state: a Ray shard was lost ({exc}); try again") from exc
+        joined = join_states(parts, self._targets)
+        return dataclasses.replace(joined, tick=self._tick, faults=self._faults.copy())
+
+    def set_state(self, state: BatchState) -> None:
+        """Split `state` over the shards; checked whole first so no shard is half-restored."""
+        state.check_compatible(self.nworld, self._physics_shapes)
+        self._all_live("set_state")
+        for i in range(self.shards):
+            self._staged.take(i)  # staged commands belonged to the state being replaced
+        bounds = [*self._plan.starts.tolist(), self.nworld]
+        refs = [
+            s.actor.set_state.remote(slice_state(state, bounds[i], bounds[i + 1]))
+            for i, s in enumerate(self._shards)
+        ]
+        try:
+            ray.get(refs)
+        except RayActorError as exc:
+            raise Unavailable(f"set_state: a Ray shard was lost ({exc}); try again") from exc
+        self._tick = int(state.tick)
+        self._targets = np.array(state.targets, dtype=np.float64)
+        self._faults = np.array(state.faults, dtype=np.int64)
+        self._prefetch, self._asked = None, (-1, -1)
+        self._checkpoint_refs = None  # copies of the replaced state
+        parts = ray.get([s.actor.snapshot.remote() for s in self._shards])
+        for s, part in zip(self._shards, parts, strict=True):
+            s.last = part
 
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos now (fault-injection tests), on the shard that holds it."""

@@ -104,6 +104,8 @@ class ReplayReport:
     divergence: Divergence | None
     truncated: str | None
     out: str | None
+    recorded_on: str = ""
+    replayed_on: str = ""
 
     @property
     def ticks_per_s(self) -> float:
@@ -223,6 +225,8 @@ def replay_recording(
         divergence=divergence,
         truncated=rec.truncated,
         out=None if out is None else str(out),
+        recorded_on=str(h.get("device", "")),
+        replayed_on=batch.device_name,
     )
 
 

@@ -6,6 +6,7 @@ for names, ranges and the home pose.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -81,6 +82,12 @@ def load_robot(path: Path | str = SCENE_XML) -> LoadedRobot:
         flange_site=flange,
         home_key=home_key,
     )
+
+
+@functools.cache
+def default_spec() -> RobotSpec:
+    """The default scene's commanded joints, compiled once (the request schemas list them)."""
+    return load_robot().spec
 
 
 def _custom_numeric(mjm: mujoco.MjModel, name: str, size: int) -> np.ndarray:

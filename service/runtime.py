@@ -9,14 +9,21 @@ Surfaces are optional add-ons (ROS 2 bridge, Foxglove server, recorder, ...) tha
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
-from typing import TYPE_CHECKING, Protocol
+import signal
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
+
+import orjson
 
 from service import provenance
-from service.control import Control
+from service.access import ClientSlots
+from service.control import Accepted, Control
 from service.errors import Conflict, NotFound
 from service.hub import StreamHub
 from service.loop import SimLoop
+from service.metrics import Metrics
 from service.settings import Settings
 from service.snapshots import LATEST, SnapshotStore, check_state_support
 from service.types import Batch
@@ -75,6 +82,10 @@ def optional_surfaces(s: Settings) -> list[Surface]:
         from service.foxglove_live import FoxgloveLive
 
         out.append(FoxgloveLive(s.host, s.foxglove_port, s.foxglove_worlds, s.foxglove_rate))
+    if s.ros2:
+        from service.ros.dds import DdsBridge
+
+        out.append(DdsBridge(s.ros2_rate, s.ros2_worlds, s.ros2_network))
     return out
 
 
@@ -86,6 +97,12 @@ class Runtime:
         self.hub: StreamHub | None = None
         self.surfaces: list[Surface] = [*surfaces, *optional_surfaces(settings)]
         self.error: str | None = None
+        self.metrics = Metrics()
+        self.slots = ClientSlots(settings.max_clients)  # shared by HTTP and every socket surface
+        self._problems: list[str] = []
+        self._watchdog: asyncio.Task[None] | None = None
+        self._stopping: asyncio.Task[None] | None = None
+        self._register_levels()
         self.snapshots = SnapshotStore(settings.data_dir)
         self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
 
@@ -99,9 +116,85 @@ class Runtime:
 
     @property
     def ready(self) -> bool:
-        return self.loop is not None
+        return self.loop is not None and not self.problems()
+
+    def problems(self) -> list[str]:
+        """Why the service is not ready now: starting, engine failed, tick failing, shard lost."""
+        if self.loop is None:
+            return [self.error or "starting (compiling kernels)"]
+        out = []
+        if self.loop.failure:
+            out.append(f"ticks are failing: {self.loop.failure}")
+        health: Callable[[], list[str]] | None = getattr(self.loop.batch, "health", None)
+        if health is not None:
+            out += health()
+        return out
+
+    async def _watch(self, period: float = 0.1) -> None:
+        """Notice problems between requests: tell subscribers and the log when they change."""
+        while True:
+            await asyncio.sleep(period)
+            try:
+                now = self.problems()
+            except Exception:
+                log.exception("health check failed")
+                continue
+            if now != self._problems:
+                self._problems = now
+                status = {"op": "status", "ready": not now, "problems": now}
+                if self.hub is not None:
+                    self.hub.broadcast(orjson.dumps(status))
+                if now:
+                    log.warning("not ready: %s", "; ".join(now))
+                else:
+                    log.warning("ready again")
+
+    def _register_levels(self) -> None:
+        m = self.metrics
+        m.level("armfleet_ready", "1 when ready for commands", lambda: float(self.ready))
+        m.level("armfleet_tick", "control ticks completed", lambda: self._loop_attr("tick"))
+        m.level(
+            "armfleet_realtime_factor",
+            "simulated seconds per wall second over the last second",
+            lambda: self._loop_attr("stats").realtime_factor if self.loop else None,
+        )
+        m.level(
+            "armfleet_ticks_per_second",
+            "control ticks per wall second over the last second",
+            lambda: self._loop_attr("stats").ticks_per_s if self.loop else None,
+        )
+        m.level(
+            "armfleet_subscribers",
+            "WebSocket stream subscribers",
+            lambda: None if self.hub is None else self.hub.subscribers,
+        )
+        m.level("armfleet_clients", "clients being served now", lambda: self.slots.active)
+        m.counter_level(
+            "armfleet_frames_skipped",
+            "state frames replaced by a newer one before a slow reader took them",
+            lambda: None if self.hub is None else self.hub.frames_skipped,
+        )
+        m.counter_level(
+            "armfleet_shard_restarts",
+            "shard worker processes rebuilt after dying",
+            lambda: getattr(self.loop.batch, "restarts", 0) if self.loop else None,
+        )
+
+    def _loop_attr(self, name: str) -> Any:
+        return None if self.loop is None else getattr(self.loop, name)
+
+    def _count_accepted(self, accepted: Accepted) -> None:
+        self.metrics.command_accepted(accepted.source, accepted.kind, accepted.tick)
 
     async def start(self) -> None:
+        """Build the engine and start everything; a failure is kept in `error` (see /readyz)."""
+        try:
+            await self._start()
+        except Exception as exc:  # never leave /readyz saying "starting" forever
+            self.error = f"{type(exc).__name__}: {exc}"
+            log.exception("service failed to start")
+
+    async def _start(self) -> None:
         s = self.settings
         try:
             batch = await asyncio.to_thread(build_batch, s)
@@ -116,8 +209,11 @@ class Runtime:
         self.hub = StreamHub(asyncio.get_running_loop())
         loop = SimLoop(batch, s.mode, (self.hub,))
         self.control = Control(loop)
+        self.control.add_listener(self._count_accepted)
+        loop.add_tick_listener(self.metrics.on_tick)
         loop.start()
         self.loop = loop
+        self._watchdog = asyncio.create_task(self._watch())
         for surface in self.surfaces:
             surface.start(self)
         log.info(
@@ -137,6 +233,30 @@ class Runtime:
             batch.capture_s,
             "" if batch.captured else f" (NOT captured: {batch.capture_error})",
         )
+
+    def install_stop_signal(self) -> None:
+        """SIGTERM: close every stream with 1001 (going away) first, then stop as usual.
+
+        The server's own handler would close sockets with 1012; ours runs first and then hands
+        over to it, so that clients learn the service is going away rather than restarting.
+        """
+        aio = asyncio.get_running_loop()
+        previous = signal.getsignal(signal.SIGTERM)
+
+        async def going_away() -> None:
+            if self.hub is not None:
+                with contextlib.suppress(Exception):
+                    await asyncio.wait_for(self.hub.close_all(1001, "service stopping"), 1.0)
+            if callable(previous):
+                previous(signal.SIGTERM, None)
+            else:
+                signal.raise_signal(signal.SIGINT)
+
+        def on_term() -> None:
+            self._stopping = aio.create_task(going_away())
+
+        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+            aio.add_signal_handler(signal.SIGTERM, on_term)
 
     def _restore_at_start(self, batch: Batch, name: str) -> bool:
         """`--restore NAME` before the loop starts; False (and `error` set) if it cannot be.
@@ -161,6 +281,8 @@ class Runtime:
         return False
 
     def stop(self) -> None:
+        if self._watchdog is not None:
+            self._watchdog.cancel()
         for surface in reversed(self.surfaces):
             try:
                 surface.stop()

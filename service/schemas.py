@@ -7,15 +7,22 @@ Joint-state fields follow sensor_msgs/JointState (`name`, `position`, `velocity`
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    WithJsonSchema,
+    model_validator,
+)
 
+from service.robot import default_spec
 from service.types import JointSpec, Mode
 
 # Strict: numbers only ("0.1" and true are refused); ints are fine.
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
-JointRef = Annotated[str | int, Field(description="joint name or index 0..6")]
 Delta = Annotated[
     float,
     Field(
@@ -82,6 +89,11 @@ class WorldState(BaseModel):
     target: list[float]
     flange: Flange
     faults: int = Field(description="times this world was reset for NaN or capacity overflow")
+    pending_target: list[float] | None = Field(
+        None,
+        description="only while paused: the targets as of every accepted command, which the "
+        "next step puts in effect (`target` is what the last step used) [rad]",
+    )
 
 
 class WorldStates(BaseModel):
@@ -111,7 +123,125 @@ class SimReply(BaseModel):
     tick: int
 
 
+# -- error replies ----------------------------------------------------------------------------
+
+
+class ErrorReply(BaseModel):
+    """Every 4xx/5xx except 422: what went wrong, in words naming the field and the limit."""
+
+    detail: str
+
+
+_ERROR_MEANING = {
+    400: "the body is not JSON (or not UTF-8)",
+    401: "a write (or, with token_reads, a read) without the token",
+    403: "a write from a browser page of a foreign origin",
+    404: "no such world (the detail names the ids and the valid range)",
+    409: "the request does not fit the current state (e.g. step while not paused)",
+    413: "the body is over the size limit",
+    503: "the engine is starting, failed or is rebuilding a shard; or too many clients at once",
+}
+
+
+def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
+    """`responses=` for a route: the error statuses it can answer (422 FastAPI adds itself)."""
+    return {code: {"model": ErrorReply, "description": _ERROR_MEANING[code]} for code in codes}
+
+
+# Statuses every /v1 route can answer (engine not ready, client cap, token and origin checks).
+ANY = (401, 403, 503)
+WITH_BODY = (*ANY, 400, 413)
+
+
 # -- requests ---------------------------------------------------------------------------------
+#
+# The JSON Schema of every request states every rule the server enforces (joint names, equal
+# lengths, which of increment's two shapes, strict integers), so that what the schema calls
+# valid is accepted and what it calls invalid is refused: schemathesis holds us to that
+# (tests/test_contract.py).
+
+JOINT_NAMES = tuple(default_spec().names)  # the model names them (service/robot.py)
+JOINT_KEYS = (*JOINT_NAMES, *(str(i) for i in range(len(JOINT_NAMES))))  # names or "0".."6"
+MAX_BATCH_WORLDS = 64  # worlds per POST /v1/targets; the schema lists every allowed length
+
+
+def _joint_key(value: object) -> str:
+    """A joint named by its name or by its index as a string (JSON object keys are strings)."""
+    if not isinstance(value, str):
+        raise ValueError(f"a joint is named by a string, got {value!r}")
+    if value not in JOINT_KEYS:
+        raise ValueError(f"unknown joint {value!r}; joints are {list(JOINT_NAMES)} (or 0..6)")
+    return value
+
+
+def _joint_ref(value: object) -> str | int:
+    """A joint named by its name or its index 0..6 (booleans are not indices; 2.0 is 2)."""
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, int) and not isinstance(value, bool):
+        if not 0 <= value < len(JOINT_NAMES):
+            raise ValueError(f"joint index {value} out of range 0..{len(JOINT_NAMES) - 1}")
+        return value
+    return _joint_key(value)
+
+
+_JOINT_KEY_SCHEMA = {
+    "type": "string",
+    "enum": list(JOINT_KEYS),
+    "description": "joint name, or its index as a string",
+}
+JointKey = Annotated[str, PlainValidator(_joint_key), WithJsonSchema(_JOINT_KEY_SCHEMA)]
+JointRef = Annotated[
+    str | int,
+    PlainValidator(_joint_ref),
+    WithJsonSchema(
+        {
+            "anyOf": [
+                {"type": "string", "enum": list(JOINT_NAMES)},
+                {"type": "integer", "minimum": 0, "maximum": len(JOINT_NAMES) - 1},
+            ],
+            "description": "joint name or index 0..6",
+        }
+    ),
+]
+
+
+def json_int(minimum: int | None = None, maximum: int | None = None, description: str = "") -> Any:
+    """An integer as JSON Schema means it: 3 and 3.0 (JSON has one number type), never true/false
+    (Python's bools are ints), "3" or 3.5; with optional bounds, stated in the schema too."""
+
+    def check(value: object) -> int:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"must be an integer, got {value!r}")
+        if isinstance(value, float) and not value.is_integer():
+            raise ValueError(f"must be an integer, got {value!r}")
+        number = int(value)
+        if minimum is not None and number < minimum:
+            raise ValueError(f"must be >= {minimum}, got {number}")
+        if maximum is not None and number > maximum:
+            raise ValueError(f"must be <= {maximum}, got {number}")
+        return number
+
+    schema: dict[str, Any] = {"type": "integer"}
+    if minimum is not None:
+        schema["minimum"] = minimum
+    if maximum is not None:
+        schema["maximum"] = maximum
+    if description:
+        schema["description"] = description
+    return Annotated[int, PlainValidator(check), WithJsonSchema(schema)]
+
+
+WorldId = json_int(minimum=0, description="world index")
+
+
+def _equal_lengths(a: str, b: str, lengths: range) -> list[dict[str, Any]]:
+    """oneOf branches saying arrays `a` and `b` have the same length (JSON Schema cannot
+    compare two arrays, so every allowed length is listed)."""
+    return [
+        {"properties": {a: {"minItems": k, "maxItems": k}, b: {"minItems": k, "maxItems": k}}}
+        for k in lengths
+    ]
 
 
 class IncrementRequest(_Strict):
@@ -119,17 +249,45 @@ class IncrementRequest(_Strict):
 
     joint: JointRef | None = None
     delta: Delta | None = None
-    deltas: dict[str, Delta] | None = None
+    deltas: Annotated[dict[JointKey, Delta], Field(min_length=1)] | None = None
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {"joint": "elbow_joint", "delta": 0.1},
-                {"deltas": {"elbow_joint": 0.1, "finger_joint": -0.1}},
-            ]
-        },
-    )
+    @staticmethod
+    def _schema(schema: dict[str, Any]) -> None:
+        # Exactly one of the two shapes, and no nulls (the validator below refuses them too).
+        props = schema.pop("properties")
+        plain = {k: _non_null(v) for k, v in props.items()}
+        schema.pop("additionalProperties", None)
+        schema["oneOf"] = [
+            {
+                "title": "one joint",
+                "type": "object",
+                "properties": {"joint": plain["joint"], "delta": plain["delta"]},
+                "required": ["joint", "delta"],
+                "additionalProperties": False,
+            },
+            {
+                "title": "several joints",
+                "type": "object",
+                "properties": {"deltas": plain["deltas"]},
+                "required": ["deltas"],
+                "additionalProperties": False,
+            },
+        ]
+        schema["examples"] = [
+            {"joint": "elbow_joint", "delta": 0.1},
+            {"deltas": {"elbow_joint": 0.1, "finger_joint": -0.1}},
+        ]
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_schema)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_nulls(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            for key in ("joint", "delta", "deltas"):
+                if key in data and data[key] is None:
+                    raise ValueError(f"`{key}` may be left out but not null")
+        return data
 
     @model_validator(mode="after")
     def _one_form(self) -> IncrementRequest:
@@ -147,16 +305,32 @@ class IncrementRequest(_Strict):
         return {self.joint: self.delta}
 
 
+def _non_null(prop: dict[str, Any]) -> dict[str, Any]:
+    """`X | None` as pydantic writes it (anyOf [X, null]) → X, keeping description/title."""
+    if "anyOf" not in prop:
+        return prop
+    kept = [p for p in prop["anyOf"] if p.get("type") != "null"]
+    out = {k: v for k, v in prop.items() if k not in ("anyOf", "default")}
+    if len(kept) == 1:
+        out.update(kept[0])
+    else:
+        out["anyOf"] = kept
+    return out
+
+
 class JointTargets(_Strict):
     """sensor_msgs/JointState-shaped: a subset of names is allowed; others keep their targets."""
 
-    name: list[str] = Field(min_length=1, max_length=7)
-    position: list[FiniteFloat] = Field(min_length=1, max_length=7)
+    name: list[JointKey] = Field(
+        min_length=1, max_length=len(JOINT_NAMES), json_schema_extra={"uniqueItems": True}
+    )
+    position: list[FiniteFloat] = Field(min_length=1, max_length=len(JOINT_NAMES))
 
     model_config = ConfigDict(
         extra="allow",  # JointState also carries header/velocity/effort; they are ignored
         json_schema_extra={
-            "examples": [{"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]}]
+            "examples": [{"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]}],
+            "oneOf": _equal_lengths("name", "position", range(1, len(JOINT_NAMES) + 1)),
         },
     )
 
@@ -169,13 +343,23 @@ class JointTargets(_Strict):
 class BatchTargets(_Strict):
     """Full 7-joint targets for many worlds in one request, applied at one tick boundary."""
 
-    worlds: list[int] = Field(min_length=1)
-    position: list[Annotated[list[FiniteFloat], Field(min_length=7, max_length=7)]]
+    worlds: list[WorldId] = Field(
+        min_length=1,
+        max_length=MAX_BATCH_WORLDS,
+        json_schema_extra={"uniqueItems": True},
+        description=f"distinct world ids, at most {MAX_BATCH_WORLDS} per request",
+    )
+    position: list[Annotated[list[FiniteFloat], Field(min_length=7, max_length=7)]] = Field(
+        min_length=1, max_length=MAX_BATCH_WORLDS, description="one row of 7 targets per world"
+    )
 
     model_config = ConfigDict(
         extra="forbid",
         json_schema_extra={
-            "examples": [{"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2}]
+            "examples": [
+                {"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2}
+            ],
+            "oneOf": _equal_lengths("worlds", "position", range(1, MAX_BATCH_WORLDS + 1)),
         },
     )
 
@@ -186,7 +370,7 @@ class BatchTargets(_Strict):
 
 
 class ResetRequest(_Strict):
-    worlds: list[int] | None = Field(default=None, description="omit for all worlds")
+    worlds: list[WorldId] | None = Field(default=None, description="omit for all worlds")
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"worlds": [0, 3]}]})
 
@@ -198,7 +382,7 @@ class ModeRequest(_Strict):
 
 
 class StepRequest(_Strict):
-    ticks: int = Field(default=1, ge=1, le=MAX_STEP_TICKS)
+    ticks: json_int(minimum=1, maximum=MAX_STEP_TICKS) = 1  # type: ignore[valid-type]
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"ticks": 60}]})
 
@@ -297,3 +481,31 @@ class Scene(BaseModel):
     bodies: list[SceneBody]
     geoms: list[SceneGeom] = Field(description="geoms of groups 0-2 (MuJoCo's visible groups)")
     skipped: int = Field(description="visible geoms of types not described (height fields, SDFs)")
+
+
+_ERROR_CONTENT = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorReply"}}}
+
+
+def fit_openapi(spec: dict[str, Any], nworld: int) -> dict[str, Any]:
+    """Tighten the generated OpenAPI to this service's size: a batch lists distinct worlds, so
+    it never holds more than `nworld` of them; listing only the lengths that can occur keeps
+    the equal-length rule exact and the document small."""
+    # Whatever route a surface adds: a JSON body can be unreadable (400) or too large (413), and
+    # every /v1 route is behind the token, origin and client-cap checks and needs the engine.
+    for path, operations in spec.get("paths", {}).items():
+        for op in operations.values():
+            if not isinstance(op, dict) or "responses" not in op:
+                continue
+            codes = [*ANY] if path.startswith("/v1/") else []
+            if "requestBody" in op:
+                codes += [400, 413]
+            for code, response in errors(*codes).items():
+                response = {"description": response["description"], "content": _ERROR_CONTENT}
+                op["responses"].setdefault(str(code), response)
+    batch = spec.get("components", {}).get("schemas", {}).get("BatchTargets")
+    if batch is not None:
+        most = min(nworld, MAX_BATCH_WORLDS)
+        batch["oneOf"] = _equal_lengths("worlds", "position", range(1, most + 1))
+        for key in ("worlds", "position"):
+            batch["properties"][key]["maxItems"] = most
+    return spec

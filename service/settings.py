@@ -53,6 +53,23 @@ class Settings(BaseSettings):
     log_level: Literal["debug", "info", "warning", "error"] = Field(
         "info", description="debug, info, warning or error"
     )
+    # -- access (service/access.py) --
+    token: str | None = Field(
+        None, description="token that writes (and with token_reads, reads) must present"
+    )
+    insecure: bool = Field(False, description="allow a non-loopback bind without a token")
+    token_reads: bool = Field(False, description="reads need the token too")
+    allow_origins: list[str] = Field(
+        [],
+        description="browser origins besides the service's own that may command (exact match)",
+    )
+    max_clients: int = Field(
+        256, ge=0, description="clients served at once (HTTP requests + sockets); 0 = no limit"
+    )
+    command_rate: float = Field(200.0, gt=0, description="commands per second per connection")
+    command_burst: int | None = Field(
+        None, ge=1, description="commands a connection may send at once (default: one second's)"
+    )
     data_dir: Path = Field(
         Path("~/.local/share/armfleet"), description="where snapshots and recordings are kept"
     )

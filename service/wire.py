@@ -6,6 +6,8 @@ per-frame cost low when hundreds of worlds are streamed.
 
 from __future__ import annotations
 
+import json
+import re
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -44,9 +46,14 @@ def error_frame(msg_id: Any, error: ArmfleetError | str) -> dict[str, Any]:
     return {"op": "error", "id": msg_id, "detail": str(error)}
 
 
-def world_state(snap: Snapshot, world: int, names: list[str]) -> dict[str, Any]:
-    """One world as sensor_msgs/JointState fields plus target, flange and fault count."""
-    return {
+def world_state(
+    snap: Snapshot, world: int, names: list[str], pending: np.ndarray | None = None
+) -> dict[str, Any]:
+    """One world as sensor_msgs/JointState fields plus target, flange and fault count.
+
+    `pending` (paused only): the world's targets as of every accepted command.
+    """
+    out = {
         "world": world,
         "tick": snap.tick,
         "sim_time": float(snap.sim_time[world]),
@@ -58,10 +65,20 @@ def world_state(snap: Snapshot, world: int, names: list[str]) -> dict[str, Any]:
         "flange": {"position": snap.flange_pos[world], "quaternion": snap.flange_quat[world]},
         "faults": int(snap.faults[world]),
     }
+    if pending is not None:
+        out["pending_target"] = pending
+    return out
 
 
-def states(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> dict[str, Any]:
-    return {"tick": snap.tick, "worlds": [world_state(snap, int(w), names) for w in worlds]}
+def states(
+    snap: Snapshot, worlds: np.ndarray, names: list[str], pending: np.ndarray | None = None
+) -> dict[str, Any]:
+    """Several worlds; `pending` (paused only) holds one row of pending targets per world."""
+    rows = [
+        world_state(snap, int(w), names, None if pending is None else pending[i])
+        for i, w in enumerate(worlds)
+    ]
+    return {"tick": snap.tick, "worlds": rows}
 
 
 def single_frame(snap: Snapshot, world: int, names: list[str]) -> bytes:
@@ -151,7 +168,8 @@ def batch_frame_binary(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> 
 #   int32[n]  faults per world (times reset for NaN or capacity overflow)
 #   float32[n, nbody, 7]  per world, per body (MjModel order, 0 = world; see GET /v1/scene):
 #             x y z [m], then the orientation quaternion w x y z, world frame
-# All little-endian. 64 worlds of our 19-body scene: ~34 KB per frame.
+# All little-endian. 64 worlds of our 19-body scene: ~34 KB per frame. While nothing shown
+# changes (poses within 1e-4, targets, faults) the socket sends one frame every 0.5 s only.
 POSE_MAGIC = b"AFP1"
 
 
@@ -187,29 +205,29 @@ def pose_frame(
     )
 
 
+# The `worlds` query: ids and inclusive ranges, comma-separated, no spaces. A range may be
+# written either way round ("7-3" is 3..7), so that every string of this shape is meaningful.
+WORLDS_PATTERN = r"^[0-9]+(-[0-9]+)?(,[0-9]+(-[0-9]+)?)*$"
+_WORLDS_RE = re.compile(WORLDS_PATTERN)
+_MAX_ID_DIGITS = 18  # longer ids cannot exist (and int() refuses over 4300 digits)
+
+
 def parse_worlds(spec: str, nworld: int) -> np.ndarray:
     """'0-63,70,72-75' (the `worlds` query of HTTP and WebSocket) → sorted unique world ids.
 
-    BadCommand for text that is not a list of ids/ranges, UnknownWorld for ids that do not exist.
+    BadCommand for text not of WORLDS_PATTERN, UnknownWorld for ids that do not exist.
     """
+    if not _WORLDS_RE.fullmatch(spec):
+        raise BadCommand(_WORLDS, f"{spec[:40]!r} is not a list of ids and ranges like 0-63,70")
     out: set[int] = set()
     for part in spec.split(","):
-        part = part.strip()
-        if not part:
-            continue
-        lo_s, sep, hi_s = part.partition("-")
-        try:
-            lo = int(lo_s)
-            hi = int(hi_s) if sep else lo
-        except ValueError:
-            raise BadCommand(_WORLDS, f"{part!r} is not an id or a range like 0-63") from None
-        if lo > hi:
-            raise BadCommand(_WORLDS, f"range {part!r} is empty")
-        if lo < 0 or hi >= nworld:
+        ends = part.split("-")
+        if any(len(e.lstrip("0")) > _MAX_ID_DIGITS for e in ends):
+            raise UnknownWorld(part[:40], nworld)
+        lo, hi = sorted(int(e) for e in (ends[0], ends[-1]))
+        if hi >= nworld:
             raise UnknownWorld(part, nworld)
         out.update(range(lo, hi + 1))
-    if not out:
-        raise BadCommand(_WORLDS, "no world ids given")
     return np.array(sorted(out), dtype=np.int64)
 
 
@@ -222,3 +240,38 @@ def pick_worlds(spec: str | None, nworld: int, default_count: int = 8) -> list[i
     if spec is None:
         return list(range(min(default_count, nworld)))
     return [int(w) for w in parse_worlds(spec, nworld)]
+
+
+# -- reading client messages leniently (to answer them properly) ------------------------------
+
+_ID_RE = re.compile(r'"id"\s*:\s*("(?:[^"\\]|\\.)*"|-?[0-9]+(?:\.[0-9]+)?)')
+
+
+def loads_lenient(text: str) -> Any:
+    """JSON that may hold NaN/Infinity (Python's json reads them; orjson refuses), else None.
+
+    The control layer then refuses the non-finite value by name, with the message's id.
+    """
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError):
+        return None
+
+
+def read_id(text: str) -> Any:
+    """The `id` of a message, whatever else is wrong with it (None when none can be read)."""
+    try:
+        msg = orjson.loads(text)
+    except orjson.JSONDecodeError:
+        msg = loads_lenient(text)
+    if isinstance(msg, dict):
+        return msg.get("id")
+    if msg is not None:
+        return None
+    found = _ID_RE.search(text)
+    if found is None:
+        return None
+    try:
+        return json.loads(found.group(1))
+    except ValueError:
+        return None

@@ -16,6 +16,7 @@ Protocol: one JSON request per stdin line, one JSON reply per stdout line.
 """
 
 import json
+import os
 import sys
 import threading
 import time
@@ -23,10 +24,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from cyclonedds._clayer import ddspy_take, ddspy_write
+from cyclonedds.builtin import (
+    BuiltinDataReader,
+    BuiltinTopicDcpsPublication,
+    BuiltinTopicDcpsSubscription,
+)
 from cyclonedds.core import InstanceState, SampleState, ViewState
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float64, int32, sequence, uint32
+from cyclonedds.idl.types import array, bounded_str, float64, int32, sequence, uint8, uint32
 from cyclonedds.pub import DataWriter
 from cyclonedds.qos import Policy, Qos
 from cyclonedds.sub import DataReader
@@ -62,6 +68,25 @@ class JS(IdlStruct, typename="sensor_msgs::msg::dds_::JointState_"):
 @dataclass
 class Clk(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
     clock: Stamp = field(default_factory=Stamp)
+
+
+@dataclass
+class G(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
+    data: array[uint8, 24] = field(default_factory=lambda: [0] * 24)
+
+
+@dataclass
+class NodeInfo(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
+    node_namespace: bounded_str[256] = ""  # string<=256 in the .msg
+    node_name: bounded_str[256] = ""
+    reader_gid_seq: sequence[G] = field(default_factory=list)
+    writer_gid_seq: sequence[G] = field(default_factory=list)
+
+
+@dataclass
+class PartInfo(IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"):
+    gid: G = field(default_factory=G)
+    node_entities_info_seq: sequence[NodeInfo] = field(default_factory=list)
 
 
 ANY = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -102,7 +127,7 @@ def decode(raw: bytes, kind: str) -> dict:
 
 class Peer:
     def __init__(self) -> None:
-        self.dp = DomainParticipant(0)
+        self.dp = DomainParticipant(int(os.environ.get("ROS_DOMAIN_ID", "0")))
         self.topics: dict[str, Topic] = {}
         self.writers: dict[str, DataWriter] = {}
         self.readers: dict[str, tuple[DataReader, str]] = {}
@@ -139,6 +164,51 @@ class Peer:
                         self.counts[name] = self.counts.get(name, 0) + 1
             time.sleep(0.005)
 
+    def discovery(self, timeout: float) -> dict:
+        """ros_discovery_info as rosbags decodes it, and the endpoints DDS discovery saw."""
+        qos = Qos(
+            Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+            Policy.Durability.TransientLocal,
+            Policy.History.KeepLast(1),
+        )
+        reader = DataReader(self.dp, Topic(self.dp, "ros_discovery_info", PartInfo), qos=qos)
+        pubs = BuiltinDataReader(self.dp, BuiltinTopicDcpsPublication)
+        subs = BuiltinDataReader(self.dp, BuiltinTopicDcpsSubscription)
+        infos: list = []
+        deadline = time.monotonic() + timeout
+        while not infos and time.monotonic() < deadline:
+            for data, info in ddspy_take(reader._ref, ANY, 16):
+                if info.valid_data:
+                    m = TYPESTORE.deserialize_cdr(
+                        bytes(data), "rmw_dds_common/msg/ParticipantEntitiesInfo"
+                    )
+                    infos.append(m)
+            time.sleep(0.05)
+
+        def hexes(gids: list) -> list[str]:
+            return [bytes(g.data.tolist()).hex() for g in gids]
+
+        nodes = [
+            {
+                "participant": bytes(m.gid.data.tolist()).hex(),
+                "namespace": n.node_namespace,
+                "name": n.node_name,
+                "readers": hexes(n.reader_gid_seq),
+                "writers": hexes(n.writer_gid_seq),
+            }
+            for m in infos
+            for n in m.node_entities_info_seq
+        ]
+
+        def endpoints(builtin: BuiltinDataReader) -> dict[str, list[str]]:
+            out: dict[str, list[str]] = {}
+            for e in builtin.take(N=256):
+                if hasattr(e, "topic_name"):
+                    out.setdefault(e.topic_name, []).append(e.key.bytes.hex())
+            return out
+
+        return {"nodes": nodes, "writers": endpoints(pubs), "readers": endpoints(subs)}
+
     def handle(self, req: dict) -> object:
         op, topic = req["op"], req.get("topic", "")
         if op == "publish":
@@ -149,6 +219,8 @@ class Peer:
             self.reader(topic)
             out = self.latest.get(topic)
             return None if out is None else {**out, "count": self.counts[topic]}
+        if op == "discovery":
+            return self.discovery(req.get("timeout", 10))
         if op == "matched":
             deadline = time.monotonic() + req.get("timeout", 20)
             while time.monotonic() < deadline:

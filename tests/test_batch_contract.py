@@ -25,11 +25,12 @@ NWORLD = 4
 
 
 def _ray_batch(n: int) -> Batch:
-    """Two CPU actors on the module's local Ray instance (4 logical CPUs: two batches of two)."""
+    """One CPU actor on a local Ray instance (shared with tests/test_ray_shards.py, which covers
+    worlds split over several actors); one actor keeps this module's cost down."""
     from service.ray_shards import RayBatch, connect
 
     connect("local", num_cpus=4)
-    return RayBatch(n, shards=2)
+    return RayBatch(n, shards=1)
 
 
 ENGINES: dict[str, Callable[[int], Batch]] = {
@@ -176,7 +177,14 @@ def test_a_state_continues_bit_identically_in_the_same_and_another_batch(fresh):
         return out
 
     run(batch, plan[:6])
+    # A command staged but not yet stepped (on a worker shard, for sharded engines) is part of
+    # the state: world 2 only moves if the state carried its new target.
+    staged = batch.home_target + 0.2
+    batch.set_targets(np.array([2]), staged[None])
     state = batch.get_state()
+    np.testing.assert_array_equal(
+        state.targets[2], np.clip(staged, batch.spec.lower, batch.spec.upper)
+    )
     first = run(batch, plan[6:])
     batch.set_state(state)
     assert batch.tick == state.tick

@@ -7,6 +7,7 @@ WebGL) and use it as a person would: click its buttons, read what it shows, comp
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import re
@@ -133,6 +134,32 @@ def test_view_socket_sends_pose_frames_with_the_focus_worlds_state(srv, http):
     # World 2 bent its elbow, the others are at home: only its arm is elsewhere.
     assert np.linalg.norm(poses[2, gripper, :3] - poses[0, gripper, :3]) > 0.05
     np.testing.assert_allclose(poses[1], poses[0], atol=1e-6)
+
+
+def test_view_socket_sends_a_heartbeat_while_still_and_every_frame_while_moving(srv, http):
+    def frames_during(ws, seconds: float, between=None) -> int:
+        n, end = 0, time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            if between:
+                between()
+            with contextlib.suppress(TimeoutError):
+                ws.recv(timeout=min(left, 0.2))
+                n += 1
+        return n
+
+    swing = iter(np.tile([0.3, -0.3], 100))
+
+    def move() -> None:
+        body = {"name": ["shoulder_pan_joint"], "position": [float(next(swing))]}
+        http.put("/v1/worlds/1/targets", json=body).raise_for_status()
+
+    time.sleep(1.0)  # let the reset arms come to rest
+    with connect(f"{srv.server.ws_url}/v1/ws/view?worlds=0-3&focus=0&rate=30") as ws:
+        ws.recv(timeout=5)  # the current state, at once
+        still = frames_during(ws, 2.0)
+        moving = frames_during(ws, 2.0, between=move)
+    assert 2 <= still <= 8, still  # a heartbeat every 0.5 s, not 30 a second
+    assert moving > 2 * still, (moving, still)
 
 
 @pytest.mark.parametrize(

@@ -7,6 +7,8 @@ WorldBatch of the same worlds as the reference.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
 
 import numpy as np
@@ -18,6 +20,7 @@ from ray.exceptions import RayActorError  # noqa: E402
 
 from service.engine import WorldBatch  # noqa: E402
 from service.ray_shards import RayBatch, connect  # noqa: E402
+from service.sharding import join_states, slice_state  # noqa: E402
 
 NWORLD = 6
 FIELDS = ("position", "velocity", "effort", "target", "flange_pos", "flange_quat", "sim_time")
@@ -28,7 +31,7 @@ REBUILD_DEADLINE_S = 300
 @pytest.fixture(scope="module")
 def pair():
     connect("local", num_cpus=4)
-    sharded = RayBatch(NWORLD, shards=2)
+    sharded = RayBatch(NWORLD, shards=2, checkpoint_s=math.inf)  # the restore test turns it on
     single = WorldBatch(NWORLD)
     yield sharded, single
     sharded.close()
@@ -95,20 +98,26 @@ def test_reset_after_targets_in_the_same_tick_wins(pair):
     assert_identical(sharded, single)
 
 
+def kill(batch: RayBatch, shard: int) -> None:
+    """ray.kill, then wait until calls on the actor fail (ray.kill is asynchronous)."""
+    victim = batch.actors[shard]
+    ray.kill(victim, no_restart=True)
+    deadline = time.monotonic() + REBUILD_DEADLINE_S
+    while True:
+        try:
+            ray.get(victim.snapshot.remote())
+        except RayActorError:
+            return
+        assert time.monotonic() < deadline, "ray.kill did not kill the actor"
+        time.sleep(0.05)
+
+
 def test_a_killed_actor_is_rebuilt_and_its_worlds_come_back_at_home(pair):
     sharded, single = pair
     drive(pair, np.random.default_rng(7), 5)
     lost_worlds = np.arange(3, 6)  # shard 1
-    victim = sharded.actors[1]
-    ray.kill(victim, no_restart=True)
+    kill(sharded, 1)
     deadline = time.monotonic() + REBUILD_DEADLINE_S
-    while True:  # ray.kill is asynchronous: wait until calls on the actor fail
-        try:
-            ray.get(victim.snapshot.remote())
-        except RayActorError:
-            break
-        assert time.monotonic() < deadline, "ray.kill did not kill the actor"
-        time.sleep(0.05)
     before = sharded.snapshot()  # notices the loss: shard 1 shows its last state from now on
     assert sharded.rebuilds == 1
 
@@ -134,4 +143,62 @@ def test_a_killed_actor_is_rebuilt_and_its_worlds_come_back_at_home(pair):
     np.testing.assert_array_equal(snap.faults, [0, 0, 0, 1, 1, 1])
     assert_identical(sharded, single)  # shard 0 never noticed; shard 1 is home + one tick
     drive(pair, np.random.default_rng(9), 10)  # and both shards go on in lockstep
+    assert_identical(sharded, single)
+
+
+def test_a_killed_actor_resumes_from_its_last_checkpoint_with_todays_targets(pair):
+    """With checkpoints on, the lost worlds continue from the last copied state, bit-exactly."""
+    sharded, single = pair
+    sharded.checkpoint_s = 0.0  # a copy after every step
+    rng = np.random.default_rng(13)
+    history = {}  # the reference's state at each tick boundary
+    for _ in range(8):  # long enough for copies to arrive
+        history[single.tick] = single.get_state()
+        drive(pair, rng, 1)
+    assert sharded._shards[1].checkpoint is not None
+    restored = len(sharded.restored)
+    kill(sharded, 1)
+    sharded.snapshot()  # notices the loss
+    deadline = time.monotonic() + REBUILD_DEADLINE_S
+    while True:
+        targets = single.home_target + rng.uniform(-0.2, 0.2, size=(NWORLD, 7))
+        for b in pair:
+            b.set_targets(np.arange(NWORLD), targets)
+        now = single.get_state()
+        history[single.tick] = now
+        assert sharded.step(1).size == 0  # resumed worlds are not faults
+        if len(sharded.restored) > restored:
+            shard, tick = sharded.restored[-1]
+            assert shard == 1 and tick < single.tick
+            # What the reference must do: worlds 3..5 back to that tick, today's targets.
+            back = slice_state(history[tick], 3, NWORLD)
+            physics = dict(back.physics)
+            physics["ctrl"] = slice_state(now, 3, NWORLD).physics["ctrl"]
+            back = dataclasses.replace(back, physics=physics)
+            joined = join_states([slice_state(now, 0, 3), back], now.targets)
+            single.set_state(dataclasses.replace(joined, tick=now.tick, faults=now.faults))
+            single.step(1)
+            break
+        single.step(1)
+        assert time.monotonic() < deadline, "the lost shard was not rebuilt"
+        time.sleep(0.05)
+    sharded.checkpoint_s = math.inf
+    assert_identical(sharded, single)
+    drive(pair, rng, 5)
+    assert_identical(sharded, single)
+
+
+def test_state_round_trips_through_the_ray_shards(pair):
+    sharded, single = pair
+    state = sharded.get_state()
+    ref = single.get_state()
+    assert state.tick == sharded.tick
+    np.testing.assert_array_equal(state.targets, ref.targets)
+    for name, arr in ref.physics.items():
+        np.testing.assert_array_equal(state.physics[name], arr, err_msg=name)
+    drive(pair, np.random.default_rng(17), 4)
+    sharded.set_state(state)
+    single.set_state(ref)
+    assert sharded.tick == state.tick
+    drive(pair, np.random.default_rng(19), 4)
     assert_identical(sharded, single)

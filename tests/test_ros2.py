@@ -166,8 +166,8 @@ def test_bad_message_log_is_rate_limited(caplog: pytest.LogCaptureFixture) -> No
 class Peer:
     """tests/ros2_peer.py in its own process: rosbags bytes over its own DDS participant."""
 
-    def __init__(self) -> None:
-        env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK_CONFIG, "PYTHONPATH": ""}
+    def __init__(self, domain: int) -> None:
+        env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK_CONFIG, "ROS_DOMAIN_ID": str(domain)}
         self.proc = subprocess.Popen(
             [sys.executable, str(PEER)],
             stdin=subprocess.PIPE,
@@ -194,15 +194,24 @@ class Peer:
 
 
 @pytest.fixture(scope="module")
-def ros_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+def domain() -> int:
+    """A DDS domain of its own: all participants on a host share a domain, so a run beside
+    another one (or a developer's `serve --ros2`) would otherwise hear the other's commands."""
+    return random.SystemRandom().randrange(1, 233)
+
+
+@pytest.fixture(scope="module")
+def ros_server(tmp_path_factory: pytest.TempPathFactory, domain: int) -> Iterator[Server]:
     extra = ("--ros2", "--ros2-worlds", "1-2", "--ros2-rate", "30")
-    with serve(worlds=4, extra_args=extra, log_dir=tmp_path_factory.mktemp("ros2")) as srv:
+    env = {"ROS_DOMAIN_ID": str(domain)}
+    log_dir = tmp_path_factory.mktemp("ros2")
+    with serve(worlds=4, extra_args=extra, env=env, log_dir=log_dir) as srv:
         yield srv
 
 
 @pytest.fixture(scope="module")
-def peer(ros_server: Server) -> Iterator[Peer]:
-    p = Peer()
+def peer(ros_server: Server, domain: int) -> Iterator[Peer]:
+    p = Peer(domain)
     try:
         for topic in ("/joint_commands", "/world_1/joint_commands", "/world_2/joint_commands"):
             assert p.ask(op="matched", topic=topic), f"armfleet's reader on {topic} not found"
@@ -305,3 +314,42 @@ def test_clock_follows_simulated_time(ros_server: Server, peer: Peer) -> None:
         assert js["stamp"] == list(topics.stamp((tick + 90) * tick_dt))
     finally:
         httpx.post(f"{ros_server.url}/v1/sim/resume").raise_for_status()
+
+
+def test_status_shows_domain_scope_and_topics(ros_server: Server, domain: int) -> None:
+    dds = httpx.get(f"{ros_server.url}/v1/ros").json()["dds"]
+    assert dds["enabled"] and dds["domain_id"] == domain and dds["scope"] == "loopback"
+    assert dds["topics"]["/world_2/joint_commands"] == "sensor_msgs/msg/JointState"
+    assert "/world_3/joint_states" not in dds["topics"] and dds["rate_hz"] == 30
+
+
+def test_ros2_tools_see_node_armfleet_owning_its_endpoints(peer: Peer) -> None:
+    """`ros_discovery_info` (rosbags-decoded) names node /armfleet with the GIDs of exactly the
+    readers and writers DDS discovery reports on its topics: how `ros2 node list` and
+    `ros2 topic info -v` attribute them."""
+    seen = peer.ask(op="discovery")
+    (node,) = [n for n in seen["nodes"] if n["name"] == "armfleet"]
+    assert node["namespace"] == "/"
+    owned = {
+        "rt/joint_states": "writers",
+        "rt/world_1/joint_states": "writers",
+        "rt/clock": "writers",
+        "rt/joint_commands": "readers",
+        "rt/world_2/joint_commands": "readers",
+    }
+    for topic, kind in owned.items():
+        ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
+        assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
+    assert len(node["writers"]) == 4 and len(node["readers"]) == 3  # world 0, 1, 2 (+ /clock)
+
+
+def test_ros2_worlds_must_exist() -> None:
+    from pydantic import ValidationError
+
+    from service.settings import Settings
+
+    assert topics.parse_world_list("0-2,3", 4) == (0, 1, 2, 3)
+    with pytest.raises(ValidationError, match="ros2_worlds '2-9'"):
+        Settings(worlds=4, ros2_worlds="2-9")
+    with pytest.raises(ValidationError, match="ros2_worlds 'x'"):
+        Settings(worlds=4, ros2_worlds="x")

@@ -281,3 +281,30 @@ def test_root_serves_the_page_to_browsers_and_rosbridge_to_websockets(
     page = httpx.get(server.url + "/")
     assert page.status_code == 200 and "text/html" in page.headers["content-type"]
     assert ros.is_connected  # roslibpy dialled ws://host:port/
+
+
+def test_unsubscribe_by_id_keeps_the_other_subscriptions(server: Server) -> None:
+    """Two subscribe ids on one topic: removing one (or an id never used) keeps the stream."""
+    topic = "/world_1/joint_states"
+
+    def sync(ws: Any) -> None:
+        """Replies follow every earlier op's effect: frames after this one are current."""
+        ws.send(json.dumps({"op": "call_service", "id": "sync", "service": "/rosapi/topics"}))
+        while json.loads(ws.recv(timeout=10)).get("id") != "sync":
+            pass
+
+    def next_is_state(ws: Any) -> bool:
+        return json.loads(ws.recv(timeout=10))["topic"] == topic
+
+    with connect(server.ws_url + "/rosbridge") as ws:
+        for sub_id in ("a", "b"):
+            ws.send(json.dumps({"op": "subscribe", "id": sub_id, "topic": topic}))
+        assert next_is_state(ws)
+        ws.send(json.dumps({"op": "unsubscribe", "id": "zzz", "topic": topic}))
+        ws.send(json.dumps({"op": "unsubscribe", "id": "a", "topic": topic}))
+        sync(ws)
+        assert next_is_state(ws)  # "b" still holds it
+        ws.send(json.dumps({"op": "unsubscribe", "id": "b", "topic": topic}))
+        sync(ws)
+        ws.send(json.dumps({"op": "call_service", "id": "last", "service": "/rosapi/topics"}))
+        assert json.loads(ws.recv(timeout=10))["id"] == "last"  # no state frame before it

@@ -11,7 +11,9 @@ import httpx
 import numpy as np
 import pytest
 from conftest import ELBOW, FINGER, Server, running_server
+from mcap.reader import make_reader
 
+from clients.testing import stop
 from service.errors import Conflict
 from service.runtime import Runtime
 from service.settings import Settings
@@ -140,24 +142,27 @@ def test_a_flipped_array_byte_is_caught_by_the_file_checks():
             np.testing.assert_array_equal(state.physics[k], v)
 
 
-def test_stop_saves_latest_and_restore_latest_starts_from_it(tmp_path):
-    data = tmp_path / "data"
-    extra = ("--data-dir", str(data))
-    with running_server(tmp_path, worlds=2, mode="paused", extra=extra) as srv:
-        http = httpx.Client(base_url=srv.url, timeout=30)
-        http.post("/v1/worlds/1/increments", json={"joint": ELBOW, "delta": 0.4})
-        http.post("/v1/sim/step", json={"ticks": 33}).raise_for_status()
-        final = everything(http)
-    assert (data / "snapshots" / "latest.npz").exists()  # saved on SIGINT
-    extra = (*extra, "--restore", "latest")
-    with running_server(tmp_path, worlds=2, mode="paused", extra=extra) as srv:
-        http = httpx.Client(base_url=srv.url, timeout=30)
-        assert everything(http) == final
+def test_stop_saves_latest_and_restore_latest_starts_from_it(paused, http):
+    """Last in the module: it stops the module's server (SIGINT, as Ctrl-C) to see `latest`."""
+    srv, data = paused
+    http.post("/v1/worlds/1/increments", json={"joint": ELBOW, "delta": 0.4})
+    http.post("/v1/sim/step", json={"ticks": 33}).raise_for_status()
+    final = everything(http)
+    latest = data / "snapshots" / "latest.npz"
+    latest.unlink(missing_ok=True)
+    assert stop(srv.process) == 0
+    assert read_header(latest.read_bytes())["tick"] == final["tick"]  # saved on SIGINT
+    run = data / "from-latest.mcap"  # and `serve --record`: the recording starts there too
+    extra = ("--data-dir", str(data), "--restore", "latest", "--record", str(run))
+    with running_server(data.parent, worlds=NWORLD, mode="paused", extra=extra) as again:
+        assert everything(httpx.Client(base_url=again.url, timeout=30)) == final
+    with open(run, "rb") as f:
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}["armfleet"]
+    assert int(meta["start_tick"]) == final["tick"] and int(meta["nworld"]) == NWORLD
     # Another number of worlds: the runtime refuses to start from it and says why (/readyz).
-    runtime = Runtime(Settings(worlds=3, data_dir=data, restore="latest", save_on_exit=True))
+    runtime = Runtime(Settings(worlds=2, data_dir=data, restore="latest", save_on_exit=True))
     asyncio.run(runtime.start())
     assert runtime.loop is None and runtime.error is not None
-    assert "holds 2 worlds, this service runs 3" in runtime.error
+    assert f"holds {NWORLD} worlds, this service runs 2" in runtime.error
     runtime.stop()
-    latest = read_header((data / "snapshots" / "latest.npz").read_bytes())
-    assert latest["nworld"] == 2  # a server that never got ready saves nothing over it
+    assert read_header(latest.read_bytes())["nworld"] == NWORLD  # nothing saved over it

@@ -1,4 +1,4 @@
-"""get_state / set_state beyond the contract test: warm start, refusals, shards ↔ one batch."""
+"""get_state / set_state beyond the contract test: warm start, refusals, the restored snapshot."""
 
 from __future__ import annotations
 
@@ -92,31 +92,6 @@ def test_a_state_that_does_not_fit_changes_nothing(batch, change, message):
     assert after.tick == before.tick
     for k in PHYSICS_FIELDS:
         np.testing.assert_array_equal(after.physics[k], before.physics[k])
-
-
-def test_sharded_state_round_trips_and_matches_one_batch():
-    sharded = ShardedBatch(6, shards=2)
-    try:
-        single = WorldBatch(6)
-        drive(sharded, 10, seed=6)
-        drive(single, 10, seed=6)
-        # A command staged for a worker shard but not yet stepped is part of the state.
-        for b in (sharded, single):
-            b.set_targets(np.array([5]), b.home_target[None] + 0.1)
-        s_state, w_state = sharded.get_state(), single.get_state()
-        for k in PHYSICS_FIELDS:
-            np.testing.assert_array_equal(s_state.physics[k], w_state.physics[k])
-        np.testing.assert_array_equal(s_state.targets, w_state.targets)
-        first = drive(sharded, 10, seed=7)
-        sharded.set_state(w_state)  # a state of one batch restores into shards, and back
-        again = drive(sharded, 10, seed=7)
-        single.set_state(s_state)
-        alone = drive(single, 10, seed=7)
-        for a, b, c in zip(first, again, alone, strict=True):
-            np.testing.assert_array_equal(a, b)
-            np.testing.assert_array_equal(a, c)
-    finally:
-        sharded.close()
 
 
 def test_the_snapshot_at_the_restored_tick_is_the_saved_one(batch):

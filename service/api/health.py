@@ -21,10 +21,19 @@ async def healthz() -> dict[str, str]:
 @router.get(
     "/readyz",
     summary="Kernels compiled and the control tick captured: ready for commands",
-    responses={503: {"description": "still starting, or the engine failed (see detail)"}},
+    responses={
+        503: {
+            "description": "starting, the engine failed, ticks are failing or a shard worker "
+            "was lost and is being rebuilt (`problems` says which)"
+        }
+    },
 )
 async def readyz(runtime: Annotated[Runtime, Depends(get_runtime)]) -> JSONResponse:
-    if runtime.loop is not None:
+    problems = runtime.problems()
+    if runtime.loop is not None and not problems:
         return JSONResponse({"status": "ready", "tick": runtime.loop.latest.tick})
-    status = "failed" if runtime.error else "starting"
-    return JSONResponse({"status": status, "detail": runtime.error}, status_code=503)
+    status = "degraded"  # running, but a tick is failing or a shard is being rebuilt
+    if runtime.loop is None:
+        status = "failed" if runtime.error else "starting"
+    detail = "; ".join(problems)
+    return JSONResponse({"status": status, "detail": detail, "problems": problems}, status_code=503)

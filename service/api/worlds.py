@@ -16,7 +16,11 @@ from fastapi.responses import Response
 from service import wire
 from service.api.deps import Ctl, Loop, World
 from service.control import Source
+from service.errors import Unavailable
+from service.loop import SimLoop
 from service.schemas import (
+    ANY,
+    WITH_BODY,
     BatchCommandReply,
     BatchTargets,
     CommandReply,
@@ -26,7 +30,9 @@ from service.schemas import (
     ResetRequest,
     WorldState,
     WorldStates,
+    errors,
 )
+from service.types import Mode, Snapshot
 
 router = APIRouter(prefix="/v1", tags=["worlds"])
 
@@ -36,37 +42,70 @@ def _json(payload: Any) -> Response:
     return Response(wire.dumps(payload), media_type="application/json")
 
 
+# A read waits at most this long for the tick its worlds' commands take effect at (normally
+# one or two ticks); longer means the engine is not advancing (see /readyz).
+_READ_TIMEOUT = 5.0
+
+
+async def _read(
+    loop: SimLoop, worlds: np.ndarray | list[int]
+) -> tuple[Snapshot, np.ndarray | None]:
+    """Read-your-writes: a snapshot including every accepted command for `worlds`, and while
+    paused their pending targets (which the next step puts in effect)."""
+    try:
+        snap = await asyncio.wait_for(
+            asyncio.wrap_future(loop.fresh_snapshot(worlds)), timeout=_READ_TIMEOUT
+        )
+    except TimeoutError:
+        why = loop.failure or "no tick completed"
+        raise Unavailable(f"the engine is not advancing ({why}); see /readyz") from None
+    pending = loop.pending_targets(np.asarray(worlds)) if loop.mode is Mode.PAUSED else None
+    return snap, pending
+
+
 @router.get(
     "/worlds/state",
     response_model=WorldStates,
-    summary="State of several worlds (default: all) at the last completed tick",
+    summary="State of several worlds (default: all), including every command accepted before",
+    responses=errors(404, *ANY),
 )
 async def get_states(
     loop: Loop,
     worlds: Annotated[
-        str | None, Query(description="ids and ranges, e.g. 0,3,7 or 0-63", examples=["0,3,7"])
+        str | None,
+        Query(
+            description="ids and inclusive ranges, e.g. 0,3,7 or 0-63 (a range may be written "
+            "either way round)",
+            examples=["0,3,7"],
+            pattern=wire.WORLDS_PATTERN,
+        ),
     ] = None,
 ) -> Response:
     n = loop.batch.nworld
     ids = np.arange(n) if worlds is None else wire.parse_worlds(worlds, n)
-    snap = await asyncio.wrap_future(loop.fresh_snapshot())
-    return _json(wire.states(snap, ids, loop.spec.names))
+    snap, pending = await _read(loop, ids)
+    return _json(wire.states(snap, ids, loop.spec.names, pending))
 
 
 @router.get(
     "/worlds/{world}/state",
     response_model=WorldState,
-    summary="One world's JointState, target and flange pose at the last completed tick",
+    summary="One world's JointState, target and flange pose, including every command accepted "
+    "before",
+    responses=errors(404, *ANY),
 )
 async def get_state(loop: Loop, world: World) -> Response:
-    snap = await asyncio.wrap_future(loop.fresh_snapshot())
-    return _json(wire.world_state(snap, world, loop.spec.names))
+    snap, pending = await _read(loop, [world])
+    return _json(
+        wire.world_state(snap, world, loop.spec.names, None if pending is None else pending[0])
+    )
 
 
 @router.post(
     "/worlds/{world}/increments",
     response_model=CommandReply,
     summary="Add to joint targets (the seed's Up/Down buttons); clamps to the joint range",
+    responses=errors(404, *WITH_BODY),
 )
 async def increment(control: Ctl, world: World, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
@@ -78,6 +117,7 @@ async def increment(control: Ctl, world: World, body: IncrementRequest) -> Respo
     "/worlds/{world}/targets",
     response_model=CommandReply,
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
+    responses=errors(404, *WITH_BODY),
 )
 async def put_targets(control: Ctl, world: World, body: JointTargets) -> Response:
     result = control.set_targets(world, body.name, body.position, Source.HTTP)
@@ -88,20 +128,29 @@ async def put_targets(control: Ctl, world: World, body: JointTargets) -> Respons
     "/targets",
     response_model=BatchCommandReply,
     summary="Full 7-joint targets for many worlds, applied together at one tick boundary",
+    responses=errors(404, *WITH_BODY),
 )
 async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     results = control.set_many(body.worlds, body.position, Source.HTTP)
     return _json({"tick": results[0].tick, "results": [wire.command_reply(r) for r in results]})
 
 
-@router.post("/worlds/{world}/reset", response_model=ResetReply, summary="Reset one world to home")
+@router.post(
+    "/worlds/{world}/reset",
+    response_model=ResetReply,
+    summary="Reset one world to home",
+    responses=errors(404, *ANY),
+)
 async def reset_world(control: Ctl, world: World) -> ResetReply:
     done = control.reset([world], Source.HTTP)
     return ResetReply(worlds=done.worlds, tick=done.tick)
 
 
 @router.post(
-    "/reset", response_model=ResetReply, summary="Reset listed worlds (default: all) to home"
+    "/reset",
+    response_model=ResetReply,
+    summary="Reset listed worlds (default: all) to home",
+    responses=errors(404, *WITH_BODY),
 )
 async def reset_many(
     control: Ctl, body: Annotated[ResetRequest | None, Body()] = None

@@ -16,7 +16,7 @@ import numpy as np
 import orjson
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
-from service import wire
+from service import access, wire
 from service.control import Control, Source
 from service.errors import ArmfleetError, BadCommand
 from service.hub import StreamHub, Subscription
@@ -82,6 +82,39 @@ async def batch_socket(
     await _serve(ws, loop, control, hub, sub, default_world=None)
 
 
+class StillFilter:
+    """Drops a view socket's frame when nothing it shows changed (poses, targets, faults) since
+    the last frame sent, except one every HEARTBEAT_S (tick and speed for the status line).
+
+    A page watching resting arms then wakes twice a second instead of thirty times: most of a
+    still viewer's cost, in the browser and in the server. Any motion, command or fault sends
+    at once. Per socket state, used on the event loop only.
+    """
+
+    HEARTBEAT_S = 0.5
+    STILL = 1e-4  # m or quaternion units: below what a page draws differently
+
+    def __init__(self, worlds: np.ndarray) -> None:
+        self.worlds = worlds
+        self.sent: tuple[np.ndarray, ...] | None = None
+        self.sent_at = 0.0
+
+    def __call__(self, snap: Snapshot) -> bool:
+        w, now = self.worlds, time.monotonic()
+        state = (snap.body_pos[w], snap.body_quat[w], snap.target[w], snap.faults[w])
+        if self.sent is not None and now - self.sent_at < self.HEARTBEAT_S:
+            pos, quat, target, faults = self.sent
+            if (
+                np.array_equal(state[2], target)
+                and np.array_equal(state[3], faults)
+                and np.abs(state[0] - pos).max() < self.STILL
+                and np.abs(state[1] - quat).max() < self.STILL
+            ):
+                return True
+        self.sent, self.sent_at = state, now
+        return False
+
+
 MAX_VIEW_WORLDS = 256  # what the page's fleet view draws; ~136 KB per pose frame
 
 
@@ -128,6 +161,7 @@ async def view_socket(
         return wire.pose_frame(snap, ids, names, focus, stats)
 
     sub = Subscription(ids, rate, render, f"view:{focus}", binary=True)
+    sub.skip = StillFilter(ids)
     await _serve(ws, loop, control, hub, sub, default_world=None, source=Source.BROWSER)
 
 
@@ -139,8 +173,12 @@ def _running(ws: WebSocket) -> tuple[SimLoop, Control, StreamHub] | None:
 
 
 async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
-    await ws.accept()
+    await ws.accept(subprotocol=_grant(ws).subprotocol)
     await ws.close(code=code, reason=reason[:120])
+
+
+def _grant(ws: WebSocket) -> access.Grant:
+    return access.check_websocket(ws.app.state.runtime.settings, ws)
 
 
 async def _serve(
@@ -152,7 +190,17 @@ async def _serve(
     default_world: int | None,
     source: Source = Source.WS,
 ) -> None:
-    await ws.accept()
+    runtime = ws.app.state.runtime
+    grant = _grant(ws)
+    limiter = access.RateLimiter(runtime.settings.command_rate, runtime.settings.command_burst)
+    metrics = runtime.metrics
+    await ws.accept(subprotocol=grant.subprotocol)
+
+    async def close(code: int, reason: str) -> None:
+        await ws.close(code=code, reason=reason[:120])
+
+    sub.close = close
+    sub.status_frames = True
     hub.add(sub)
     sub.offer(loop.latest, time.monotonic())  # the current state at once, then the stream
     writer = asyncio.create_task(_write(ws, hub, sub))
@@ -166,10 +214,26 @@ async def _serve(
             text = message.get("text")
             if text is None:
                 reply = wire.error_frame(None, "send JSON as text frames")
+                metrics.command_rejected(source, "unknown")
+            elif not grant.command:
+                reply = wire.error_frame(wire.read_id(text), grant.reason)
+                metrics.command_rejected(source, "unknown", "refused")
             else:
-                reply = _handle(control, text, default_world, source)
-                if reply.get("op") == "ack" and isinstance(reply.get("tick"), int):
-                    sub.owe(reply["tick"])  # its first frame goes out whatever the cadence
+                verdict = limiter.take()
+                if verdict == "ok":
+                    reply = _handle(control, text, default_world, source)
+                    if reply.get("op") == "error":
+                        metrics.command_rejected(source, _op(text))
+                    elif reply.get("op") == "ack" and isinstance(reply.get("tick"), int):
+                        sub.owe(reply["tick"])  # its first frame goes out whatever the cadence
+                else:
+                    reply = wire.error_frame(wire.read_id(text), limiter.detail)
+                    metrics.command_rejected(source, _op(text), "refused")
+                    if verdict == "close":
+                        sub.push_ack(wire.dumps(reply))
+                        await _drain(sub)
+                        await close(access.CLOSE_POLICY, "over the command rate")
+                        break
             sub.push_ack(wire.dumps(reply))
     except (WebSocketDisconnect, RuntimeError):
         pass
@@ -187,7 +251,7 @@ async def _write(ws: WebSocket, hub: StreamHub, sub: Subscription) -> None:
         while sub.acks:
             await ws.send_text(sub.acks.popleft().decode())
         snap, sub.latest = sub.latest, None
-        if snap is None:
+        if snap is None or (sub.skip is not None and sub.skip(snap)):
             continue
         frame = hub.frame(sub, snap)
         if sub.binary:
@@ -203,5 +267,24 @@ def _handle(
     try:
         msg = orjson.loads(text)
     except orjson.JSONDecodeError as exc:
-        return wire.error_frame(None, f"malformed JSON: {exc}")
+        # NaN/Infinity are not JSON, but the rest of such a message is readable: parse it
+        # leniently so that the error names the field and echoes the client's id.
+        msg = wire.loads_lenient(text)
+        if msg is None:
+            return wire.error_frame(wire.read_id(text), f"malformed JSON: {exc}")
     return control.handle(msg, default_world, source)
+
+
+def _op(text: str) -> str:
+    """The `op` of a message for counting (cheap, never raises)."""
+    for op in ("increment", "set_targets", "reset"):
+        if f'"{op}"' in text:
+            return op
+    return "unknown"
+
+
+async def _drain(sub: Subscription, timeout: float = 1.0) -> None:
+    """Give the writer a moment to send what is queued (the last error) before closing."""
+    deadline = time.monotonic() + timeout
+    while sub.acks and time.monotonic() < deadline:
+        await asyncio.sleep(0.01)

@@ -18,6 +18,7 @@ like the HTTP bind; `ROS_LOCALHOST_ONLY=1` always keeps it on loopback.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import threading
 import time
@@ -46,7 +47,12 @@ LOOPBACK_CONFIG = (
     "<MaxAutoParticipantIndex>50</MaxAutoParticipantIndex></Discovery>"
     "</Domain></CycloneDDS>"
 )
-_READER_DEPTH = 64  # commands buffered per topic between two wake-ups of the reader thread
+NODE_NAME = "armfleet"  # how ROS 2 tools name the bridge (`ros2 node list` shows /armfleet)
+# Commands buffered per topic while the reader thread waits for a core (a busy machine can hold
+# it off for a while); rclpy's depth 10 would drop commands under a burst.
+_READER_DEPTH = 1000
+_TAKE_BATCH = 64
+_MATCH_CHECK_S = 0.5  # a new subscriber gets its first state within this
 _WRITE_BLOCK_S = 0.01  # a reliable write never holds the publisher thread longer than this
 
 
@@ -108,6 +114,10 @@ class DdsBridge:
         self._running = False
         self._threads: list[threading.Thread] = []
         self._entities: list[Any] = []  # DDS entities, deleted children first on stop
+        # State topics somebody subscribes to, refreshed every _MATCH_CHECK_S: a message nobody
+        # reads is not even built (many --ros2-worlds cost nothing until someone listens).
+        self._subscribed: list[tuple[Any, int]] = []
+        self._matched_at = -math.inf
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -161,6 +171,8 @@ class DdsBridge:
         self._entities.append(self._clock)
         self._msgs = msgs
 
+        self._announce_node(dp, msgs)
+
         self._waitset = WaitSet(dp)
         self._guard = GuardCondition(dp)
         any_sample = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -179,6 +191,7 @@ class DdsBridge:
         for t in self._threads:
             t.start()
         loop.add_sink(self)
+        self._loop = loop
         log.info(
             "ROS 2 (DDS domain %d, %s): commands on %s; states on %s at %.0f Hz; /clock",
             cfg.domain_id,
@@ -188,9 +201,45 @@ class DdsBridge:
             self.rate,
         )
 
+    def _announce_node(self, dp: Any, msgs: Any) -> None:
+        """Name our readers and writers as node `/armfleet` on `ros_discovery_info`.
+
+        ROS 2 tools learn node names from this rmw topic (`ros2 node list`, the node column of
+        `ros2 topic info -v`); topics work without it. Transient-local, so late joiners get it.
+        """
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.qos import Policy, Qos
+        from cyclonedds.topic import Topic
+
+        def gid(entity: Any) -> Any:
+            return msgs.Gid(list(entity.get_guid().bytes) + [0] * 8)
+
+        info = msgs.ParticipantEntitiesInfo(
+            gid=gid(dp),
+            node_entities_info_seq=[
+                msgs.NodeEntitiesInfo(
+                    node_namespace="/",
+                    node_name=NODE_NAME,
+                    reader_gid_seq=[gid(r) for r, _, _ in self._readers],
+                    writer_gid_seq=[gid(w) for w, _ in self._writers] + [gid(self._clock)],
+                )
+            ],
+        )
+        qos = Qos(
+            Policy.Reliability.Reliable(max_blocking_time=0),
+            Policy.Durability.TransientLocal,
+            Policy.History.KeepLast(1),
+            Policy.DataRepresentation(use_cdrv0_representation=True),
+        )
+        topic = Topic(dp, "ros_discovery_info", msgs.ParticipantEntitiesInfo)
+        writer = DataWriter(dp, topic, qos=qos)
+        self._entities += [topic, writer]
+        writer.write(info)
+
     def stop(self) -> None:
         if not self._running:
             return
+        self._loop.remove_sink(self)
         with self._cond:
             self._running = False
             self._cond.notify_all()
@@ -237,39 +286,40 @@ class DdsBridge:
         while self._running:
             self._waitset.wait(1_000_000_000)
             for reader, name, world in self._readers:
-                while self._running and self._take_one(reader, name, world):
+                while self._running and self._take(reader, name, world):
                     pass
 
-    def _take_one(self, reader: Any, topic: str, world: int) -> bool:
-        """Take and apply one command; False when the reader is empty.
+    def _take(self, reader: Any, topic: str, world: int) -> bool:
+        """Take up to a batch of commands and apply each in order; False when none were left.
 
-        One at a time so that bytes that do not decode as a JointState cost only themselves.
+        Cyclone checks every sample's CDR against the type before handing it over, so a take
+        that fails to decode should not happen; if it does, that batch is counted as malformed.
         """
         try:
-            samples = reader.take(N=1)
-        except Exception as exc:  # the sample is consumed; its bytes were not a JointState
+            samples = reader.take(N=_TAKE_BATCH)
+        except Exception as exc:
             self.bad.report("malformed", topic, f"undecodable CDR ({type(exc).__name__}: {exc})")
             return True
-        if not samples:
-            return False
-        msg = samples[0]
-        if not isinstance(msg, self._msgs.JointState):
-            return True  # a dispose/unregister notice, not a message
-        try:
-            names, values = topics.command_from_joint_state(self._joints, msg.name, msg.position)
-            self._control.set_targets(world, names, values, Source.ROS2)
-        except BadMessage as exc:
-            self.bad.report(exc.kind, topic, exc.detail)
-        except ArmfleetError as exc:
-            self.bad.report("rejected", topic, str(exc))
-        except Exception:
-            log.exception("ROS 2 command on %s failed", topic)
-        else:
-            self.received += 1
-        return True
+        for msg in samples:
+            if not isinstance(msg, self._msgs.JointState):
+                continue  # a dispose/unregister notice, not a message
+            try:
+                names, values = topics.command_from_joint_state(
+                    self._joints, msg.name, msg.position
+                )
+                self._control.set_targets(world, names, values, Source.ROS2)
+            except BadMessage as exc:
+                self.bad.report(exc.kind, topic, exc.detail)
+            except ArmfleetError as exc:
+                self.bad.report("rejected", topic, str(exc))
+            except Exception:
+                log.exception("ROS 2 command on %s failed", topic)
+            else:
+                self.received += 1
+        return bool(samples)
 
     def _publish_loop(self) -> None:
-        """Write the newest snapshot, then rest one period: at most `rate` per second."""
+        """Write the newest snapshot, then rest about one period: at most ~`rate` per second."""
         last_tick = -1
         while True:
             with self._cond:
@@ -284,17 +334,26 @@ class DdsBridge:
             except Exception:  # a DDS error must not end the stream; the next snapshot retries
                 log.exception("ROS 2 publish failed")
             last_tick = snap.tick
+            # 10% slack as in the stream hub: a 60 Hz stream on a jittery 60 Hz loop takes
+            # every tick instead of sitting one out now and then
+            rest = started + 0.9 * self._period - time.monotonic()
             with self._cond:
-                self._cond.wait_for(
-                    lambda: not self._running, started + self._period - time.monotonic()
-                )
+                self._cond.wait_for(lambda: not self._running, rest)
 
     def _write_states(self, snap: Snapshot) -> None:
         msgs = self._msgs
         sec, nanosec = topics.stamp(topics.sim_seconds(snap, self._tick_dt))
         stamp = msgs.Time(sec=sec, nanosec=nanosec)
         self._clock.write(msgs.Clock(clock=stamp))
-        for writer, world in self._writers:
+        now = time.monotonic()
+        if now - self._matched_at >= _MATCH_CHECK_S:
+            self._matched_at = now
+            self._subscribed = [
+                (w, world)
+                for w, world in self._writers
+                if w.get_publication_matched_status().current_count
+            ]
+        for writer, world in self._subscribed:
             writer.write(
                 msgs.JointState(
                     header=msgs.Header(stamp=stamp, frame_id=""),

@@ -1,10 +1,10 @@
 """The ROS 2 message types armfleet speaks, declared for Cyclone DDS.
 
 Written from the .msg definitions (builtin_interfaces/Time, std_msgs/Header,
-sensor_msgs/JointState, rosgraph_msgs/Clock) with the DDS type names ROS 2's middleware uses
-(`pkg::msg::dds_::Type_`), so a ROS 2 node sees them as its own types. Samples are serialised as
-plain CDR (XCDR1, what ROS 2 Humble sends); tests/test_ros2.py checks the bytes against rosbags'
-independent Humble definitions in both directions.
+sensor_msgs/JointState, rosgraph_msgs/Clock, and rmw_dds_common's graph messages) with the DDS
+type names ROS 2's middleware uses (`pkg::msg::dds_::Type_`), so a ROS 2 node sees them as its
+own types. Samples are serialised as plain CDR (XCDR1, what ROS 2 Humble sends);
+tests/test_ros2.py checks the bytes against rosbags' independent Humble definitions both ways.
 
 No `from __future__ import annotations` here: cyclonedds reads the field annotations at class
 creation and needs them as real types, not strings.
@@ -13,7 +13,7 @@ creation and needs them as real types, not strings.
 from dataclasses import dataclass, field
 
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float64, int32, sequence, uint32
+from cyclonedds.idl.types import array, bounded_str, float64, int32, sequence, uint8, uint32
 
 
 @dataclass
@@ -48,3 +48,30 @@ class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
     """The simulated time nodes with `use_sim_time` follow."""
 
     clock: Time = field(default_factory=Time)
+
+
+@dataclass
+class Gid(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
+    """A DDS entity's identity as ROS 2 writes it: the 16-byte GUID, zero-padded to 24."""
+
+    data: array[uint8, 24] = field(default_factory=lambda: [0] * 24)
+
+
+@dataclass
+class NodeEntitiesInfo(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
+    """One node: its name and the readers and writers that belong to it."""
+
+    node_namespace: bounded_str[256] = "/"
+    node_name: bounded_str[256] = ""
+    reader_gid_seq: sequence[Gid] = field(default_factory=list)
+    writer_gid_seq: sequence[Gid] = field(default_factory=list)
+
+
+@dataclass
+class ParticipantEntitiesInfo(
+    IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"
+):
+    """What `ros_discovery_info` carries: a participant's nodes (how `ros2 node list` finds us)."""
+
+    gid: Gid = field(default_factory=Gid)
+    node_entities_info_seq: sequence[NodeEntitiesInfo] = field(default_factory=list)

@@ -27,6 +27,7 @@ import numpy as np
 import orjson
 from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect
 
+from service import access
 from service.control import Source
 from service.errors import ArmfleetError
 from service.hub import StreamHub, Subscription
@@ -123,6 +124,11 @@ class Session:
         self.subs: dict[str, _TopicSub] = {}
         self.advertised: dict[str, str] = {}
         self.ready = asyncio.Event()
+        # One access policy for every surface (service/access.py): may it publish, how fast.
+        settings = runtime.settings
+        self.grant = access.check_websocket(settings, ws)
+        self.limiter = access.RateLimiter(settings.command_rate, settings.command_burst)
+        self.over_rate = False  # set when the client kept publishing over its rate: close 1008
 
     # -- inbound ----------------------------------------------------------------------------
 
@@ -182,6 +188,12 @@ class Session:
             raise ProtocolError(f"topic: {topic} was not advertised by this client")
 
     def op_publish(self, msg: dict[str, Any]) -> None:
+        if not self.grant.command:
+            raise BadMessage("refused", self.grant.reason)
+        verdict = self.limiter.take()
+        if verdict != "ok":
+            self.over_rate = verdict == "close"
+            raise BadMessage("refused", self.limiter.detail)
         topic = _topic_name(msg.get("topic"))
         world = self.server.topic_map.command_topics().get(topic)
         if world is None:
@@ -208,7 +220,7 @@ class Session:
 
     def op_subscribe(self, msg: dict[str, Any]) -> None:
         topic = _topic_name(msg.get("topic"))
-        render, world, kind = self._renderer(topic)
+        _, _, kind = self._renderer(topic)  # unknown topics fail here, before any change
         given = msg.get("type")
         if given is not None and (not isinstance(given, str) or not _same_type(given, kind)):
             raise ProtocolError(f"type: {topic} carries {kind}, not {given!r}")
@@ -223,17 +235,7 @@ class Session:
         existing = self.subs.get(topic)
         ids = dict(existing.ids) if existing else {}
         ids[msg.get("id")] = throttle
-        rate = self._rate(min(ids.values()))
-        if existing is not None:
-            if existing.hub_sub.period == 1.0 / rate:
-                existing.ids = ids
-                return
-            self.hub.remove(existing.hub_sub)
-        sub = Subscription(np.array([world]), rate, render, f"rosbridge {topic}")
-        sub.ready = self.ready  # one writer per socket wakes for replies and any topic
-        self.subs[topic] = _TopicSub(sub, ids)
-        self.hub.add(sub)
-        sub.offer(self.loop.latest, time.monotonic())  # the current state at once
+        self._deliver(topic, ids)
 
     def op_unsubscribe(self, msg: dict[str, Any]) -> None:
         topic = _topic_name(msg.get("topic"))
@@ -241,11 +243,35 @@ class Session:
         if existing is None:
             return  # rosbridge ignores unsubscribing what was not subscribed
         msg_id = msg.get("id")
-        if msg_id is not None and msg_id in existing.ids and len(existing.ids) > 1:
-            del existing.ids[msg_id]
+        if msg_id is None:
+            ids: dict[Any, int] = {}  # no id: every subscription of this client to the topic
+        elif msg_id in existing.ids:
+            ids = {k: v for k, v in existing.ids.items() if k != msg_id}
+        else:
+            return  # an id this client never subscribed with changes nothing
+        self._deliver(topic, ids)
+
+    def _deliver(self, topic: str, ids: dict[Any, int]) -> None:
+        """Send `topic` at the fastest rate its subscribe ids ask for; none left: stop sending."""
+        existing = self.subs.pop(topic, None)
+        if not ids:
+            if existing is not None:
+                self.hub.remove(existing.hub_sub)
             return
-        self.hub.remove(existing.hub_sub)
-        del self.subs[topic]
+        rate = self._rate(min(ids.values()))
+        if existing is not None and existing.hub_sub.period == 1.0 / rate:
+            existing.ids = ids
+            self.subs[topic] = existing
+            return
+        if existing is not None:
+            self.hub.remove(existing.hub_sub)
+        render, world, _ = self._renderer(topic)
+        sub = Subscription(np.array([world]), rate, render, f"rosbridge {topic}")
+        sub.ready = self.ready  # one writer per socket wakes for replies and any topic
+        self.subs[topic] = _TopicSub(sub, ids)
+        self.hub.add(sub)
+        if existing is None:
+            sub.offer(self.loop.latest, time.monotonic())  # the current state at once
 
     def op_call_service(self, msg: dict[str, Any]) -> None:
         name = _topic_name(msg.get("service"), "service")
@@ -378,7 +404,7 @@ def server_of(app: Any) -> RosbridgeServer:
 async def rosbridge_socket(ws: WebSocket) -> None:
     """rosbridge v2 clients (roslibpy, roslib.js): JSON ops in text frames."""
     runtime = ws.app.state.runtime
-    await ws.accept()
+    await ws.accept(subprotocol=access.check_websocket(runtime.settings, ws).subprotocol)
     if runtime.loop is None or runtime.hub is None:
         await ws.close(code=1013, reason="simulation is starting")
         return
@@ -399,6 +425,10 @@ async def rosbridge_socket(ws: WebSocket) -> None:
                 session.status("error", "send JSON as text frames (binary frames are not read)")
             else:
                 session.handle_text(text)
+                if session.over_rate:
+                    await asyncio.sleep(0.2)  # let the writer send the refusal first
+                    await ws.close(code=access.CLOSE_POLICY, reason="over the command rate")
+                    break
     except (WebSocketDisconnect, RuntimeError):
         pass
     finally:

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from service import wire
+from service.errors import ArmfleetError
 from service.types import Snapshot
 
 log = logging.getLogger("armfleet.ros")
@@ -194,5 +195,5 @@ def parse_world_list(spec: str | None, nworld: int) -> tuple[int, ...]:
         return ()
     try:
         return tuple(int(w) for w in wire.parse_worlds(spec, nworld))
-    except IndexError as exc:
-        raise ValueError(f"ros2_{exc.args[0]}") from None
+    except ArmfleetError as exc:
+        raise ValueError(f"ros2_worlds {spec!r}: {exc.detail}") from None

@@ -28,6 +28,9 @@ export class Connection {
   /** Watch `worlds` ("0-63") with `focus`'s joint state, at `rate` frames per second. */
   open({ worlds, focus, rate }) {
     const q = new URLSearchParams({ worlds, focus: String(focus), rate: String(rate) });
+    // A service started with --token: the page's own URL carries it (/?token=...).
+    const token = new URLSearchParams(location.search).get('token');
+    if (token) q.set('token', token);
     const scheme = location.protocol === 'https:' ? 'wss' : 'ws';
     this.url = `${scheme}://${location.host}/v1/ws/view?${q}`;
     this.wanted = true;

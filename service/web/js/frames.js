@@ -27,12 +27,12 @@ export function parsePoseFrame(buf) {
  * newest over one stream period, so motion looks smooth at the stream rate (one period late).
  */
 export class PoseTrack {
-  constructor() {
+  constructor(rate = 30) {
     this.prev = null;
     this.cur = null;
     this.out = null;
     this.tCur = 0;
-    this.period = 1 / 30;
+    this.period = 1 / rate;
     this.drawn = null; // the poses last drawn in full
     this.moving = true; // something changed since then
   }
@@ -41,7 +41,8 @@ export class PoseTrack {
     const same = this.cur && this.cur.length === poses.length;
     if (same) {
       const dt = now - this.tCur;
-      if (dt > 0 && dt < 1) this.period = 0.8 * this.period + 0.2 * dt;
+      // Gaps (the server sends nothing while nothing moves) are not the stream's period.
+      if (dt > 0 && dt < 4 * this.period) this.period = 0.8 * this.period + 0.2 * dt;
       this.moving = this.moving || !this.drawn || maxDiff(this.drawn, poses) > STILL;
     } else {
       this.out = new Float32Array(poses.length);

@@ -8,6 +8,10 @@ import { Viewer } from './viewer.js';
 
 const FLEET_MAX = 256; // the server's limit per view socket too
 const params = new URLSearchParams(location.search);
+// A service started with --token (and --token-reads): the page's URL carries the token.
+const authorised = params.get('token')
+  ? { headers: { Authorization: `Bearer ${params.get('token')}` } }
+  : {};
 const banner = document.getElementById('banner');
 
 const page = {
@@ -35,7 +39,7 @@ const page = {
 };
 window.armfleet = page.stats;
 
-const track = new PoseTrack();
+const track = new PoseTrack(page.rate);
 const panel = new Panel({
   step: (joint, delta) => command({ op: 'increment', joint, delta }),
   reset: () => command({ op: 'reset' }),
@@ -97,7 +101,7 @@ function hideBanner() {
 async function fetchReady(path) {
   for (let wait = 250; ; wait = Math.min(2 * wait, 2000)) {
     try {
-      const r = await fetch(path);
+      const r = await fetch(path, authorised);
       if (r.ok) return await r.json();
       panel.status(r.status === 503 ? 'simulation is starting…' : `${path}: HTTP ${r.status}`, true);
     } catch {

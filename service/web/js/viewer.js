@@ -14,19 +14,24 @@ const _q = new THREE.Quaternion();
 const _p = new THREE.Vector3();
 const _one = new THREE.Vector3(1, 1, 1);
 
-function geometryOf(g) {
+// Above this many worlds round shapes get fewer segments: a fleet of 64 has ~400k triangles at
+// full detail, too many for software WebGL (measured 2.9 frames/s), and each arm is small there.
+const LOW_DETAIL_WORLDS = 16;
+
+function geometryOf(g, low = false) {
   const [a, b, c] = g.size;
+  const radial = low ? 8 : 20, caps = low ? 2 : 6, rings = low ? 6 : 14;
   switch (g.type) {
     case 'box':
       return new THREE.BoxGeometry(2 * a, 2 * b, 2 * c);
     case 'sphere':
-      return new THREE.SphereGeometry(a, 20, 14);
+      return new THREE.SphereGeometry(a, radial, rings);
     case 'ellipsoid':
-      return new THREE.SphereGeometry(1, 20, 14).scale(a, b, c);
+      return new THREE.SphereGeometry(1, radial, rings).scale(a, b, c);
     case 'capsule': // three.js builds along y; MuJoCo's axis is z
-      return new THREE.CapsuleGeometry(a, 2 * b, 6, 16).rotateX(Math.PI / 2);
+      return new THREE.CapsuleGeometry(a, 2 * b, caps, radial).rotateX(Math.PI / 2);
     case 'cylinder':
-      return new THREE.CylinderGeometry(a, a, 2 * b, 20).rotateX(Math.PI / 2);
+      return new THREE.CylinderGeometry(a, a, 2 * b, radial).rotateX(Math.PI / 2);
     case 'plane':
       return new THREE.PlaneGeometry(2 * (a || 1), 2 * (b || 1));
     case 'mesh': {
@@ -81,10 +86,10 @@ export class Viewer {
 
   /** Build the meshes of a scene description (GET /v1/scene). */
   setScene(desc) {
-    for (const { mesh } of this.meshes) {
-      this.scene.remove(mesh);
-      mesh.geometry.dispose();
-      mesh.material.dispose();
+    for (const entry of this.meshes) {
+      if (entry.mesh) this.scene.remove(entry.mesh);
+      entry.geometry.dispose();
+      entry.material.dispose();
     }
     this.meshes = [];
     this.nbody = desc.nbody;
@@ -107,7 +112,7 @@ export class Viewer {
         new THREE.Quaternion(g.quat[1], g.quat[2], g.quat[3], g.quat[0]),
         _one,
       );
-      this.meshes.push({ geom: g, local, material, geometry: geo, mesh: null });
+      this.meshes.push({ geom: g, local, material, geometry: geo, low: false, mesh: null });
     }
     this.worlds = [];
     this.dirty = true;
@@ -119,10 +124,16 @@ export class Viewer {
     const n = ids.length;
     this.cols = Math.ceil(Math.sqrt(n));
     this.spacing = this._spacing(homePoses);
+    const low = n > LOW_DETAIL_WORLDS;
     for (const entry of this.meshes) {
       if (entry.mesh) {
         this.scene.remove(entry.mesh);
         entry.mesh.dispose();
+      }
+      if (entry.low !== low) {
+        entry.geometry.dispose();
+        entry.geometry = geometryOf(entry.geom, low);
+        entry.low = low;
       }
       const mesh = new THREE.InstancedMesh(entry.geometry, entry.material, n);
       mesh.instanceMatrix.setUsage(THREE.DynamicDrawUsage);

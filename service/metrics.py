@@ -1,0 +1,190 @@
+"""Prometheus metrics: what the loop, the commands, the streams and the engine are doing.
+
+One registry per service (not the process-global one) so that several services in one process
+(tests) do not collide. Counters that happen on the sim thread (ticks, their duration, faults,
+commands coming into effect) are fed by `on_tick`, which the loop calls after every tick and
+which only does a few additions and a deque walk. Commands are counted by a control listener
+(accepted) and by the surfaces (rejected, refused); levels that already live elsewhere (mode,
+real-time factor, subscribers, clients, readiness) are read when scraped.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from prometheus_client import (
+    CollectorRegistry,
+    Counter,
+    Histogram,
+    disable_created_metrics,
+    generate_latest,
+)
+from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
+from prometheus_client.registry import Collector
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
+disable_created_metrics()  # the *_created series only double the output here
+
+# Control ticks are 16.7 ms at 60 Hz: buckets from well below to several ticks.
+_TICK_BUCKETS = (0.001, 0.002, 0.005, 0.01, 0.0167, 0.025, 0.05, 0.1, 0.25, 1.0)
+# A command waits for the next tick boundary and that tick: 0..2 ticks when all is well.
+_EFFECT_BUCKETS = (0.005, 0.01, 0.0167, 0.025, 0.0333, 0.05, 0.1, 0.25, 0.5, 1.0, 5.0)
+_MAX_WAITING = 100_000  # accepted commands waiting for their tick (paused: they pile up)
+
+
+class Metrics:
+    """The service's metrics; `render()` is the body of GET /metrics."""
+
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry(auto_describe=True)
+        r = self.registry
+        self.ticks = Counter("armfleet_ticks", "control ticks stepped", registry=r)
+        self.tick_seconds = Histogram(
+            "armfleet_tick_duration_seconds",
+            "wall time of one control tick (commands in, physics, snapshot)",
+            buckets=_TICK_BUCKETS,
+            registry=r,
+        )
+        self.commands = Counter(
+            "armfleet_commands",
+            "commands by surface, kind and result (accepted, rejected: invalid, "
+            "refused: token/origin/rate)",
+            ["source", "kind", "result"],
+            registry=r,
+        )
+        self.effect_seconds = Histogram(
+            "armfleet_command_effect_latency_seconds",
+            "from a command's acceptance to the end of the first tick stepped with it",
+            buckets=_EFFECT_BUCKETS,
+            registry=r,
+        )
+        self.faults = Counter(
+            "armfleet_world_faults", "worlds reset for NaN or contact overflow", registry=r
+        )
+        self.engine_faults = Counter(
+            "armfleet_engine_faults", "ticks that failed with an engine exception", registry=r
+        )
+        self._levels = _Levels()
+        r.register(self._levels)
+        # (effective tick, accepted at) of commands not yet in effect; appended from any thread,
+        # drained on the sim thread. deque appends and pops are atomic.
+        self._waiting: collections.deque[tuple[int, float]] = collections.deque(maxlen=_MAX_WAITING)
+        self._lock = threading.Lock()
+
+    # -- fed by the service -----------------------------------------------------------------
+
+    def command_accepted(self, source: str, kind: str, tick: int) -> None:
+        """A control listener calls this for each accepted command."""
+        self.commands.labels(str(source), kind, "accepted").inc()
+        if kind != "mode":
+            self._waiting.append((tick, time.monotonic()))
+
+    def command_rejected(self, source: str, kind: str, result: str = "rejected") -> None:
+        """A surface calls this for a command it refused (result: rejected or refused)."""
+        self.commands.labels(str(source), kind or "unknown", result).inc()
+
+    def on_tick(self, tick: int, seconds: float, faulted: int) -> None:
+        """The loop calls this on the sim thread after each tick (faulted -1: the tick failed)."""
+        if faulted < 0:
+            self.engine_faults.inc()
+            return
+        self.ticks.inc()
+        self.tick_seconds.observe(seconds)
+        if faulted:
+            self.faults.inc(faulted)
+        now = time.monotonic()
+        waiting = self._waiting
+        with self._lock:
+            while waiting and waiting[0][0] <= tick:
+                self.effect_seconds.observe(now - waiting.popleft()[1])
+
+    def level(self, name: str, help_text: str, read: Callable[[], float | None]) -> None:
+        """A gauge read at scrape time (`read` may return None: not reported then)."""
+        self._levels.add(name, help_text, read)
+
+    def counter_level(self, name: str, help_text: str, read: Callable[[], float | None]) -> None:
+        """A counter kept elsewhere (e.g. in the hub), read at scrape time."""
+        self._levels.add(name, help_text, read, counter=True)
+
+    # -- read -------------------------------------------------------------------------------
+
+    def render(self) -> bytes:
+        return generate_latest(self.registry)
+
+
+class _Levels(Collector):
+    """Values that live in other objects, read when Prometheus scrapes."""
+
+    def __init__(self) -> None:
+        self._reads: list[tuple[str, str, Callable[[], float | None], bool]] = []
+
+    def add(
+        self, name: str, help_text: str, read: Callable[[], float | None], counter: bool = False
+    ) -> None:
+        self._reads.append((name, help_text, read, counter))
+
+    def describe(self) -> Iterator[Metric]:
+        return iter(())  # values may be absent until the engine runs; no fixed description
+
+    def collect(self) -> Iterator[Metric]:
+        for name, help_text, read, counter in self._reads:
+            try:
+                value = read()
+            except Exception:  # a half-started service: leave the value out
+                value = None
+            if value is None:
+                continue
+            family: Any = (
+                CounterMetricFamily(name, help_text, value=value)
+                if counter
+                else GaugeMetricFamily(name, help_text, value=value)
+            )
+            yield family
+
+
+def command_kind(path: str) -> str | None:
+    """The command an HTTP write path stands for (for counting refusals), None if not one."""
+    if not path.startswith("/v1/"):
+        return None
+    last = path.rstrip("/").rsplit("/", 1)[-1]
+    return {
+        "increments": "increment",
+        "targets": "set_targets",
+        "reset": "reset",
+        "pause": "mode",
+        "resume": "mode",
+        "mode": "mode",
+        "step": "step",
+    }.get(last, "other")
+
+
+class CommandCounter:
+    """Counts HTTP writes answered with an error: 401/403/429/503 refused, other 4xx rejected.
+
+    (Accepted commands are counted by the control listener, whatever surface sent them.)
+    """
+
+    def __init__(self, app: ASGIApp, metrics: Metrics) -> None:
+        self.app = app
+        self.metrics = metrics
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):
+            return await self.app(scope, receive, send)
+        kind = command_kind(scope["path"])
+        if kind is None:
+            return await self.app(scope, receive, send)
+
+        async def counting(message: Message) -> None:
+            if message["type"] == "http.response.start" and message["status"] >= 400:
+                status = message["status"]
+                result = "refused" if status in (401, 403, 429, 503) else "rejected"
+                self.metrics.command_rejected("http", kind, result)
+            await send(message)
+
+        await self.app(scope, receive, counting)
