@@ -50,7 +50,9 @@ def ensure_venv() -> None:
         return
     say("installing armfleet and its pinned dependencies (mujoco, mujoco-warp, warp-lang, ...)")
     run(BIN / "python", "-m", "pip", "install", "--quiet", "--upgrade", "pip")
-    run(BIN / "python", "-m", "pip", "install", "--quiet", "-e", ".[test,bench]")
+    # setuptools' build backend warns about editable installs in general (nothing to act on).
+    quiet_backend = {**os.environ, "PYTHONWARNINGS": "ignore::UserWarning"}
+    run(BIN / "python", "-m", "pip", "install", "--quiet", "-e", ".[test,bench]", env=quiet_backend)
     STAMP.write_text(want)
 
 

@@ -46,6 +46,16 @@ def usable_cores() -> int:
     return os.cpu_count() or 1
 
 
+# Below this many worlds per thread a tick is too short for the pool: handing work to a second
+# thread (and waiting for it when the machine is busy) costs more than the thread brings.
+MIN_WORLDS_PER_THREAD = 32
+
+
+def auto_threads(nworld: int) -> int:
+    """Threads to step `nworld` worlds on: one per usable core once the batch is big enough."""
+    return max(1, min(usable_cores(), nworld // MIN_WORLDS_PER_THREAD))
+
+
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of quaternions (w, x, y, z), row-wise: (n, 4) x (4,) -> (n, 4)."""
     aw, ax, ay, az = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
@@ -90,7 +100,7 @@ class NativeBatch:
         self.control_hz = float(control_hz)
         self.tick_dt = 1.0 / self.control_hz
         self.substeps, self.physics_dt = tick_timing(self.control_hz, physics_dt)
-        self.nthread = max(1, min(nthread or usable_cores(), nworld))
+        self.nthread = max(1, min(nthread or auto_threads(nworld), nworld))
         self.device_name = f"cpu (native MuJoCo, {self.nthread} thread{'s' * (self.nthread > 1)})"
 
         mjm = self.robot.mjm

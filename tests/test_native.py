@@ -16,13 +16,14 @@ from conftest import ELBOW, HOME, Server, serve, wait_for
 from websockets.sync.client import connect
 
 from service import wire
-from service.native import NativeBatch, usable_cores
+from service.native import NativeBatch, auto_threads, usable_cores
 
 
-def test_native_batch_uses_every_usable_core_by_default():
-    batch = NativeBatch(8)
-    assert batch.nthread == min(8, usable_cores())
-    assert NativeBatch(8, nthread=1).nthread == 1
+def test_native_batch_uses_every_usable_core_once_the_batch_is_big_enough():
+    assert NativeBatch(8).nthread == 1  # a few worlds: the pool would cost more than it brings
+    assert NativeBatch(64).nthread == min(2, usable_cores())
+    assert auto_threads(4096) == usable_cores()
+    assert NativeBatch(8, nthread=2).nthread == 2
     assert NativeBatch(1, nthread=4).nthread == 1  # no more threads than worlds
 
 
