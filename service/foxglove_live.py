@@ -182,8 +182,12 @@ class FoxgloveLive:
         port: int = 8765,
         worlds: str | None = None,
         rate: float = 30.0,
+        commands: bool = True,
     ):
         self._host, self._port, self._worlds_spec = host, port, worlds
+        # Foxglove's protocol has no place for our token: where writes need one, the server
+        # offers no ClientPublish and is a viewer only (commands go through HTTP/WS instead).
+        self._commands = commands
         self._period = 1.0 / rate
         self._stop = threading.Event()
         self._scene_wanted = threading.Event()
@@ -218,7 +222,7 @@ class FoxgloveLive:
             name="armfleet",
             host=self._host,
             port=self._port,
-            capabilities=[Capability.ClientPublish],
+            capabilities=[Capability.ClientPublish] if self._commands else [],
             supported_encodings=["json"],
             server_listener=self,
             context=self._ctx,
@@ -227,11 +231,12 @@ class FoxgloveLive:
         self._thread = threading.Thread(target=self._run, name="armfleet-foxglove", daemon=True)
         self._thread.start()
         log.info(
-            "Foxglove WebSocket on ws://%s:%d: worlds %s at %.0f Hz (3D: frame `world`)",
+            "Foxglove WebSocket on ws://%s:%d: worlds %s at %.0f Hz (3D: frame `world`)%s",
             self._host,
             self.port,
             ",".join(map(str, self.worlds)),
             1 / self._period,
+            "" if self._commands else "; view only: writes need the token",
         )
 
     def stop(self) -> None:
@@ -338,6 +343,8 @@ class FoxgloveLive:
         self._client_topics.pop((client.id, client_channel_id), None)
 
     def on_message_data(self, client: Client, client_channel_id: int, data: bytes) -> None:
+        if not self._commands:
+            return  # not offered (see __init__); refused even if a client sends anyway
         topic = self._client_topics.get((client.id, client_channel_id), "")
         try:
             world = self._command_world(topic)

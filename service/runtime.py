@@ -81,7 +81,15 @@ def optional_surfaces(s: Settings) -> list[Surface]:
     if s.foxglove:
         from service.foxglove_live import FoxgloveLive
 
-        out.append(FoxgloveLive(s.host, s.foxglove_port, s.foxglove_worlds, s.foxglove_rate))
+        out.append(
+            FoxgloveLive(
+                s.host,
+                s.foxglove_port,
+                s.foxglove_worlds,
+                s.foxglove_rate,
+                commands=s.token is None,
+            )
+        )
     if s.ros2:
         from service.ros.dds import DdsBridge
 

@@ -215,3 +215,20 @@ def test_the_layout_in_docs_uses_what_the_server_offers(client):
     publish = panels["Publish!armfleet"]
     assert publish["topicName"] == "/joint_commands"
     assert set(json.loads(publish["value"])) == {"name", "position"}
+
+
+def test_with_a_token_foxglove_is_a_viewer_and_publishes_change_nothing(tmp_path):
+    """Foxglove's protocol cannot carry our token, so where writes need one it must not write."""
+    port = free_port()
+    extra = ("--foxglove", "--foxglove-port", str(port), "--token", "s3cret")
+    with serve(worlds=1, extra_args=extra, log_dir=tmp_path) as srv:
+        before = httpx.get(f"{srv.url}/v1/worlds/0/state").json()["target"]
+        with connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL]) as ws:
+            c = FoxgloveClient(ws)
+            assert "clientPublish" not in c.handshake()["capabilities"]
+            c.advertise(7, "/joint_commands")
+            c.publish(7, {"name": ["elbow_joint"], "position": [0.5]})
+            c.subscribe(["/world_0/joint_states"])  # it still serves the viewer
+            c.next_message("/world_0/joint_states")
+        after = httpx.get(f"{srv.url}/v1/worlds/0/state").json()["target"]
+    assert after == before
