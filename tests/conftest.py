@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 
 from clients import ArmfleetClient, WorldState
@@ -77,3 +78,10 @@ def target_after(client: ArmfleetClient, world: int, pred: Callable[[WorldState]
 def server(armfleet_server: Server) -> Iterator[Server]:
     """The 4-world realtime server shared by the tests of one module (`armfleet_server`)."""
     yield armfleet_server
+
+
+@pytest.fixture(scope="module")
+def http(server: Server) -> Iterator[httpx.Client]:
+    """An HTTP client on the module's server."""
+    with httpx.Client(base_url=server.url, timeout=10) as client:
+        yield client

@@ -8,17 +8,10 @@ import socket
 import threading
 import time
 
-import httpx
 import numpy as np
 import pytest
 from conftest import HOME, JOINTS
 from websockets.sync.client import connect
-
-
-@pytest.fixture(scope="module")
-def http(server):
-    with httpx.Client(base_url=server.url, timeout=10) as client:
-        yield client
 
 
 @pytest.fixture(autouse=True)

@@ -9,19 +9,12 @@ import json
 import signal
 import time
 
-import httpx
 import pytest
 from conftest import HOME, running_server, wait_for
 from prometheus_client.parser import text_string_to_metric_families
 from websockets.sync.client import connect
 
 from clients import ArmfleetClient
-
-
-@pytest.fixture(scope="module")
-def http(server):
-    with httpx.Client(base_url=server.url, timeout=10) as client:
-        yield client
 
 
 @pytest.fixture(autouse=True)
