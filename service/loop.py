@@ -30,8 +30,8 @@ T = TypeVar("T")
 # Called on the sim thread after a restore: (tick before, the state restored, its name).
 RestoreListener = Callable[[int, BatchState, str], None]
 
-# In fast mode with nobody streaming, a snapshot is still taken this often so that reads are
-# never older than this; readers that need the current tick ask for one explicitly.
+# Snapshots are taken when a sink wants one, a reader waits for one, or at least this often so
+# that `latest` is never older than this; readers that need the current tick ask for one.
 _IDLE_SNAPSHOT_PERIOD = 0.1
 _STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
 
@@ -57,15 +57,17 @@ class LoopStats:
 class SnapshotSink:
     """Where snapshots go (the stream hub, the ROS 2 bridge, the recorder, ...).
 
-    Both methods run on the sim thread between ticks: they must be quick and hand any real work
-    (serialising, sending, writing) to a thread or event loop of their own.
+    Every method runs on the sim thread between ticks (`on_tick` after every tick, for sinks
+    that take what they need from the batch themselves): they must be quick and hand any real
+    work (serialising, sending, writing) to a thread or event loop of their own.
     """
 
     def wants_snapshot(self, now: float) -> bool:
         return False
 
-    def publish(self, snapshot: Snapshot) -> None:  # called on the loop thread
-        pass
+    def publish(self, snapshot: Snapshot) -> None: ...
+
+    def on_tick(self, batch: Batch, now: float) -> None: ...
 
 
 class SimLoop:
@@ -128,9 +130,7 @@ class SimLoop:
         if self._thread is not None:
             self._thread.join(timeout=10)
         self._serve_requests()  # the thread is gone: requests that raced the stop are served here
-        for _, fut in self._step_waiters:
-            fut.cancel()
-        for _, fut in self._snapshot_waiters:
+        for _, fut in (*self._step_waiters, *self._snapshot_waiters):
             fut.cancel()
 
     # -- commands (any thread) --------------------------------------------------------------
@@ -410,6 +410,8 @@ class SimLoop:
         now = time.monotonic()
         if self._finish_tick(faulted, mode, now):
             self._publish(now)
+        for sink in self._sinks:
+            sink.on_tick(self.batch, now)
         self._release_step_waiters()
         self._update_stats(now)
         seconds = time.perf_counter() - t0
@@ -445,8 +447,7 @@ class SimLoop:
                 keep = faulted[~self._dirty[faulted]]  # commands that arrived since still apply
                 self._pending[keep] = self.batch.home_target
             return (
-                mode is Mode.REALTIME
-                or (mode is Mode.PAUSED and self._tick >= self._step_goal)
+                (mode is Mode.PAUSED and self._tick >= self._step_goal)
                 or bool(self._snapshot_waiters)
                 or now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
                 or any(sink.wants_snapshot(now) for sink in self._sinks)
@@ -477,8 +478,7 @@ class SimLoop:
         t0, tick0 = self._window
         if now - t0 < _STATS_WINDOW:
             return
-        ticks = self._tick - tick0
-        rate = ticks / (now - t0)
+        rate = (self._tick - tick0) / (now - t0)
         self._stats = LoopStats(self._tick, self._mode, rate, rate * self.batch.tick_dt)
         self._window = (now, self._tick)
 
