@@ -64,7 +64,8 @@ def ensure_venv() -> None:
     venv_python = _pyfind.version_of(str(BIN / "python")) if (BIN / "python").exists() else None
     if venv_python is None or venv_python < _pyfind.NEED:
         if VENV.exists():  # e.g. made by Python 3.10 before this script knew better
-            say(f"removing {VENV}: its Python is {venv_python or 'broken'}")
+            made_by = _pyfind.dotted(venv_python) if venv_python else "broken"
+            say(f"removing {VENV}: its Python is {made_by}")
             shutil.rmtree(VENV)
         say(f"creating virtualenv in {VENV} with {sys.executable}")
         if subprocess.run([sys.executable, "-m", "venv", str(VENV)], cwd=ROOT).returncode:

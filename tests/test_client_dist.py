@@ -23,6 +23,7 @@ PROJECT = ROOT / "packaging" / "armfleet-client"
 ABSENT = ("mujoco", "mujoco_warp", "warp", "service", "fastapi", "cyclonedds", "clients.testing")
 # Ubuntu 22.04's python3-numpy, which rclpy's messages use: the client must work beside it.
 HUMBLE_NUMPY = "numpy==1.21.5"
+PIP = [sys.executable, "-m", "pip", "--disable-pip-version-check"]
 
 DRIVE = """
 import asyncio, json, sys
@@ -70,8 +71,7 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     shutil.copytree(PROJECT, src / "packaging" / "armfleet-client")
     shutil.copytree(ROOT / "clients", src / "clients", ignore=shutil.ignore_patterns("__pycache__"))
     out = tmp_path_factory.mktemp("wheel")
-    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check"]
-    check([*pip, "wheel", "-q", "--no-deps", "-w", out, src / "packaging" / "armfleet-client"])
+    check([*PIP, "wheel", "-q", "--no-deps", "-w", out, src / "packaging" / "armfleet-client"])
     (built,) = out.glob("armfleet_client-*.whl")
     return built
 
@@ -95,15 +95,8 @@ def test_the_client_alone_drives_a_real_server(
             pytest.skip("no Python 3.10 on this machine (`pyenv install 3.10` gives one)")
     venv = tmp_path / "venv"
     check([python, "-m", "venv", "--without-pip", venv], env=outside_env())
-    pip = [
-        sys.executable,
-        "-m",
-        "pip",
-        "--disable-pip-version-check",
-        "--python",
-        venv / "bin" / "python",
-    ]
-    check([*pip, "install", "-q", wheel, *constraints], env=outside_env())
+    python_arg = ["--python", venv / "bin" / "python"]
+    check([*PIP, *python_arg, "install", "-q", wheel, *constraints], env=outside_env())
 
     probe = "import importlib.util as u, sys; print([m for m in sys.argv[1:] if u.find_spec(m)])"
     env = outside_env()
