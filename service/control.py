@@ -25,6 +25,7 @@ from service.errors import ArmfleetError, BadCommand, UnknownWorld
 from service.loop import CommandResult, SimLoop
 from service.schemas import IncrementRequest, JointTargets
 from service.trajectory import JointTrajectorySpec, Started, TrajectoryStatus
+from service.trajectory import ops as trajectory_ops
 from service.trajectory.manager import TrajectoryManager
 from service.types import Mode, RobotSpec
 
@@ -283,6 +284,8 @@ class Control:
             elif op == "set_targets":
                 req_t = JointTargets.model_validate(body)
                 result = self.set_targets(world, req_t.name, req_t.position, source)
+            elif op in trajectory_ops.OPS:
+                return trajectory_ops.handle(self, op, msg_id, world, body, source)
             elif op == "reset":
                 if body:
                     extra = next(iter(body))
@@ -298,7 +301,7 @@ class Control:
             return wire.error_frame(msg_id, validation_detail(exc))
 
 
-_OPS = ("increment", "reset", "set_targets")
+_OPS = ("increment", "reset", "set_targets", *trajectory_ops.OPS)
 
 
 def validation_detail(exc: ValidationError) -> str:
