@@ -13,7 +13,7 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from service.schemas import JOINT_NAMES, WorldId
+from service.schemas import JOINT_NAMES, WorldId, json_int
 from service.trajectory.spec import MAX_DURATION_S, MAX_POINTS
 from service.wire import WORLDS_PATTERN
 
@@ -39,8 +39,8 @@ class _Strict(BaseModel):
 class Duration(_Strict):
     """builtin_interfaces/Duration, as rosbridge and ROS tools write it."""
 
-    sec: int = Field(ge=0, le=int(MAX_DURATION_S))
-    nanosec: int = Field(default=0, ge=0, lt=1_000_000_000)
+    sec: json_int(0, int(MAX_DURATION_S))  # type: ignore[valid-type]
+    nanosec: json_int(0, 999_999_999) = 0  # type: ignore[valid-type]
 
 
 class TrajectoryPointBody(_Strict):
