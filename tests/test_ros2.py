@@ -15,6 +15,7 @@ import random
 import subprocess
 import sys
 import time
+import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -30,6 +31,14 @@ from tests.conftest import ELBOW, FINGER, JOINTS, Server, serve, wait_for
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 PEER = Path(__file__).with_name("ros2_peer.py")
+# The Cyclone peer discovers by unicast on 127.0.0.1 only (no multicast at all): armfleet's
+# own unicast peer list must find it, as its multicast on lo finds Fast DDS (test_fastdds.py).
+UNICAST_ONLY = (
+    '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/>'
+    "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery><Peers>"
+    '<Peer address="127.0.0.1"/></Peers><ParticipantIndex>auto</ParticipantIndex>'
+    "<MaxAutoParticipantIndex>50</MaxAutoParticipantIndex></Discovery></Domain></CycloneDDS>"
+)
 
 
 # -- the types, byte for byte --------------------------------------------------------------
@@ -150,6 +159,63 @@ def test_dds_scope_follows_flags_and_environment() -> None:
         choose_config(False, {"ROS_DOMAIN_ID": "abc"})
 
 
+def test_loopback_discovery_announces_by_multicast_on_lo_and_unicast() -> None:
+    """What lets a Fast DDS node (multicast only, no initial peers) started later find us."""
+    general = ET.fromstring(LOOPBACK_CONFIG).find("Domain/General")
+    assert general is not None
+    (nic,) = general.findall("Interfaces/NetworkInterface")
+    assert nic.attrib == {"address": "127.0.0.1", "multicast": "true"}
+    assert general.findtext("AllowMulticast") == "spdp"
+    peers = ET.fromstring(LOOPBACK_CONFIG).findall("Domain/Discovery/Peers/Peer")
+    assert [p.get("address") for p in peers] == ["127.0.0.1"]
+
+
+def _peers(config: str | None) -> list[str]:
+    xml = (config or "").split(",")[0]
+    return [p.get("address", "") for p in ET.fromstring(xml).iter("Peer")] if xml else []
+
+
+@pytest.mark.parametrize(
+    ("network", "env", "scope", "peers"),
+    [
+        (False, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}, "loopback", ["127.0.0.1"]),
+        (True, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}, "loopback", ["127.0.0.1"]),
+        (False, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}, "network", []),
+        (False, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "system_default"}, "loopback", ["127.0.0.1"]),
+        (
+            True,
+            {"ROS_STATIC_PEERS": "10.0.0.7; robot.local"},
+            "network",
+            ["10.0.0.7", "robot.local"],
+        ),
+        (False, {"ROS_STATIC_PEERS": "127.0.0.2"}, "loopback", ["127.0.0.1", "127.0.0.2"]),
+        (
+            False,
+            {"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF", "ROS_STATIC_PEERS": "127.0.0.1"},
+            "off (static peers only)",
+            ["127.0.0.1"],
+        ),
+        (
+            False,
+            {"ROS_LOCALHOST_ONLY": "1", "CYCLONEDDS_URI": "file:///etc/dds.xml"},
+            "loopback + user CYCLONEDDS_URI",
+            ["127.0.0.1"],
+        ),
+    ],
+)
+def test_jazzy_discovery_variables_are_honoured(
+    network: bool, env: dict[str, str], scope: str, peers: list[str]
+) -> None:
+    cfg = choose_config(network, env)
+    assert cfg.scope == scope and _peers(cfg.config) == peers
+    if "CYCLONEDDS_URI" in env:  # applied after ours, so the user's settings win
+        assert cfg.config and cfg.config.endswith("," + env["CYCLONEDDS_URI"])
+    if scope == "off (static peers only)":
+        assert "<AllowMulticast>false</AllowMulticast>" in (cfg.config or "")
+    with pytest.raises(ValueError, match="ROS_AUTOMATIC_DISCOVERY_RANGE must be one of"):
+        choose_config(network, {**env, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LAN"})
+
+
 def test_bad_message_log_is_rate_limited(caplog: pytest.LogCaptureFixture) -> None:
     counter = topics.BadMessageCounter("test")
     with caplog.at_level("WARNING", logger="armfleet.ros"):
@@ -167,7 +233,7 @@ class Peer:
     """tests/ros2_peer.py in its own process: rosbags bytes over its own DDS participant."""
 
     def __init__(self, domain: int) -> None:
-        env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK_CONFIG, "ROS_DOMAIN_ID": str(domain)}
+        env = {**os.environ, "CYCLONEDDS_URI": UNICAST_ONLY, "ROS_DOMAIN_ID": str(domain)}
         self.proc = subprocess.Popen(
             [sys.executable, str(PEER)],
             stdin=subprocess.PIPE,
