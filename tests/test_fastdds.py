@@ -22,7 +22,7 @@ import httpx
 import pytest
 
 from service.ros import topics
-from tests.conftest import ELBOW, FINGER, JOINTS, Server, serve, wait_for
+from tests.conftest import ELBOW, FINGER, JOINTS, Server, node_armfleet, serve, wait_for
 from tests.fastdds_peer import FastDdsPeer, PeerUnavailable, build
 
 COMMANDS = ("/joint_commands", "/world_1/joint_commands")
@@ -186,8 +186,6 @@ def test_ros_discovery_info_names_node_armfleet(
     readers and writers Fast DDS's own discovery reports on its topics."""
     assert_discovers(early_peer)
     seen = early_peer.discovery()
-    (node,) = [n for n in seen["nodes"] if n["name"] == "armfleet"]
-    assert node["namespace"] == "/"
     owned = {
         "rt/joint_states": "writers",
         "rt/world_1/joint_states": "writers",
@@ -195,9 +193,7 @@ def test_ros_discovery_info_names_node_armfleet(
         "rt/joint_commands": "readers",
         "rt/world_1/joint_commands": "readers",
     }
-    for topic, kind in owned.items():
-        ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
-        assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
+    node = node_armfleet(seen, owned)
     for kind in ("writers", "readers"):  # and every endpoint it names is one DDS reported
         discovered = {g + "00" * 8 for guids in seen[kind].values() for g in guids}
         assert set(node[kind]) <= discovered, kind

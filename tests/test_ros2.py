@@ -22,7 +22,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from service.ros import msgs, topics
 from service.ros.dds import LOOPBACK_CONFIG, choose_config
-from tests.conftest import ELBOW, FINGER, JOINTS, Server, serve, wait_for
+from tests.conftest import ELBOW, FINGER, JOINTS, Server, node_armfleet, serve, wait_for
 from tests.peer_stdio import PeerProcess
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
@@ -370,9 +370,6 @@ def test_ros2_tools_see_node_armfleet_owning_its_endpoints(peer: Peer) -> None:
     """`ros_discovery_info` (rosbags-decoded) names node /armfleet with the GIDs of exactly the
     readers and writers DDS discovery reports on its topics: how `ros2 node list` and
     `ros2 topic info -v` attribute them."""
-    seen = peer.ask(op="discovery")
-    (node,) = [n for n in seen["nodes"] if n["name"] == "armfleet"]
-    assert node["namespace"] == "/"
     owned = {
         "rt/joint_states": "writers",
         "rt/world_1/joint_states": "writers",
@@ -383,9 +380,7 @@ def test_ros2_tools_see_node_armfleet_owning_its_endpoints(peer: Peer) -> None:
         "rt/robot_description": "writers",
         "rt/world_1/forward_position_controller/commands": "readers",
     }
-    for topic, kind in owned.items():
-        ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
-        assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
+    node = node_armfleet(peer.ask(op="discovery"), owned)
     # per namespace (root, world_1, world_2): joint_states, tf, tf_static, robot_description
     # written, joint_commands and forward_position_controller/commands read; plus /clock
     assert len(node["writers"]) == 3 * 4 + 1 and len(node["readers"]) == 3 * 2
