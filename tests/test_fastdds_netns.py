@@ -27,7 +27,7 @@ import pytest
 
 from clients.testing import stop
 from tests.conftest import ELBOW, JOINTS, ROOT, wait_for
-from tests.fastdds_peer import FastDdsPeer, PeerUnavailable, build
+from tests.fastdds_peer import FastDdsPeer, built_or_skip
 
 ADDRESSES = ("10.217.17.1", "10.217.17.2")
 PORT = 8000  # a namespace of our own: every port is free
@@ -88,10 +88,7 @@ def _ip(*args: str) -> None:
 
 @pytest.fixture(scope="module")
 def peer_binary() -> Path:
-    try:
-        return build()
-    except PeerUnavailable as exc:
-        pytest.skip(str(exc))
+    return built_or_skip()
 
 
 @pytest.fixture(scope="module")
