@@ -1,6 +1,6 @@
 """What the service returns, as typed results built from its JSON.
 
-Each class follows one reply schema of the server (service/schemas.py); `from_json` reads the
+Each class follows one reply schema of the server (service/core/schemas.py); `from_json` reads the
 fields it knows and ignores the rest, so a newer server that adds a field does not break an
 older client. Nothing about the robot is written here: joint names, limits and home come from
 `/v1/info` (`Info.joints`, each the service's own `JointSpec`) and every state carries its
@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from service.types import JointSpec
+from service.core.types import JointSpec
 
 JointRef = str | int  # a joint by name ("elbow_joint") or by index in `Info.joints` (2)
 WorldSpec = int | str | Iterable[int] | None  # one world, "0-63", [0, 3, 7], or None: all

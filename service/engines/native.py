@@ -7,7 +7,7 @@ thread pool with the GIL released; results are bit-identical to stepping one MjD
 at any thread count. It beats ``mujoco.rollout`` for a per-tick loop because nothing is tiled
 or copied per call beyond the fields we bind (measured: bench/, section throughput).
 
-Semantics match ``service.engine.WorldBatch`` (the Batch protocol): targets are a float64 host
+Semantics match ``service.engines.warp.WorldBatch`` (the Batch protocol): targets are a float64 host
 mirror written straight into the rows' ctrl; a world whose state goes non-finite, whose |qvel|
 passes 1e4, or for which MuJoCo raises or warns (bad qpos/qvel/qacc, contact or constraint
 buffer full: MuJoCo then resets the world to qpos0 itself) is reset to ``home`` after the tick
@@ -28,9 +28,9 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from mjcf import SCENE_XML
-from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
-from service.robot import LoadedRobot, load_robot
-from service.types import PHYSICS_FIELDS, BatchState, Snapshot
+from service.core.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
+from service.core.robot import LoadedRobot, load_robot
+from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.native")
 

@@ -13,8 +13,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from service.engine import WorldBatch
-from service.types import BatchState, Snapshot
+from service.core.types import BatchState, Snapshot
+from service.engines.warp import WorldBatch
 
 _EMPTY = np.zeros(0, dtype=np.int64)
 

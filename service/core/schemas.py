@@ -18,8 +18,8 @@ from pydantic import (
     model_validator,
 )
 
-from service.robot import default_spec
-from service.types import JointSpec, Mode
+from service.core.robot import default_spec
+from service.core.types import JointSpec, Mode
 
 # Strict: numbers only ("0.1" and true are refused); ints are fine.
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
@@ -160,7 +160,7 @@ WITH_BODY = (*ANY, 400, 413)
 # valid is accepted and what it calls invalid is refused: schemathesis holds us to that
 # (tests/test_contract.py).
 
-JOINT_NAMES = tuple(default_spec().names)  # the model names them (service/robot.py)
+JOINT_NAMES = tuple(default_spec().names)  # the model names them (service/core/robot.py)
 JOINT_KEYS = (*JOINT_NAMES, *(str(i) for i in range(len(JOINT_NAMES))))  # names or "0".."6"
 MAX_BATCH_WORLDS = 64  # worlds per POST /v1/targets; the schema lists every allowed length
 
@@ -389,7 +389,7 @@ class StepRequest(_Strict):
 
 # -- snapshots and recordings -----------------------------------------------------------------
 
-# Names become file names under the data directory (see service/snapshots.py).
+# Names become file names under the data directory (see service/persistence/snapshots.py).
 SNAPSHOT_NAME = r"^[A-Za-z0-9_][A-Za-z0-9._-]{0,63}$"
 SnapshotName = Annotated[
     str,
@@ -445,7 +445,7 @@ class RecordingStatus(BaseModel):
     error: str | None = Field(description="why the recording stopped early, if it did")
 
 
-# -- the drawable scene (GET /v1/scene; built by service/scene.py) ------------------------------
+# -- the drawable scene (GET /v1/scene; built by service/core/scene.py) -------------------------
 
 
 class SceneBody(BaseModel):

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 
 if TYPE_CHECKING:
-    from service.robot import LoadedRobot
+    from service.core.robot import LoadedRobot
 
 
 @dataclass(frozen=True)

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from service.engine import WorldBatch
-from service.sharding import (
+from service.core.types import Batch, BatchState, Snapshot
+from service.engines.sharding import (
     ShardPlan,
     StagedCommands,
     apply_and_step,
@@ -30,7 +30,7 @@ from service.sharding import (
     join_states,
     slice_state,
 )
-from service.types import Batch, BatchState, Snapshot
+from service.engines.warp import WorldBatch
 
 log = logging.getLogger("armfleet.shards")
 

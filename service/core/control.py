@@ -19,12 +19,12 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from service import wire
-from service.commands import resolve_joints
-from service.errors import ArmfleetError, BadCommand, UnknownWorld
-from service.loop import CommandResult, SimLoop
-from service.schemas import IncrementRequest, JointTargets
-from service.types import Mode, RobotSpec
+from service.core import wire
+from service.core.commands import resolve_joints
+from service.core.errors import ArmfleetError, BadCommand, UnknownWorld
+from service.core.loop import CommandResult, SimLoop
+from service.core.schemas import IncrementRequest, JointTargets
+from service.core.types import Mode, RobotSpec
 
 log = logging.getLogger("armfleet.control")
 

@@ -2,7 +2,7 @@
 
 roslibpy's `Ros('localhost', 8000)` dials `ws://localhost:8000/` and roslib.js takes any URL, so
 the socket is served at `/` (beside the browser page's GET) and at `/rosbridge`. The topics are
-the DDS bridge's (service/ros/topics.py); commands go through the control layer (source
+the DDS bridge's (service/surfaces/ros/topics.py); commands go through the control layer (source
 `rosbridge`); states come from the stream hub with its latest-state delivery, so a slow client
 skips frames instead of queueing them, and every client subscribed to a topic shares one
 serialisation per tick.
@@ -27,12 +27,13 @@ import numpy as np
 import orjson
 from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect
 
-from service import access
-from service.control import Source
-from service.errors import ArmfleetError
-from service.hub import StreamHub, Subscription
-from service.ros import topics
-from service.ros.topics import (
+from service.core import access
+from service.core.control import Source
+from service.core.errors import ArmfleetError
+from service.core.hub import StreamHub, Subscription
+from service.core.types import Snapshot
+from service.surfaces.ros import topics
+from service.surfaces.ros.topics import (
     CLOCK_TOPIC,
     CLOCK_TYPE,
     JOINT_STATE_TYPE,
@@ -40,7 +41,6 @@ from service.ros.topics import (
     BadMessageCounter,
     TopicMap,
 )
-from service.types import Snapshot
 
 log = logging.getLogger("armfleet.rosbridge")
 
@@ -124,7 +124,7 @@ class Session:
         self.subs: dict[str, _TopicSub] = {}
         self.advertised: dict[str, str] = {}
         self.ready = asyncio.Event()
-        # One access policy for every surface (service/access.py): may it publish, how fast.
+        # One access policy for every surface (service/core/access.py): may it publish, how fast.
         settings = runtime.settings
         self.grant = access.check_websocket(settings, ws)
         self.limiter = access.RateLimiter(settings.command_rate, settings.command_burst)

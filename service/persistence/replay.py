@@ -1,6 +1,6 @@
 """Replay: rebuild a recording's batch, re-apply its commands at their ticks, compare bit for bit.
 
-The recording (`service.mcap_log`) holds the batch header, the full starting state, every
+The recording (`mcap_log.py`) holds the batch header, the full starting state, every
 accepted command with its effective tick, every restore with the restored state, and states of
 some worlds at some ticks. Replay builds a batch of the same model and size, restores the
 starting state into a paused loop, and then, tick by tick, stages the recorded commands through
@@ -25,9 +25,10 @@ import numpy as np
 from mcap.records import Attachment, Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 
-from service.control import Control, Source
-from service.loop import SimLoop
-from service.mcap_log import (
+from service.core.control import Control, Source
+from service.core.loop import SimLoop
+from service.core.types import BatchState, Mode
+from service.persistence.mcap_log import (
     COMMANDS,
     METADATA,
     RESTORES,
@@ -35,10 +36,9 @@ from service.mcap_log import (
     parse_metadata,
     tick_of,
 )
-from service.provenance import batch_header, mismatch
-from service.recorder import Recorder
-from service.snapshots import decode_state
-from service.types import BatchState, Mode
+from service.persistence.provenance import batch_header, mismatch
+from service.persistence.recorder import Recorder
+from service.persistence.snapshots import decode_state
 
 log = logging.getLogger("armfleet.replay")
 
@@ -177,7 +177,7 @@ def replay_recording(
     rec: Recording, out: Path | str | None = None, device: str | None = None
 ) -> ReplayReport:
     """Replay a parsed recording (tests change one on purpose to see divergence named)."""
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     path = rec.path
     h = rec.header

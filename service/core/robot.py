@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from mjcf import SCENE_XML
-from service.types import JointSpec, RobotSpec
+from service.core.types import JointSpec, RobotSpec
 
 ROBOT_NAME = "UR10e + Robotiq 2F-140"
 HOME_KEY = "home"

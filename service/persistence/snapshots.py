@@ -1,7 +1,7 @@
 """Snapshots: the full state of every world in one file, saved atomically, checked before use.
 
 A snapshot is one uncompressed `.npz` (a zip of .npy arrays; numpy reads it without pickle):
-`header` (UTF-8 JSON: format, name, created, tick, the batch header of `service.provenance`, and
+`header` (UTF-8 JSON: format, name, created, tick, the batch header of `provenance.py`, and
 a sha256 over every array) plus the arrays of a `BatchState`. It is written to a temporary file,
 fsynced and renamed, so a crash leaves the old file or the new one, never half of one. Loading
 reads and checks everything (zip CRCs, digest, header, shapes) before anything is restored: a
@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from service.errors import BadCommand, Conflict, NotFound
-from service.provenance import mismatch
-from service.schemas import SNAPSHOT_NAME
-from service.types import PHYSICS_FIELDS, Batch, BatchState
+from service.core.errors import BadCommand, Conflict, NotFound
+from service.core.schemas import SNAPSHOT_NAME
+from service.core.types import PHYSICS_FIELDS, Batch, BatchState
+from service.persistence.provenance import mismatch
 
 FORMAT = "armfleet-snapshot/1"
 SUFFIX = ".npz"

@@ -11,8 +11,8 @@ from typing import Literal
 from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from service.physics import DEFAULT_PHYSICS_DT
-from service.types import Mode
+from service.core.physics import DEFAULT_PHYSICS_DT
+from service.core.types import Mode
 
 
 class Settings(BaseSettings):
@@ -53,7 +53,7 @@ class Settings(BaseSettings):
     log_level: Literal["debug", "info", "warning", "error"] = Field(
         "info", description="debug, info, warning or error"
     )
-    # -- access (service/access.py) --
+    # -- access (service/core/access.py) --
     token: str | None = Field(
         None, description="token that writes (and with token_reads, reads) must present"
     )
@@ -117,7 +117,7 @@ class Settings(BaseSettings):
 
     @model_validator(mode="after")
     def _ros2_worlds_exist(self) -> Settings:
-        from service.ros.topics import parse_world_list
+        from service.surfaces.ros.topics import parse_world_list
 
         parse_world_list(self.ros2_worlds, self.worlds)  # ValueError names the bad part
         return self

@@ -1,8 +1,8 @@
 """The MCAP layout of an armfleet recording: what is written where, in schemas Foxglove reads.
 
-- metadata `armfleet`: the batch header (`service.provenance`), recorded worlds and rate, the
+- metadata `armfleet`: the batch header (`provenance.py`), recorded worlds and rate, the
   tick the recording starts at and the joint names; all values are strings (JSON for lists).
-- attachment `state-<tick>.npz` (`service.snapshots` bytes): the full batch state the recording
+- attachment `state-<tick>.npz` (`snapshots.py` bytes): the full batch state the recording
   starts from and every state restored while recording; a replay starts from these.
 - `/world_<w>/joint_states`: `sensor_msgs/msg/JointState` (ros2msg schema, CDR, as rosbag2
   writes it) of each recorded world: the seven commanded joints' position [rad], velocity

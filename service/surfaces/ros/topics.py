@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from service import wire
-from service.errors import ArmfleetError
-from service.types import Snapshot
+from service.core import wire
+from service.core.errors import ArmfleetError
+from service.core.types import Snapshot
 
 log = logging.getLogger("armfleet.ros")
 

@@ -13,11 +13,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import orjson
 
-from service.errors import ArmfleetError, BadCommand, UnknownWorld
-from service.types import Snapshot
+from service.core.errors import ArmfleetError, BadCommand, UnknownWorld
+from service.core.types import Snapshot
 
 if TYPE_CHECKING:
-    from service.loop import CommandResult
+    from service.core.loop import CommandResult
 
 _OPTS = orjson.OPT_SERIALIZE_NUMPY
 

@@ -34,25 +34,25 @@ import ray
 from ray.exceptions import RayActorError
 
 from mjcf import SCENE_XML
-from service.engine import SnapshotArrays, WorldBatch, snapshot_from
-from service.errors import Unavailable
-from service.physics import configure
-from service.robot import load_robot
-from service.sharding import (
+from service.core.errors import Unavailable
+from service.core.physics import configure
+from service.core.robot import load_robot
+from service.core.types import Batch, BatchState, Snapshot
+from service.engines.sharding import (
     ShardPlan,
     StagedCommands,
     apply_and_step,
     join_states,
     slice_state,
 )
-from service.shards import MIN_WORLDS_PER_SHARD
-from service.types import Batch, BatchState, Snapshot
+from service.engines.shards import MIN_WORLDS_PER_SHARD
+from service.engines.warp import SnapshotArrays, WorldBatch, snapshot_from
 
 log = logging.getLogger("armfleet.ray")
 
 # The directory that holds the `service` package: actors import it from there when the node has
 # the same checkout (one machine, or a shared path); elsewhere armfleet must be installed.
-_CODE_ROOT = str(Path(__file__).resolve().parent.parent)
+_CODE_ROOT = str(Path(__file__).resolve().parents[2])
 # How often each shard's full state is copied into the API process, so that a lost shard comes
 # back where it was at most this long ago instead of at home (one state copy per shard each time).
 CHECKPOINT_S = 10.0
@@ -176,7 +176,7 @@ class _Shard:
 class RayBatch(Batch):
     """N worlds as k contiguous shards, each a Ray actor holding a WorldBatch.
 
-    Implements the Batch protocol (service/types.py). `address` is as in `connect`; None uses
+    Implements the Batch protocol (service/core/types.py). `address` is as in `connect`; None uses
     the Ray connection this process already has, or starts a local instance.
     """
 

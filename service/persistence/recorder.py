@@ -3,7 +3,7 @@
 The recorder hears three things: every accepted command (a `control` listener, on the caller's
 thread), every restore (a loop listener, on the sim thread) and snapshots at whole ticks of the
 chosen rate (a loop sink, on the sim thread). Each of these only puts an item on a bounded queue;
-a writer thread of its own serialises and writes (layout: `service.mcap_log`). If the disk cannot
+a writer thread of its own serialises and writes (layout: `mcap_log.py`). If the disk cannot
 keep up and the queue fills, the recording stops with an error naming why and where, the file is
 closed with what was written, and the simulation goes on untouched.
 
@@ -24,14 +24,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from service.mcap_log import COMMANDS, RESTORES, STATUS, McapLog
-from service.provenance import batch_header
-from service.snapshots import encode_state
-from service.types import BatchState, Snapshot
-from service.wire import pick_worlds
+from service.core.types import BatchState, Snapshot
+from service.core.wire import pick_worlds
+from service.persistence.mcap_log import COMMANDS, RESTORES, STATUS, McapLog
+from service.persistence.provenance import batch_header
+from service.persistence.snapshots import encode_state
 
 if TYPE_CHECKING:
-    from service.control import Accepted
+    from service.core.control import Accepted
     from service.runtime import Runtime
 
 log = logging.getLogger("armfleet.recorder")

@@ -15,8 +15,8 @@ from collections.abc import Awaitable, Callable
 
 import numpy as np
 
-from service.loop import SnapshotSink
-from service.types import Snapshot
+from service.core.loop import SnapshotSink
+from service.core.types import Snapshot
 
 
 class Subscription:

@@ -28,7 +28,7 @@ from urllib.parse import parse_qs, urlsplit
 from starlette.responses import JSONResponse
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from service.settings import Settings
+from service.core.settings import Settings
 
 TOKEN_SUBPROTOCOL = "armfleet.token."  # + the token: how a browser socket presents it
 APP_SUBPROTOCOL = "armfleet"  # offered beside the token one; the server answers with this

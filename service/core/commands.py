@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.errors import BadCommand
-from service.types import RobotSpec
+from service.core.errors import BadCommand
+from service.core.types import RobotSpec
 
 MAX_ABS_DELTA = 2 * math.pi  # one press may not move a target by more than a full turn
 # Increments are rounded to this many decimals so that repeated ±0.1 presses land on decimal

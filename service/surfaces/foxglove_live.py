@@ -49,16 +49,16 @@ from foxglove.messages import (
     Vector3,
 )
 
-from service.control import Source
-from service.errors import ArmfleetError
-from service.robot import load_robot
-from service.wire import pick_worlds
+from service.core.control import Source
+from service.core.errors import ArmfleetError
+from service.core.robot import load_robot
+from service.core.wire import pick_worlds
 
 if TYPE_CHECKING:
     from foxglove.websocket import ChannelView, Client, ClientChannel
 
+    from service.core.types import Snapshot
     from service.runtime import Runtime
-    from service.types import Snapshot
 
 log = logging.getLogger("armfleet.foxglove")
 

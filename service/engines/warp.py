@@ -21,9 +21,9 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
-from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
-from service.robot import LoadedRobot, load_robot
-from service.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
+from service.core.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
+from service.core.robot import LoadedRobot, load_robot
+from service.core.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.engine")
 

@@ -25,11 +25,11 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from service.control import Source
-from service.errors import ArmfleetError
-from service.ros import topics
-from service.ros.topics import BadMessage, BadMessageCounter, TopicMap
-from service.types import Snapshot
+from service.core.control import Source
+from service.core.errors import ArmfleetError
+from service.core.types import Snapshot
+from service.surfaces.ros import topics
+from service.surfaces.ros.topics import BadMessage, BadMessageCounter, TopicMap
 
 if TYPE_CHECKING:
     from service.runtime import Runtime
@@ -135,7 +135,7 @@ class DdsBridge:
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
-        from service.ros import msgs
+        from service.surfaces.ros import msgs
 
         loop, control = runtime.loop, runtime.control
         assert loop is not None and control is not None

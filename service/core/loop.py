@@ -21,9 +21,9 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from service import commands
-from service.errors import NotPaused, UnknownWorld
-from service.types import Batch, BatchState, Mode, Snapshot
+from service.core import commands
+from service.core.errors import NotPaused, UnknownWorld
+from service.core.types import Batch, BatchState, Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
 T = TypeVar("T")

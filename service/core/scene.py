@@ -3,7 +3,7 @@
 The browser page builds its 3D scene from this (GET /v1/scene) instead of knowing the robot, so
 a change under mjcf/ shows in the page with no JavaScript touched. Geometry is static: each geom
 is described in its body's frame, and the moving part (every body's world pose) is streamed per
-tick (`Snapshot.body_pos` / `body_quat`, the pose frames of service/wire.py).
+tick (`Snapshot.body_pos` / `body_quat`, the pose frames of service/core/wire.py).
 """
 
 from __future__ import annotations
