@@ -8,15 +8,10 @@ its `/joint_states` and `/clock` with rosbags. Everything stays on loopback.
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import random
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
@@ -27,9 +22,9 @@ from rosbags.typesys import Stores, get_typestore
 from service.surfaces.ros import msgs, topics
 from service.surfaces.ros.dds import LOOPBACK_CONFIG, choose_config
 from tests.conftest import ELBOW, FINGER, JOINTS, Server, serve, wait_for
+from tests.peer_stdio import PeerProcess
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
-PEER = Path(__file__).with_name("ros2_peer.py")
 
 
 # -- the types, byte for byte --------------------------------------------------------------
@@ -163,34 +158,16 @@ def test_bad_message_log_is_rate_limited(caplog: pytest.LogCaptureFixture) -> No
 # -- a running server and an independent DDS peer ------------------------------------------
 
 
-class Peer:
+class Peer(PeerProcess):
     """tests/ros2_peer.py in its own process: rosbags bytes over its own DDS participant."""
 
     def __init__(self, domain: int) -> None:
-        env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK_CONFIG, "ROS_DOMAIN_ID": str(domain)}
-        self.proc = subprocess.Popen(
-            [sys.executable, str(PEER)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            text=True,
-            env=env,
+        super().__init__(
+            "tests.ros2_peer", {"CYCLONEDDS_URI": LOOPBACK_CONFIG, "ROS_DOMAIN_ID": str(domain)}
         )
-        assert json.loads(self.proc.stdout.readline()) == {"ready": True}  # type: ignore[union-attr]
-
-    def ask(self, **req: Any) -> Any:
-        assert self.proc.stdin and self.proc.stdout
-        self.proc.stdin.write(json.dumps(req) + "\n")
-        self.proc.stdin.flush()
-        reply = json.loads(self.proc.stdout.readline())
-        assert reply["ok"], reply
-        return reply["result"]
 
     def publish(self, topic: str, name: list[str], position: list[float]) -> None:
         assert self.ask(op="publish", topic=topic, msg={"name": name, "position": position}) == 0
-
-    def close(self) -> None:
-        self.proc.kill()
-        self.proc.wait()
 
 
 @pytest.fixture(scope="module")
@@ -336,11 +313,16 @@ def test_ros2_tools_see_node_armfleet_owning_its_endpoints(peer: Peer) -> None:
         "rt/clock": "writers",
         "rt/joint_commands": "readers",
         "rt/world_2/joint_commands": "readers",
+        "rt/world_2/tf": "writers",
+        "rt/robot_description": "writers",
+        "rt/world_1/forward_position_controller/commands": "readers",
     }
     for topic, kind in owned.items():
         ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
         assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
-    assert len(node["writers"]) == 4 and len(node["readers"]) == 3  # world 0, 1, 2 (+ /clock)
+    # per namespace (root, world_1, world_2): joint_states, tf, tf_static, robot_description
+    # written, joint_commands and forward_position_controller/commands read; plus /clock
+    assert len(node["writers"]) == 3 * 4 + 1 and len(node["readers"]) == 3 * 2
 
 
 def test_ros2_worlds_must_exist() -> None:

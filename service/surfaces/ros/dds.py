@@ -18,7 +18,6 @@ like the HTTP bind; `ROS_LOCALHOST_ONLY=1` always keeps it on loopback.
 from __future__ import annotations
 
 import logging
-import math
 import os
 import threading
 import time
@@ -26,10 +25,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from service.core.control import Source
-from service.core.errors import ArmfleetError
 from service.core.types import Snapshot
 from service.surfaces.ros import topics
-from service.surfaces.ros.topics import BadMessage, BadMessageCounter, TopicMap
+from service.surfaces.ros.topics import BadMessageCounter, TopicMap
+from service.surfaces.ros.ur_dds import ur_topics
 
 if TYPE_CHECKING:
     from service.runtime import Runtime
@@ -114,10 +113,6 @@ class DdsBridge:
         self._running = False
         self._threads: list[threading.Thread] = []
         self._entities: list[Any] = []  # DDS entities, deleted children first on stop
-        # State topics somebody subscribes to, refreshed every _MATCH_CHECK_S: a message nobody
-        # reads is not even built (many --ros2-worlds cost nothing until someone listens).
-        self._subscribed: list[tuple[Any, int]] = []
-        self._matched_at = -math.inf
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -167,10 +162,13 @@ class DdsBridge:
             w = DataWriter(dp, topic(name, msgs.JointState), qos=_qos(10))
             self._entities.append(w)
             self._writers.append((w, world))
+        self._listened = topics.ListenedWriters(self._writers, _MATCH_CHECK_S)
         self._clock = DataWriter(dp, topic(topics.CLOCK_TOPIC, msgs.Clock), qos=_qos(1))
         self._entities.append(self._clock)
         self._msgs = msgs
+        from service.surfaces.ros.ur_dds import UrDriverDds
 
+        self.ur = UrDriverDds(dp, runtime, self.topics, self.bad)
         self._announce_node(dp, msgs)
 
         self._waitset = WaitSet(dp)
@@ -220,8 +218,10 @@ class DdsBridge:
                 msgs.NodeEntitiesInfo(
                     node_namespace="/",
                     node_name=NODE_NAME,
-                    reader_gid_seq=[gid(r) for r, _, _ in self._readers],
-                    writer_gid_seq=[gid(w) for w, _ in self._writers] + [gid(self._clock)],
+                    reader_gid_seq=[gid(r) for r, _, _ in self._readers]
+                    + [gid(r) for r in self.ur.readers],
+                    writer_gid_seq=[gid(w) for w, _ in self._writers]
+                    + [gid(w) for w in [self._clock, *self.ur.writers]],
                 )
             ],
         )
@@ -246,6 +246,7 @@ class DdsBridge:
         self._guard.set(True)
         for t in self._threads:
             t.join(timeout=5)
+        self.ur.stop()
         # cyclonedds keeps every entity in a class-level table until it is deleted explicitly.
         for entity in reversed(self._entities):
             entity.__del__()
@@ -259,8 +260,8 @@ class DdsBridge:
             "domain_id": cfg.domain_id if cfg else None,
             "scope": cfg.scope if cfg else None,
             "rate_hz": self.rate,
-            "topics": self.topics.all_topics() if self.topics else {},
-            "commands_accepted": self.received,
+            "topics": (self.topics.all_topics() | ur_topics(self.topics)) if self.topics else {},
+            "commands_accepted": self.received + (self.ur.received if self._running else 0),
             "states_published": self.published,
             "rejected": self.bad.counts(),
         }
@@ -290,33 +291,17 @@ class DdsBridge:
                     pass
 
     def _take(self, reader: Any, topic: str, world: int) -> bool:
-        """Take up to a batch of commands and apply each in order; False when none were left.
+        """Take up to a batch of commands and apply each in order; False when none were left."""
 
-        Cyclone checks every sample's CDR against the type before handing it over, so a take
-        that fails to decode should not happen; if it does, that batch is counted as malformed.
-        """
-        try:
-            samples = reader.take(N=_TAKE_BATCH)
-        except Exception as exc:
-            self.bad.report("malformed", topic, f"undecodable CDR ({type(exc).__name__}: {exc})")
-            return True
-        for msg in samples:
-            if not isinstance(msg, self._msgs.JointState):
-                continue  # a dispose/unregister notice, not a message
-            try:
-                names, values = topics.command_from_joint_state(
-                    self._joints, msg.name, msg.position
-                )
-                self._control.set_targets(world, names, values, Source.ROS2)
-            except BadMessage as exc:
-                self.bad.report(exc.kind, topic, exc.detail)
-            except ArmfleetError as exc:
-                self.bad.report("rejected", topic, str(exc))
-            except Exception:
-                log.exception("ROS 2 command on %s failed", topic)
-            else:
-                self.received += 1
-        return bool(samples)
+        def apply(msg: Any) -> None:
+            names, values = topics.command_from_joint_state(self._joints, msg.name, msg.position)
+            self._control.set_targets(world, names, values, Source.ROS2)
+
+        taken, accepted = topics.take_commands(
+            reader, self._msgs.JointState, topic, self.bad, apply
+        )
+        self.received += accepted
+        return taken
 
     def _publish_loop(self) -> None:
         """Write the newest snapshot, then rest about one period: at most ~`rate` per second."""
@@ -345,15 +330,7 @@ class DdsBridge:
         sec, nanosec = topics.stamp(topics.sim_seconds(snap, self._tick_dt))
         stamp = msgs.Time(sec=sec, nanosec=nanosec)
         self._clock.write(msgs.Clock(clock=stamp))
-        now = time.monotonic()
-        if now - self._matched_at >= _MATCH_CHECK_S:
-            self._matched_at = now
-            self._subscribed = [
-                (w, world)
-                for w, world in self._writers
-                if w.get_publication_matched_status().current_count
-            ]
-        for writer, world in self._subscribed:
+        for writer, world in self._listened.current():
             writer.write(
                 msgs.JointState(
                     header=msgs.Header(stamp=stamp, frame_id=""),
@@ -364,6 +341,7 @@ class DdsBridge:
                 )
             )
             self.published += 1
+        self.ur.write(snap, stamp)
 
 
 def _qos(depth: int, accept_xcdr2: bool = False) -> Any:

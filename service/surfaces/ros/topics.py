@@ -13,7 +13,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -187,6 +187,60 @@ class BadMessageCounter:
     def total(self) -> int:
         with self._lock:
             return sum(self._counts.values())
+
+
+class ListenedWriters:
+    """The DDS writers somebody subscribes to, refreshed every `interval` seconds: a message
+    nobody reads is not even built (many `--ros2-worlds` cost nothing until someone listens)."""
+
+    def __init__(self, writers: list[tuple[Any, int]], interval: float = 0.5) -> None:
+        self.writers = writers  # (writer, world)
+        self._interval = interval
+        self._checked = -math.inf
+        self._listened: list[tuple[Any, int]] = []
+
+    def current(self) -> list[tuple[Any, int]]:
+        now = time.monotonic()
+        if now - self._checked >= self._interval:
+            self._checked = now
+            self._listened = [
+                (w, world)
+                for w, world in self.writers
+                if w.get_publication_matched_status().current_count
+            ]
+        return self._listened
+
+
+def take_commands(
+    reader: Any, kind: type, topic: str, bad: BadMessageCounter, apply: Callable[[Any], None]
+) -> tuple[bool, int]:
+    """Take up to a batch of samples from a DDS reader and `apply` each message in order.
+
+    Returns (whether anything was taken, how many were accepted). A BadMessage or a refusal of
+    the control layer is counted under its kind, never raised: one bad message must not end
+    the reader thread. Cyclone checks every sample's CDR against the type before handing it
+    over, so a take that fails to decode should not happen; if it does, it counts as malformed.
+    """
+    try:
+        samples = reader.take(N=64)
+    except Exception as exc:
+        bad.report("malformed", topic, f"undecodable CDR ({type(exc).__name__}: {exc})")
+        return True, 0
+    accepted = 0
+    for msg in samples:
+        if not isinstance(msg, kind):
+            continue  # a dispose/unregister notice, not a message
+        try:
+            apply(msg)
+        except BadMessage as exc:
+            bad.report(exc.kind, topic, exc.detail)
+        except ArmfleetError as exc:
+            bad.report("rejected", topic, str(exc))
+        except Exception:
+            log.exception("ROS 2 command on %s failed", topic)
+        else:
+            accepted += 1
+    return bool(samples), accepted
 
 
 def parse_world_list(spec: str | None, nworld: int) -> tuple[int, ...]:
