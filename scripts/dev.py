@@ -37,6 +37,10 @@ TEST_DEBS = {
     "tmux": "tmux",
     "xwd": "x11-apps",
     "chromium": "chromium",
+    # the Fast DDS peer of the ROS 2 tests (tests/fastdds_peer): a header stands for the library
+    "fastddsgen": "fastddsgen",
+    "g++": "g++",
+    "/usr/include/fastdds/dds/domain/DomainParticipant.hpp": "libfastrtps-dev",
 }
 
 
@@ -91,7 +95,9 @@ def warm_kernel_cache() -> None:
 
 
 def ensure_test_tools() -> None:
-    missing = [deb for tool, deb in TEST_DEBS.items() if shutil.which(tool) is None]
+    missing = [
+        deb for tool, deb in TEST_DEBS.items() if not (shutil.which(tool) or Path(tool).exists())
+    ]
     if not missing:
         return
     sudo = [] if os.geteuid() == 0 else ["sudo", "-n"]
@@ -102,6 +108,13 @@ def ensure_test_tools() -> None:
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
     run(*sudo, "apt-get", "update", "-qq", env=env)
     run(*sudo, "apt-get", "install", "-y", "-qq", "--no-install-recommends", *missing, env=env)
+
+
+def build_test_peers() -> None:
+    """The Fast DDS peer, compiled once per source change (cached under build/fastdds_peer)."""
+    done = subprocess.run([BIN / "python", "-m", "tests.fastdds_peer"], cwd=ROOT)
+    if done.returncode:
+        say("the Fast DDS peer could not be built: its ROS 2 tests will be skipped")
 
 
 def ensure_js_tools() -> None:
@@ -126,6 +139,7 @@ def main(argv: list[str]) -> int:
     ensure_venv()
     if command == "test":
         ensure_test_tools()
+        build_test_peers()
         ensure_js_tools()
     warm_kernel_cache()
     if command == "serve":

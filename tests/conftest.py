@@ -64,6 +64,19 @@ def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
         time.sleep(0.05)
 
 
+def node_armfleet(seen: dict[str, Any], owned: dict[str, str]) -> dict[str, Any]:
+    """Node /armfleet from a peer's `ros_discovery_info` view (`seen`: 'nodes', and the GUIDs
+    DDS discovery reported as 'writers'/'readers' by topic), checked to own exactly one
+    endpoint on each topic of `owned` (topic -> 'writers' or 'readers'): how `ros2 node list`
+    and `ros2 topic info -v` attribute them. Node GIDs are the 16-byte GUID padded to 24."""
+    (node,) = [n for n in seen["nodes"] if n["name"] == "armfleet"]
+    assert node["namespace"] == "/"
+    for topic, kind in owned.items():
+        ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
+        assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
+    return node
+
+
 def target_after(client: ArmfleetClient, world: int, pred: Callable[[WorldState], bool]) -> Any:
     """The world's targets once `pred(state)` holds (commands apply at the next tick)."""
 

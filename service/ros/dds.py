@@ -11,21 +11,20 @@ Two threads of its own, never the event loop or the sim thread:
 - the publisher thread writes `/joint_states`, `/world_N/joint_states` and `/clock` from the
   newest snapshot. The loop sees the bridge as a snapshot sink that only stores a reference.
 
-DDS stays on loopback unless the user opens it (`--ros2-network`, or their own CYCLONEDDS_URI),
-like the HTTP bind; `ROS_LOCALHOST_ONLY=1` always keeps it on loopback.
+DDS stays on loopback unless the user opens it, like the HTTP bind; service/ros/discovery.py
+says how (and why every ROS 2 node on the machine finds it whichever starts first).
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from service.control import Source
 from service.ros import topics
+from service.ros.discovery import LOOPBACK_CONFIG, DdsConfig, choose_config
 from service.ros.topics import BadMessageCounter, TopicMap
 from service.ros.ur_dds import ur_topics
 from service.types import Snapshot
@@ -35,17 +34,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("armfleet.ros2")
 
-# Unicast discovery on 127.0.0.1 only, no multicast (tried with cyclonedds 11: processes on one
-# host find each other; nothing leaves the machine).
-LOOPBACK_CONFIG = (
-    "<CycloneDDS><Domain><General><Interfaces>"
-    '<NetworkInterface address="127.0.0.1"/></Interfaces>'
-    "<AllowMulticast>false</AllowMulticast></General>"
-    '<Discovery><Peers><Peer address="127.0.0.1"/></Peers>'
-    "<ParticipantIndex>auto</ParticipantIndex>"
-    "<MaxAutoParticipantIndex>50</MaxAutoParticipantIndex></Discovery>"
-    "</Domain></CycloneDDS>"
-)
+__all__ = ["LOOPBACK_CONFIG", "DdsBridge", "DdsConfig", "choose_config"]
+
 NODE_NAME = "armfleet"  # how ROS 2 tools name the bridge (`ros2 node list` shows /armfleet)
 # Commands buffered per topic while the reader thread waits for a core (a busy machine can hold
 # it off for a while); rclpy's depth 10 would drop commands under a burst.
@@ -53,41 +43,6 @@ _READER_DEPTH = 1000
 _TAKE_BATCH = 64
 _MATCH_CHECK_S = 0.5  # a new subscriber gets its first state within this
 _WRITE_BLOCK_S = 0.01  # a reliable write never holds the publisher thread longer than this
-
-
-@dataclass(frozen=True)
-class DdsConfig:
-    """Where the participant lives.
-
-    domain_id: the DDS domain (ROS_DOMAIN_ID)
-    config: Cyclone XML given to the domain, or None to let Cyclone read CYCLONEDDS_URI / defaults
-    scope: 'loopback', 'user CYCLONEDDS_URI' or 'network', for the log and GET /v1/ros
-    """
-
-    domain_id: int
-    config: str | None
-    scope: str
-
-
-def choose_config(network: bool, env: dict[str, str] | None = None) -> DdsConfig:
-    """Decide the DDS scope from `--ros2-network` and the ROS/Cyclone environment variables."""
-    env = dict(os.environ) if env is None else env
-    raw_domain = env.get("ROS_DOMAIN_ID", "").strip() or "0"
-    try:
-        domain_id = int(raw_domain)
-    except ValueError:
-        raise ValueError(f"ROS_DOMAIN_ID must be an integer, got {raw_domain!r}") from None
-    if not 0 <= domain_id <= 232:
-        raise ValueError(f"ROS_DOMAIN_ID must be in 0..232, got {domain_id}")
-    if env.get("ROS_LOCALHOST_ONLY", "").strip() == "1":
-        if network:
-            log.warning("ROS_LOCALHOST_ONLY=1 overrides --ros2-network: DDS stays on loopback")
-        return DdsConfig(domain_id, LOOPBACK_CONFIG, "loopback")
-    if env.get("CYCLONEDDS_URI", "").strip():
-        return DdsConfig(domain_id, None, "user CYCLONEDDS_URI")
-    if network:
-        return DdsConfig(domain_id, None, "network")
-    return DdsConfig(domain_id, LOOPBACK_CONFIG, "loopback")
 
 
 class DdsBridge:
