@@ -53,24 +53,27 @@ def run(*cmd: str | Path, **kw) -> None:
 
 
 def use_new_enough_python(argv: list[str]) -> None:
-    """Restart with a Python 3.11+ when this one is older (or ARMFLEET_PYTHON names one)."""
+    """Restart with a Python 3.11+ when this one is older, or with the one ARMFLEET_PYTHON
+    names."""
     if os.environ.get(RESTARTED):
         return
     exe = _pyfind.choose(sys.version_info[:2], dict(os.environ), Path.home())
     if exe is None:
         return
-    say(f"python {sys.version.split()[0]} is too old for armfleet (3.11+): restarting with {exe}")
+    old = sys.version_info < _pyfind.NEED
+    why = "is too old for armfleet (3.11+)" if old else f"is not {_pyfind.EXPLICIT}"
+    say(f"python {sys.version.split()[0]} {why}: restarting with {exe}")
     env = {**os.environ, RESTARTED: exe}
     os.execve(exe, [exe, str(Path(__file__).resolve()), *argv], env)
 
 
 def ensure_venv() -> None:
-    venv_python = _pyfind.version_of(str(BIN / "python")) if (BIN / "python").exists() else None
-    if venv_python is None or venv_python < _pyfind.NEED:
-        if VENV.exists():  # e.g. made by Python 3.10 before this script knew better
-            made_by = _pyfind.dotted(venv_python) if venv_python else "broken"
-            say(f"removing {VENV}: its Python is {made_by}")
-            shutil.rmtree(VENV)
+    python = BIN / "python"
+    stale = _pyfind.stale_venv(python)
+    if stale:
+        say(f"removing {VENV}: {stale}")
+        shutil.rmtree(VENV)
+    if not python.exists():
         say(f"creating virtualenv in {VENV} with {sys.executable}")
         if subprocess.run([sys.executable, "-m", "venv", str(VENV)], cwd=ROOT).returncode:
             shutil.rmtree(VENV, ignore_errors=True)

@@ -20,7 +20,7 @@ import pytest
 from clients import ArmfleetClient, WorldState
 from clients import pytest_plugin as armfleet_plugin
 from clients.testing import Server, free_port, serve
-from service.robot import load_robot
+from service.core.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -21,7 +21,7 @@ from typing import Any
 import httpx
 import pytest
 
-from service.ros import topics
+from service.surfaces.ros import topics
 from tests.conftest import ELBOW, FINGER, JOINTS, Server, node_armfleet, serve, wait_for
 from tests.fastdds_peer import FastDdsPeer, built_or_skip
 

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
-from service.ros import msgs, topics
-from service.ros.dds import LOOPBACK_CONFIG, choose_config
+from service.surfaces.ros import msgs, topics
+from service.surfaces.ros.dds import LOOPBACK_CONFIG, choose_config
 from tests.conftest import ELBOW, FINGER, JOINTS, Server, node_armfleet, serve, wait_for
 from tests.peer_stdio import PeerProcess
 
@@ -389,7 +389,7 @@ def test_ros2_tools_see_node_armfleet_owning_its_endpoints(peer: Peer) -> None:
 def test_ros2_worlds_must_exist() -> None:
     from pydantic import ValidationError
 
-    from service.settings import Settings
+    from service.core.settings import Settings
 
     assert topics.parse_world_list("0-2,3", 4) == (0, 1, 2, 3)
     with pytest.raises(ValidationError, match="ros2_worlds '2-9'"):
