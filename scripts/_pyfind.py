@@ -22,23 +22,34 @@ NEED = (3, 11)
 PREFERRED = ((3, 11), (3, 12), (3, 13))
 EXPLICIT = "ARMFLEET_PYTHON"  # a user's own choice of interpreter, used as given
 _NAME = re.compile(r"^python3(\.\d+)?$")
-_PROBE = "import sys; print('%d %d' % sys.version_info[:2])"
+# Version, and whether `venv` can put pip in (Debian and Ubuntu ship ensurepip apart, in
+# python3.N-venv: without it `python3.N -m venv` fails).
+_PROBE = (
+    "import sys, importlib.util as u;"
+    "print(sys.version_info[0], sys.version_info[1], int(u.find_spec('ensurepip') is not None))"
+)
 
 
 def dotted(version: tuple[int, int]) -> str:
     return ".".join(str(part) for part in version)
 
 
-def version_of(exe: str, timeout: float = 10.0) -> tuple[int, int] | None:
-    """The (major, minor) an interpreter reports, or None when it does not run (a pyenv shim
-    for a version not selected, a dangling link, a hang)."""
+def probe(exe: str, timeout: float = 10.0) -> tuple[tuple[int, int], bool] | None:
+    """((major, minor), has venv's ensurepip) of an interpreter, or None when it does not run
+    (a pyenv shim for a version not selected, a dangling link, a hang)."""
     try:
         out = subprocess.run(
             [exe, "-c", _PROBE], capture_output=True, text=True, timeout=timeout, check=True
         ).stdout.split()
-        return (int(out[0]), int(out[1]))
+        return (int(out[0]), int(out[1])), out[2] == "1"
     except (OSError, subprocess.SubprocessError, ValueError, IndexError):
         return None
+
+
+def version_of(exe: str, timeout: float = 10.0) -> tuple[int, int] | None:
+    """The (major, minor) an interpreter reports, or None when it does not run."""
+    found = probe(exe, timeout)
+    return found[0] if found else None
 
 
 def candidates(path: str, home: Path, dirs: tuple[str, ...]) -> list[str]:
@@ -76,16 +87,30 @@ def candidates(path: str, home: Path, dirs: tuple[str, ...]) -> list[str]:
     return unique
 
 
-def best(interpreters: list[str]) -> tuple[str, tuple[int, int]] | None:
-    """The interpreter to use: a PREFERRED version if any, else the newest that is new enough."""
-    usable = [(exe, v) for exe, v in ((e, version_of(e)) for e in interpreters) if v and v >= NEED]
-    if not usable:
-        return None
-    for want in PREFERRED:
-        for exe, v in usable:
-            if v == want:
-                return exe, v
-    return max(usable, key=lambda item: item[1])
+def best(interpreters: list[str]) -> tuple[str, tuple[int, int], bool] | None:
+    """The interpreter to use, with its version and whether it can make a venv: one that can
+    before one that cannot, then a PREFERRED version, else the newest that is new enough."""
+    probed = ((exe, probe(exe)) for exe in interpreters)
+    usable = [(exe, p[0], p[1]) for exe, p in probed if p and p[0] >= NEED]
+    rank = {version: i for i, version in enumerate(PREFERRED)}
+
+    def order(item: tuple[str, tuple[int, int], bool]) -> tuple[bool, int, tuple[int, int]]:
+        _, version, venv = item
+        return (not venv, rank.get(version, len(rank)), (-version[0], -version[1]))
+
+    return min(usable, key=order) if usable else None
+
+
+def stale_venv(python: Path) -> str | None:
+    """Why the venv whose interpreter is `python` must be made anew, or None to keep it: made by
+    a Python older than 3.11 (a run of dev.py before it knew better), or its interpreter gone.
+    One that only failed to answer is kept: on a loaded machine the answer may have been slow."""
+    if python.is_symlink() and not python.exists():
+        return f"its Python ({os.readlink(python)}) is gone"
+    made_by = version_of(str(python), timeout=60) if python.exists() else None
+    if made_by is not None and made_by < NEED:
+        return f"it was made by Python {dotted(made_by)}"
+    return None
 
 
 def os_release(path: str = "/etc/os-release") -> dict[str, str]:
@@ -148,8 +173,14 @@ def choose(
     if current >= NEED:
         return None
     found = best(candidates(env.get("PATH", ""), home, dirs))
-    if found:
+    if found and found[2]:
         return found[0]
+    if found:
+        raise SystemExit(
+            f"{found[0]} is Python {dotted(found[1])} but cannot make a virtualenv (no venv "
+            f"module).\nInstall: {venv_hint(found[1], os_release(release_file))}\n"
+            "then run the same command again."
+        )
     uv = ["`uv python find`"] if shutil.which("uv", path=env.get("PATH", "")) else []
     looked = ", ".join(["PATH", *dirs, "~/.pyenv/versions", *uv])
     raise SystemExit(

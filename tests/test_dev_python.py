@@ -20,11 +20,14 @@ from pythons import ROOT, older_than_311, pyfind
 UBUNTU_2204 = 'NAME="Ubuntu"\nID=ubuntu\nVERSION_ID="22.04"\n'
 
 
-def fake_python(where: Path, name: str, version: str | None, sleep: float = 0) -> Path:
-    """An executable answering `-c <probe>` with "3 12" (version "3.12"); None: it fails."""
+def fake_python(
+    where: Path, name: str, version: str | None, sleep: float = 0, venv: bool = True
+) -> Path:
+    """An executable answering the probe as python `version` ("3.12") would, with or without
+    the venv module; version None: it fails."""
     where.mkdir(parents=True, exist_ok=True)
     exe = where / name
-    answer = "exit 1" if version is None else f"echo '{version.replace('.', ' ')}'"
+    answer = "exit 1" if version is None else f"echo {version.replace('.', ' ')} {int(venv)}"
     exe.write_text(f"#!/bin/sh\nsleep {sleep}\n{answer}\n")
     exe.chmod(0o755)
     return exe
@@ -56,6 +59,20 @@ def test_pyenv_versions_and_uv_are_searched(tmp_path: Path) -> None:
     uv.write_text(f"#!/bin/sh\n[ \"$1 $2 $3\" = 'python find >=3.11' ] && echo {managed}\n")
     uv.chmod(0o755)
     assert choose([uv.parent], tmp_path) == str(managed)
+
+
+def test_one_without_venv_is_passed_over_or_named_with_its_package(tmp_path: Path) -> None:
+    """Ubuntu 22.04 after `apt install python3.11` alone: python3.11 has no ensurepip."""
+    release = tmp_path / "os-release"
+    release.write_text(UBUNTU_2204)
+    bare = fake_python(tmp_path / "bin", "python3.11", "3.11", venv=False)
+    env = {"PATH": str(tmp_path / "bin")}
+    with pytest.raises(SystemExit) as stop:
+        pyfind.choose((3, 10), env, tmp_path, dirs=(), release_file=str(release))
+    assert f"{bare} is Python 3.11 but cannot make a virtualenv" in str(stop.value.code)
+    assert "Install: sudo apt install python3.11-venv" in str(stop.value.code)
+    pyenv = fake_python(tmp_path / ".pyenv" / "versions" / "3.12.1" / "bin", "python3.12", "3.12")
+    assert pyfind.choose((3, 10), env, tmp_path, dirs=()) == str(pyenv)
 
 
 def test_a_hanging_interpreter_is_given_up_on(tmp_path: Path) -> None:
@@ -95,6 +112,20 @@ def old_pythons() -> list[str]:
     if not found:
         pytest.skip("no Python older than 3.11 here (`pyenv install 3.10` gives one)")
     return found
+
+
+def test_a_venv_of_an_old_or_removed_python_is_made_anew(
+    tmp_path: Path, old_pythons: list[str]
+) -> None:
+    """The .venv a 3.10 run left behind (its pip install failed) is replaced, not reused."""
+    subprocess.run([old_pythons[-1], "-m", "venv", "--without-pip", tmp_path / "old"], check=True)
+    assert pyfind.stale_venv(tmp_path / "old" / "bin" / "python").startswith("it was made by")
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", tmp_path / "new"], check=True)
+    assert pyfind.stale_venv(tmp_path / "new" / "bin" / "python") is None
+    gone = tmp_path / "gone"
+    gone.symlink_to(tmp_path / "removed-python3.12")
+    assert "is gone" in pyfind.stale_venv(gone)
+    assert pyfind.stale_venv(tmp_path / "none") is None  # no venv yet: nothing to remove
 
 
 def test_dev_py_under_an_old_python_restarts_with_a_new_one(

@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 from urdf_parser_py.urdf import URDF
 
-from service.robot import load_robot
-from service.ros import msgs, msgs_tf, urdf
-from service.ros.dds import LOOPBACK_CONFIG
-from service.ros.tf_frames import FrameTree
+from service.core.robot import load_robot
+from service.surfaces.ros import msgs, msgs_tf, urdf
+from service.surfaces.ros.dds import LOOPBACK_CONFIG
+from service.surfaces.ros.tf_frames import FrameTree
 from tests.conftest import JOINTS, Server, serve, wait_for
 from tests.peer_stdio import PeerProcess
 from tests.ros2_types import serialize

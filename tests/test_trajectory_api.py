@@ -27,7 +27,7 @@ from clients import (
     point,
     tolerance,
 )
-from service.replay import read_recording, replay_recording
+from service.persistence.replay import read_recording, replay_recording
 
 NWORLD = 4
 ARM = JOINTS[:6]

@@ -14,13 +14,13 @@ import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
-from service import wire
 from service.api.deps import Ctl, World
-from service.control import Control, Source
-from service.errors import BadCommand, Conflict, NotFound
-from service.schemas import ANY, WITH_BODY, errors
-from service.trajectory import TrajectoryStatus, parse
-from service.trajectory.schemas import (
+from service.core import wire
+from service.core.control import Control, Source
+from service.core.errors import BadCommand, Conflict, NotFound
+from service.core.schemas import ANY, WITH_BODY, errors
+from service.core.trajectory import TrajectoryStatus, parse
+from service.core.trajectory.schemas import (
     BatchStartedReply,
     BatchTrajectoryBody,
     StartedReply,

@@ -1,0 +1,218 @@
+"""What the UR driver offers beside `joint_states`, on DDS, for every world namespace.
+
+For world 0 at the root (as the seed uses it) and for `/world_N` per exposed world:
+- `robot_description` (std_msgs/String, transient-local): the URDF of service/surfaces/ros/urdf.py;
+- `tf_static` (transient-local, once) and `tf` (at the bridge's state rate while someone
+  listens): the link frames of service/surfaces/ros/tf_frames.py, stamped with simulated time;
+- `forward_position_controller/commands` (std_msgs/Float64MultiArray): six arm positions,
+  through the control layer (source `ros2`) like any command;
+- the controllers' actions and `~/joint_trajectory` topics (service/surfaces/ros/dds_actions.py).
+
+It lives inside the DDS bridge (dds.py): same participant, the bridge's publisher
+thread writes `tf`, and a reader thread of its own serves commands and action requests.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from service.core.control import Source
+from service.surfaces.ros import topics
+from service.surfaces.ros.tf_frames import FrameTree
+from service.surfaces.ros.topics import BadMessageCounter, TopicMap
+from service.surfaces.ros.urdf import generate
+
+FORWARD_COMMANDS = "forward_position_controller/commands"
+STRING_TYPE = "std_msgs/msg/String"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+FLOAT64_ARRAY_TYPE = "std_msgs/msg/Float64MultiArray"
+_READER_DEPTH = 100
+
+
+def namespaces(topic_map: TopicMap) -> dict[str, int]:
+    """Namespace → world: the root is world 0 (the seed's), `/world_N` each exposed world."""
+    return {"": 0} | {f"/world_{w}": w for w in topic_map.worlds}
+
+
+def ur_topics(topic_map: TopicMap) -> dict[str, str]:
+    """Topic name → ROS 2 type of every UR-driver topic (for `GET /v1/ros`)."""
+    out = {}
+    for ns in namespaces(topic_map):
+        out[f"{ns}/robot_description"] = STRING_TYPE
+        out[f"{ns}/tf"] = TF_TYPE
+        out[f"{ns}/tf_static"] = TF_TYPE
+        out[f"{ns}/{FORWARD_COMMANDS}"] = FLOAT64_ARRAY_TYPE
+    return out
+
+
+def latched_qos() -> Any:
+    """Reliable, transient-local, depth 1: what robot_state_publisher and tf2's static
+    broadcaster offer, so a node that starts later still gets the description and frames."""
+    from cyclonedds.qos import Policy, Qos
+
+    return Qos(
+        Policy.Reliability.Reliable(max_blocking_time=0),
+        Policy.Durability.TransientLocal,
+        Policy.History.KeepLast(1),
+        Policy.DataRepresentation(use_cdrv0_representation=True),
+    )
+
+
+def arm_command(arm_joints: list[str], data: list[float]) -> list[float]:
+    """forward_position_controller's rule: exactly one finite position per arm joint."""
+    if len(data) != len(arm_joints):
+        raise topics.BadMessage(
+            "length_mismatch",
+            f"data needs {len(arm_joints)} positions ({', '.join(arm_joints)}), got {len(data)}",
+        )
+    for name, value in zip(arm_joints, data, strict=True):
+        if not math.isfinite(value):
+            raise topics.BadMessage("not_finite", f"data for {name} is {value} (must be finite)")
+    return [float(v) for v in data]
+
+
+class UrDriverDds:
+    """The UR driver's topics (and actions) on an existing DDS participant."""
+
+    def __init__(self, dp: Any, runtime: Any, topic_map: TopicMap, bad: BadMessageCounter):
+        from cyclonedds import core
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+
+        from service.surfaces.ros import msgs, msgs_tf
+        from service.surfaces.ros.dds import _qos
+
+        loop = runtime.loop
+        self._control = runtime.control
+        self._bad = bad
+        self._msgs, self._tf = msgs, msgs_tf
+        self.received = 0
+        self._entities: list[Any] = []
+        self.readers: list[Any] = []
+        self.writers: list[Any] = []
+        mjm = loop.batch.robot.mjm
+        self.urdf = generate(mjm, loop.spec)
+        self.frames = FrameTree(mjm)
+        self._arm = [j.name for j in loop.spec.joints][:6]
+        self._spaces = namespaces(topic_map)
+        self._tick_dt = loop.batch.tick_dt
+
+        topics_made: dict[tuple[str, type], Any] = {}
+
+        def topic(name: str, kind: type) -> Any:
+            if (name, kind) not in topics_made:
+                topics_made[name, kind] = Topic(dp, topics.dds_name(name), kind)
+                self._entities.append(topics_made[name, kind])
+            return topics_made[name, kind]
+
+        def writer(name: str, kind: type, qos: Any) -> Any:
+            w = DataWriter(dp, topic(name, kind), qos=qos)
+            self._entities.append(w)
+            self.writers.append(w)
+            return w
+
+        self._tf_writers: list[tuple[Any, int]] = []
+        self._commands: list[Any] = []
+        self._inputs: list[Callable[[], bool]] = []
+        sec, nanosec = topics.stamp(topics.sim_seconds(loop.latest, self._tick_dt))
+        static = self._static_message(msgs.Time(sec=sec, nanosec=nanosec))
+        for ns, world in self._spaces.items():
+            writer(f"{ns}/robot_description", msgs_tf.String, latched_qos()).write(
+                msgs_tf.String(data=self.urdf)
+            )
+            writer(f"{ns}/tf_static", msgs_tf.TFMessage, latched_qos()).write(static)
+            self._tf_writers.append((writer(f"{ns}/tf", msgs_tf.TFMessage, _qos(100)), world))
+            name = f"{ns}/{FORWARD_COMMANDS}"
+            r = DataReader(dp, topic(name, msgs_tf.Float64MultiArray), qos=_qos(_READER_DEPTH))
+            self._entities.append(r)
+            self.readers.append(r)
+            self._commands.append(r)
+            self._inputs.append(self._command_input(r, name, world))
+        self._tf_listened = topics.ListenedWriters(self._tf_writers)
+
+        self._waitset = core.WaitSet(dp)
+        self._guard = core.GuardCondition(dp)
+        any_sample = core.SampleState.Any | core.ViewState.Any | core.InstanceState.Any
+        for r in self._commands:
+            condition = core.ReadCondition(r, any_sample)
+            self._waitset.attach(condition)
+            self._entities.append(condition)
+        self._waitset.attach(self._guard)
+        self._entities += [self._guard, self._waitset]
+        self._running = True
+        self._thread = threading.Thread(
+            target=self._read_loop, name="armfleet-ros2-ur", daemon=True
+        )
+        self._thread.start()
+
+    # -- tf -----------------------------------------------------------------------------------
+
+    def _stamped(self, stamp: Any, parent: str, child: str, pos: Any, quat: Any) -> Any:
+        m = self._tf
+        w, x, y, z = (float(v) for v in quat)
+        return m.TransformStamped(
+            header=self._msgs.Header(stamp=stamp, frame_id=parent),
+            child_frame_id=child,
+            transform=m.Transform(
+                translation=m.Vector3(*(float(v) for v in pos)),
+                rotation=m.Quaternion(x=x, y=y, z=z, w=w),
+            ),
+        )
+
+    def _static_message(self, stamp: Any) -> Any:
+        return self._tf.TFMessage(
+            transforms=[
+                self._stamped(stamp, t.parent, t.child, t.pos, t.quat) for t in self.frames.static
+            ]
+        )
+
+    def write(self, snap: Any, stamp: Any) -> None:
+        """Publisher thread: `tf` of every namespace somebody listens to."""
+        listened = self._tf_listened.current()
+        if not listened:
+            return
+        worlds = [world for _, world in listened]
+        pos, quat = self.frames.moving(snap.body_pos[worlds], snap.body_quat[worlds])
+        parents, children = self.frames.moving_parents, self.frames.moving_children
+        for i, (w, _) in enumerate(listened):
+            transforms = [
+                self._stamped(stamp, parents[k], children[k], pos[i, k], quat[i, k])
+                for k in range(len(children))
+            ]
+            w.write(self._tf.TFMessage(transforms=transforms))
+
+    # -- commands -----------------------------------------------------------------------------
+
+    def _read_loop(self) -> None:
+        """Serve every input as it arrives (commands, and action requests)."""
+        while self._running:
+            self._waitset.wait(1_000_000_000)
+            for serve_one in self._inputs:
+                while self._running and serve_one():
+                    pass
+
+    def _command_input(self, reader: Any, topic: str, world: int) -> Callable[[], bool]:
+        def apply(msg: Any) -> None:
+            values = arm_command(self._arm, list(msg.data))
+            self._control.set_targets(world, self._arm, values, Source.ROS2)
+
+        def serve_one() -> bool:
+            kind = self._tf.Float64MultiArray
+            taken, accepted = topics.take_commands(reader, kind, topic, self._bad, apply)
+            self.received += accepted
+            return taken
+
+        return serve_one
+
+    def stop(self) -> None:
+        """Leave the graph: the thread ends, then every entity of ours is deleted."""
+        self._running = False
+        self._guard.set(True)
+        self._thread.join(timeout=5)
+        for entity in reversed(self._entities):
+            entity.__del__()
+        self._entities.clear()
