@@ -94,9 +94,9 @@ class TrajectoryManager:
         out: list[Started] = []
         with self.loop.staging(ids) as st:
             self._abort(st, ids, AbortReason.PREEMPTED, "a newer trajectory replaced it")
-            for w in ids.tolist():
-                traj_id = next(self._ids)
-                end = self.table.add(traj_id, w, spec, st.tick, st.pending[w], st.velocity[w])
+            traj_ids = np.array([next(self._ids) for _ in range(len(ids))], dtype=np.int64)
+            end = self.table.add(traj_ids, ids, spec, st.tick, st.pending[ids], st.velocity[ids])
+            for traj_id, w in zip(traj_ids.tolist(), ids.tolist(), strict=True):
                 status = self._initial_status(traj_id, w, spec, source, st.tick, end)
                 self._runs[traj_id] = _Run(traj_id, w, spec, source, st.tick, end, status)
                 self._by_world[w] = traj_id
