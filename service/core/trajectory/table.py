@@ -38,6 +38,7 @@ _PUBLIC_PER_SLOT = (
     "has_path",
     "has_goal",
     "goal_deadline",
+    "duration",
 )
 
 
@@ -87,6 +88,7 @@ class TrajectoryTable:
         self.has_path = np.zeros(0, dtype=bool)
         self.has_goal = np.zeros(0, dtype=bool)
         self.goal_deadline = np.zeros(0, dtype=np.int64)
+        self.duration = np.zeros(0)  # time_from_start of the last point [s]
         # Flat point rows of every slot: time [s], and position/velocity/acceleration (7 wide).
         self._t = np.zeros(0)
         self._pva = np.zeros((0, 3, NJOINT))
@@ -137,6 +139,7 @@ class TrajectoryTable:
             "has_path": np.full(k, spec.has_path_tolerance),
             "has_goal": np.full(k, spec.has_goal_tolerance),
             "goal_deadline": (end + grace) * each,
+            "duration": np.full(k, spec.duration),
             "ids": np.asarray(traj_ids, dtype=np.int64),
             "worlds": np.asarray(worlds, dtype=np.int64),
             "start_tick": start_tick * each,
