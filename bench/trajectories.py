@@ -4,9 +4,9 @@
    facts): a 2 s trajectory through three points for all six arm joints; the largest path error
    |actual - desired| over the run, and the distance to the last point 0.5 s after the end.
 2. Fast mode at 1024 worlds (``armfleet serve --mode fast``): ticks/s with no trajectory, with
-   every world running a 300 s, 150-point trajectory that barely moves (all the trajectory
-   work, the physics at rest) and one that swings the arm ±0.3 rad, windows interleaved in one
-   run so drift on a shared machine falls on all; ratios are against no trajectory.
+   every world running a 300 s, 150-point trajectory that holds the pose (all the trajectory
+   work, the physics unchanged) and one that swings the arm ±0.3 rad, windows interleaved in
+   one run so drift on a shared machine falls on all; ratios are against no trajectory.
 3. 10,000 trajectories started over HTTP in one batch call (``POST /v1/trajectories`` with
    ``worlds: "0-9999"``, native engine, paused): the call's wall time, then one tick stepped
    with all of them sampled.
@@ -109,10 +109,11 @@ def _ticks_per_s(url: str, window: float) -> float:
     return (b[1] - a[1]) / (b[0] - a[0])
 
 
-# What runs on every world in the fast-mode windows: nothing; a trajectory that swings ±2 mrad
-# (all of the trajectory machinery and feed-forward, the physics as at rest); one that swings
-# ±0.3 rad (the machinery plus the physics of 1024 arms in motion).
-FAST_KINDS = {"none": None, "hold": 0.002, "move": 0.3}
+# What runs on every world in the fast-mode windows: nothing; a trajectory whose 150 points all
+# hold the home pose (every tick sampled, staged and applied to every world, so all of the
+# trajectory work, while the physics stays bit-identical to no trajectory); one that swings the
+# arm ±0.3 rad (the same work plus the physics of 1024 arms in motion).
+FAST_KINDS = {"none": None, "hold": 0.0, "move": 0.3}
 
 
 def fast_ratio(ctx: Context, engine: str, window: float, rounds: int) -> dict[str, Any]:
@@ -208,9 +209,9 @@ def trajectories(ctx: Context) -> Result:
         lambda b: f"{b['call_s'] * 1000:.0f} ms; first tick {b['first_tick_s']:.2f} s",
     )
     notes = [
-        f"fast mode: {window:g} s windows, {rounds} per kind, interleaved; hold = a ±2 mrad "
-        "trajectory (the trajectory machinery, physics at rest), move = ±0.3 rad (plus the "
-        "physics of 1024 arms in motion)"
+        f"fast mode: {window:g} s windows, {rounds} per kind, interleaved; hold = a trajectory "
+        "holding the pose (all trajectory work, physics identical), move = ±0.3 rad swings "
+        "(plus the physics of 1024 arms in motion)"
     ]
     return Result(rows, data, notes)
 
