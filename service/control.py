@@ -24,6 +24,8 @@ from service.commands import resolve_joints
 from service.errors import ArmfleetError, BadCommand, UnknownWorld
 from service.loop import CommandResult, SimLoop
 from service.schemas import IncrementRequest, JointTargets
+from service.trajectory import JointTrajectorySpec, Started, TrajectoryStatus
+from service.trajectory.manager import TrajectoryManager
 from service.types import Mode, RobotSpec
 
 log = logging.getLogger("armfleet.control")
@@ -46,11 +48,13 @@ class Accepted:
     """One accepted command as the listeners see it.
 
     source: the surface it came through
-    kind: "increment", "set_targets", "reset" or "mode"
+    kind: "increment", "set_targets", "reset", "mode", "trajectory" or "trajectory_cancel"
     worlds: the worlds it changed                                   (k,) int64
     targets: those worlds' targets after it [rad]                   (k, 7) float64
+        (a trajectory's: the targets it starts from / holds after the cancel)
     tick: the first tick stepped with it
     mode: the new mode (kind "mode" only)
+    trajectory: the trajectory as JSON (`JointTrajectorySpec.to_json`, kind "trajectory" only)
     """
 
     source: Source
@@ -59,6 +63,7 @@ class Accepted:
     targets: np.ndarray
     tick: int
     mode: Mode | None = None
+    trajectory: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -82,6 +87,7 @@ class Control:
         # Staging and announcing happen under one lock so that listeners hear commands in the
         # order the loop staged them (a recording replays them in that order).
         self._order = threading.Lock()
+        self.trajectories = TrajectoryManager(loop)
 
     @property
     def spec(self) -> RobotSpec:
@@ -217,6 +223,33 @@ class Control:
             tick = self.loop.tick
             self._announce(Accepted(source, "mode", empty, np.zeros((0, 7)), tick, Mode(mode)))
         return tick
+
+    def start_trajectory(
+        self, worlds: Sequence[int], spec: JointTrajectorySpec, source: Source
+    ) -> list[Started]:
+        """Run a validated trajectory on every world of `worlds` from one tick (see trajectory)."""
+        ids = self.worlds(worlds)
+        with self._order:
+            started = self.trajectories.start(ids, spec, source)
+            if started and self._listeners:
+                rows = self.loop.pending_targets(np.array(ids))
+                tick = started[0].start_tick
+                w = np.array(ids, dtype=np.int64)
+                self._announce(Accepted(source, "trajectory", w, rows, tick, None, spec.to_json()))
+        return started
+
+    def cancel_trajectory(self, worlds: Sequence[int], source: Source) -> list[TrajectoryStatus]:
+        """Stop the worlds' running trajectories; they hold where they were. Those stopped."""
+        ids = self.worlds(worlds)
+        with self._order:
+            stopped = self.trajectories.cancel(ids)
+            if stopped and self._listeners:
+                w = np.array([s.world for s in stopped], dtype=np.int64)
+                tick = int(stopped[0].finished_tick or 0) + 1  # the hold starts here
+                self._announce(
+                    Accepted(source, "trajectory_cancel", w, self.loop.pending_targets(w), tick)
+                )
+        return stopped
 
     def _announce_result(self, kind: str, source: Source, result: CommandResult) -> None:
         if self._listeners:

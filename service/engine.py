@@ -21,7 +21,7 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
-from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
+from service.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.robot import LoadedRobot, load_robot
 from service.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
 
@@ -205,6 +205,8 @@ class WorldBatch(Batch):
         self._world_ticks = np.zeros(nworld, dtype=np.int64)
         self._faults = np.zeros(nworld, dtype=np.int64)
         self._targets = np.tile(self.home_target, (nworld, 1))
+        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
+        self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
         self._graph = None
         self.capture_error: str | None = None
 
@@ -307,16 +309,23 @@ class WorldBatch(Batch):
 
     # -- commands ---------------------------------------------------------------------------
 
-    def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
-        """Position targets for `worlds` (k,) ← `targets` (k, 7), in one device write."""
+    def set_targets(
+        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+    ) -> None:
+        """Position targets for `worlds` (k,) ← `targets` (k, 7), in one device write, with a
+        velocity feed-forward (k, 7) [rad/s] (None: zero) folded into ctrl (see physics)."""
         self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
+        self._velocity[worlds] = 0.0 if velocities is None else velocities
         self._push_targets()
 
     def _push_targets(self) -> None:
+        ctrl = self._targets
+        if self._velocity.any():  # else exactly the targets, as before feed-forward existed
+            ctrl = self._targets + self._ff_gain * self._velocity
         if self.device.is_cpu:
-            self._d.ctrl.numpy()[:] = self._targets  # a view of the same memory
+            self._d.ctrl.numpy()[:] = ctrl  # a view of the same memory
         else:
-            self._d.ctrl.assign(self._targets.astype(np.float32))
+            self._d.ctrl.assign(ctrl.astype(np.float32))
 
     def reset(self, worlds: np.ndarray) -> None:
         """Reset `worlds` to `home`, state and targets; every other world stays bit-identical."""
@@ -328,6 +337,7 @@ class WorldBatch(Batch):
         with wp.ScopedDevice(self.device):
             mjw.reset_data_keyframe(self._m, self._d, wp.array(key, dtype=int))
         self._targets[worlds] = self.home_target
+        self._velocity[worlds] = 0.0
         self._world_ticks[worlds] = 0
 
     # -- reading ----------------------------------------------------------------------------
@@ -391,6 +401,7 @@ class WorldBatch(Batch):
             self._world_ticks = np.array(state.world_ticks, dtype=np.int64)
             self._faults = np.array(state.faults, dtype=np.int64)
             self._targets = np.array(state.targets, dtype=np.float64)
+            self._velocity[:] = 0.0  # ctrl came with the state; the next command sets it anew
             self._gather()  # the snapshot shows the restored state at once
 
     # -- test and diagnostics hooks ---------------------------------------------------------

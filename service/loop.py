@@ -15,7 +15,7 @@ import contextlib
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -23,6 +23,7 @@ import numpy as np
 
 from service import commands
 from service.errors import NotPaused, UnknownWorld
+from service.staging import Override, Staging, TrajectoryHook
 from service.types import Batch, BatchState, Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
@@ -87,6 +88,8 @@ class SimLoop:
         self._thread: threading.Thread | None = None
         # Everything below is guarded by _lock.
         self._pending = batch.targets  # float64 (nworld, 7): targets as of all accepted commands
+        self._velocity = np.zeros_like(self._pending)  # velocity feed-forward staged with them
+        self._traj: TrajectoryHook | None = None
         self._dirty = np.zeros(batch.nworld, dtype=bool)
         self._reset = np.zeros(batch.nworld, dtype=bool)
         self._stepping = False
@@ -173,7 +176,10 @@ class SimLoop:
 
     def _stage(self, world: int, update: commands.TargetUpdate) -> CommandResult:
         self._pending[world] = update.target
+        self._velocity[world] = 0.0
         self._dirty[world] = True
+        if self._traj is not None:
+            self._traj.overridden(np.array([world]), Override.MANUAL)
         tick = self._accept_tick()
         self._effective[world] = tick
         return CommandResult(world, update.target.copy(), update.clamped, tick)
@@ -187,9 +193,25 @@ class SimLoop:
             self._reset[idx] = True
             self._dirty[idx] = False
             self._pending[idx] = self.batch.home_target
+            self._velocity[idx] = 0.0
+            if self._traj is not None:
+                self._traj.overridden(idx, Override.RESET)
             tick = self._accept_tick()
             self._effective[idx] = tick
             return tick
+
+    def attach_trajectories(self, hook: TrajectoryHook) -> None:
+        """Let `hook` run trajectories: it is called at every stage of a tick (see staging)."""
+        self._traj = hook
+
+    @contextlib.contextmanager
+    def staging(self, worlds: np.ndarray | None = None) -> Iterator[Staging]:
+        """Hold the command lock and lend the pending tables; `worlds` get the effective tick."""
+        with self._lock:
+            st = Staging(self._pending, self._velocity, self._dirty, self._accept_tick())
+            yield st
+            if worlds is not None:
+                self._effective[worlds] = st.tick
 
     def pending_targets(self, world: int | np.ndarray) -> np.ndarray:
         """Targets as of every command accepted so far (some may not be in effect yet)."""
@@ -239,6 +261,9 @@ class SimLoop:
             self._tick = batch.tick
             self._step_goal = self._tick
             self._pending = batch.targets
+            self._velocity[:] = 0.0
+            if self._traj is not None:
+                self._traj.restored()
             self._dirty[:] = False
             self._reset[:] = False
             self._effective[:] = self._tick  # what was accepted before belongs to the old state
@@ -404,8 +429,8 @@ class SimLoop:
     def _tick_once(self, mode: Mode) -> None:
         """One tick as named stages, each holding the lock only for its own bookkeeping."""
         t0 = time.perf_counter()
-        resets, dirty, targets = self._take_commands()
-        self._apply(resets, dirty, targets)
+        resets, dirty, targets, velocity = self._take_commands()
+        self._apply(resets, dirty, targets, velocity)
         faulted = self.batch.step(1)
         now = time.monotonic()
         if self._finish_tick(faulted, mode, now):
@@ -413,28 +438,43 @@ class SimLoop:
         self._release_step_waiters()
         self._update_stats(now)
         seconds = time.perf_counter() - t0
+        if self._traj is not None:
+            self._traj.dispatch()
         for listener in self._tick_listeners:
             try:
                 listener(self._tick, seconds, int(faulted.size))
             except Exception:
                 log.exception("tick listener %r failed", listener)
 
-    def _take_commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Take what is pending from under the lock: (worlds to reset, dirty worlds, targets)."""
+    def _take_commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """Take what is pending from under the lock: (resets, dirty worlds, their targets and
+        velocity feed-forward, None when all zero); running trajectories are sampled first."""
         with self._lock:
+            if self._traj is not None:
+                self._traj.sample(self._tick + 1, self._staged())
             resets = np.flatnonzero(self._reset)
             dirty = np.flatnonzero(self._dirty)
             targets = self._pending[dirty].copy()
+            velocity = self._velocity[dirty].copy()
             self._reset[:] = False
             self._dirty[:] = False
             self._stepping = True
-        return resets, dirty, targets
+        return resets, dirty, targets, velocity if velocity.any() else None
 
-    def _apply(self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray) -> None:
+    def _staged(self) -> Staging:
+        """The pending tables for the hook (lock held)."""
+        return Staging(self._pending, self._velocity, self._dirty, self._accept_tick())
+
+    def _apply(
+        self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray, vel: np.ndarray | None
+    ) -> None:
         """Hand the tick's commands to the engine: resets first, then targets."""
         self.batch.reset(resets)
         if dirty.size:
-            self.batch.set_targets(dirty, targets)
+            if vel is None:  # no feed-forward: the plain call every engine has always had
+                self.batch.set_targets(dirty, targets)
+            else:
+                self.batch.set_targets(dirty, targets, vel)
 
     def _finish_tick(self, faulted: np.ndarray, mode: Mode, now: float) -> bool:
         """Count the tick, forget targets of worlds reset for faults; is a snapshot wanted?"""
@@ -444,8 +484,13 @@ class SimLoop:
             if faulted.size:
                 keep = faulted[~self._dirty[faulted]]  # commands that arrived since still apply
                 self._pending[keep] = self.batch.home_target
+                self._velocity[keep] = 0.0
+            traj = self._traj is not None and self._traj.after_step(
+                self._tick, faulted, self._staged()
+            )
             return (
-                mode is Mode.REALTIME
+                traj
+                or mode is Mode.REALTIME
                 or (mode is Mode.PAUSED and self._tick >= self._step_goal)
                 or bool(self._snapshot_waiters)
                 or now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
@@ -458,6 +503,8 @@ class SimLoop:
         with self._lock:
             self._latest = snap
             self._last_snapshot_wall = now
+            if self._traj is not None:
+                self._traj.observe(snap, self._staged())
             ready = [f for need, f in self._snapshot_waiters if need <= snap.tick]
             self._snapshot_waiters = [(n, f) for n, f in self._snapshot_waiters if n > snap.tick]
             ready += self._stranded_waiters()

@@ -83,7 +83,17 @@ _COMMAND_SCHEMA = {
     "properties": {
         "seq": {"type": "integer", "description": "order of acceptance in this recording"},
         "source": {"type": "string", "description": "http, ws, browser, ros2, ... replay"},
-        "kind": {"type": "string", "enum": ["increment", "set_targets", "reset", "mode"]},
+        "kind": {
+            "type": "string",
+            "enum": [
+                "increment",
+                "set_targets",
+                "reset",
+                "mode",
+                "trajectory",
+                "trajectory_cancel",
+            ],
+        },
         "worlds": {"type": "array", "items": {"type": "integer"}},
         "targets": {
             "type": "array",
@@ -92,6 +102,10 @@ _COMMAND_SCHEMA = {
         },
         "tick": {"type": "integer", "description": "first tick stepped with the command"},
         "mode": {"type": ["string", "null"], "description": "new mode (kind mode)"},
+        "trajectory": {
+            "type": "object",
+            "description": "kind trajectory: joint_names, points, tolerances (as POSTed)",
+        },
     },
 }
 _RESTORE_SCHEMA = {

@@ -28,7 +28,7 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from mjcf import SCENE_XML
-from service.physics import DEFAULT_PHYSICS_DT, configure, tick_timing
+from service.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.robot import LoadedRobot, load_robot
 from service.types import PHYSICS_FIELDS, BatchState, Snapshot
 
@@ -127,6 +127,7 @@ class NativeBatch:
         self._world_ticks = np.zeros(nworld, dtype=np.int64)
         self._faults = np.zeros(nworld, dtype=np.int64)
         self._targets = np.tile(self.home_target, (nworld, 1))
+        self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
         self._effort = np.zeros((nworld, 7))
         self._flange_pos = np.zeros((nworld, 3))
         self._flange_quat = np.zeros((nworld, 4))
@@ -175,11 +176,17 @@ class NativeBatch:
 
     # -- commands ---------------------------------------------------------------------------
 
-    def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
-        """Position targets for `worlds` (k,) <- `targets` (k, 7), written into their rows."""
+    def set_targets(
+        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+    ) -> None:
+        """Position targets for `worlds` (k,) <- `targets` (k, 7), written into their rows,
+        with a velocity feed-forward (k, 7) [rad/s] (None: zero) folded in (see physics)."""
         worlds = np.asarray(worlds, dtype=np.int64)
         self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        self._ctrl[worlds] = self._targets[worlds]
+        if velocities is None or not np.any(velocities):
+            self._ctrl[worlds] = self._targets[worlds]
+        else:
+            self._ctrl[worlds] = self._targets[worlds] + self._ff_gain * velocities
 
     def reset(self, worlds: np.ndarray) -> None:
         """Reset `worlds` to `home`, state and targets; every other world stays bit-identical."""

@@ -8,6 +8,7 @@ that. Nothing here imports warp: the native engine and the tests use it without 
 from __future__ import annotations
 
 import mujoco
+import numpy as np
 
 # Approximate physics step [s]; the exact one divides the control tick into whole substeps.
 # 1/60 s in 2 substeps (8.33 ms) is the largest step at which every fidelity test passes (hold,
@@ -34,3 +35,16 @@ def configure(mjm: mujoco.MjModel, physics_dt: float) -> None:
     """
     mjm.opt.timestep = physics_dt
     mjm.opt.solver = mujoco.mjtSolver.mjSOL_CG
+
+
+def feedforward_gain(mjm: mujoco.MjModel, actuator_ids: np.ndarray) -> np.ndarray:
+    """kv / kp of each position actuator: the ctrl offset per rad/s of velocity feed-forward.
+
+    A position servo's force is kp (ctrl - q) - kv q̇, so it lags a target moving at speed v by
+    kv/kp × v (0.1 s × v on shoulder_pan). Commanding ctrl = q_d + kv/kp × v_d makes the force
+    kp (q_d - q) + kv (v_d - q̇): the same servo tracking a velocity too, within the same force
+    limits, with nothing in the model changed. 0 where an actuator has no position gain.
+    """
+    kp = -mjm.actuator_biasprm[actuator_ids, 1]
+    kv = -mjm.actuator_biasprm[actuator_ids, 2]
+    return np.where(kp > 0, kv / np.where(kp > 0, kp, 1.0), 0.0)

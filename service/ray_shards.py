@@ -42,6 +42,7 @@ from service.sharding import (
     ShardPlan,
     StagedCommands,
     apply_and_step,
+    command_rows,
     join_states,
     slice_state,
 )
@@ -234,6 +235,7 @@ class RayBatch(Batch):
         self.last_step: tuple[float, float] = (0.0, 0.0)
         self._tick = 0
         self._targets = np.tile(self.home_target, (nworld, 1))
+        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
         self._faults = np.zeros(nworld, dtype=np.int64)
         self._staged = StagedCommands(shards)
         self._asked = (-1, -1)  # ticks of the last two snapshot() calls
@@ -262,9 +264,12 @@ class RayBatch(Batch):
 
     # -- commands: staged per shard, sent with the next step ---------------------------------
 
-    def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
+    def set_targets(
+        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+    ) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
         self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
+        self._velocity[worlds] = 0.0 if velocities is None else velocities
         for i, local_ids in enumerate(self._plan.split(worlds)):
             self._staged.targets(i, local_ids)
 
@@ -273,6 +278,7 @@ class RayBatch(Batch):
         if worlds.size == 0:
             return
         self._targets[worlds] = self.home_target
+        self._velocity[worlds] = 0.0
         for i, local_ids in enumerate(self._plan.split(worlds)):
             self._staged.reset(i, local_ids)
 
@@ -287,7 +293,7 @@ class RayBatch(Batch):
             if s.building is not None:
                 continue  # its staged commands wait; it comes back at home anyway
             resets, dirty = self._staged.take(i)
-            targets = self._targets[dirty + self._plan.starts[i]]
+            targets = command_rows(self._targets, self._velocity, dirty + self._plan.starts[i])
             refs[i] = s.actor.step.remote(resets, dirty, targets, ticks)
         after = self._tick + ticks
         if self._snapshot_expected(after):
@@ -308,6 +314,7 @@ class RayBatch(Batch):
         self._checkpoint()
         out = np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
         self._targets[out] = self.home_target
+        self._velocity[out] = 0.0
         np.add.at(self._faults, out, 1)
         return out
 
@@ -475,7 +482,7 @@ class RayBatch(Batch):
         refs = []
         for i, s in enumerate(self._shards):
             resets, dirty = self._staged.take(i)
-            targets = self._targets[dirty + self._plan.starts[i]]
+            targets = command_rows(self._targets, self._velocity, dirty + self._plan.starts[i])
             refs.append(s.actor.get_state.remote(resets, dirty, targets))
         try:
             parts = ray.get(refs)
@@ -501,6 +508,7 @@ class RayBatch(Batch):
             raise Unavailable(f"set_state: a Ray shard was lost ({exc}); try again") from exc
         self._tick = int(state.tick)
         self._targets = np.array(state.targets, dtype=np.float64)
+        self._velocity = np.zeros_like(self._targets)
         self._faults = np.array(state.faults, dtype=np.int64)
         self._prefetch, self._asked = None, (-1, -1)
         self._checkpoint_refs = None  # copies of the replaced state
@@ -516,7 +524,7 @@ class RayBatch(Batch):
         # Commands staged before this call happen before it, as on a WorldBatch: send them
         # with a step of zero ticks first (an actor runs its calls in order).
         resets, dirty = self._staged.take(shard)
-        targets = self._targets[dirty + self._plan.starts[shard]]
+        targets = command_rows(self._targets, self._velocity, dirty + self._plan.starts[shard])
         actor.step.remote(resets, dirty, targets, 0)
         ray.get(actor.write_qpos.remote(local, np.asarray(qpos)))
 

@@ -271,6 +271,7 @@ class Recorder:
                     "targets": a.targets,
                     "tick": a.tick,
                     "mode": None if a.mode is None else str(a.mode),
+                    **({} if a.trajectory is None else {"trajectory": a.trajectory}),
                 },
             )
         elif kind == "restore":

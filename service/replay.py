@@ -38,6 +38,7 @@ from service.mcap_log import (
 from service.provenance import batch_header, mismatch
 from service.recorder import Recorder
 from service.snapshots import decode_state
+from service.trajectory import parse as parse_trajectory
 from service.types import BatchState, Mode
 
 log = logging.getLogger("armfleet.replay")
@@ -269,5 +270,10 @@ def _apply(control: Control, cmd: dict[str, Any]) -> None:
     worlds = [int(w) for w in cmd["worlds"]]
     if cmd["kind"] == "reset":
         control.reset(worlds, Source.REPLAY)
+    elif cmd["kind"] == "trajectory":  # re-run from the same tick: sampled exactly as it was
+        spec = parse_trajectory(control.spec, cmd["trajectory"])
+        control.start_trajectory(worlds, spec, Source.REPLAY)
+    elif cmd["kind"] == "trajectory_cancel":
+        control.cancel_trajectory(worlds, Source.REPLAY)
     else:  # increment or set_targets: the recorded rows are the targets after the command
         control.set_many(worlds, np.asarray(cmd["targets"], dtype=np.float64), Source.REPLAY)

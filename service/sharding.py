@@ -90,8 +90,24 @@ class StagedCommands:
         return out
 
 
+def command_rows(targets: np.ndarray, velocity: np.ndarray, worlds: np.ndarray) -> np.ndarray:
+    """The rows of `worlds` to send to a shard: targets (k, 7), with the velocity feed-forward
+    appended, (k, 14), only when some of it is non-zero (so plain commands travel as before)."""
+    vel = velocity[worlds]
+    return np.concatenate([targets[worlds], vel], axis=1) if vel.any() else targets[worlds]
+
+
+def apply_targets(batch: WorldBatch, dirty: np.ndarray, rows: np.ndarray) -> None:
+    """A shard's side of `command_rows`: targets, and feed-forward when the rows carry it."""
+    if dirty.size:
+        if rows.shape[1] > 7:
+            batch.set_targets(dirty, rows[:, :7], rows[:, 7:])
+        else:
+            batch.set_targets(dirty, rows)
+
+
 def apply_and_step(
-    batch: WorldBatch, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray, ticks: int
+    batch: WorldBatch, resets: np.ndarray, dirty: np.ndarray, rows: np.ndarray, ticks: int
 ) -> np.ndarray:
     """A shard's side of one step: staged resets, then staged targets, then the ticks.
 
@@ -99,8 +115,7 @@ def apply_and_step(
     exactly like the same worlds inside one WorldBatch. Returns the shard's faulted local ids.
     """
     batch.reset(resets)
-    if dirty.size:
-        batch.set_targets(dirty, targets)
+    apply_targets(batch, dirty, rows)
     return batch.step(ticks)
 
 

@@ -26,6 +26,8 @@ from service.sharding import (
     ShardPlan,
     StagedCommands,
     apply_and_step,
+    apply_targets,
+    command_rows,
     join_snapshots,
     join_states,
     slice_state,
@@ -81,10 +83,9 @@ def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
         if op == "step":
             conn.send(apply_and_step(batch, *args))
         elif op == "get_state":
-            resets, dirty, targets = args  # staged commands are part of the state
+            resets, dirty, rows = args  # staged commands are part of the state
             batch.reset(resets)
-            if dirty.size:
-                batch.set_targets(dirty, targets)
+            apply_targets(batch, dirty, rows)
             conn.send(batch.get_state())
         elif op == "set_state":
             try:
@@ -144,6 +145,7 @@ class ShardedBatch(Batch):
         for name in _FACTS_OF_LOCAL:  # every shard is built alike: the local one speaks for all
             setattr(self, name, getattr(self._local, name))
         self._targets = np.tile(self.home_target, (nworld, 1))
+        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
         self._staged = StagedCommands(shards)
         # Losing a worker (killed, crashed): its worlds pause, showing their last state, while
         # the others go on; a new worker is built in the background and swapped in at a tick
@@ -170,13 +172,19 @@ class ShardedBatch(Batch):
     def targets(self) -> np.ndarray:
         return self._targets.copy()
 
-    def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
+    def set_targets(
+        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+    ) -> None:
         """The local shard gets its targets now, worker shards with their next step."""
         worlds = np.asarray(worlds, dtype=np.int64)
         self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
+        self._velocity[worlds] = 0.0 if velocities is None else velocities
         parts = self._plan.split(worlds)
         if parts[0].size:
-            self._local.set_targets(parts[0], self._targets[parts[0]])
+            vel = self._velocity[parts[0]]
+            self._local.set_targets(
+                parts[0], self._targets[parts[0]], vel if velocities is not None else None
+            )
         for i, local_ids in enumerate(parts[1:], start=1):
             self._staged.targets(i, local_ids)
 
@@ -185,6 +193,7 @@ class ShardedBatch(Batch):
         if worlds.size == 0:
             return
         self._targets[worlds] = self.home_target
+        self._velocity[worlds] = 0.0
         parts = self._plan.split(worlds)
         self._local.reset(parts[0])
         for i, local_ids in enumerate(parts[1:], start=1):
@@ -198,7 +207,7 @@ class ShardedBatch(Batch):
             if not self._alive[i]:
                 continue  # its commands stay staged (and in _targets) for the new worker
             resets, dirty = self._staged.take(i)
-            targets = self._targets[dirty + self._starts[i]]
+            targets = command_rows(self._targets, self._velocity, dirty + self._starts[i])
             try:
                 conn.send(("step", resets, dirty, targets, ticks))
             except OSError:
@@ -214,6 +223,7 @@ class ShardedBatch(Batch):
         self._copy_states(sent)
         out = np.concatenate(faulted)
         self._targets[out] = self.home_target
+        self._velocity[out] = 0.0
         return out
 
     def snapshot(self) -> Snapshot:
@@ -253,7 +263,8 @@ class ShardedBatch(Batch):
         """Every shard's state (staged commands applied first), joined in world order."""
         for i, conn in enumerate(self._conns, start=1):
             resets, dirty = self._staged.take(i)
-            conn.send(("get_state", resets, dirty, self._targets[dirty + self._starts[i]]))
+            rows = command_rows(self._targets, self._velocity, dirty + self._starts[i])
+            conn.send(("get_state", resets, dirty, rows))
         parts = [self._local.get_state()] + [conn.recv() for conn in self._conns]
         return join_states(parts, self._targets)
 
@@ -271,6 +282,7 @@ class ShardedBatch(Batch):
         if errors:  # cannot happen after the check above; say so loudly if it does
             raise RuntimeError(f"shard refused a checked state: {errors[0]}")
         self._targets = np.array(state.targets, dtype=np.float64)
+        self._velocity = np.zeros_like(self._targets)
 
     def qpos(self) -> np.ndarray:
         return self._gather_qpos()[0]

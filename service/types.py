@@ -239,8 +239,15 @@ class Batch(Protocol):
         """Advance every world by `ticks`; returns the worlds reset for faults (int64)."""
         ...
 
-    def set_targets(self, worlds: np.ndarray, targets: np.ndarray) -> None:
-        """Targets for `worlds` (k,) ← `targets` (k, 7), clamped, in effect from the next step."""
+    def set_targets(
+        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+    ) -> None:
+        """Targets for `worlds` (k,) ← `targets` (k, 7), clamped, in effect from the next step.
+
+        `velocities` (k, 7) [rad/s]: a velocity feed-forward for the servos (trajectories send
+        their desired velocity, so tracking has no kv/kp × speed lag); None sets it to zero,
+        and with zero feed-forward every engine steps exactly as with targets alone.
+        """
         ...
 
     def reset(self, worlds: np.ndarray) -> None:
