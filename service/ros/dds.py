@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 from service.control import Source
 from service.ros import topics
 from service.ros.topics import BadMessageCounter, TopicMap
-from service.ros.ur_dds import ur_topics
+from service.ros.ur_dds import ur_actions, ur_topics
 from service.types import Snapshot
 
 if TYPE_CHECKING:
@@ -261,6 +261,7 @@ class DdsBridge:
             "scope": cfg.scope if cfg else None,
             "rate_hz": self.rate,
             "topics": (self.topics.all_topics() | ur_topics(self.topics)) if self.topics else {},
+            "actions": ur_actions(self.topics) if self.topics else {},
             "commands_accepted": self.received + (self.ur.received if self._running else 0),
             "states_published": self.published,
             "rejected": self.bad.counts(),

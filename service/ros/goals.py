@@ -67,6 +67,7 @@ class Goal:
     on_feedback: Callable[[Goal, dict[str, Any]], None]
     on_done: Callable[[Goal], None]
     status: Status = Status.EXECUTING
+    key: Any = None  # the surface's id of the goal (DDS: the goal's UUID bytes)
     result: dict[str, Any] = field(default_factory=dict)
     traj_id: int | None = None
     finger_target: float = 0.0
