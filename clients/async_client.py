@@ -14,7 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import AsyncIterator, Iterable, Mapping
-from typing import Any, Self, Unpack
+from typing import TYPE_CHECKING, Any
 
 import httpx
 from websockets.asyncio.client import ClientConnection
@@ -25,6 +25,9 @@ from clients import _http, _stream, models
 from clients._http import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable, unreachable
 from clients.models import JointRef, WorldSpec
+
+if TYPE_CHECKING:  # typing has both from 3.11 on; the client also runs on 3.10
+    from typing_extensions import Self, Unpack
 
 
 class _Closes:

@@ -17,7 +17,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator, Mapping
-from typing import Any, Self, Unpack
+from typing import TYPE_CHECKING, Any
 
 import httpx
 from websockets.exceptions import InvalidURI
@@ -28,6 +28,9 @@ from clients import _http, _stream, models
 from clients._http import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable
 from clients.models import JointRef, WorldSpec
+
+if TYPE_CHECKING:  # typing has both from 3.11 on; the client also runs on 3.10
+    from typing_extensions import Self, Unpack
 
 
 class _Closes:

@@ -7,6 +7,10 @@
 Set-up is idempotent and quick when nothing changed: a virtualenv in .venv, the project
 installed editable with its pinned dependencies (re-installed only when pyproject.toml
 changes), and MuJoCo Warp's kernels compiled into ~/.cache/warp with visible progress.
+
+armfleet needs Python 3.11+; started by an older python3 (Ubuntu 22.04's is 3.10) this script
+restarts itself with a newer one found on the machine, or stops naming what to install
+(scripts/_pyfind.py). It must therefore still parse and start on Python 3.8.
 """
 
 from __future__ import annotations
@@ -18,10 +22,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import _pyfind  # beside this file
+
 ROOT = Path(__file__).resolve().parents[1]
 VENV = ROOT / ".venv"
 BIN = VENV / "bin"
 STAMP = VENV / ".armfleet-installed"
+RESTARTED = "ARMFLEET_DEV_RESTARTED"  # set when this script restarted itself with another Python
 # What the UI tests drive: a virtual X display, a pointer, a terminal multiplexer, and the
 # browser the page's tests load it in (Playwright drives it; its own download is not used).
 TEST_DEBS = {
@@ -41,10 +48,30 @@ def run(*cmd: str | Path, **kw) -> None:
     subprocess.run([str(c) for c in cmd], check=True, cwd=ROOT, **kw)
 
 
+def use_new_enough_python(argv: list[str]) -> None:
+    """Restart with a Python 3.11+ when this one is older (or ARMFLEET_PYTHON names one)."""
+    if os.environ.get(RESTARTED):
+        return
+    exe = _pyfind.choose(sys.version_info[:2], dict(os.environ), Path.home())
+    if exe is None:
+        return
+    say(f"python {sys.version.split()[0]} is too old for armfleet (3.11+): restarting with {exe}")
+    env = {**os.environ, RESTARTED: exe}
+    os.execve(exe, [exe, str(Path(__file__).resolve()), *argv], env)
+
+
 def ensure_venv() -> None:
-    if not (BIN / "python").exists():
-        say(f"creating virtualenv in {VENV}")
-        run(sys.executable, "-m", "venv", VENV)
+    venv_python = _pyfind.version_of(str(BIN / "python")) if (BIN / "python").exists() else None
+    if venv_python is None or venv_python < _pyfind.NEED:
+        if VENV.exists():  # e.g. made by Python 3.10 before this script knew better
+            made_by = _pyfind.dotted(venv_python) if venv_python else "broken"
+            say(f"removing {VENV}: its Python is {made_by}")
+            shutil.rmtree(VENV)
+        say(f"creating virtualenv in {VENV} with {sys.executable}")
+        if subprocess.run([sys.executable, "-m", "venv", str(VENV)], cwd=ROOT).returncode:
+            shutil.rmtree(VENV, ignore_errors=True)
+            hint = _pyfind.venv_hint(sys.version_info[:2], _pyfind.os_release())
+            sys.exit(f"{sys.executable} cannot create a virtualenv. Install: {hint}")
     want = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
     if STAMP.exists() and STAMP.read_text() == want:
         return
@@ -88,6 +115,7 @@ def ensure_js_tools() -> None:
 
 
 def main(argv: list[str]) -> int:
+    use_new_enough_python(argv)
     if not argv or argv[0] not in ("serve", "test"):
         print(__doc__)
         return 2

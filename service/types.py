@@ -13,27 +13,12 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
+# Defined with the client's models (the wire's own description of a joint), so that the client
+# installs without the service and the two cannot drift apart.
+from clients.models import JointSpec
+
 if TYPE_CHECKING:
     from service.robot import LoadedRobot
-
-
-@dataclass(frozen=True)
-class JointSpec:
-    """One commanded joint as the outside world sees it.
-
-    name: joint name, as in sensor_msgs/JointState and the MJCF
-    lower, upper: joint range [rad]; targets are clamped to it
-    home: value in the `home` keyframe [rad]
-    velocity_limit: rated maximum speed [rad/s] (informative; MuJoCo does not enforce it)
-    effort_limit: actuator force limit [N·m]
-    """
-
-    name: str
-    lower: float
-    upper: float
-    home: float
-    velocity_limit: float
-    effort_limit: float
 
 
 def _frozen(values: list[float]) -> np.ndarray:
