@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import random
 import uuid
-from collections.abc import Iterator
 from typing import Any
 
 import httpx
@@ -19,9 +18,8 @@ import numpy as np
 import pytest
 
 from service.ros import msgs_action as m
-from service.ros.dds import LOOPBACK_CONFIG
-from tests.conftest import JOINTS, Server, serve, wait_for
-from tests.peer_stdio import PeerProcess
+from tests.conftest import JOINTS, Server, wait_for
+from tests.peer_stdio import UrPeer
 from tests.ros2_types import serialize
 
 FJT = "control_msgs/action/FollowJointTrajectory"
@@ -51,6 +49,10 @@ def _uuid() -> list[int]:
     return list(uuid.uuid4().bytes)
 
 
+def _id(goal_id: list[int]) -> dict[str, list[int]]:
+    return {"uuid": goal_id}
+
+
 # -- layouts ----------------------------------------------------------------------------------
 
 
@@ -65,7 +67,7 @@ def test_request_reply_bytes_match_rosbags_after_the_rmw_header() -> None:
         assert bytes(ours.serialize()) == theirs[:4] + header + theirs[4:], ros_type
 
     same(
-        m.FjtSendGoalRequest(
+        m.FOLLOW_JOINT_TRAJECTORY.send_goal_request(
             12345,
             7,
             m.UUID(goal_id),
@@ -98,12 +100,14 @@ def test_request_reply_bytes_match_rosbags_after_the_rmw_header() -> None:
         },
     )
     same(
-        m.FjtGetResultResponse(12345, 7, 6, m.FollowJointTrajectoryResult(-4, "path")),
+        m.FOLLOW_JOINT_TRAJECTORY.get_result_response(
+            12345, 7, 6, m.FollowJointTrajectoryResult(-4, "path")
+        ),
         f"{FJT}_GetResult_Response",
         {"status": 6, "result": {"error_code": -4, "error_string": "path"}},
     )
     same(
-        m.GripperSendGoalResponse(12345, 7, True, m.Time(3, 4)),
+        m.GRIPPER_COMMAND.send_goal_response(12345, 7, True, m.Time(3, 4)),
         f"{GRIPPER}_SendGoal_Response",
         {"accepted": True, "stamp": {"sec": 3, "nanosec": 4}},
     )
@@ -117,7 +121,7 @@ def test_request_reply_bytes_match_rosbags_after_the_rmw_header() -> None:
             * 2,
         },
     )
-    fb = m.FjtFeedbackMessage(
+    fb = m.FOLLOW_JOINT_TRAJECTORY.feedback_message(
         m.UUID(goal_id),
         m.FollowJointTrajectoryFeedback(
             joint_names=ARM, desired=m.JointTrajectoryPoint(positions=HOME_ARM)
@@ -148,70 +152,27 @@ def test_request_reply_bytes_match_rosbags_after_the_rmw_header() -> None:
 # -- a running server and an independent action client ------------------------------------------
 
 
-class Peer(PeerProcess):
-    def __init__(self, domain: int) -> None:
-        env = {"CYCLONEDDS_URI": LOOPBACK_CONFIG, "ROS_DOMAIN_ID": str(domain)}
-        super().__init__("tests.ros2_ur_peer", env)
-
-    def call(self, action: str, kind: str, service: str, request: dict, timeout: float = 15) -> Any:
-        suffix = {"send_goal": "SendGoal", "get_result": "GetResult"}.get(service)
-        ros_type = f"{kind}_{suffix}" if suffix else "action_msgs/srv/CancelGoal"
-        reply = self.ask(
-            op="call",
-            service=f"{action}/_action/{service}",
-            type=ros_type,
-            request=request,
-            timeout=timeout,
-        )
-        assert reply is not None, f"no reply from {action} {service}"
-        return reply
-
-
-@pytest.fixture(scope="module")
-def domain() -> int:
-    return random.SystemRandom().randrange(1, 233)
-
-
-@pytest.fixture(scope="module")
-def ros_server(tmp_path_factory: pytest.TempPathFactory, domain: int) -> Iterator[Server]:
-    extra = ("--ros2", "--ros2-worlds", "1", "--ros2-rate", "30")
-    log_dir = tmp_path_factory.mktemp("ros_actions")
-    with serve(
-        worlds=2, extra_args=extra, env={"ROS_DOMAIN_ID": str(domain)}, log_dir=log_dir
-    ) as s:
-        yield s
-
-
-@pytest.fixture(scope="module")
-def peer(ros_server: Server, domain: int) -> Iterator[Peer]:
-    p = Peer(domain)
-    try:
-        yield p
-    finally:
-        p.close()
-
-
 def _state(server: Server, world: int) -> dict[str, Any]:
     return httpx.get(f"{server.url}/v1/worlds/{world}/state").json()
 
 
 def test_follow_joint_trajectory_goal_feedback_result_status(
-    ros_server: Server, peer: Peer
+    ur_server: Server, ur_peer: UrPeer
 ) -> None:
     feedback_topic = f"{SCALED}/_action/feedback"
-    peer.ask(op="all", topic=feedback_topic, type=f"{FJT}_FeedbackMessage")
+    ur_peer.ask(op="all", topic=feedback_topic, type=f"{FJT}_FeedbackMessage")
     wanted = [0.3, -1.3, 1.6, -1.8, -1.4, 0.4]
     goal_id = _uuid()
     goal = _goal([(0.5, [0.15, -1.4, 1.6, -1.7, -1.5, 0.2]), (1.0, wanted)])
-    reply = peer.call(SCALED, FJT, "send_goal", {"goal_id": {"uuid": goal_id}, "goal": goal})
+    reply = ur_peer.call(SCALED, FJT, "send_goal", {"goal_id": {"uuid": goal_id}, "goal": goal})
     assert reply["accepted"] is True
-    result = peer.call(SCALED, FJT, "get_result", {"goal_id": {"uuid": goal_id}})
+    result = ur_peer.call(SCALED, FJT, "get_result", {"goal_id": {"uuid": goal_id}})
     assert result["status"] == SUCCEEDED, result
     assert result["result"] == {"error_code": 0, "error_string": ""}
-    np.testing.assert_allclose(_state(ros_server, 1)["target"][:6], wanted, atol=1e-9)
+    np.testing.assert_allclose(_state(ur_server, 1)["target"][:6], wanted, atol=1e-9)
     feedback = [
         f
-        for f in peer.ask(op="all", topic=feedback_topic, type=f"{FJT}_FeedbackMessage")
+        for f in ur_peer.ask(op="all", topic=feedback_topic, type=f"{FJT}_FeedbackMessage")
         if f["goal_id"]["uuid"] == goal_id
     ]
     assert len(feedback) >= 5  # 20 Hz over a simulated second
@@ -223,7 +184,7 @@ def test_follow_joint_trajectory_goal_feedback_result_status(
         atol=1e-9,
     )
     status = wait_for(
-        lambda: peer.ask(
+        lambda: ur_peer.ask(
             op="latest",
             topic=f"{SCALED}/_action/status",
             type="action_msgs/msg/GoalStatusArray",
@@ -246,74 +207,80 @@ def test_follow_joint_trajectory_goal_feedback_result_status(
     ],
 )
 def test_bad_goals_are_rejected_and_change_nothing(
-    ros_server: Server, peer: Peer, goal: dict[str, Any], why: str
+    ur_server: Server, ur_peer: UrPeer, goal: dict[str, Any], why: str
 ) -> None:
-    before = _state(ros_server, 1)["target"]
-    counts = httpx.get(f"{ros_server.url}/v1/ros").json()["dds"]["rejected"]
-    reply = peer.call(SCALED, FJT, "send_goal", {"goal_id": {"uuid": _uuid()}, "goal": goal})
+    before = _state(ur_server, 1)["target"]
+    counts = httpx.get(f"{ur_server.url}/v1/ros").json()["dds"]["rejected"]
+    reply = ur_peer.call(SCALED, FJT, "send_goal", {"goal_id": {"uuid": _uuid()}, "goal": goal})
     assert reply["accepted"] is False
-    assert _state(ros_server, 1)["target"] == before
-    after = httpx.get(f"{ros_server.url}/v1/ros").json()["dds"]["rejected"]
+    assert _state(ur_server, 1)["target"] == before
+    after = httpx.get(f"{ur_server.url}/v1/ros").json()["dds"]["rejected"]
     assert after["rejected_goal"] == counts.get("rejected_goal", 0) + 1
 
 
-def test_cancel_stops_and_holds(ros_server: Server, peer: Peer) -> None:
+def test_cancel_stops_and_holds(ur_server: Server, ur_peer: UrPeer) -> None:
     action = "/joint_trajectory_controller/follow_joint_trajectory"  # world 0, at the root
     goal_id = _uuid()
     far = [1.5, -1.0, 1.0, -1.0, -1.0, 1.5]
-    reply = peer.call(
+    reply = ur_peer.call(
         action, FJT, "send_goal", {"goal_id": {"uuid": goal_id}, "goal": _goal([(20.0, far)])}
     )
     assert reply["accepted"]
-    wait_for(lambda: _state(ros_server, 0)["target"][0] > 0.01, "the trajectory to move world 0")
-    unknown = peer.call(action, FJT, "cancel_goal", {"goal_info": {"goal_id": {"uuid": _uuid()}}})
+    wait_for(lambda: _state(ur_server, 0)["target"][0] > 0.01, "the trajectory to move world 0")
+    unknown = ur_peer.call(
+        action, FJT, "cancel_goal", {"goal_info": {"goal_id": {"uuid": _uuid()}}}
+    )
     assert unknown["return_code"] == 2 and unknown["goals_canceling"] == []
-    cancel = peer.call(action, FJT, "cancel_goal", {"goal_info": {"goal_id": {"uuid": goal_id}}})
+    cancel = ur_peer.call(action, FJT, "cancel_goal", {"goal_info": {"goal_id": _id(goal_id)}})
     assert cancel["return_code"] == 0
     assert [g["goal_id"]["uuid"] for g in cancel["goals_canceling"]] == [goal_id]
-    result = peer.call(action, FJT, "get_result", {"goal_id": {"uuid": goal_id}})
+    result = ur_peer.call(action, FJT, "get_result", {"goal_id": {"uuid": goal_id}})
     assert result["status"] == CANCELED
-    held = _state(ros_server, 0)["target"]
+    held = _state(ur_server, 0)["target"]
     assert 0 < held[0] < 1.0  # stopped part of the way
-    again = peer.call(action, FJT, "cancel_goal", {"goal_info": {"goal_id": {"uuid": goal_id}}})
+    again = ur_peer.call(action, FJT, "cancel_goal", {"goal_info": {"goal_id": {"uuid": goal_id}}})
     assert again["return_code"] == 3  # already terminated
-    assert _state(ros_server, 0)["target"] == held
+    assert _state(ur_server, 0)["target"] == held
 
 
 def test_a_newer_goal_preempts_and_joint_trajectory_topic_moves(
-    ros_server: Server, peer: Peer
+    ur_server: Server, ur_peer: UrPeer
 ) -> None:
     first = _uuid()
     slow = _goal([(20.0, [1.0, -1.0, 1.0, -1.0, -1.0, 1.0])])
-    assert peer.call(SCALED, FJT, "send_goal", {"goal_id": {"uuid": first}, "goal": slow})[
+    assert ur_peer.call(SCALED, FJT, "send_goal", {"goal_id": {"uuid": first}, "goal": slow})[
         "accepted"
     ]
     topic = "/world_1/scaled_joint_trajectory_controller/joint_trajectory"
     kind = "trajectory_msgs/msg/JointTrajectory"
-    assert peer.ask(op="matched", topic=topic, type=kind, role="reader")
-    peer.ask(op="publish", topic=topic, type=kind, msg=_goal([(0.5, HOME_ARM)])["trajectory"])
-    result = peer.call(SCALED, FJT, "get_result", {"goal_id": {"uuid": first}})
+    assert ur_peer.ask(op="matched", topic=topic, type=kind, role="reader")
+    ur_peer.ask(op="publish", topic=topic, type=kind, msg=_goal([(0.5, HOME_ARM)])["trajectory"])
+    result = ur_peer.call(SCALED, FJT, "get_result", {"goal_id": {"uuid": first}})
     assert result["status"] == ABORTED and "preempted" in result["result"]["error_string"]
     wait_for(
-        lambda: np.allclose(_state(ros_server, 1)["target"][:6], HOME_ARM), "home via the topic"
+        lambda: np.allclose(_state(ur_server, 1)["target"][:6], HOME_ARM), "home via the topic"
     )
 
 
-def test_gripper_closes_on_the_cube_stalled_and_opens(ros_server: Server, peer: Peer) -> None:
+def test_gripper_closes_on_the_cube_stalled_and_opens(ur_server: Server, ur_peer: UrPeer) -> None:
     action = "/robotiq_gripper_controller/gripper_cmd"
-    httpx.post(f"{ros_server.url}/v1/worlds/0/reset").raise_for_status()
+    httpx.post(f"{ur_server.url}/v1/worlds/0/reset").raise_for_status()
     arm = "/scaled_joint_trajectory_controller/follow_joint_trajectory"
     down = _uuid()
-    peer.call(arm, FJT, "send_goal", {"goal_id": {"uuid": down}, "goal": _goal([(1.5, AT_CUBE)])})
-    assert peer.call(arm, FJT, "get_result", {"goal_id": {"uuid": down}})["status"] == SUCCEEDED
+    ur_peer.call(
+        arm, FJT, "send_goal", {"goal_id": {"uuid": down}, "goal": _goal([(1.5, AT_CUBE)])}
+    )
+    assert ur_peer.call(arm, FJT, "get_result", {"goal_id": {"uuid": down}})["status"] == SUCCEEDED
 
     def close(position: float) -> dict[str, Any]:
         goal_id = _uuid()
         goal = {"command": {"position": position, "max_effort": 100.0}}
-        assert peer.call(
+        assert ur_peer.call(
             action, GRIPPER, "send_goal", {"goal_id": {"uuid": goal_id}, "goal": goal}
         )["accepted"]
-        return peer.call(action, GRIPPER, "get_result", {"goal_id": {"uuid": goal_id}}, timeout=30)
+        return ur_peer.call(
+            action, GRIPPER, "get_result", {"goal_id": {"uuid": goal_id}}, timeout=30
+        )
 
     closed = close(0.7)
     assert closed["status"] == SUCCEEDED
@@ -323,6 +290,6 @@ def test_gripper_closes_on_the_cube_stalled_and_opens(ros_server: Server, peer: 
     assert opened["status"] == SUCCEEDED
     assert opened["result"]["reached_goal"] is True and opened["result"]["stalled"] is False
     bad = {"command": {"position": float("nan"), "max_effort": 1.0}}
-    assert not peer.call(action, GRIPPER, "send_goal", {"goal_id": {"uuid": _uuid()}, "goal": bad})[
-        "accepted"
-    ]
+    assert not ur_peer.call(
+        action, GRIPPER, "send_goal", {"goal_id": {"uuid": _uuid()}, "goal": bad}
+    )["accepted"]

@@ -26,34 +26,14 @@ from typing import Any
 
 from service.control import Source
 from service.ros import msgs_action as m
-from service.ros.goal_msgs import FJT_TYPE, GoalRejected, Status
+from service.ros.goal_msgs import FJT_TYPE, GRIPPER_TYPE, GoalRejected, Status
 from service.ros.goals import Goal, GoalRunner
 from service.ros.msgs import Time
 from service.ros.topics import BadMessageCounter, stamp
 
 log = logging.getLogger("armfleet.ros2")
 
-# (send_goal request, reply, get_result request, reply, feedback message, feedback, result)
-_TYPES = {
-    FJT_TYPE: (
-        m.FjtSendGoalRequest,
-        m.FjtSendGoalResponse,
-        m.FjtGetResultRequest,
-        m.FjtGetResultResponse,
-        m.FjtFeedbackMessage,
-        m.FollowJointTrajectoryFeedback,
-        m.FollowJointTrajectoryResult,
-    ),
-    "control_msgs/action/GripperCommand": (
-        m.GripperSendGoalRequest,
-        m.GripperSendGoalResponse,
-        m.GripperGetResultRequest,
-        m.GripperGetResultResponse,
-        m.GripperFeedbackMessage,
-        m.GripperCommandFeedback,
-        m.GripperCommandResult,
-    ),
-}
+_TYPES = {FJT_TYPE: m.FOLLOW_JOINT_TRAJECTORY, GRIPPER_TYPE: m.GRIPPER_COMMAND}
 _KEEP_FINISHED = 64  # ended goals kept for get_result and the status list, per action
 _CLIENT_WAIT_S = 0.1  # rmw_cyclonedds_cpp waits as long for a client's reply reader
 CANCEL_OK, CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL, CANCEL_TERMINATED = 0, 1, 2, 3
@@ -139,10 +119,11 @@ class ActionServerDds:
     ) -> None:
         self.name, self.kind, self.world = name, kind, world
         self._runner, self._bad = runner, bad
-        req, rep, res_req, res_rep, fb_msg, fb, result = _TYPES[kind]
-        self._types = (rep, res_rep, fb_msg, fb, result)
+        t = self._t = _TYPES[kind]
         base = f"{name}/_action"
-        self.send_goal = _Service(make, f"{base}/send_goal", req, rep, service_id())
+        self.send_goal = _Service(
+            make, f"{base}/send_goal", t.send_goal_request, t.send_goal_response, service_id()
+        )
         self.cancel_goal = _Service(
             make,
             f"{base}/cancel_goal",
@@ -150,8 +131,10 @@ class ActionServerDds:
             m.CancelGoalResponse,
             service_id(),
         )
-        self.get_result = _Service(make, f"{base}/get_result", res_req, res_rep, service_id())
-        self.feedback = make("writer", f"rt{base}/feedback", fb_msg, None)
+        self.get_result = _Service(
+            make, f"{base}/get_result", t.get_result_request, t.get_result_response, service_id()
+        )
+        self.feedback = make("writer", f"rt{base}/feedback", t.feedback_message, None)
         self.status_writer = make("latched", f"rt{base}/status", m.GoalStatusArray, None)
         self._lock = threading.Lock()
         self._goals: OrderedDict[bytes, Goal] = OrderedDict()
@@ -191,7 +174,7 @@ class ActionServerDds:
     # -- requests ------------------------------------------------------------------------------
 
     def _on_send_goal(self, req: Any, info: Any) -> None:
-        rep = self._types[0]
+        rep = self._t.send_goal_response
         key = bytes(req.goal_id.uuid)
         accepted = False
         with self._lock:
@@ -260,18 +243,17 @@ class ActionServerDds:
         self._send_result(goal, [(info, req.client_guid, req.sequence_number)])
 
     def _send_result(self, goal: Goal | None, requests: list[tuple[Any, int, int]]) -> None:
-        _, res_rep, _, _, result_cls = self._types
+        res_rep = self._t.get_result_response
         status = Status.UNKNOWN if goal is None else goal.status
-        result = from_plain(result_cls, goal.result if goal is not None else {})
+        result = from_plain(self._t.result, goal.result if goal is not None else {})
         for info, guid, seq in requests:
             self.get_result.reply(info, res_rep(guid, seq, int(status), result))
 
     # -- the runner's callbacks ---------------------------------------------------------------
 
     def _on_feedback(self, goal: Goal, feedback: dict[str, Any]) -> None:
-        _, _, fb_msg, fb_cls, _ = self._types
         uuid = m.UUID(list(goal.key))
-        self.feedback.write(fb_msg(uuid, from_plain(fb_cls, feedback)))
+        self.feedback.write(self._t.feedback_message(uuid, from_plain(self._t.feedback, feedback)))
 
     def _on_done(self, goal: Goal) -> None:
         with self._lock:

@@ -10,11 +10,13 @@ topic `A_FeedbackMessage`, plus action_msgs' CancelGoal service and GoalStatusAr
 Service requests and replies travel the way rmw_cyclonedds_cpp sends them: the client's 64-bit
 guid and the request's sequence number come first in the CDR stream (its
 `cdds_request_header_t`), so each request/response struct here starts with those two fields.
-tests/test_ros_actions.py checks every layout against rosbags. No postponed annotations:
+tests/test_ros_actions.py checks the layouts against rosbags. No postponed annotations:
 cyclonedds reads the field types at class creation.
 """
 
+import types
 from dataclasses import dataclass, field
+from typing import Any, NamedTuple
 
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.types import (
@@ -218,95 +220,53 @@ class CancelGoalResponse(IdlStruct, typename="action_msgs::srv::dds_::CancelGoal
 # -- the per-action service and feedback types ---------------------------------------------------
 
 
-@dataclass
-class FjtSendGoalRequest(
-    IdlStruct, typename="control_msgs::action::dds_::FollowJointTrajectory_SendGoal_Request_"
-):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    goal_id: UUID = field(default_factory=UUID)
-    goal: FollowJointTrajectoryGoal = field(default_factory=FollowJointTrajectoryGoal)
+class ActionTypes(NamedTuple):
+    """The wire types of one action (`A_SendGoal`, `A_GetResult`, `A_FeedbackMessage`)."""
+
+    send_goal_request: type
+    send_goal_response: type
+    get_result_request: type
+    get_result_response: type
+    feedback_message: type
+    feedback: type
+    result: type
 
 
-@dataclass
-class FjtSendGoalResponse(
-    IdlStruct, typename="control_msgs::action::dds_::FollowJointTrajectory_SendGoal_Response_"
-):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    accepted: bool = False
-    stamp: Time = field(default_factory=Time)
+def _struct(typename: str, fields_: dict[str, Any], defaults: dict[str, Any]) -> type:
+    """A dataclass IdlStruct built from field annotations (the shapes rosidl generates)."""
+
+    def body(ns: dict[str, Any]) -> None:
+        ns["__annotations__"] = fields_
+        for name in fields_:
+            default = defaults.get(name, 0)
+            ns[name] = field(default_factory=default) if callable(default) else default
+
+    name = typename.rsplit("::", 1)[1].strip("_")
+    return dataclass(types.new_class(name, (IdlStruct,), {"typename": typename}, body))
 
 
-@dataclass
-class FjtGetResultRequest(
-    IdlStruct, typename="control_msgs::action::dds_::FollowJointTrajectory_GetResult_Request_"
-):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    goal_id: UUID = field(default_factory=UUID)
+def _action(name: str, goal: type, result: type, feedback: type) -> ActionTypes:
+    base = f"control_msgs::action::dds_::{name}"
+    header = {"client_guid": uint64, "sequence_number": int64}
+    ids = {"goal_id": UUID}
+    made = {"goal_id": UUID, "goal": goal, "result": result, "feedback": feedback, "stamp": Time}
+    return ActionTypes(
+        _struct(f"{base}_SendGoal_Request_", {**header, **ids, "goal": goal}, made),
+        _struct(f"{base}_SendGoal_Response_", {**header, "accepted": bool, "stamp": Time}, made),
+        _struct(f"{base}_GetResult_Request_", {**header, **ids}, made),
+        _struct(f"{base}_GetResult_Response_", {**header, "status": int8, "result": result}, made),
+        _struct(f"{base}_FeedbackMessage_", {**ids, "feedback": feedback}, made),
+        feedback,
+        result,
+    )
 
 
-@dataclass
-class FjtGetResultResponse(
-    IdlStruct, typename="control_msgs::action::dds_::FollowJointTrajectory_GetResult_Response_"
-):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    status: int8 = 0
-    result: FollowJointTrajectoryResult = field(default_factory=FollowJointTrajectoryResult)
-
-
-@dataclass
-class FjtFeedbackMessage(
-    IdlStruct, typename="control_msgs::action::dds_::FollowJointTrajectory_FeedbackMessage_"
-):
-    goal_id: UUID = field(default_factory=UUID)
-    feedback: FollowJointTrajectoryFeedback = field(default_factory=FollowJointTrajectoryFeedback)
-
-
-@dataclass
-class GripperSendGoalRequest(
-    IdlStruct, typename="control_msgs::action::dds_::GripperCommand_SendGoal_Request_"
-):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    goal_id: UUID = field(default_factory=UUID)
-    goal: GripperCommandGoal = field(default_factory=GripperCommandGoal)
-
-
-@dataclass
-class GripperSendGoalResponse(
-    IdlStruct, typename="control_msgs::action::dds_::GripperCommand_SendGoal_Response_"
-):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    accepted: bool = False
-    stamp: Time = field(default_factory=Time)
-
-
-@dataclass
-class GripperGetResultRequest(
-    IdlStruct, typename="control_msgs::action::dds_::GripperCommand_GetResult_Request_"
-):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    goal_id: UUID = field(default_factory=UUID)
-
-
-@dataclass
-class GripperGetResultResponse(
-    IdlStruct, typename="control_msgs::action::dds_::GripperCommand_GetResult_Response_"
-):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    status: int8 = 0
-    result: GripperCommandResult = field(default_factory=GripperCommandResult)
-
-
-@dataclass
-class GripperFeedbackMessage(
-    IdlStruct, typename="control_msgs::action::dds_::GripperCommand_FeedbackMessage_"
-):
-    goal_id: UUID = field(default_factory=UUID)
-    feedback: GripperCommandFeedback = field(default_factory=GripperCommandFeedback)
+FOLLOW_JOINT_TRAJECTORY = _action(
+    "FollowJointTrajectory",
+    FollowJointTrajectoryGoal,
+    FollowJointTrajectoryResult,
+    FollowJointTrajectoryFeedback,
+)
+GRIPPER_COMMAND = _action(
+    "GripperCommand", GripperCommandGoal, GripperCommandResult, GripperCommandFeedback
+)

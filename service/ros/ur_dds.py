@@ -42,15 +42,10 @@ FLOAT64_ARRAY_TYPE = "std_msgs/msg/Float64MultiArray"
 _READER_DEPTH = 100
 
 
-def namespaces(topic_map: TopicMap) -> dict[str, int]:
-    """Namespace → world: the root is world 0 (the seed's), `/world_N` each exposed world."""
-    return {"": 0} | {f"/world_{w}": w for w in topic_map.worlds}
-
-
 def ur_topics(topic_map: TopicMap) -> dict[str, str]:
     """Topic name → ROS 2 type of every UR-driver topic (for `GET /v1/ros`)."""
     out = {}
-    for ns in namespaces(topic_map):
+    for ns in topic_map.namespaces():
         out[f"{ns}/robot_description"] = STRING_TYPE
         out[f"{ns}/tf"] = TF_TYPE
         out[f"{ns}/tf_static"] = TF_TYPE
@@ -61,7 +56,7 @@ def ur_topics(topic_map: TopicMap) -> dict[str, str]:
 
 def ur_actions(topic_map: TopicMap) -> dict[str, str]:
     """Action name → action type, every action of every namespace."""
-    return {name: kind for name, (_, kind) in action_names(namespaces(topic_map)).items()}
+    return {name: kind for name, (_, kind) in action_names(topic_map.namespaces()).items()}
 
 
 def latched_qos() -> Any:
@@ -116,7 +111,7 @@ class UrDriverDds:
         self.urdf = generate(mjm, loop.spec)
         self.frames = FrameTree(mjm)
         self._arm = [j.name for j in loop.spec.joints][:6]
-        self._spaces = namespaces(topic_map)
+        self._spaces = topic_map.namespaces()
         self._tick_dt = loop.batch.tick_dt
 
         made: dict[str, Any] = {}
