@@ -55,8 +55,8 @@ class DdsClient:
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
-        from service.ros import msgs
-        from service.ros.dds import LOOPBACK_CONFIG, _qos
+        from service.surfaces.ros import msgs
+        from service.surfaces.ros.dds import LOOPBACK_CONFIG, _qos
 
         self.msgs = msgs
         self.domain = Domain(domain, LOOPBACK_CONFIG)

@@ -1,6 +1,6 @@
 """What the service returns, as typed results built from its JSON.
 
-Each class follows one reply schema of the server (service/schemas.py); `from_json` reads the
+Each class follows one reply schema of the server (service/core/schemas.py); `from_json` reads the
 fields it knows and ignores the rest, so a newer server that adds a field does not break an
 older client. Nothing about the robot is written here: joint names, limits and home come from
 `/v1/info` (`Info.joints`, each a `JointSpec`, the class the service itself describes joints
@@ -46,7 +46,7 @@ def joint_index(names: Sequence[str], joint: JointRef) -> int:
 @dataclass(frozen=True)
 class JointSpec:
     """One commanded joint as the outside world sees it: `/v1/info` lists these. The service
-    builds its robot description from this very class (service.types imports it from here), so
+    builds its robot description from this very class (service.core.types imports it from here), so
     the two cannot drift apart, and the client needs nothing of the service.
 
     name: joint name, as in sensor_msgs/JointState and the MJCF

@@ -101,6 +101,18 @@ def best(interpreters: list[str]) -> tuple[str, tuple[int, int], bool] | None:
     return min(usable, key=order) if usable else None
 
 
+def stale_venv(python: Path) -> str | None:
+    """Why the venv whose interpreter is `python` must be made anew, or None to keep it: made by
+    a Python older than 3.11 (a run of dev.py before it knew better), or its interpreter gone.
+    One that only failed to answer is kept: on a loaded machine the answer may have been slow."""
+    if python.is_symlink() and not python.exists():
+        return f"its Python ({os.readlink(python)}) is gone"
+    made_by = version_of(str(python), timeout=60) if python.exists() else None
+    if made_by is not None and made_by < NEED:
+        return f"it was made by Python {dotted(made_by)}"
+    return None
+
+
 def os_release(path: str = "/etc/os-release") -> dict[str, str]:
     """ID and VERSION_ID etc. of this Linux distribution ({} where the file is missing)."""
     try:

@@ -37,6 +37,10 @@ TEST_DEBS = {
     "tmux": "tmux",
     "xwd": "x11-apps",
     "chromium": "chromium",
+    # the Fast DDS peer of the ROS 2 tests (tests/fastdds_peer): a header stands for the library
+    "fastddsgen": "fastddsgen",
+    "g++": "g++",
+    "/usr/include/fastdds/dds/domain/DomainParticipant.hpp": "libfastrtps-dev",
 }
 
 
@@ -49,24 +53,27 @@ def run(*cmd: str | Path, **kw) -> None:
 
 
 def use_new_enough_python(argv: list[str]) -> None:
-    """Restart with a Python 3.11+ when this one is older (or ARMFLEET_PYTHON names one)."""
+    """Restart with a Python 3.11+ when this one is older, or with the one ARMFLEET_PYTHON
+    names."""
     if os.environ.get(RESTARTED):
         return
     exe = _pyfind.choose(sys.version_info[:2], dict(os.environ), Path.home())
     if exe is None:
         return
-    say(f"python {sys.version.split()[0]} is too old for armfleet (3.11+): restarting with {exe}")
+    old = sys.version_info < _pyfind.NEED
+    why = "is too old for armfleet (3.11+)" if old else f"is not {_pyfind.EXPLICIT}"
+    say(f"python {sys.version.split()[0]} {why}: restarting with {exe}")
     env = {**os.environ, RESTARTED: exe}
     os.execve(exe, [exe, str(Path(__file__).resolve()), *argv], env)
 
 
 def ensure_venv() -> None:
-    venv_python = _pyfind.version_of(str(BIN / "python")) if (BIN / "python").exists() else None
-    if venv_python is None or venv_python < _pyfind.NEED:
-        if VENV.exists():  # e.g. made by Python 3.10 before this script knew better
-            made_by = _pyfind.dotted(venv_python) if venv_python else "broken"
-            say(f"removing {VENV}: its Python is {made_by}")
-            shutil.rmtree(VENV)
+    python = BIN / "python"
+    stale = _pyfind.stale_venv(python)
+    if stale:
+        say(f"removing {VENV}: {stale}")
+        shutil.rmtree(VENV)
+    if not python.exists():
         say(f"creating virtualenv in {VENV} with {sys.executable}")
         if subprocess.run([sys.executable, "-m", "venv", str(VENV)], cwd=ROOT).returncode:
             shutil.rmtree(VENV, ignore_errors=True)
@@ -88,7 +95,9 @@ def warm_kernel_cache() -> None:
 
 
 def ensure_test_tools() -> None:
-    missing = [deb for tool, deb in TEST_DEBS.items() if shutil.which(tool) is None]
+    missing = [
+        deb for tool, deb in TEST_DEBS.items() if not (shutil.which(tool) or Path(tool).exists())
+    ]
     if not missing:
         return
     sudo = [] if os.geteuid() == 0 else ["sudo", "-n"]
@@ -99,6 +108,13 @@ def ensure_test_tools() -> None:
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
     run(*sudo, "apt-get", "update", "-qq", env=env)
     run(*sudo, "apt-get", "install", "-y", "-qq", "--no-install-recommends", *missing, env=env)
+
+
+def build_test_peers() -> None:
+    """The Fast DDS peer, compiled once per source change (cached under build/fastdds_peer)."""
+    done = subprocess.run([BIN / "python", "-m", "tests.fastdds_peer"], cwd=ROOT)
+    if done.returncode:
+        say("the Fast DDS peer could not be built: its ROS 2 tests will be skipped")
 
 
 def ensure_js_tools() -> None:
@@ -123,6 +139,7 @@ def main(argv: list[str]) -> int:
     ensure_venv()
     if command == "test":
         ensure_test_tools()
+        build_test_peers()
         ensure_js_tools()
     warm_kernel_cache()
     if command == "serve":

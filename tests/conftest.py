@@ -21,7 +21,7 @@ import pytest
 from clients import ArmfleetClient, WorldState
 from clients import pytest_plugin as armfleet_plugin
 from clients.testing import Server, free_port, serve
-from service.robot import load_robot
+from service.core.robot import load_robot
 from tests.peer_stdio import UrPeer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,6 +64,19 @@ def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout} s waiting for {what}")
         time.sleep(0.05)
+
+
+def node_armfleet(seen: dict[str, Any], owned: dict[str, str]) -> dict[str, Any]:
+    """Node /armfleet from a peer's `ros_discovery_info` view (`seen`: 'nodes', and the GUIDs
+    DDS discovery reported as 'writers'/'readers' by topic), checked to own exactly one
+    endpoint on each topic of `owned` (topic -> 'writers' or 'readers'): how `ros2 node list`
+    and `ros2 topic info -v` attribute them. Node GIDs are the 16-byte GUID padded to 24."""
+    (node,) = [n for n in seen["nodes"] if n["name"] == "armfleet"]
+    assert node["namespace"] == "/"
+    for topic, kind in owned.items():
+        ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
+        assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
+    return node
 
 
 def target_after(client: ArmfleetClient, world: int, pred: Callable[[WorldState], bool]) -> Any:

@@ -60,7 +60,7 @@ class UrPeer(PeerProcess):
     """tests/ros2_ur_peer.py in its own process, on DDS domain `domain` over loopback."""
 
     def __init__(self, domain: int) -> None:
-        from service.ros.dds import LOOPBACK_CONFIG
+        from service.surfaces.ros.dds import LOOPBACK_CONFIG
 
         env = {"CYCLONEDDS_URI": LOOPBACK_CONFIG, "ROS_DOMAIN_ID": str(domain)}
         super().__init__("tests.ros2_ur_peer", env)

@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 from mjcf import SCENE_XML
-from service.engine import WorldBatch
-from service.errors import Conflict
-from service.native import NativeBatch
-from service.shards import ShardedBatch
-from service.snapshots import check_state_support
-from service.types import Batch
+from service.core.errors import Conflict
+from service.core.types import Batch
+from service.engines.native import NativeBatch
+from service.engines.shards import ShardedBatch
+from service.engines.warp import WorldBatch
+from service.persistence.snapshots import check_state_support
 
 NWORLD = 4
 
@@ -27,7 +27,7 @@ NWORLD = 4
 def _ray_batch(n: int) -> Batch:
     """One CPU actor on a local Ray instance (shared with tests/test_ray_shards.py, which covers
     worlds split over several actors); one actor keeps this module's cost down."""
-    from service.ray_shards import RayBatch, connect
+    from service.engines.ray_shards import RayBatch, connect
 
     connect("local", num_cpus=4)
     return RayBatch(n, shards=1)

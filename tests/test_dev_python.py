@@ -114,6 +114,20 @@ def old_pythons() -> list[str]:
     return found
 
 
+def test_a_venv_of_an_old_or_removed_python_is_made_anew(
+    tmp_path: Path, old_pythons: list[str]
+) -> None:
+    """The .venv a 3.10 run left behind (its pip install failed) is replaced, not reused."""
+    subprocess.run([old_pythons[-1], "-m", "venv", "--without-pip", tmp_path / "old"], check=True)
+    assert pyfind.stale_venv(tmp_path / "old" / "bin" / "python").startswith("it was made by")
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", tmp_path / "new"], check=True)
+    assert pyfind.stale_venv(tmp_path / "new" / "bin" / "python") is None
+    gone = tmp_path / "gone"
+    gone.symlink_to(tmp_path / "removed-python3.12")
+    assert "is gone" in pyfind.stale_venv(gone)
+    assert pyfind.stale_venv(tmp_path / "none") is None  # no venv yet: nothing to remove
+
+
 def test_dev_py_under_an_old_python_restarts_with_a_new_one(
     tmp_path: Path, old_pythons: list[str]
 ) -> None:

@@ -17,7 +17,7 @@ import httpx
 import numpy as np
 import pytest
 
-from service.ros import msgs_action as m
+from service.surfaces.ros import msgs_action as m
 from tests.conftest import JOINTS, Server, wait_for
 from tests.peer_stdio import UrPeer
 from tests.ros2_types import serialize

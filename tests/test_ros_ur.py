@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 from urdf_parser_py.urdf import URDF
 
-from service.robot import load_robot
-from service.ros import msgs, msgs_tf, urdf
-from service.ros.tf_frames import FrameTree
+from service.core.robot import load_robot
+from service.surfaces.ros import msgs, msgs_tf, urdf
+from service.surfaces.ros.tf_frames import FrameTree
 from tests.conftest import JOINTS, Server, wait_for
 from tests.peer_stdio import UrPeer
 from tests.ros2_types import serialize

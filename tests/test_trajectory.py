@@ -11,11 +11,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from service.control import Control, Source
-from service.errors import BadCommand
-from service.loop import SimLoop
-from service.native import NativeBatch
-from service.trajectory import (
+from service.core.control import Control, Source
+from service.core.errors import BadCommand
+from service.core.loop import SimLoop
+from service.core.trajectory import (
     MAX_DURATION_S,
     MAX_POINTS,
     AbortReason,
@@ -25,8 +24,9 @@ from service.trajectory import (
     TrajectoryState,
     parse,
 )
-from service.trajectory.table import TrajectoryTable
-from service.types import Mode
+from service.core.trajectory.table import TrajectoryTable
+from service.core.types import Mode
+from service.engines.native import NativeBatch
 from tests.conftest import HOME, JOINTS, SPEC
 
 ARM = JOINTS[:6]
@@ -58,7 +58,7 @@ def stepped(ticks: int, loop: SimLoop) -> None:
 @pytest.fixture(scope="module", params=["warp", "mujoco"])
 def engine(request: pytest.FixtureRequest) -> Iterator[tuple[SimLoop, Control]]:
     if request.param == "warp":
-        from service.engine import WorldBatch
+        from service.engines.warp import WorldBatch
 
         batch = WorldBatch(4)
     else:

@@ -16,12 +16,12 @@ import numpy as np
 import orjson
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
-from service import access, wire
-from service.control import Control, Source
-from service.errors import ArmfleetError, BadCommand
-from service.hub import StreamHub, Subscription
-from service.loop import SimLoop
-from service.types import Snapshot
+from service.core import access, wire
+from service.core.control import Control, Source
+from service.core.errors import ArmfleetError, BadCommand
+from service.core.hub import StreamHub, Subscription
+from service.core.loop import SimLoop
+from service.core.types import Snapshot
 
 router = APIRouter(prefix="/v1")
 
@@ -59,7 +59,8 @@ async def batch_socket(
     worlds: Annotated[str | None, Query(description="e.g. 0-63 or 0,3,7 (default all)")] = None,
     rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
     format: Annotated[
-        Literal["json", "binary"], Query(description="binary: float32 rows, see service/wire.py")
+        Literal["json", "binary"],
+        Query(description="binary: float32 rows, see service/core/wire.py"),
     ] = "json",
 ) -> None:
     """Many worlds per frame (`{"op": "states", ...}`, column-wise); commands name `world`."""
@@ -127,7 +128,7 @@ async def view_socket(
     focus: Annotated[int | None, Query(description="world whose joint state rides along")] = None,
     rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
 ) -> None:
-    """The browser page's socket: binary pose frames (`service/wire.py`), commands name `world`.
+    """The browser page's socket: binary pose frames (`core/wire.py`), commands name `world`.
 
     Each frame carries every body's pose for `worlds` and the `focus` world's joint state in
     its header, so one socket feeds both the 3D view and the panel. Its commands are the
