@@ -137,6 +137,13 @@ class FastDdsPeer:
         nm = ",".join(names) or "-"
         assert self.ask(f"publish {topic} {nm} {','.join(repr(float(p)) for p in positions)}")
 
+    def trajectory(
+        self, topic: str, names: Sequence[str], positions: Sequence[float], seconds: float
+    ) -> None:
+        """Publish a one-point trajectory_msgs/JointTrajectory reaching `positions` at `seconds`."""
+        values = ",".join(repr(float(p)) for p in positions)
+        assert self.ask(f"trajectory {topic} {','.join(names)} {values} {seconds!r}")
+
     def matched(self, topic: str, timeout: float = 20.0) -> dict[str, Any]:
         """{'count': matched endpoints (0: none in time), 'ms': from start to the first match}"""
         return self.ask(f"matched {topic} {timeout}", timeout + 10)
