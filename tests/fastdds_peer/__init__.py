@@ -15,6 +15,7 @@ import os
 import queue
 import shutil
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -171,7 +172,8 @@ class FastDdsPeer:
                 assert self.proc.stdin
                 self.proc.stdin.write("quit\n")
                 self.proc.stdin.flush()
-                self.proc.wait(timeout=3)
-            except (OSError, subprocess.TimeoutExpired):
+                self.proc.wait(timeout=10)  # deleting the participant frees its /dev/shm segment
+            except (OSError, subprocess.TimeoutExpired) as exc:
+                print(f"fastdds peer killed ({type(exc).__name__})", file=sys.stderr)
                 self.proc.kill()
                 self.proc.wait()
