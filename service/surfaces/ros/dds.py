@@ -26,8 +26,9 @@ from service.core.control import Source
 from service.core.types import Snapshot
 from service.surfaces.ros import topics
 from service.surfaces.ros.discovery import LOOPBACK_CONFIG, DdsConfig, choose_config
+from service.surfaces.ros.qos import rclpy_default as _qos
 from service.surfaces.ros.topics import BadMessageCounter, TopicMap
-from service.surfaces.ros.ur_dds import ur_topics
+from service.surfaces.ros.ur_dds import ur_actions, ur_topics
 
 if TYPE_CHECKING:
     from service.runtime import Runtime
@@ -42,7 +43,6 @@ NODE_NAME = "armfleet"  # how ROS 2 tools name the bridge (`ros2 node list` show
 _READER_DEPTH = 1000
 _TAKE_BATCH = 64
 _MATCH_CHECK_S = 0.5  # a new subscriber gets its first state within this
-_WRITE_BLOCK_S = 0.01  # a reliable write never holds the publisher thread longer than this
 
 
 class DdsBridge:
@@ -216,6 +216,7 @@ class DdsBridge:
             "scope": cfg.scope if cfg else None,
             "rate_hz": self.rate,
             "topics": (self.topics.all_topics() | ur_topics(self.topics)) if self.topics else {},
+            "actions": ur_actions(self.topics) if self.topics else {},
             "commands_accepted": self.received + (self.ur.received if self._running else 0),
             "states_published": self.published,
             "rejected": self.bad.counts(),
@@ -297,22 +298,3 @@ class DdsBridge:
             )
             self.published += 1
         self.ur.write(snap, stamp)
-
-
-def _qos(depth: int, accept_xcdr2: bool = False) -> Any:
-    """rclpy's default QoS (RELIABLE, VOLATILE, KEEP_LAST depth) in plain CDR (XCDR1).
-
-    XCDR1 is what ROS 2 Humble writes and reads (XCDR2 lays the string sequence out
-    differently), so writers offer only that; readers also take XCDR2 from newer peers.
-    """
-    from cyclonedds.qos import Policy, Qos
-    from cyclonedds.util import duration
-
-    return Qos(
-        Policy.Reliability.Reliable(max_blocking_time=duration(seconds=_WRITE_BLOCK_S)),
-        Policy.Durability.Volatile,
-        Policy.History.KeepLast(depth),
-        Policy.DataRepresentation(
-            use_cdrv0_representation=True, use_xcdrv2_representation=accept_xcdr2
-        ),
-    )
