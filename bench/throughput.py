@@ -59,7 +59,7 @@ DESCRIPTIONS = {
 
 def physics_dt() -> tuple[int, float]:
     """(substeps, physics_dt) of the engine's defaults, exactly as WorldBatch derives them."""
-    from service.physics import tick_timing
+    from service.core.physics import tick_timing
 
     return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
 
@@ -87,7 +87,7 @@ SETTLE_TICKS = 240
 
 
 def bench_engine(nworld: int, device: str, min_time: float, warmup_time: float) -> dict:
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     t0 = time.perf_counter()
     batch = WorldBatch(nworld, device=device)
@@ -108,7 +108,7 @@ def bench_engine(nworld: int, device: str, min_time: float, warmup_time: float) 
 
 def bench_engine_cores(nworld: int, device: str, min_time: float, warmup_time: float) -> dict:
     """The engine as `armfleet serve` builds it on the CPU: one shard per core when big enough."""
-    from service.shards import ShardedBatch, auto_shards
+    from service.engines.shards import ShardedBatch, auto_shards
 
     shards = auto_shards(nworld, device)
     if shards < 2:
@@ -127,14 +127,14 @@ def bench_engine_cores(nworld: int, device: str, min_time: float, warmup_time: f
 def engine_model(device: str = "cpu"):
     """(MjModel, home key id) configured exactly as the engine configures its own.
 
-    Both engines load the robot and set their options with `service.physics.configure` at the
-    default step: doing the same here keeps the baselines on the same physics whatever the
+    Both engines load the robot and set their options with `service.core.physics.configure` at
+    the default step: doing the same here keeps the baselines on the same physics whatever the
     engine changes, without building (and on a GPU run compiling CPU kernels for) a batch.
     `device` is accepted for the callers' symmetry; the model is host data. A fresh model each
     call.
     """
-    from service.physics import configure
-    from service.robot import load_robot
+    from service.core.physics import configure
+    from service.core.robot import load_robot
 
     robot = load_robot()
     configure(robot.mjm, physics_dt()[1])
@@ -165,7 +165,7 @@ def _raw_warp(nworld: int, device: str, substeps: int, dt: float):
     import mujoco_warp as mjw
     import warp as wp
 
-    from service.engine import NCONMAX, NJMAX
+    from service.engines.warp import NCONMAX, NJMAX
 
     mjm, home_key = engine_model(device)
     assert abs(mjm.opt.timestep - dt) < 1e-12, (mjm.opt.timestep, dt)

@@ -71,10 +71,10 @@ def _graph_ms(batch: Any, seconds: float = 1.0) -> float | None:
 
 def _build(n: int, device: str) -> Any:
     if device.startswith("cuda"):
-        from service.engine import WorldBatch
+        from service.engines.warp import WorldBatch
 
         return WorldBatch(n, device=device)
-    from service.native import NativeBatch
+    from service.engines.native import NativeBatch
 
     return NativeBatch(n)
 
@@ -90,10 +90,10 @@ def profile(
     """
     import numpy as np
 
-    from service import frames, wire
-    from service.hub import StreamHub, Subscription
-    from service.loop import SimLoop
-    from service.types import Mode
+    from service.core import frames, wire
+    from service.core.hub import StreamHub, Subscription
+    from service.core.loop import SimLoop
+    from service.core.types import Mode
 
     batch = _build(n, device)
     batch.step(SETTLE_TICKS)  # settled worlds, as the service runs them (section 17)

@@ -60,7 +60,7 @@ def _raw(n: int, device: Any, variant: str, substeps: int) -> tuple[Any, Any, An
     import warp as wp
 
     from bench.throughput import engine_model
-    from service.engine import NCONMAX, NJMAX
+    from service.engines.warp import NCONMAX, NJMAX
 
     mjm, home_key = engine_model(str(device))
     mjd = mujoco.MjData(mjm)
@@ -114,7 +114,7 @@ def measure(n: int, device_name: str, ticks: int) -> dict[str, Any]:
     import warp as wp
 
     from bench.throughput import physics_dt
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     device = wp.get_device(device_name)
     substeps = physics_dt()[0]
@@ -179,7 +179,7 @@ def largest(device_name: str, n: int, ticks: int = 5) -> dict[str, Any]:
     """Build a batch of `n` worlds and step it: does it fit, what does a tick cost."""
     import warp as wp
 
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     device = wp.get_device(device_name)
     free0 = _free(device)

@@ -16,12 +16,14 @@ import json
 import httpx
 import numpy as np
 import pytest
+from conftest import HOME, JOINTS
 from websockets.sync.client import connect
 
+from clients import ArmfleetClient, point
 from clients.testing import serve
-from service import frames, wire
-from service.engine import WorldBatch
-from service.native import NativeBatch
+from service.core import frames, wire
+from service.engines.native import NativeBatch
+from service.engines.warp import WorldBatch
 
 NWORLD = 6
 IDS = np.array([1, 3, 4])
@@ -123,6 +125,11 @@ def test_streamed_frames_carry_the_http_state_bit_for_bit(tmp_path, engine):
         http = httpx.Client(base_url=s.url, timeout=30)
         http.put("/v1/worlds/3/targets", json={"name": ["elbow_joint"], "position": [1.2]})
         http.post("/v1/worlds/4/reset").raise_for_status()
+        # World 1 follows a trajectory: its targets move with a velocity feed-forward in ctrl,
+        # and JSON frames carry its progress.
+        arm = ArmfleetClient(s.url)
+        goal = (np.array(HOME[:6]) + 0.2).tolist()
+        started = arm.start_trajectory(1, JOINTS[:6], [point(goal, 1.0)])
         spec = "1,3-4"
         with (
             connect(f"{s.ws_url}/v1/ws?worlds={spec}&format=binary") as wb,
@@ -134,6 +141,7 @@ def test_streamed_frames_carry_the_http_state_bit_for_bit(tmp_path, engine):
             header, ids, rows = _binary_rows(_frame_of(wb, first + 4))
             as_json = json.loads(_frame_of(wj, first + 4))
             state = http.get("/v1/worlds/state", params={"worlds": spec}).json()
+            status = arm.trajectory(1)
     assert header["tick"] == as_json["tick"] == state["tick"] == first + 4
     assert ids.tolist() == as_json["worlds"] == [w["world"] for w in state["worlds"]] == [1, 3, 4]
     columns = {
@@ -157,6 +165,10 @@ def test_streamed_frames_carry_the_http_state_bit_for_bit(tmp_path, engine):
         np.testing.assert_array_equal(got, want, err_msg=name)  # float32 of HTTP's numbers
         assert as_json[name] == values, name  # the same JSON numbers
     assert as_json["target"][1][2] == pytest.approx(1.2)
+    assert status.state == "running" and 0 < status.progress < 1
+    assert as_json["trajectories"] == {
+        "1": {"id": started.id, "state": "running", "reason": None, "progress": status.progress}
+    }
 
 
 def test_the_frame_thread_and_its_helper_process_deliver_the_same_bytes(monkeypatch):
