@@ -18,6 +18,44 @@ from bench import common
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
+GPU_HEAD = (
+    "worlds",
+    "engine",
+    "raw MJWarp captured",
+    "engine / raw",
+    "served, binary (frames/s)",
+    "binary / engine",
+    "served, JSON (frames/s)",
+    "JSON / engine",
+)
+
+PROFILE_HEAD = (
+    "worlds",
+    "path / frames",
+    "engine ms",
+    "served ms",
+    "served / engine",
+    "frames/s",
+    "snapshot s/s",
+    "pack s/s",
+    "serialise s/s",
+)
+
+BASELINE_HEAD = (
+    "worlds",
+    "variant",
+    "ms/tick (settled)",
+    "ms/tick by quarter from home",
+    "variant / engine",
+)
+
+CAPACITY_HEAD = (
+    "engine",
+    "worlds at RTF ≥ 0.99",
+    "rollout limit (worlds)",
+    "capacity / limit",
+)
+
 
 def _m(x: float | None) -> str:
     """World-steps/s as 4.73M / 812k."""
@@ -69,16 +107,7 @@ def gpu() -> str:
                 _r(j.get("ratio_to_engine")),
             ]
         )
-    head = [
-        "worlds",
-        "engine",
-        "raw MJWarp captured",
-        "engine / raw",
-        "served, binary (frames/s)",
-        "binary / engine",
-        "served, JSON (frames/s)",
-        "JSON / engine",
-    ]
+    head = list(GPU_HEAD)
     return _table(head, rows) + f"\n\n({_machine(tp)}; world-steps/s, 30 Hz asked)"
 
 
@@ -103,17 +132,7 @@ def profile() -> str:
                     f"{host or 0:.2f}",
                 ]
             )
-    head = [
-        "worlds",
-        "path / frames",
-        "engine ms",
-        "served ms",
-        "served / engine",
-        "frames/s",
-        "snapshot s/s",
-        "pack s/s",
-        "serialise s/s",
-    ]
+    head = list(PROFILE_HEAD)
     return _table(head, rows) + f"\n\n({_machine(tp)})"
 
 
@@ -125,13 +144,7 @@ def baseline() -> str:
         for k, ms in r["mean_ms_after_first_quarter"].items():
             quarters = " → ".join(f"{x:.1f}" for x in r["window_mean_ms"][k])
             rows.append([f"{int(n):,}", k, f"{ms:.2f}", quarters, _r(r["engine_vs"].get(k, 1.0))])
-    head = [
-        "worlds",
-        "variant",
-        "ms/tick (settled)",
-        "ms/tick by quarter from home",
-        "variant / engine",
-    ]
+    head = list(BASELINE_HEAD)
     return _table(head, rows) + f"\n\n({_machine(bl)})"
 
 
@@ -151,7 +164,7 @@ def capacity() -> str:
                 _r(best / limit if best and limit else None),
             ]
         )
-    head = ["engine", "worlds at RTF ≥ 0.99", "rollout limit (worlds)", "capacity / limit"]
+    head = list(CAPACITY_HEAD)
     load = cap.get("machine", {}).get("loadavg_at_start")
     return _table(head, rows) + f"\n\n({_machine(cap)}; load at start {load})"
 
@@ -166,9 +179,9 @@ TABLES: dict[str, Callable[[], str]] = {
 
 def update(text: str) -> str:
     for name, render in TABLES.items():
-        pattern = re.compile(rf"(<!-- bench:{name} -->\n).*?(\n<!-- /bench:{name} -->)", re.S)
+        pattern = re.compile(rf"(<!-- bench:{name} -->\n)(?:.*?\n)?(<!-- /bench:{name} -->)", re.S)
         if pattern.search(text):
-            text = pattern.sub(lambda m, r=render: m.group(1) + r() + m.group(2), text)
+            text = pattern.sub(lambda m, r=render: m.group(1) + r() + "\n" + m.group(2), text)
     return text
 
 

@@ -54,24 +54,17 @@ def _free(device: Any) -> int:
 
 def _raw(n: int, device: Any, variant: str, substeps: int) -> tuple[Any, Any, Any]:
     """(model, data, graph) of one raw variant, ready to replay."""
-    import mujoco
     import mujoco_warp as mjw
     import numpy as np
     import warp as wp
 
-    from bench.throughput import engine_model
-    from service.engines.warp import NCONMAX, NJMAX
+    from bench.throughput import _home_key, _raw_warp, physics_dt
 
-    mjm, home_key = engine_model(str(device))
-    mjd = mujoco.MjData(mjm)
-    mujoco.mj_resetDataKeyframe(mjm, mjd, home_key)
-    mujoco.mj_forward(mjm, mjd)
+    m, d = _raw_warp(n, str(device), substeps, physics_dt()[1])
     with wp.ScopedDevice(device):
-        m = mjw.put_model(mjm)
-        d = mjw.put_data(mjm, mjd, nworld=n, nconmax=NCONMAX, njmax=NJMAX)
         mjw.step(m, d)  # loads every kernel (capture needs them)
         if variant == "raw_reset":
-            mjw.reset_data_keyframe(m, d, wp.array(np.full(n, home_key, np.int32), dtype=int))
+            mjw.reset_data_keyframe(m, d, wp.array(np.full(n, _home_key(), np.int32), dtype=int))
         if variant == "raw_as_bench":
             t0 = time.perf_counter()
             while time.perf_counter() - t0 < 1.0:
@@ -81,21 +74,6 @@ def _raw(n: int, device: Any, variant: str, substeps: int) -> tuple[Any, Any, An
             for _ in range(substeps):
                 mjw.step(m, d)
     return m, d, cap.graph
-
-
-def _time(fn: Callable[[], Any], sync: Callable[[], Any], seconds: float) -> float:
-    """Median seconds per call over about `seconds` (after a short warm-up)."""
-    for _ in range(3):
-        fn()
-    sync()
-    per: list[float] = []
-    t_end = time.perf_counter() + seconds
-    while time.perf_counter() < t_end or len(per) < 5:
-        t0 = time.perf_counter()
-        fn()
-        sync()
-        per.append(time.perf_counter() - t0)
-    return statistics.median(per)
 
 
 def _series(step: Callable[[], Any], sync: Callable[[], Any], ticks: int) -> list[float]:
