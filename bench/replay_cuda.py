@@ -77,14 +77,14 @@ def plan(ticks: int, nworld: int) -> np.ndarray:
 DEVICE = os.environ.get("ARMFLEET_BENCH_DEVICE", "cuda")  # cpu: a smoke test of this script
 
 
-PREBUILT: dict[str, Any] = {}  # what service.prebuild did in this process
+PREBUILT: dict[str, Any] = {}  # what bench.warp_modes.prebuild did in this process
 
 
 def make_batch(mode: str, nworld: int) -> Any:
     import mujoco_warp as mjw
 
     from bench.warp_modes import enable, prebuild
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     if mode == "deterministic":
         enable()
@@ -161,11 +161,11 @@ def rate(batch: Any, seconds: float = 3.0) -> dict[str, float]:
 
 def record_and_replay(mode: str, nworld: int, path: Path) -> dict[str, Any]:
     """Record `nworld` worlds driven through the control layer, replay on the same GPU."""
-    from service.control import Control, Source
-    from service.loop import SimLoop
-    from service.recorder import Recorder
-    from service.replay import replay
-    from service.types import Mode
+    from service.core.control import Control, Source
+    from service.core.loop import SimLoop
+    from service.core.types import Mode
+    from service.persistence.recorder import Recorder
+    from service.persistence.replay import replay
 
     batch = make_batch(mode, nworld)
     loop = SimLoop(batch, Mode.PAUSED)

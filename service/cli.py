@@ -15,7 +15,7 @@ from typing import Annotated, Any
 
 import typer
 
-from service.types import Mode
+from service.core.types import Mode
 
 # Nothing here renders with MuJoCo's OpenGL: without this, `import mujoco` loads GLFW (~0.1-0.3 s
 # of every start). A value the user set wins.
@@ -34,7 +34,7 @@ def _opt(name: str) -> Any:
     Options default to None so that only what the user typed overrides the settings, which
     themselves come from ARMFLEET_* variables or the field defaults.
     """
-    from service.settings import Settings
+    from service.core.settings import Settings
 
     field = Settings.model_fields[name]
     default = field.default.value if isinstance(field.default, Mode) else field.default
@@ -104,7 +104,7 @@ def serve(
     import uvicorn
 
     from service.app import create_app
-    from service.settings import Settings
+    from service.core.settings import Settings
 
     settings = Settings(**given)
     _check_port_free(settings.host, settings.port)
@@ -112,7 +112,7 @@ def serve(
     logging.basicConfig(level=level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:
         service = create_app(settings)
-    except ValueError as exc:  # an unsafe bind (service/access.py)
+    except ValueError as exc:  # an unsafe bind (service/core/access.py)
         typer.echo(f"armfleet serve: {exc}", err=True)
         raise typer.Exit(2) from None
     uvicorn.run(
@@ -152,9 +152,9 @@ def replay(
     deviation per tick range is printed either way.
     """
     logging.basicConfig(level="WARNING", format="%(asctime)s %(name)s %(message)s")
-    from service.replay import ReplayError
-    from service.replay import replay as run_replay
-    from service.replay_check import Tolerance, format_table
+    from service.persistence.replay import ReplayError
+    from service.persistence.replay import replay as run_replay
+    from service.persistence.replay_check import Tolerance, format_table
 
     try:
         judge = tolerance if tolerance in ("auto", "exact") else Tolerance.parse(tolerance)
@@ -199,7 +199,7 @@ def setup(
         "(first time: about a minute on CPU, several on CUDA; cached afterwards)...",
     )
     t0 = time.perf_counter()
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     batch = WorldBatch(1, device=device)
     batch.step(2)

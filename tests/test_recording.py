@@ -20,8 +20,8 @@ from mcap.reader import make_reader
 from rosbags.typesys import Stores, get_typestore
 from websockets.sync.client import connect
 
-from service.replay import read_recording, replay_recording
-from service.replay_check import Tolerance
+from service.persistence.replay import read_recording, replay_recording
+from service.persistence.replay_check import Tolerance
 
 NWORLD = 8
 TICKS = 600

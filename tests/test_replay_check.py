@@ -16,7 +16,13 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from service.replay_check import Comparison, Tolerance, bit_exact, format_table, table_span
+from service.persistence.replay_check import (
+    Comparison,
+    Tolerance,
+    bit_exact,
+    format_table,
+    table_span,
+)
 
 NAMES = [f"j{i}" for i in range(7)]
 
@@ -124,7 +130,7 @@ def test_the_prebuild_walk_notes_the_tick_modules_without_running_a_kernel():
     import warp as wp
 
     from bench.warp_modes import _noted_launches
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     seen: dict = {}
     with _noted_launches(seen):

@@ -1,7 +1,7 @@
 """Dependencies shared by the routers: the runtime, the loop, the control layer, world ids.
 
 They are `async def` on purpose: plain `def` dependencies each hop through the threadpool
-(~0.1 ms apiece on every request). Errors are raised as service.errors exceptions; the app maps
+(~0.1 ms apiece on every request). Errors are raised as service.core.errors exceptions; the app maps
 them to status codes in one place.
 """
 
@@ -11,9 +11,9 @@ from typing import Annotated
 
 from fastapi import Depends, Path, Request
 
-from service.control import Control
-from service.errors import Unavailable, UnknownWorld
-from service.loop import SimLoop
+from service.core.control import Control
+from service.core.errors import Unavailable, UnknownWorld
+from service.core.loop import SimLoop
 from service.runtime import Runtime
 
 

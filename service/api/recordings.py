@@ -9,11 +9,11 @@ from typing import Annotated
 from fastapi import APIRouter, Depends
 
 from service.api.deps import Loop, get_runtime
-from service.errors import Conflict, NotFound
-from service.recorder import Recorder
+from service.core.errors import Conflict, NotFound
+from service.core.schemas import RecordingRequest, RecordingStatus
+from service.persistence.recorder import Recorder
+from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
-from service.schemas import RecordingRequest, RecordingStatus
-from service.snapshots import check_state_support
 
 router = APIRouter(prefix="/v1/recordings", tags=["recordings"])
 Rt = Annotated[Runtime, Depends(get_runtime)]

@@ -9,10 +9,10 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Path
 
 from service.api.deps import Loop, get_runtime
-from service.errors import Conflict
+from service.core.errors import Conflict
+from service.core.schemas import RestoreReply, SnapshotInfo, SnapshotName, SnapshotRequest
+from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
-from service.schemas import RestoreReply, SnapshotInfo, SnapshotName, SnapshotRequest
-from service.snapshots import check_state_support
 
 router = APIRouter(prefix="/v1/snapshots", tags=["snapshots"])
 Rt = Annotated[Runtime, Depends(get_runtime)]
