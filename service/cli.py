@@ -136,9 +136,9 @@ def replay(
     tolerance: Annotated[
         str,
         typer.Option(
-            help="auto: bit for bit where the replay can be bit-exact, else within the stated "
-            "default; exact; or P,V,E: largest accepted |deviation| of position [rad], "
-            "velocity [rad/s], effort [N·m]"
+            help="auto: bit for bit where the replay can be bit-exact (the CPU), else within "
+            "the stated default; exact; or P,V,E: largest accepted |deviation| of position "
+            "(rad), velocity (rad/s), effort (N·m)"
         ),
     ] = "auto",
 ) -> None:
