@@ -32,9 +32,10 @@ from service.core.errors import ArmfleetError, BadCommand
 from service.core.metrics import CommandCounter
 from service.core.schemas import ANY, errors, fit_openapi
 from service.core.settings import Settings
+from service.core.worlds import world_list
 from service.runtime import Runtime
 from service.surfaces.ros import rosbridge
-from service.surfaces.ros.topics import TopicMap, parse_world_list
+from service.surfaces.ros.topics import TopicMap
 
 DESCRIPTION = """
 Many simulated UR10e + Robotiq 2F-140 worlds stepped together by MuJoCo Warp.
@@ -159,7 +160,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.runtime = runtime
     app.state.rosbridge = rosbridge.RosbridgeServer(
-        TopicMap(parse_world_list(settings.ros2_worlds, settings.worlds)), settings.ros2_rate
+        TopicMap(world_list(settings.ros2_worlds, settings.worlds, "ros2_worlds")),
+        settings.ros2_rate,
     )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Added last = runs first: count refused commands, then check token, origin and slots.

@@ -12,19 +12,18 @@ import asyncio
 import contextlib
 import logging
 import signal
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
 import orjson
 
 from service.core.access import ClientSlots
+from service.core.batch import Batch, Supervised
 from service.core.control import Accepted, Control
 from service.core.errors import Conflict, NotFound
 from service.core.hub import StreamHub
 from service.core.loop import SimLoop
 from service.core.metrics import Metrics
 from service.core.settings import Settings
-from service.core.types import Batch
 from service.persistence import provenance
 from service.persistence.snapshots import LATEST, SnapshotStore, check_state_support
 
@@ -133,9 +132,8 @@ class Runtime:
         out = []
         if self.loop.failure:
             out.append(f"ticks are failing: {self.loop.failure}")
-        health: Callable[[], list[str]] | None = getattr(self.loop.batch, "health", None)
-        if health is not None:
-            out += health()
+        if isinstance(self.loop.batch, Supervised):
+            out += self.loop.batch.health()
         return out
 
     async def _watch(self, period: float = 0.1) -> None:
@@ -185,8 +183,13 @@ class Runtime:
         m.counter_level(
             "armfleet_shard_restarts",
             "shard worker processes rebuilt after dying",
-            lambda: getattr(self.loop.batch, "restarts", 0) if self.loop else None,
+            self._restarts,
         )
+
+    def _restarts(self) -> float | None:
+        if self.loop is None:
+            return None
+        return self.loop.batch.restarts if isinstance(self.loop.batch, Supervised) else 0
 
     def _loop_attr(self, name: str) -> Any:
         return None if self.loop is None else getattr(self.loop, name)

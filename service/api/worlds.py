@@ -33,6 +33,7 @@ from service.core.schemas import (
     errors,
 )
 from service.core.types import Mode, Snapshot
+from service.core.worlds import WORLDS_PATTERN, parse_worlds
 
 router = APIRouter(prefix="/v1", tags=["worlds"])
 
@@ -77,12 +78,12 @@ async def get_states(
             description="ids and inclusive ranges, e.g. 0,3,7 or 0-63 (a range may be written "
             "either way round)",
             examples=["0,3,7"],
-            pattern=wire.WORLDS_PATTERN,
+            pattern=WORLDS_PATTERN,
         ),
     ] = None,
 ) -> Response:
     n = loop.batch.nworld
-    ids = np.arange(n) if worlds is None else wire.parse_worlds(worlds, n)
+    ids = np.arange(n) if worlds is None else parse_worlds(worlds, n)
     snap, pending = await _read(loop, ids)
     return _json(wire.states(snap, ids, loop.spec.names, pending))
 
@@ -120,7 +121,7 @@ async def increment(control: Ctl, world: World, body: IncrementRequest) -> Respo
     responses=errors(404, *WITH_BODY),
 )
 async def put_targets(control: Ctl, world: World, body: JointTargets) -> Response:
-    result = control.set_targets(world, body.name, body.position, Source.HTTP)
+    result = control.command_targets(world, body.name, body.position, Source.HTTP)
     return _json(wire.command_reply(result))
 
 

@@ -22,9 +22,10 @@ from typing import Any, TypeVar
 import numpy as np
 
 from service.core import commands
+from service.core.batch import Batch
 from service.core.errors import NotPaused, UnknownWorld
 from service.core.staging import Override, Staging, TrajectoryHook
-from service.core.types import Batch, BatchState, Mode, Snapshot
+from service.core.types import BatchState, Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
 T = TypeVar("T")
@@ -153,11 +154,11 @@ class SimLoop:
             update = commands.increment(self.spec, self._pending[world], deltas)
             return self._stage(world, update)
 
-    def set_targets(self, world: int, values: Mapping[int, float]) -> CommandResult:
+    def stage_targets(self, world: int, values: Mapping[int, float]) -> CommandResult:
         """Set the named joints' targets (others keep theirs), clamped."""
         self._check_world(world)
         with self._lock:
-            update = commands.set_targets(self.spec, self._pending[world], values)
+            update = commands.replace_targets(self.spec, self._pending[world], values)
             return self._stage(world, update)
 
     def set_many(self, worlds: list[int], positions: np.ndarray) -> list[CommandResult]:
@@ -167,7 +168,7 @@ class SimLoop:
         every = dict.fromkeys(range(len(self.spec.joints)), 0.0)
         with self._lock:
             updates = [
-                commands.set_targets(
+                commands.replace_targets(
                     self.spec, self._pending[w], dict(zip(every, row, strict=True))
                 )
                 for w, row in zip(worlds, positions, strict=True)
@@ -472,9 +473,9 @@ class SimLoop:
         self.batch.reset(resets)
         if dirty.size:
             if vel is None:  # no feed-forward: the plain call every engine has always had
-                self.batch.set_targets(dirty, targets)
+                self.batch.apply_targets(dirty, targets)
             else:
-                self.batch.set_targets(dirty, targets, vel)
+                self.batch.apply_targets(dirty, targets, vel)
 
     def _finish_tick(self, faulted: np.ndarray, mode: Mode, now: float) -> bool:
         """Count the tick, forget targets of worlds reset for faults; is a snapshot wanted?"""

@@ -7,6 +7,7 @@ Joint-state fields follow sensor_msgs/JointState (`name`, `position`, `velocity`
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Annotated, Any
 
 from pydantic import (
@@ -19,7 +20,7 @@ from pydantic import (
 )
 
 from service.core.robot import default_spec
-from service.core.types import JointSpec, Mode
+from service.core.types import NJOINT, JointSpec, Mode
 
 # Strict: numbers only ("0.1" and true are refused); ints are fine.
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
@@ -160,17 +161,27 @@ WITH_BODY = (*ANY, 400, 413)
 # valid is accepted and what it calls invalid is refused: schemathesis holds us to that
 # (tests/test_contract.py).
 
-JOINT_NAMES = tuple(default_spec().names)  # the model names them (service/core/robot.py)
-JOINT_KEYS = (*JOINT_NAMES, *(str(i) for i in range(len(JOINT_NAMES))))  # names or "0".."6"
 MAX_BATCH_WORLDS = 64  # worlds per POST /v1/targets; the schema lists every allowed length
+
+
+# The joint names come from the model (service/core/robot.py), read when a request is first
+# validated or the OpenAPI document first built, not when this module is imported: importing
+# the contract must not compile the MJCF.
+def joint_names() -> tuple[str, ...]:
+    return tuple(default_spec().names)
+
+
+def _joint_keys() -> tuple[str, ...]:
+    """Names or "0".."6": how a joint is named as a JSON object key."""
+    return (*joint_names(), *(str(i) for i in range(NJOINT)))
 
 
 def _joint_key(value: object) -> str:
     """A joint named by its name or by its index as a string (JSON object keys are strings)."""
     if not isinstance(value, str):
         raise ValueError(f"a joint is named by a string, got {value!r}")
-    if value not in JOINT_KEYS:
-        raise ValueError(f"unknown joint {value!r}; joints are {list(JOINT_NAMES)} (or 0..6)")
+    if value not in _joint_keys():
+        raise ValueError(f"unknown joint {value!r}; joints are {list(joint_names())} (or 0..6)")
     return value
 
 
@@ -179,26 +190,41 @@ def _joint_ref(value: object) -> str | int:
     if isinstance(value, float) and value.is_integer():
         value = int(value)
     if isinstance(value, int) and not isinstance(value, bool):
-        if not 0 <= value < len(JOINT_NAMES):
-            raise ValueError(f"joint index {value} out of range 0..{len(JOINT_NAMES) - 1}")
+        if not 0 <= value < NJOINT:
+            raise ValueError(f"joint index {value} out of range 0..{NJOINT - 1}")
         return value
     return _joint_key(value)
 
 
-_JOINT_KEY_SCHEMA = {
-    "type": "string",
-    "enum": list(JOINT_KEYS),
-    "description": "joint name, or its index as a string",
-}
-JointKey = Annotated[str, PlainValidator(_joint_key), WithJsonSchema(_JOINT_KEY_SCHEMA)]
+class _LazyJsonSchema:
+    """`WithJsonSchema`, but the schema is made when the document is built (it names joints)."""
+
+    def __init__(self, make: Callable[[], dict[str, Any]]) -> None:
+        self._make = make
+
+    def __get_pydantic_json_schema__(self, core_schema: Any, handler: Any) -> dict[str, Any]:
+        return self._make()
+
+
+JointKey = Annotated[
+    str,
+    PlainValidator(_joint_key),
+    _LazyJsonSchema(
+        lambda: {
+            "type": "string",
+            "enum": list(_joint_keys()),
+            "description": "joint name, or its index as a string",
+        }
+    ),
+]
 JointRef = Annotated[
     str | int,
     PlainValidator(_joint_ref),
-    WithJsonSchema(
-        {
+    _LazyJsonSchema(
+        lambda: {
             "anyOf": [
-                {"type": "string", "enum": list(JOINT_NAMES)},
-                {"type": "integer", "minimum": 0, "maximum": len(JOINT_NAMES) - 1},
+                {"type": "string", "enum": list(joint_names())},
+                {"type": "integer", "minimum": 0, "maximum": NJOINT - 1},
             ],
             "description": "joint name or index 0..6",
         }
@@ -322,15 +348,15 @@ class JointTargets(_Strict):
     """sensor_msgs/JointState-shaped: a subset of names is allowed; others keep their targets."""
 
     name: list[JointKey] = Field(
-        min_length=1, max_length=len(JOINT_NAMES), json_schema_extra={"uniqueItems": True}
+        min_length=1, max_length=NJOINT, json_schema_extra={"uniqueItems": True}
     )
-    position: list[FiniteFloat] = Field(min_length=1, max_length=len(JOINT_NAMES))
+    position: list[FiniteFloat] = Field(min_length=1, max_length=NJOINT)
 
     model_config = ConfigDict(
         extra="allow",  # JointState also carries header/velocity/effort; they are ignored
         json_schema_extra={
             "examples": [{"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]}],
-            "oneOf": _equal_lengths("name", "position", range(1, len(JOINT_NAMES) + 1)),
+            "oneOf": _equal_lengths("name", "position", range(1, NJOINT + 1)),
         },
     )
 

@@ -28,6 +28,7 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from mjcf import SCENE_XML
+from service.core.batch import Batch, Restorable
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
 from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
@@ -71,7 +72,7 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-class NativeBatch:
+class NativeBatch(Batch, Restorable):
     """N worlds of one model in native MuJoCo, advanced a control tick at a time on a pool."""
 
     shards = 1  # one batch; the cores are used by threads, not processes
@@ -176,7 +177,7 @@ class NativeBatch:
 
     # -- commands ---------------------------------------------------------------------------
 
-    def set_targets(
+    def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
         """Position targets for `worlds` (k,) <- `targets` (k, 7), written into their rows,

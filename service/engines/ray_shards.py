@@ -34,10 +34,11 @@ import ray
 from ray.exceptions import RayActorError
 
 from mjcf import SCENE_XML
+from service.core.batch import Batch, Restorable
 from service.core.errors import Unavailable
 from service.core.physics import configure
 from service.core.robot import load_robot
-from service.core.types import Batch, BatchState, Snapshot
+from service.core.types import BatchState, Snapshot
 from service.engines.sharding import (
     ShardPlan,
     StagedCommands,
@@ -174,7 +175,7 @@ class _Shard:
     lost: list[float] = field(default_factory=list)  # wall times at which the actor was lost
 
 
-class RayBatch(Batch):
+class RayBatch(Batch, Restorable):
     """N worlds as k contiguous shards, each a Ray actor holding a WorldBatch.
 
     Implements the Batch protocol (service/core/types.py). `address` is as in `connect`; None uses
@@ -264,7 +265,7 @@ class RayBatch(Batch):
 
     # -- commands: staged per shard, sent with the next step ---------------------------------
 
-    def set_targets(
+    def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
@@ -354,7 +355,7 @@ class RayBatch(Batch):
         hi = lo + int(self._plan.sizes[shard])
         targets = self._targets[lo:hi].copy()
         physics = dict(s.checkpoint.physics)
-        physics["ctrl"] = targets.astype(physics["ctrl"].dtype)  # what set_targets would push
+        physics["ctrl"] = targets.astype(physics["ctrl"].dtype)  # what apply_targets would push
         resumed = dataclasses.replace(s.checkpoint, targets=targets, physics=physics)
         ray.get(s.actor.set_state.remote(resumed))
         self.restored.append((shard, s.checkpoint.tick))

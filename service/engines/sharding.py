@@ -101,9 +101,9 @@ def apply_targets(batch: WorldBatch, dirty: np.ndarray, rows: np.ndarray) -> Non
     """A shard's side of `command_rows`: targets, and feed-forward when the rows carry it."""
     if dirty.size:
         if rows.shape[1] > 7:
-            batch.set_targets(dirty, rows[:, :7], rows[:, 7:])
+            batch.apply_targets(dirty, rows[:, :7], rows[:, 7:])
         else:
-            batch.set_targets(dirty, rows)
+            batch.apply_targets(dirty, rows)
 
 
 def apply_and_step(

@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from service.core.types import Batch, BatchState, Snapshot
+from service.core.batch import Batch, Restorable, Supervised
+from service.core.types import BatchState, Snapshot
 from service.engines.sharding import (
     ShardPlan,
     StagedCommands,
@@ -120,7 +121,7 @@ def _ready_reply(conn: Connection) -> tuple[Any, ...]:
         return ("error", "worker exited while building its shard")
 
 
-class ShardedBatch(Batch):
+class ShardedBatch(Batch, Restorable, Supervised):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
     def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
@@ -172,7 +173,7 @@ class ShardedBatch(Batch):
     def targets(self) -> np.ndarray:
         return self._targets.copy()
 
-    def set_targets(
+    def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
         """The local shard gets its targets now, worker shards with their next step."""
@@ -182,7 +183,7 @@ class ShardedBatch(Batch):
         parts = self._plan.split(worlds)
         if parts[0].size:
             vel = self._velocity[parts[0]]
-            self._local.set_targets(
+            self._local.apply_targets(
                 parts[0], self._targets[parts[0]], vel if velocities is not None else None
             )
         for i, local_ids in enumerate(parts[1:], start=1):

@@ -21,9 +21,10 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
+from service.core.batch import Batch, Restorable
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
-from service.core.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
+from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.engine")
 
@@ -160,7 +161,7 @@ def snapshot_from(a: SnapshotArrays, target: np.ndarray) -> Snapshot:
     )
 
 
-class WorldBatch(Batch):
+class WorldBatch(Batch, Restorable):
     """N worlds of one model on one Warp device, advanced in captured control ticks.
 
     Targets live in a float64 host mirror (what was commanded, reported as `target`) and are
@@ -309,7 +310,7 @@ class WorldBatch(Batch):
 
     # -- commands ---------------------------------------------------------------------------
 
-    def set_targets(
+    def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
         """Position targets for `worlds` (k,) ← `targets` (k, 7), in one device write, with a

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from service.core.types import BatchState, Snapshot
-from service.core.wire import pick_worlds
+from service.core.worlds import pick_worlds
 from service.persistence.mcap_log import COMMANDS, RESTORES, STATUS, McapLog
 from service.persistence.provenance import batch_header
 from service.persistence.snapshots import encode_state

@@ -52,7 +52,7 @@ from foxglove.messages import (
 from service.core.control import Source
 from service.core.errors import ArmfleetError
 from service.core.robot import load_robot
-from service.core.wire import pick_worlds
+from service.core.worlds import pick_worlds
 
 if TYPE_CHECKING:
     from foxglove.websocket import ChannelView, Client, ClientChannel
@@ -356,7 +356,7 @@ class FoxgloveLive:
             name, position = msg.get("name"), msg.get("position")
             if not isinstance(name, list) or not isinstance(position, list):
                 raise ValueError("a JointState needs `name` and `position` lists")
-            self._control.set_targets(world, name, position, Source.FOXGLOVE)
+            self._control.command_targets(world, name, position, Source.FOXGLOVE)
         except (ArmfleetError, ValueError) as exc:
             log.warning("Foxglove command on %s refused: %s", topic, exc)
             self._server.publish_status(f"{topic}: {exc}", StatusLevel.Warning)

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from service.core.control import Source
 from service.core.types import Snapshot
+from service.core.worlds import world_list
 from service.surfaces.ros import topics
 from service.surfaces.ros.discovery import LOOPBACK_CONFIG, DdsConfig, choose_config
 from service.surfaces.ros.topics import BadMessageCounter, TopicMap
@@ -93,7 +94,7 @@ class DdsBridge:
         self._joints = tuple(loop.spec.names)
         self._joint_list = list(self._joints)
         self._tick_dt = loop.batch.tick_dt
-        self.topics = TopicMap(topics.parse_world_list(self._worlds_spec, loop.batch.nworld))
+        self.topics = TopicMap(world_list(self._worlds_spec, loop.batch.nworld, "ros2_worlds"))
         self.config = cfg = choose_config(self._network)
         if cfg.config is not None:
             self._entities.append(Domain(cfg.domain_id, cfg.config))
@@ -250,7 +251,7 @@ class DdsBridge:
 
         def apply(msg: Any) -> None:
             names, values = topics.command_from_joint_state(self._joints, msg.name, msg.position)
-            self._control.set_targets(world, names, values, Source.ROS2)
+            self._control.command_targets(world, names, values, Source.ROS2)
 
         taken, accepted = topics.take_commands(
             reader, self._msgs.JointState, topic, self.bad, apply

@@ -213,7 +213,7 @@ class Session:
             raise BadMessage("bad_type", "name and position must be arrays")
         names, values = topics.command_from_joint_state(self.joints, name, position)
         try:
-            self.control.set_targets(world, names, values, Source.ROSBRIDGE)
+            self.control.command_targets(world, names, values, Source.ROSBRIDGE)
         except ArmfleetError as exc:
             raise BadMessage("rejected", str(exc)) from None
         self.server.accepted += 1

@@ -198,7 +198,7 @@ class UrDriverDds:
     def _command_input(self, reader: Any, topic: str, world: int) -> Callable[[], bool]:
         def apply(msg: Any) -> None:
             values = arm_command(self._arm, list(msg.data))
-            self._control.set_targets(world, self._arm, values, Source.ROS2)
+            self._control.command_targets(world, self._arm, values, Source.ROS2)
 
         def serve_one() -> bool:
             kind = self._tf.Float64MultiArray
