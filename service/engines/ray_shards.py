@@ -39,6 +39,7 @@ from service.core.errors import Unavailable
 from service.core.physics import configure
 from service.core.robot import load_robot
 from service.core.types import BatchState, Snapshot
+from service.engines.mirror import HostMirror
 from service.engines.sharding import (
     ShardPlan,
     StagedCommands,
@@ -175,7 +176,7 @@ class _Shard:
     lost: list[float] = field(default_factory=list)  # wall times at which the actor was lost
 
 
-class RayBatch(Batch, Restorable):
+class RayBatch(HostMirror, Batch, Restorable):
     """N worlds as k contiguous shards, each a Ray actor holding a WorldBatch.
 
     Implements the Batch protocol (service/core/types.py). `address` is as in `connect`; None uses
@@ -234,10 +235,7 @@ class RayBatch(Batch, Restorable):
         # (driver wall seconds, slowest shard's own seconds) of the last step: the difference is
         # what the Ray round trip costs per tick (bench/ray_bench.py reports it).
         self.last_step: tuple[float, float] = (0.0, 0.0)
-        self._tick = 0
-        self._targets = np.tile(self.home_target, (nworld, 1))
-        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
-        self._faults = np.zeros(nworld, dtype=np.int64)
+        self._init_mirror(nworld)  # the faults are kept here: a rebuilt shard keeps its history
         self._staged = StagedCommands(shards)
         self._asked = (-1, -1)  # ticks of the last two snapshot() calls
         self.prefetched = 0  # snapshots that came with their step (diagnostics, bench)
@@ -255,33 +253,19 @@ class RayBatch(Batch, Restorable):
         """The shards' actor handles, in shard order (diagnostics and fault-injection tests)."""
         return [s.actor for s in self._shards]
 
-    @property
-    def tick(self) -> int:
-        return self._tick
-
-    @property
-    def targets(self) -> np.ndarray:
-        return self._targets.copy()
-
     # -- commands: staged per shard, sent with the next step ---------------------------------
 
     def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
-        worlds = np.asarray(worlds, dtype=np.int64)
-        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        self._velocity[worlds] = 0.0 if velocities is None else velocities
-        for i, local_ids in enumerate(self._plan.split(worlds)):
-            self._staged.targets(i, local_ids)
+        self._staged.targets_of(self._plan.split(self._command(worlds, targets, velocities)))
 
     def reset(self, worlds: np.ndarray) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
         if worlds.size == 0:
             return
-        self._targets[worlds] = self.home_target
-        self._velocity[worlds] = 0.0
-        for i, local_ids in enumerate(self._plan.split(worlds)):
-            self._staged.reset(i, local_ids)
+        self._home(worlds)
+        self._staged.resets_of(self._plan.split(worlds))
 
     # -- stepping ---------------------------------------------------------------------------
 
@@ -311,12 +295,11 @@ class RayBatch(Batch, Restorable):
             slowest = max(slowest, spent)
             faulted.append(local + self._plan.starts[i])
         self.last_step = (time.perf_counter() - t0, slowest)
-        self._tick += ticks
+        self._advance(ticks)
         self._checkpoint()
         out = np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
-        self._targets[out] = self.home_target
-        self._velocity[out] = 0.0
-        np.add.at(self._faults, out, 1)
+        self._home(out)
+        self._count_faults(out)
         return out
 
     def _checkpoint(self) -> None:
@@ -507,10 +490,7 @@ class RayBatch(Batch, Restorable):
             ray.get(refs)
         except RayActorError as exc:
             raise Unavailable(f"set_state: a Ray shard was lost ({exc}); try again") from exc
-        self._tick = int(state.tick)
-        self._targets = np.array(state.targets, dtype=np.float64)
-        self._velocity = np.zeros_like(self._targets)
-        self._faults = np.array(state.faults, dtype=np.int64)
+        self._restore_mirror(state)
         self._prefetch, self._asked = None, (-1, -1)
         self._checkpoint_refs = None  # copies of the replaced state
         parts = ray.get([s.actor.snapshot.remote() for s in self._shards])

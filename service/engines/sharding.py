@@ -82,6 +82,16 @@ class StagedCommands:
             self._resets[shard] = np.union1d(self._resets[shard], local_ids)
             self._dirty[shard] = np.setdiff1d(self._dirty[shard], local_ids)
 
+    def targets_of(self, parts: Sequence[np.ndarray], first: int = 0) -> None:
+        """`targets` for each shard's part of a command (`ShardPlan.split`), from shard `first`."""
+        for shard, local_ids in enumerate(parts, start=first):
+            self.targets(shard, local_ids)
+
+    def resets_of(self, parts: Sequence[np.ndarray], first: int = 0) -> None:
+        """`reset` for each shard's part of a reset (`ShardPlan.split`), from shard `first`."""
+        for shard, local_ids in enumerate(parts, start=first):
+            self.reset(shard, local_ids)
+
     def take(self, shard: int) -> tuple[np.ndarray, np.ndarray]:
         """(resets, dirty) local ids for the shard's next step; the shard's stage is emptied."""
         out = self._resets[shard], self._dirty[shard]

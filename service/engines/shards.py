@@ -13,7 +13,6 @@ import contextlib
 import dataclasses
 import logging
 import multiprocessing as mp
-import os
 import threading
 import time
 from multiprocessing.connection import Connection
@@ -23,6 +22,8 @@ import numpy as np
 
 from service.core.batch import Batch, Restorable, Supervised
 from service.core.types import BatchState, Snapshot
+from service.engines.cores import usable_cores
+from service.engines.mirror import HostMirror
 from service.engines.sharding import (
     ShardPlan,
     StagedCommands,
@@ -64,8 +65,7 @@ def auto_shards(nworld: int, device: str) -> int:
     """How many shards to use: one per core on the CPU when the batch is big enough."""
     if not device.startswith("cpu"):
         return 1
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, min(cores or 1, nworld // MIN_WORLDS_PER_SHARD))
+    return max(1, min(usable_cores(), nworld // MIN_WORLDS_PER_SHARD))
 
 
 def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
@@ -121,7 +121,7 @@ def _ready_reply(conn: Connection) -> tuple[Any, ...]:
         return ("error", "worker exited while building its shard")
 
 
-class ShardedBatch(Batch, Restorable, Supervised):
+class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
     def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
@@ -145,8 +145,7 @@ class ShardedBatch(Batch, Restorable, Supervised):
         self.robot = self._local.robot
         for name in _FACTS_OF_LOCAL:  # every shard is built alike: the local one speaks for all
             setattr(self, name, getattr(self._local, name))
-        self._targets = np.tile(self.home_target, (nworld, 1))
-        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
+        self._init_mirror(nworld)  # its tick and faults are the shards' own
         self._staged = StagedCommands(shards)
         # Losing a worker (killed, crashed): its worlds pause, showing their last state, while
         # the others go on; a new worker is built in the background and swapped in at a tick
@@ -169,36 +168,26 @@ class ShardedBatch(Batch, Restorable, Supervised):
     def tick(self) -> int:
         return self._local.tick
 
-    @property
-    def targets(self) -> np.ndarray:
-        return self._targets.copy()
-
     def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
         """The local shard gets its targets now, worker shards with their next step."""
-        worlds = np.asarray(worlds, dtype=np.int64)
-        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        self._velocity[worlds] = 0.0 if velocities is None else velocities
-        parts = self._plan.split(worlds)
+        parts = self._plan.split(self._command(worlds, targets, velocities))
         if parts[0].size:
             vel = self._velocity[parts[0]]
             self._local.apply_targets(
                 parts[0], self._targets[parts[0]], vel if velocities is not None else None
             )
-        for i, local_ids in enumerate(parts[1:], start=1):
-            self._staged.targets(i, local_ids)
+        self._staged.targets_of(parts[1:], first=1)
 
     def reset(self, worlds: np.ndarray) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
         if worlds.size == 0:
             return
-        self._targets[worlds] = self.home_target
-        self._velocity[worlds] = 0.0
+        self._home(worlds)
         parts = self._plan.split(worlds)
         self._local.reset(parts[0])
-        for i, local_ids in enumerate(parts[1:], start=1):
-            self._staged.reset(i, local_ids)
+        self._staged.resets_of(parts[1:], first=1)
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance all live shards together; returns the (global) worlds reset for faults."""
@@ -223,8 +212,7 @@ class ShardedBatch(Batch, Restorable, Supervised):
                 self._lost(i, self._exit_reason(i))
         self._copy_states(sent)
         out = np.concatenate(faulted)
-        self._targets[out] = self.home_target
-        self._velocity[out] = 0.0
+        self._home(out)
         return out
 
     def snapshot(self) -> Snapshot:
@@ -282,8 +270,7 @@ class ShardedBatch(Batch, Restorable, Supervised):
         errors = [err for err in (conn.recv() for conn in self._conns) if err]
         if errors:  # cannot happen after the check above; say so loudly if it does
             raise RuntimeError(f"shard refused a checked state: {errors[0]}")
-        self._targets = np.array(state.targets, dtype=np.float64)
-        self._velocity = np.zeros_like(self._targets)
+        self._restore_mirror(state)
 
     def qpos(self) -> np.ndarray:
         return self._gather_qpos()[0]

@@ -27,11 +27,12 @@ from service.core.types import Snapshot
 from service.core.worlds import world_list
 from service.surfaces.ros import topics
 from service.surfaces.ros.discovery import LOOPBACK_CONFIG, DdsConfig, choose_config
+from service.surfaces.ros.qos import reliable_qos
 from service.surfaces.ros.topics import BadMessageCounter, TopicMap
 from service.surfaces.ros.ur_dds import ur_topics
 
 if TYPE_CHECKING:
-    from service.runtime import Runtime
+    from service.core.surface import SurfaceContext
 
 log = logging.getLogger("armfleet.ros2")
 
@@ -43,11 +44,10 @@ NODE_NAME = "armfleet"  # how ROS 2 tools name the bridge (`ros2 node list` show
 _READER_DEPTH = 1000
 _TAKE_BATCH = 64
 _MATCH_CHECK_S = 0.5  # a new subscriber gets its first state within this
-_WRITE_BLOCK_S = 0.01  # a reliable write never holds the publisher thread longer than this
 
 
 class DdsBridge:
-    """Runtime surface: `start(runtime)` joins the graph, `stop()` leaves it."""
+    """A surface: `start(ctx)` joins the graph, `stop()` leaves it."""
 
     name = "ros2"
 
@@ -72,7 +72,7 @@ class DdsBridge:
 
     # -- life cycle -------------------------------------------------------------------------
 
-    def start(self, runtime: Runtime) -> None:
+    def start(self, ctx: SurfaceContext) -> None:
         from cyclonedds.core import (
             GuardCondition,
             InstanceState,
@@ -88,8 +88,7 @@ class DdsBridge:
 
         from service.surfaces.ros import msgs
 
-        loop, control = runtime.loop, runtime.control
-        assert loop is not None and control is not None
+        loop, control = ctx.loop, ctx.control
         self._control = control
         self._joints = tuple(loop.spec.names)
         self._joint_list = list(self._joints)
@@ -109,22 +108,22 @@ class DdsBridge:
         self._readers: list[tuple[Any, str, int]] = []
         for name, world in self.topics.command_topics().items():
             r = DataReader(
-                dp, topic(name, msgs.JointState), qos=_qos(_READER_DEPTH, accept_xcdr2=True)
+                dp, topic(name, msgs.JointState), qos=reliable_qos(_READER_DEPTH, accept_xcdr2=True)
             )
             self._entities.append(r)
             self._readers.append((r, name, world))
         self._writers: list[tuple[Any, int]] = []
         for name, world in self.topics.state_topics().items():
-            w = DataWriter(dp, topic(name, msgs.JointState), qos=_qos(10))
+            w = DataWriter(dp, topic(name, msgs.JointState), qos=reliable_qos(10))
             self._entities.append(w)
             self._writers.append((w, world))
         self._listened = topics.ListenedWriters(self._writers, _MATCH_CHECK_S)
-        self._clock = DataWriter(dp, topic(topics.CLOCK_TOPIC, msgs.Clock), qos=_qos(1))
+        self._clock = DataWriter(dp, topic(topics.CLOCK_TOPIC, msgs.Clock), qos=reliable_qos(1))
         self._entities.append(self._clock)
         self._msgs = msgs
         from service.surfaces.ros.ur_dds import UrDriverDds
 
-        self.ur = UrDriverDds(dp, runtime, self.topics, self.bad)
+        self.ur = UrDriverDds(dp, ctx, self.topics, self.bad)
         self._announce_node(dp, msgs)
 
         self._waitset = WaitSet(dp)
@@ -298,22 +297,3 @@ class DdsBridge:
             )
             self.published += 1
         self.ur.write(snap, stamp)
-
-
-def _qos(depth: int, accept_xcdr2: bool = False) -> Any:
-    """rclpy's default QoS (RELIABLE, VOLATILE, KEEP_LAST depth) in plain CDR (XCDR1).
-
-    XCDR1 is what ROS 2 Humble writes and reads (XCDR2 lays the string sequence out
-    differently), so writers offer only that; readers also take XCDR2 from newer peers.
-    """
-    from cyclonedds.qos import Policy, Qos
-    from cyclonedds.util import duration
-
-    return Qos(
-        Policy.Reliability.Reliable(max_blocking_time=duration(seconds=_WRITE_BLOCK_S)),
-        Policy.Durability.Volatile,
-        Policy.History.KeepLast(depth),
-        Policy.DataRepresentation(
-            use_cdrv0_representation=True, use_xcdrv2_representation=accept_xcdr2
-        ),
-    )

@@ -17,13 +17,16 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from service.core.control import Source
 from service.surfaces.ros import topics
 from service.surfaces.ros.tf_frames import FrameTree
 from service.surfaces.ros.topics import BadMessageCounter, TopicMap
 from service.surfaces.ros.urdf import generate
+
+if TYPE_CHECKING:
+    from service.core.surface import SurfaceContext
 
 FORWARD_COMMANDS = "forward_position_controller/commands"
 STRING_TYPE = "std_msgs/msg/String"
@@ -77,17 +80,17 @@ def arm_command(arm_joints: list[str], data: list[float]) -> list[float]:
 class UrDriverDds:
     """The UR driver's topics (and actions) on an existing DDS participant."""
 
-    def __init__(self, dp: Any, runtime: Any, topic_map: TopicMap, bad: BadMessageCounter):
+    def __init__(self, dp: Any, ctx: SurfaceContext, topic_map: TopicMap, bad: BadMessageCounter):
         from cyclonedds import core
         from cyclonedds.pub import DataWriter
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
         from service.surfaces.ros import msgs, msgs_tf
-        from service.surfaces.ros.dds import _qos
+        from service.surfaces.ros.qos import reliable_qos
 
-        loop = runtime.loop
-        self._control = runtime.control
+        loop = ctx.loop
+        self._control = ctx.control
         self._bad = bad
         self._msgs, self._tf = msgs, msgs_tf
         self.received = 0
@@ -125,9 +128,13 @@ class UrDriverDds:
                 msgs_tf.String(data=self.urdf)
             )
             writer(f"{ns}/tf_static", msgs_tf.TFMessage, latched_qos()).write(static)
-            self._tf_writers.append((writer(f"{ns}/tf", msgs_tf.TFMessage, _qos(100)), world))
+            self._tf_writers.append(
+                (writer(f"{ns}/tf", msgs_tf.TFMessage, reliable_qos(100)), world)
+            )
             name = f"{ns}/{FORWARD_COMMANDS}"
-            r = DataReader(dp, topic(name, msgs_tf.Float64MultiArray), qos=_qos(_READER_DEPTH))
+            r = DataReader(
+                dp, topic(name, msgs_tf.Float64MultiArray), qos=reliable_qos(_READER_DEPTH)
+            )
             self._entities.append(r)
             self.readers.append(r)
             self._commands.append(r)
