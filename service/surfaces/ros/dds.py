@@ -27,7 +27,7 @@ from service.core.types import Snapshot
 from service.core.worlds import world_list
 from service.surfaces.ros import topics
 from service.surfaces.ros.discovery import LOOPBACK_CONFIG, DdsConfig, choose_config
-from service.surfaces.ros.qos import reliable_qos
+from service.surfaces.ros.qos import rclpy_default as _qos
 from service.surfaces.ros.topics import BadMessageCounter, TopicMap
 from service.surfaces.ros.ur_dds import ur_topics
 
@@ -108,17 +108,17 @@ class DdsBridge:
         self._readers: list[tuple[Any, str, int]] = []
         for name, world in self.topics.command_topics().items():
             r = DataReader(
-                dp, topic(name, msgs.JointState), qos=reliable_qos(_READER_DEPTH, accept_xcdr2=True)
+                dp, topic(name, msgs.JointState), qos=_qos(_READER_DEPTH, accept_xcdr2=True)
             )
             self._entities.append(r)
             self._readers.append((r, name, world))
         self._writers: list[tuple[Any, int]] = []
         for name, world in self.topics.state_topics().items():
-            w = DataWriter(dp, topic(name, msgs.JointState), qos=reliable_qos(10))
+            w = DataWriter(dp, topic(name, msgs.JointState), qos=_qos(10))
             self._entities.append(w)
             self._writers.append((w, world))
         self._listened = topics.ListenedWriters(self._writers, _MATCH_CHECK_S)
-        self._clock = DataWriter(dp, topic(topics.CLOCK_TOPIC, msgs.Clock), qos=reliable_qos(1))
+        self._clock = DataWriter(dp, topic(topics.CLOCK_TOPIC, msgs.Clock), qos=_qos(1))
         self._entities.append(self._clock)
         self._msgs = msgs
         from service.surfaces.ros.ur_dds import UrDriverDds

@@ -1,4 +1,4 @@
-"""DDS quality of service as ROS 2 nodes use it, for every writer and reader of the bridge."""
+"""The DDS QoS profiles ROS 2 nodes use, in the terms of the cyclonedds Python API."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Any
 _WRITE_BLOCK_S = 0.01  # a reliable write never holds the publisher thread longer than this
 
 
-def reliable_qos(depth: int, accept_xcdr2: bool = False) -> Any:
+def rclpy_default(depth: int, accept_xcdr2: bool = False) -> Any:
     """rclpy's default QoS (RELIABLE, VOLATILE, KEEP_LAST depth) in plain CDR (XCDR1).
 
     XCDR1 is what ROS 2 Humble writes and reads (XCDR2 lays the string sequence out
@@ -23,4 +23,17 @@ def reliable_qos(depth: int, accept_xcdr2: bool = False) -> Any:
         Policy.DataRepresentation(
             use_cdrv0_representation=True, use_xcdrv2_representation=accept_xcdr2
         ),
+    )
+
+
+def latched() -> Any:
+    """Reliable, transient-local, depth 1: what robot_state_publisher and tf2's static
+    broadcaster offer, so a node that starts later still gets the description and frames."""
+    from cyclonedds.qos import Policy, Qos
+
+    return Qos(
+        Policy.Reliability.Reliable(max_blocking_time=0),
+        Policy.Durability.TransientLocal,
+        Policy.History.KeepLast(1),
+        Policy.DataRepresentation(use_cdrv0_representation=True),
     )

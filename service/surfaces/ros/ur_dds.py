@@ -51,19 +51,6 @@ def ur_topics(topic_map: TopicMap) -> dict[str, str]:
     return out
 
 
-def latched_qos() -> Any:
-    """Reliable, transient-local, depth 1: what robot_state_publisher and tf2's static
-    broadcaster offer, so a node that starts later still gets the description and frames."""
-    from cyclonedds.qos import Policy, Qos
-
-    return Qos(
-        Policy.Reliability.Reliable(max_blocking_time=0),
-        Policy.Durability.TransientLocal,
-        Policy.History.KeepLast(1),
-        Policy.DataRepresentation(use_cdrv0_representation=True),
-    )
-
-
 def arm_command(arm_joints: list[str], data: list[float]) -> list[float]:
     """forward_position_controller's rule: exactly one finite position per arm joint."""
     if len(data) != len(arm_joints):
@@ -87,7 +74,8 @@ class UrDriverDds:
         from cyclonedds.topic import Topic
 
         from service.surfaces.ros import msgs, msgs_tf
-        from service.surfaces.ros.qos import reliable_qos
+        from service.surfaces.ros.qos import latched as latched_qos
+        from service.surfaces.ros.qos import rclpy_default as _qos
 
         loop = ctx.loop
         self._control = ctx.control
@@ -128,13 +116,9 @@ class UrDriverDds:
                 msgs_tf.String(data=self.urdf)
             )
             writer(f"{ns}/tf_static", msgs_tf.TFMessage, latched_qos()).write(static)
-            self._tf_writers.append(
-                (writer(f"{ns}/tf", msgs_tf.TFMessage, reliable_qos(100)), world)
-            )
+            self._tf_writers.append((writer(f"{ns}/tf", msgs_tf.TFMessage, _qos(100)), world))
             name = f"{ns}/{FORWARD_COMMANDS}"
-            r = DataReader(
-                dp, topic(name, msgs_tf.Float64MultiArray), qos=reliable_qos(_READER_DEPTH)
-            )
+            r = DataReader(dp, topic(name, msgs_tf.Float64MultiArray), qos=_qos(_READER_DEPTH))
             self._entities.append(r)
             self.readers.append(r)
             self._commands.append(r)
