@@ -38,6 +38,13 @@ from clients.models import (
     SimStatus,
     WorldState,
 )
+from clients.trajectory import (
+    TrajectoriesStarted,
+    TrajectoryStarted,
+    TrajectoryStatus,
+    point,
+    tolerance,
+)
 
 __all__ = [
     "ArmfleetClient",
@@ -59,7 +66,12 @@ __all__ = [
     "PayloadTooLarge",
     "ResetResult",
     "SimStatus",
+    "TrajectoriesStarted",
+    "TrajectoryStarted",
+    "TrajectoryStatus",
     "Unreachable",
     "WorldSession",
     "WorldState",
+    "point",
+    "tolerance",
 ]

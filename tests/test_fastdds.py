@@ -23,7 +23,7 @@ import pytest
 
 from service.surfaces.ros import topics
 from tests.conftest import ELBOW, FINGER, JOINTS, Server, node_armfleet, serve, wait_for
-from tests.fastdds_peer import FastDdsPeer, PeerUnavailable, build
+from tests.fastdds_peer import FastDdsPeer, built_or_skip
 
 COMMANDS = ("/joint_commands", "/world_1/joint_commands")
 STATES = ("/joint_states", "/world_1/joint_states", "/clock")
@@ -32,10 +32,7 @@ LOCALHOST_ONLY = {"ROS_LOCALHOST_ONLY": "1"}
 
 @pytest.fixture(scope="module")
 def peer_binary() -> Path:
-    try:
-        return build()
-    except PeerUnavailable as exc:
-        pytest.skip(str(exc))
+    return built_or_skip()
 
 
 @pytest.fixture(scope="module")

@@ -49,7 +49,10 @@ async def world_socket(
         return await _refuse(ws, _CLOSE_POLICY, exc.detail)
     names = loop.spec.names
     sub = Subscription(
-        np.array([world]), rate, lambda s: wire.single_frame(s, world, names), "single"
+        np.array([world]),
+        rate,
+        lambda s: wire.single_frame(s, world, names, control.trajectories.brief(world)),
+        "single",
     )
     await _serve(ws, loop, control, hub, sub, default_world=world)
 
@@ -80,7 +83,10 @@ async def batch_socket(
             ids, rate, lambda s: wire.batch_frame_binary(s, ids, names), "binary", binary=True
         )
     else:
-        sub = Subscription(ids, rate, lambda s: wire.batch_frame(s, ids, names), "batch")
+        briefs = control.trajectories.briefs
+        sub = Subscription(
+            ids, rate, lambda s: wire.batch_frame(s, ids, names, briefs(ids)), "batch"
+        )
     await _serve(ws, loop, control, hub, sub, default_world=None)
 
 
@@ -159,6 +165,7 @@ async def view_socket(
             "mode": st.mode.value,
             "ticks_per_s": st.ticks_per_s,
             "realtime_factor": st.realtime_factor,
+            "trajectory": None if focus is None else control.trajectories.brief(focus),
         }
         return wire.pose_frame(snap, ids, names, focus, stats)
 

@@ -25,6 +25,7 @@ from service.core.errors import ArmfleetError, BadCommand, UnknownWorld
 from service.core.loop import CommandResult, SimLoop
 from service.core.schemas import IncrementRequest, JointTargets
 from service.core.trajectory import JointTrajectorySpec, Started, TrajectoryStatus
+from service.core.trajectory import ops as trajectory_ops
 from service.core.trajectory.manager import TrajectoryManager
 from service.core.types import Mode, RobotSpec
 
@@ -283,6 +284,8 @@ class Control:
             elif op == "set_targets":
                 req_t = JointTargets.model_validate(body)
                 result = self.command_targets(world, req_t.name, req_t.position, source)
+            elif op in trajectory_ops.OPS:
+                return trajectory_ops.handle(self, op, msg_id, world, body, source)
             elif op == "reset":
                 if body:
                     extra = next(iter(body))
@@ -298,7 +301,7 @@ class Control:
             return wire.error_frame(msg_id, validation_detail(exc))
 
 
-_OPS = ("increment", "reset", "set_targets")
+_OPS = ("increment", "reset", "set_targets", *trajectory_ops.OPS)
 
 
 def validation_detail(exc: ValidationError) -> str:

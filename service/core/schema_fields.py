@@ -77,7 +77,7 @@ def _joint_ref(value: object) -> str | int:
     return _joint_key(value)
 
 
-class _LazyJsonSchema:
+class LazyJsonSchema:
     """`WithJsonSchema`, but the schema is made when the document is built (it names joints)."""
 
     def __init__(self, make: Callable[[], dict[str, Any]]) -> None:
@@ -90,7 +90,7 @@ class _LazyJsonSchema:
 JointKey = Annotated[
     str,
     PlainValidator(_joint_key),
-    _LazyJsonSchema(
+    LazyJsonSchema(
         lambda: {
             "type": "string",
             "enum": list(_joint_keys()),
@@ -101,7 +101,7 @@ JointKey = Annotated[
 JointRef = Annotated[
     str | int,
     PlainValidator(_joint_ref),
-    _LazyJsonSchema(
+    LazyJsonSchema(
         lambda: {
             "anyOf": [
                 {"type": "string", "enum": list(joint_names())},

@@ -81,12 +81,22 @@ def states(
     return {"tick": snap.tick, "worlds": rows}
 
 
-def single_frame(snap: Snapshot, world: int, names: list[str]) -> bytes:
-    return dumps({"op": "state", **world_state(snap, world, names)})
+def single_frame(
+    snap: Snapshot, world: int, names: list[str], trajectory: dict[str, Any] | None = None
+) -> bytes:
+    """One world's state frame; `trajectory`: its trajectory's id, state, reason, progress."""
+    return dumps({"op": "state", **world_state(snap, world, names), "trajectory": trajectory})
 
 
-def batch_frame(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> bytes:
-    """Many worlds in one frame, column-wise (row i of each array belongs to worlds[i])."""
+def batch_frame(
+    snap: Snapshot,
+    worlds: np.ndarray,
+    names: list[str],
+    trajectories: dict[str, Any] | None = None,
+) -> bytes:
+    """Many worlds in one frame, column-wise (row i of each array belongs to worlds[i]);
+    `trajectories`: world id → its trajectory's id, state, reason, progress (those that ran one).
+    """
     return dumps(
         {
             "op": "states",
@@ -101,6 +111,7 @@ def batch_frame(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> bytes:
             "flange_position": snap.flange_pos[worlds],
             "flange_quaternion": snap.flange_quat[worlds],
             "faults": snap.faults[worlds],
+            "trajectories": trajectories or {},
         }
     )
 

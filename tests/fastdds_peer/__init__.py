@@ -65,6 +65,16 @@ def build(root: Path = ROOT, say: Any = None) -> Path:
     return binary
 
 
+def built_or_skip() -> Path:
+    """For test fixtures: the binary, or the test skipped naming what is missing."""
+    import pytest
+
+    try:
+        return build()
+    except PeerUnavailable as exc:
+        pytest.skip(str(exc))
+
+
 def _run(cmd: list[str], cwd: Path) -> None:
     done = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
     if done.returncode:

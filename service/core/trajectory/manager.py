@@ -7,10 +7,10 @@ so "a button press after the trajectory stops it" means after in acceptance orde
 
 Per tick (sim thread): `sample` writes every running trajectory's desired positions and
 velocity feed-forward into the loop's pending tables (one vectorised pass, `TrajectoryTable`);
-`after_step` aborts trajectories of faulted worlds and completes those that reached their end;
-`observe` (when a snapshot of the tick is taken, which `after_step` asks for while tolerances
-are checked) compares actual with desired. Outcomes are handed to listeners and futures by
-`dispatch`, outside the lock.
+`after_step` aborts trajectories of faulted worlds and asks for a snapshot of the tick while any
+tolerance is checked or any trajectory has reached its end; `observe`, on that snapshot, records
+feedback, checks tolerances and finishes what reached its end. Outcomes are handed to listeners
+and futures by `dispatch`, outside the lock.
 
 An aborted or cancelled trajectory holds: the world keeps the last desired position as its
 target, with zero velocity feed-forward. Manual commands and resets abort; so does a restore.
@@ -26,6 +26,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -125,6 +126,16 @@ class TrajectoryManager:
             run = self._finished.get(traj_id)
             return None if run is None else run.status
 
+    def brief(self, world: int) -> dict[str, Any] | None:
+        """id, state, reason and progress of the world's running (else last) trajectory."""
+        status = self.status(world)
+        return None if status is None else status.brief()
+
+    def briefs(self, worlds: np.ndarray) -> dict[str, dict[str, Any]]:
+        """`brief` of those of `worlds` that have run a trajectory, keyed by world id (str)."""
+        known = np.intersect1d(np.fromiter(self._by_world, dtype=np.int64), worlds)
+        return {str(w): b for w in known.tolist() if (b := self.brief(w)) is not None}
+
     def running_worlds(self) -> np.ndarray:
         return self.table.worlds.copy()
 
@@ -171,7 +182,7 @@ class TrajectoryManager:
         self._last, self._last_vel, self._last_tick = s.positions, s.velocities, tick
 
     def after_step(self, tick: int, faulted: np.ndarray, st: Staging) -> bool:
-        """After tick `tick`: abort faulted worlds' runs, finish ended ones; want a snapshot?
+        """After tick `tick`: abort faulted worlds' runs; is a snapshot of the tick needed?
 
         Vectorised over slots: no per-trajectory Python work unless one finishes.
         """
@@ -181,9 +192,9 @@ class TrajectoryManager:
             self._abort(st, faulted, AbortReason.FAULT, "the world's physics failed; reset")
             st.velocity[faulted] = 0.0
         t = self.table
-        ended = tick >= t.end_tick
-        self._succeed(st, t.worlds[ended & ~t.has_goal], tick)
-        return bool(t.has_path.any() or (t.has_goal & (tick >= t.end_tick)).any())
+        # Ended runs finish in `observe`, on this tick's snapshot, so their final status
+        # carries the feedback of the end tick.
+        return bool(t.has_path.any() or (tick >= t.end_tick).any())
 
     def observe(self, snap: Snapshot, st: Staging) -> None:
         """Feedback and tolerance checks against the snapshot of the tick last sampled."""
@@ -195,9 +206,9 @@ class TrajectoryManager:
         self._feedback = (snap.tick, t.ids.copy(), self._last.copy(), actual.astype(np.float64))
         running = snap.tick < t.end_tick
         path_bad = running[:, None, None] & (err > t.path_tol)
-        goal_in = (err <= t.goal_tol).all(axis=(1, 2))
-        settling = ~running & t.has_goal
-        late = settling & ~goal_in & (snap.tick >= t.goal_deadline)
+        goal_in = (err <= t.goal_tol).all(axis=(1, 2))  # all true without a goal tolerance
+        settling = ~running
+        late = settling & t.has_goal & ~goal_in & (snap.tick >= t.goal_deadline)
         names = self.spec.names
         path = AbortReason.PATH_TOLERANCE, t.path_tol, "path"
         goal = AbortReason.GOAL_TOLERANCE, t.goal_tol, "goal"
