@@ -18,16 +18,15 @@ from service.core.types import NJOINT
 
 # Strict: numbers only ("0.1" and true are refused); ints are fine.
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
-Delta = Annotated[
-    float,
-    Field(
-        allow_inf_nan=False,
-        strict=True,
-        ge=-2 * math.pi,
-        le=2 * math.pi,
-        description="rad, |delta| <= 2π",
-    ),
-]
+
+
+def bounded_float(lo: float, hi: float, description: str) -> Any:
+    """A strict finite number in [lo, hi], the bounds stated in the schema too."""
+    field = Field(allow_inf_nan=False, strict=True, ge=lo, le=hi, description=description)
+    return Annotated[float, field]
+
+
+Delta = bounded_float(-2 * math.pi, 2 * math.pi, "rad, |delta| <= 2π")
 
 
 def paired(keys_name: str, keys: list, values_name: str, values: list) -> None:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
-import multiprocessing as mp
 import threading
 import time
 from multiprocessing.connection import Connection
@@ -24,11 +23,10 @@ from service.core.batch import Batch, Restorable, Supervised
 from service.core.types import BatchState, Snapshot
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
+from service.engines.shard_worker import ready_reply, spawn
 from service.engines.sharding import (
     ShardPlan,
     StagedCommands,
-    apply_and_step,
-    apply_targets,
     command_rows,
     join_snapshots,
     join_states,
@@ -68,59 +66,6 @@ def auto_shards(nworld: int, device: str) -> int:
     return max(1, min(usable_cores(), nworld // MIN_WORLDS_PER_SHARD))
 
 
-def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
-    """A shard's process: build the batch, then serve step/snapshot/reset/targets requests."""
-    try:
-        batch = WorldBatch(nworld, **kwargs)
-    except Exception as exc:  # report instead of leaving the parent waiting
-        conn.send(("error", f"{type(exc).__name__}: {exc}"))
-        return
-    conn.send(("ready", batch.compile_s, batch.capture_s, batch.capture_error))
-    while True:
-        try:
-            op, *args = conn.recv()
-        except EOFError:  # parent gone
-            return
-        if op == "step":
-            conn.send(apply_and_step(batch, *args))
-        elif op == "get_state":
-            resets, dirty, rows = args  # staged commands are part of the state
-            batch.reset(resets)
-            apply_targets(batch, dirty, rows)
-            conn.send(batch.get_state())
-        elif op == "set_state":
-            try:
-                batch.set_state(args[0])
-                conn.send(None)
-            except ValueError as exc:
-                conn.send(str(exc))
-        elif op == "snapshot":
-            conn.send(batch.snapshot())
-        elif op == "write_qpos":
-            batch.write_qpos(*args)
-        elif op == "qpos":
-            conn.send((batch.qpos(), batch.qvel()))
-        elif op == "stop":
-            return
-
-
-def _spawn(nworld: int, kwargs: dict[str, Any]) -> tuple[Any, Connection]:
-    """Start a worker process building `nworld` worlds; its first message says ready or not."""
-    ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
-    parent, child = ctx.Pipe()
-    proc = ctx.Process(target=_worker, args=(child, nworld, kwargs), daemon=True)
-    proc.start()
-    child.close()  # so that a dead worker shows up as EOFError, not a hang
-    return proc, parent
-
-
-def _ready_reply(conn: Connection) -> tuple[Any, ...]:
-    try:
-        return conn.recv()
-    except (EOFError, OSError):
-        return ("error", "worker exited while building its shard")
-
-
 class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
@@ -131,12 +76,12 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
         self._conns: list[Connection] = []
         self._procs: list[Any] = []
         for size in self._sizes[1:]:
-            proc, conn = _spawn(int(size), kwargs)
+            proc, conn = spawn(int(size), kwargs)
             self._conns.append(conn)
             self._procs.append(proc)
         self._local = WorldBatch(int(self._sizes[0]), **kwargs)  # builds while workers build
         for conn in self._conns:
-            reply = _ready_reply(conn)
+            reply = ready_reply(conn)
             if reply[0] == "error":
                 self.close()
                 raise RuntimeError(f"shard worker failed to start: {reply[1]}")
@@ -329,8 +274,8 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
     def _rebuild(self, i: int) -> None:
         """Build a new worker for shard i (off the sim thread); it is swapped in by _swap_in."""
         for attempt in range(1, 4):
-            proc, conn = _spawn(int(self._sizes[i]), self._kwargs)
-            reply = _ready_reply(conn)
+            proc, conn = spawn(int(self._sizes[i]), self._kwargs)
+            reply = ready_reply(conn)
             if reply[0] == "ready":
                 with self._health_lock:
                     self._replacements[i] = (proc, conn)

@@ -13,23 +13,22 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from service.core.schema_fields import LazyJsonSchema, Strict, WorldId, joint_names, json_int
+from service.core.schema_fields import (
+    FiniteFloat,
+    LazyJsonSchema,
+    Strict,
+    WorldId,
+    bounded_float,
+    joint_names,
+    json_int,
+)
 from service.core.trajectory.spec import MAX_DURATION_S, MAX_POINTS
 from service.core.types import NJOINT
 from service.core.worlds import WORLDS_PATTERN
 
 _N = NJOINT
-Number = Annotated[float, Field(allow_inf_nan=False, strict=True)]
-Seconds = Annotated[
-    float,
-    Field(
-        allow_inf_nan=False,
-        strict=True,
-        ge=0,
-        le=MAX_DURATION_S,
-        description=f"seconds, 0..{MAX_DURATION_S:g}",
-    ),
-]
+Number = FiniteFloat
+Seconds = bounded_float(0, MAX_DURATION_S, f"seconds, 0..{MAX_DURATION_S:g}")
 # The names come from the model when the document is built (importing compiles nothing).
 JointName = Annotated[str, LazyJsonSchema(lambda: {"type": "string", "enum": list(joint_names())})]
 _Strict = Strict
