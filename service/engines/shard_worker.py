@@ -10,7 +10,7 @@ import multiprocessing as mp
 from multiprocessing.connection import Connection
 from typing import Any
 
-from service.engines.sharding import apply_and_step, apply_targets
+from service.engines.sharding import apply_and_step, apply_rows
 from service.engines.warp import WorldBatch
 
 
@@ -32,7 +32,7 @@ def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
         elif op == "get_state":
             resets, dirty, rows = args  # staged commands are part of the state
             batch.reset(resets)
-            apply_targets(batch, dirty, rows)
+            apply_rows(batch, dirty, rows)
             conn.send(batch.get_state())
         elif op == "set_state":
             try:

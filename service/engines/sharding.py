@@ -107,7 +107,7 @@ def command_rows(targets: np.ndarray, velocity: np.ndarray, worlds: np.ndarray) 
     return np.concatenate([targets[worlds], vel], axis=1) if vel.any() else targets[worlds]
 
 
-def apply_targets(batch: WorldBatch, dirty: np.ndarray, rows: np.ndarray) -> None:
+def apply_rows(batch: WorldBatch, dirty: np.ndarray, rows: np.ndarray) -> None:
     """A shard's side of `command_rows`: targets, and feed-forward when the rows carry it."""
     if dirty.size:
         if rows.shape[1] > 7:
@@ -125,7 +125,7 @@ def apply_and_step(
     exactly like the same worlds inside one WorldBatch. Returns the shard's faulted local ids.
     """
     batch.reset(resets)
-    apply_targets(batch, dirty, rows)
+    apply_rows(batch, dirty, rows)
     return batch.step(ticks)
 
 
