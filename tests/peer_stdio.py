@@ -54,3 +54,27 @@ class PeerProcess:
     def close(self) -> None:
         self.proc.kill()
         self.proc.wait()
+
+
+class UrPeer(PeerProcess):
+    """tests/ros2_ur_peer.py in its own process, on DDS domain `domain` over loopback."""
+
+    def __init__(self, domain: int) -> None:
+        from service.surfaces.ros.dds import LOOPBACK_CONFIG
+
+        env = {"CYCLONEDDS_URI": LOOPBACK_CONFIG, "ROS_DOMAIN_ID": str(domain)}
+        super().__init__("tests.ros2_ur_peer", env)
+
+    def call(self, action: str, kind: str, service: str, request: dict, timeout: float = 15) -> Any:
+        """Call one of an action's services the rmw_cyclonedds way; the decoded reply."""
+        suffix = {"send_goal": "SendGoal", "get_result": "GetResult"}.get(service)
+        ros_type = f"{kind}_{suffix}" if suffix else "action_msgs/srv/CancelGoal"
+        reply = self.ask(
+            op="call",
+            service=f"{action}/_action/{service}",
+            type=ros_type,
+            request=request,
+            timeout=timeout,
+        )
+        assert reply is not None, f"no reply from {action} {service}"
+        return reply

@@ -383,8 +383,11 @@ def test_ros2_tools_see_node_armfleet_owning_its_endpoints(peer: Peer) -> None:
     }
     node = node_armfleet(peer.ask(op="discovery"), owned)
     # per namespace (root, world_1, world_2): joint_states, tf, tf_static, robot_description
-    # written, joint_commands and forward_position_controller/commands read; plus /clock
-    assert len(node["writers"]) == 3 * 4 + 1 and len(node["readers"]) == 3 * 2
+    # and 3 actions × (3 service replies + feedback + status) written; joint_commands,
+    # forward_position_controller/commands, 2 joint_trajectory topics and 3 actions × 3
+    # service requests read; plus /clock
+    assert len(node["writers"]) == 3 * (4 + 3 * 5) + 1
+    assert len(node["readers"]) == 3 * (4 + 3 * 3)
 
 
 def test_ros2_worlds_must_exist() -> None:

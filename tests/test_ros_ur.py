@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import random
-from collections.abc import Iterator
 from typing import Any
 
 import httpx
@@ -23,10 +22,9 @@ from urdf_parser_py.urdf import URDF
 
 from service.core.robot import load_robot
 from service.surfaces.ros import msgs, msgs_tf, urdf
-from service.surfaces.ros.dds import LOOPBACK_CONFIG
 from service.surfaces.ros.tf_frames import FrameTree
-from tests.conftest import JOINTS, Server, serve, wait_for
-from tests.peer_stdio import PeerProcess
+from tests.conftest import JOINTS, Server, wait_for
+from tests.peer_stdio import UrPeer
 from tests.ros2_types import serialize
 
 ROBOT = load_robot()
@@ -207,38 +205,6 @@ def test_message_bytes_match_rosbags() -> None:
 # -- a running server and an independent peer --------------------------------------------------
 
 
-class Peer(PeerProcess):
-    """tests/ros2_ur_peer.py in its own process."""
-
-    def __init__(self, domain: int) -> None:
-        env = {"CYCLONEDDS_URI": LOOPBACK_CONFIG, "ROS_DOMAIN_ID": str(domain)}
-        super().__init__("tests.ros2_ur_peer", env)
-
-
-@pytest.fixture(scope="module")
-def domain() -> int:
-    return random.SystemRandom().randrange(1, 233)
-
-
-@pytest.fixture(scope="module")
-def ros_server(tmp_path_factory: pytest.TempPathFactory, domain: int) -> Iterator[Server]:
-    extra = ("--ros2", "--ros2-worlds", "1", "--ros2-rate", "30")
-    log_dir = tmp_path_factory.mktemp("ros_ur")
-    with serve(
-        worlds=2, extra_args=extra, env={"ROS_DOMAIN_ID": str(domain)}, log_dir=log_dir
-    ) as s:
-        yield s
-
-
-@pytest.fixture(scope="module")
-def peer(ros_server: Server, domain: int) -> Iterator[Peer]:
-    p = Peer(domain)
-    try:
-        yield p
-    finally:
-        p.close()
-
-
 def _chain(messages: list[dict[str, Any]]) -> dict[str, np.ndarray]:
     """World pose of every frame from tf messages (what tf2's buffer does)."""
     parent_of: dict[str, tuple[str, np.ndarray]] = {}
@@ -258,29 +224,30 @@ def _chain(messages: list[dict[str, Any]]) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.parametrize("ns", ["", "/world_1"])
-def test_description_and_frames_match_the_arm(ros_server: Server, peer: Peer, ns: str) -> None:
+def test_description_and_frames_match_the_arm(ur_server: Server, ur_peer: UrPeer, ns: str) -> None:
     """A late joiner gets the URDF and the static frames (transient-local); `/tf` moves with
     the arm; the frames composed as tf2 does equal the URDF's kinematics at the published
     joint states and the service's own flange pose."""
     world = 1 if ns else 0
     wanted = [0.3, -1.2, 1.4, -1.9, -1.4, 0.6, 0.2]
     httpx.put(
-        f"{ros_server.url}/v1/worlds/{world}/targets", json={"name": JOINTS, "position": wanted}
+        f"{ur_server.url}/v1/worlds/{world}/targets", json={"name": JOINTS, "position": wanted}
     ).raise_for_status()
     text = wait_for(
-        lambda: peer.ask(
+        lambda: ur_peer.ask(
             op="latest", topic=f"{ns}/robot_description", type="std_msgs/msg/String", latched=True
         ),
         "/robot_description",
     )["data"]
     robot = URDF.from_xml_string(text)
     static = wait_for(
-        lambda: peer.ask(op="latest", topic=f"{ns}/tf_static", type=TF, latched=True), "tf_static"
+        lambda: ur_peer.ask(op="latest", topic=f"{ns}/tf_static", type=TF, latched=True),
+        "tf_static",
     )
 
     def settled() -> Any:
-        state = httpx.get(f"{ros_server.url}/v1/worlds/{world}/state").json()
-        moving = peer.ask(op="latest", topic=f"{ns}/tf", type=TF)
+        state = httpx.get(f"{ur_server.url}/v1/worlds/{world}/state").json()
+        moving = ur_peer.ask(op="latest", topic=f"{ns}/tf", type=TF)
         if moving is None or not np.allclose(state["position"], wanted, atol=2e-3):
             return None
         if np.any(np.abs(state["velocity"]) > 1e-3):
@@ -298,22 +265,22 @@ def test_description_and_frames_match_the_arm(ros_server: Server, peer: Peer, ns
     assert stamp["sec"] > 0 or stamp["nanosec"] > 0  # simulated time
 
 
-def test_forward_position_controller_moves_the_arm(ros_server: Server, peer: Peer) -> None:
+def test_forward_position_controller_moves_the_arm(ur_server: Server, ur_peer: UrPeer) -> None:
     topic, kind = "/world_1/forward_position_controller/commands", "std_msgs/msg/Float64MultiArray"
-    assert peer.ask(op="matched", topic=topic, type=kind, role="reader")
-    before = httpx.get(f"{ros_server.url}/v1/ros").json()["dds"]["rejected"]
-    target0 = httpx.get(f"{ros_server.url}/v1/worlds/0/state").json()["target"]
+    assert ur_peer.ask(op="matched", topic=topic, type=kind, role="reader")
+    before = httpx.get(f"{ur_server.url}/v1/ros").json()["dds"]["rejected"]
+    target0 = httpx.get(f"{ur_server.url}/v1/worlds/0/state").json()["target"]
     wanted = [0.1, -1.0, 1.0, -1.5, -1.5, 0.25]
-    peer.ask(op="publish", topic=topic, type=kind, msg={"data": [0.1] * 7})  # seven: refused
-    peer.ask(op="publish", topic=topic, type=kind, msg={"data": [*wanted[:5], math.nan]})
-    peer.ask(op="publish", topic=topic, type=kind, msg={"data": wanted})
+    ur_peer.ask(op="publish", topic=topic, type=kind, msg={"data": [0.1] * 7})  # seven: refused
+    ur_peer.ask(op="publish", topic=topic, type=kind, msg={"data": [*wanted[:5], math.nan]})
+    ur_peer.ask(op="publish", topic=topic, type=kind, msg={"data": wanted})
 
     def target() -> Any:
-        t = httpx.get(f"{ros_server.url}/v1/worlds/1/state").json()["target"]
+        t = httpx.get(f"{ur_server.url}/v1/worlds/1/state").json()["target"]
         return t if np.allclose(t[:6], wanted) else None
 
     assert wait_for(target, "world 1's arm targets")[6] is not None
-    rejected = httpx.get(f"{ros_server.url}/v1/ros").json()["dds"]["rejected"]
+    rejected = httpx.get(f"{ur_server.url}/v1/ros").json()["dds"]["rejected"]
     assert rejected.get("length_mismatch", 0) == before.get("length_mismatch", 0) + 1
     assert rejected.get("not_finite", 0) == before.get("not_finite", 0) + 1
-    assert httpx.get(f"{ros_server.url}/v1/worlds/0/state").json()["target"] == target0
+    assert httpx.get(f"{ur_server.url}/v1/worlds/0/state").json()["target"] == target0

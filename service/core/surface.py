@@ -24,7 +24,7 @@ from service.core.metrics import Metrics
 from service.core.settings import Settings
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)  # eq=False: hashed by identity (one per service)
 class SurfaceContext:
     """What a surface may use, nothing more (see the module docstring)."""
 

@@ -29,7 +29,7 @@ from service.surfaces.ros import topics
 from service.surfaces.ros.discovery import LOOPBACK_CONFIG, DdsConfig, choose_config
 from service.surfaces.ros.qos import rclpy_default as _qos
 from service.surfaces.ros.topics import BadMessageCounter, TopicMap
-from service.surfaces.ros.ur_dds import ur_topics
+from service.surfaces.ros.ur_dds import ur_actions, ur_topics
 
 if TYPE_CHECKING:
     from service.core.surface import SurfaceContext
@@ -216,6 +216,7 @@ class DdsBridge:
             "scope": cfg.scope if cfg else None,
             "rate_hz": self.rate,
             "topics": (self.topics.all_topics() | ur_topics(self.topics)) if self.topics else {},
+            "actions": ur_actions(self.topics) if self.topics else {},
             "commands_accepted": self.received + (self.ur.received if self._running else 0),
             "states_published": self.published,
             "rejected": self.bad.counts(),

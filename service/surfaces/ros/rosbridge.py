@@ -32,7 +32,8 @@ from service.core.errors import ArmfleetError
 from service.core.hub import StreamHub, Subscription
 from service.core.surface import SurfaceContext
 from service.core.types import Snapshot
-from service.surfaces.ros import topics
+from service.surfaces.ros import rosapi, rosbridge_actions, topics
+from service.surfaces.ros.rosbridge_base import ProtocolError, same_type, topic_name
 from service.surfaces.ros.topics import (
     CLOCK_TOPIC,
     CLOCK_TYPE,
@@ -45,38 +46,6 @@ from service.surfaces.ros.topics import (
 log = logging.getLogger("armfleet.rosbridge")
 
 _JOINT_STATE_FIELDS = frozenset({"header", "name", "position", "velocity", "effort"})
-_RULE = "=" * 80
-
-# Field lists of the message definitions (ros2/common_interfaces, rcl_interfaces), in the
-# `typedefs_full_text` layout rosapi uses: root type, then each dependency under `MSG: name`.
-_TIME_DEF = "int32 sec\nuint32 nanosec\n"
-_HEADER_DEF = "builtin_interfaces/Time stamp\nstring frame_id\n"
-TYPEDEFS = {
-    JOINT_STATE_TYPE: (
-        "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n"
-        f"float64[] effort\n\n{_RULE}\nMSG: std_msgs/Header\n{_HEADER_DEF}\n{_RULE}\n"
-        f"MSG: builtin_interfaces/Time\n{_TIME_DEF}"
-    ),
-    CLOCK_TYPE: (
-        f"builtin_interfaces/Time clock\n\n{_RULE}\nMSG: builtin_interfaces/Time\n{_TIME_DEF}"
-    ),
-}
-
-
-class ProtocolError(ValueError):
-    """Client input that gets a `status` error frame; nothing changes."""
-
-
-def _same_type(given: str, ros2_type: str) -> bool:
-    """rosbridge accepts `pkg/Type` and `pkg/msg/Type` for the same message."""
-    pkg, _, name = ros2_type.partition("/msg/")
-    return given in (ros2_type, f"{pkg}/{name}")
-
-
-def _topic_name(value: Any, what: str = "topic") -> str:
-    if not isinstance(value, str) or not value:
-        raise ProtocolError(f"{what}: a topic name (string) is required")
-    return value if value.startswith("/") else "/" + value
 
 
 @dataclass
@@ -113,6 +82,7 @@ class Session:
         assert ctx.hub is not None  # the service's context always has one
         self.ws = ws
         self.server = server
+        self.ctx = ctx
         self.loop = ctx.loop
         self.hub: StreamHub = ctx.hub
         self.control = ctx.control
@@ -167,7 +137,7 @@ class Session:
     # -- ops --------------------------------------------------------------------------------
 
     def op_advertise(self, msg: dict[str, Any]) -> None:
-        topic = _topic_name(msg.get("topic"))
+        topic = topic_name(msg.get("topic"))
         kind = msg.get("type")
         if not isinstance(kind, str):
             raise ProtocolError("type: a message type (string) is required")
@@ -176,12 +146,12 @@ class Session:
                 f"topic: armfleet takes commands on {list(self.server.topic_map.command_topics())}"
                 f", not {topic}"
             )
-        if not _same_type(kind, JOINT_STATE_TYPE):
+        if not same_type(kind, JOINT_STATE_TYPE):
             raise ProtocolError(f"type: {topic} carries {JOINT_STATE_TYPE}, not {kind!r}")
         self.advertised[topic] = kind
 
     def op_unadvertise(self, msg: dict[str, Any]) -> None:
-        topic = _topic_name(msg.get("topic"))
+        topic = topic_name(msg.get("topic"))
         if self.advertised.pop(topic, None) is None:
             raise ProtocolError(f"topic: {topic} was not advertised by this client")
 
@@ -192,7 +162,7 @@ class Session:
         if verdict != "ok":
             self.over_rate = verdict == "close"
             raise BadMessage("refused", self.limiter.detail)
-        topic = _topic_name(msg.get("topic"))
+        topic = topic_name(msg.get("topic"))
         world = self.server.topic_map.command_topics().get(topic)
         if world is None:
             raise ProtocolError(
@@ -217,10 +187,10 @@ class Session:
         self.server.accepted += 1
 
     def op_subscribe(self, msg: dict[str, Any]) -> None:
-        topic = _topic_name(msg.get("topic"))
+        topic = topic_name(msg.get("topic"))
         _, _, kind = self._renderer(topic)  # unknown topics fail here, before any change
         given = msg.get("type")
-        if given is not None and (not isinstance(given, str) or not _same_type(given, kind)):
+        if given is not None and (not isinstance(given, str) or not same_type(given, kind)):
             raise ProtocolError(f"type: {topic} carries {kind}, not {given!r}")
         throttle = msg.get("throttle_rate", 0)
         queue_length = msg.get("queue_length", 0)
@@ -236,7 +206,7 @@ class Session:
         self._deliver(topic, ids)
 
     def op_unsubscribe(self, msg: dict[str, Any]) -> None:
-        topic = _topic_name(msg.get("topic"))
+        topic = topic_name(msg.get("topic"))
         existing = self.subs.get(topic)
         if existing is None:
             return  # rosbridge ignores unsubscribing what was not subscribed
@@ -272,12 +242,12 @@ class Session:
             sub.offer(self.loop.latest, time.monotonic())  # the current state at once
 
     def op_call_service(self, msg: dict[str, Any]) -> None:
-        name = _topic_name(msg.get("service"), "service")
+        name = topic_name(msg.get("service"), "service")
         args = msg.get("args") or {}
         reply: dict[str, Any] = {"op": "service_response", "service": name}
         if msg.get("id") is not None:
             reply["id"] = msg["id"]
-        service = _SERVICES.get(name)
+        service = rosapi.SERVICES.get(name)
         if service is None:
             self.server.bad.report("unknown_service", name, "no such service")
             self._reply({**reply, "values": f"Service {name} does not exist", "result": False})
@@ -292,32 +262,6 @@ class Session:
 
     def op_set_level(self, msg: dict[str, Any]) -> None:
         """Accepted and ignored: armfleet's status frames are errors only."""
-
-    # -- services ---------------------------------------------------------------------------
-
-    def srv_topics(self, args: Any) -> dict[str, Any]:
-        table = self.server.topic_map.all_topics()
-        return {"topics": list(table), "types": list(table.values())}
-
-    def srv_topics_and_raw_types(self, args: Any) -> dict[str, Any]:
-        table = self.server.topic_map.all_topics()
-        return {
-            "topics": list(table),
-            "types": list(table.values()),
-            "typedefs_full_text": [TYPEDEFS[t] for t in table.values()],
-        }
-
-    def srv_topic_type(self, args: Any) -> dict[str, Any]:
-        topic = args[0] if isinstance(args, list) and args else args.get("topic")
-        name = _topic_name(topic, "args.topic")
-        return {"type": self.server.topic_map.all_topics().get(name, "")}
-
-    def srv_get_time(self, args: Any) -> dict[str, Any]:
-        sec, nanosec = topics.stamp(topics.sim_seconds(self.loop.latest, self.tick_dt))
-        return {"time": {"sec": sec, "nanosec": nanosec}}
-
-    def srv_get_ros_version(self, args: Any) -> dict[str, Any]:
-        return {"version": 2, "distro": "humble"}
 
     # -- outbound ---------------------------------------------------------------------------
 
@@ -365,6 +309,7 @@ class Session:
                     await self.ws.send_text(self.hub.frame(sub, snap).decode())
 
     def close(self) -> None:
+        rosbridge_actions.close(self)
         for entry in self.subs.values():
             self.hub.remove(entry.hub_sub)
         self.subs.clear()
@@ -378,12 +323,6 @@ _OPS: dict[str, Callable[[Session, dict[str, Any]], None]] = {
     "unsubscribe": Session.op_unsubscribe,
     "call_service": Session.op_call_service,
     "set_level": Session.op_set_level,
-}
-
-_SERVICES: dict[str, Callable[[Session, Any], dict[str, Any]]] = {
-    "/rosapi/topics": Session.srv_topics,
-    "/rosapi/topics_and_raw_types": Session.srv_topics_and_raw_types,
-    "/rosapi/topic_type": Session.srv_topic_type,
-    "/rosapi/get_time": Session.srv_get_time,
-    "/rosapi/get_ros_version": Session.srv_get_ros_version,
+    "send_action_goal": rosbridge_actions.send_action_goal,
+    "cancel_action_goal": rosbridge_actions.cancel_action_goal,
 }

@@ -59,6 +59,10 @@ class TopicMap:
         out.update({f"/world_{w}/joint_states": w for w in self.worlds})
         return out
 
+    def namespaces(self) -> dict[str, int]:
+        """Namespace → world: the root is world 0 (the seed's), `/world_N` each exposed world."""
+        return {"": 0} | {f"/world_{w}": w for w in self.worlds}
+
     def all_topics(self) -> dict[str, str]:
         """Topic name → ROS 2 type, everything armfleet has on the graph."""
         out = dict.fromkeys([*self.command_topics(), *self.state_topics()], JOINT_STATE_TYPE)

@@ -14,13 +14,22 @@ thread writes `tf`, and a reader thread of its own serves commands and action re
 
 from __future__ import annotations
 
+import itertools
 import math
 import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from service.core.control import Source
-from service.surfaces.ros import topics
+from service.surfaces.ros import dds_actions, topics
+from service.surfaces.ros.goal_msgs import (
+    ACTIONS,
+    FJT_TYPE,
+    GoalRejected,
+    action_names,
+    trajectory_spec,
+)
+from service.surfaces.ros.goals import runner_of
 from service.surfaces.ros.tf_frames import FrameTree
 from service.surfaces.ros.topics import BadMessageCounter, TopicMap
 from service.surfaces.ros.urdf import generate
@@ -29,26 +38,34 @@ if TYPE_CHECKING:
     from service.core.surface import SurfaceContext
 
 FORWARD_COMMANDS = "forward_position_controller/commands"
+# the joint trajectory controllers' fire-and-forget topic (`~/joint_trajectory`)
+TRAJECTORY_TOPICS = tuple(
+    name.replace("follow_joint_trajectory", "joint_trajectory")
+    for name, kind in ACTIONS.items()
+    if kind == FJT_TYPE
+)
+JOINT_TRAJECTORY_TYPE = "trajectory_msgs/msg/JointTrajectory"
 STRING_TYPE = "std_msgs/msg/String"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 FLOAT64_ARRAY_TYPE = "std_msgs/msg/Float64MultiArray"
 _READER_DEPTH = 100
 
 
-def namespaces(topic_map: TopicMap) -> dict[str, int]:
-    """Namespace → world: the root is world 0 (the seed's), `/world_N` each exposed world."""
-    return {"": 0} | {f"/world_{w}": w for w in topic_map.worlds}
-
-
 def ur_topics(topic_map: TopicMap) -> dict[str, str]:
     """Topic name → ROS 2 type of every UR-driver topic (for `GET /v1/ros`)."""
     out = {}
-    for ns in namespaces(topic_map):
+    for ns in topic_map.namespaces():
         out[f"{ns}/robot_description"] = STRING_TYPE
         out[f"{ns}/tf"] = TF_TYPE
         out[f"{ns}/tf_static"] = TF_TYPE
         out[f"{ns}/{FORWARD_COMMANDS}"] = FLOAT64_ARRAY_TYPE
+        out |= {f"{ns}/{name}": JOINT_TRAJECTORY_TYPE for name in TRAJECTORY_TOPICS}
     return out
+
+
+def ur_actions(topic_map: TopicMap) -> dict[str, str]:
+    """Action name → action type, every action of every namespace."""
+    return {name: kind for name, (_, kind) in action_names(topic_map.namespaces()).items()}
 
 
 def arm_command(arm_joints: list[str], data: list[float]) -> list[float]:
@@ -70,17 +87,19 @@ class UrDriverDds:
     def __init__(self, dp: Any, ctx: SurfaceContext, topic_map: TopicMap, bad: BadMessageCounter):
         from cyclonedds import core
         from cyclonedds.pub import DataWriter
+        from cyclonedds.qos import Qos
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
-        from service.surfaces.ros import msgs, msgs_tf
+        from service.surfaces.ros import msgs, msgs_action, msgs_tf
+        from service.surfaces.ros.dds_actions import ActionServerDds
         from service.surfaces.ros.qos import latched as latched_qos
         from service.surfaces.ros.qos import rclpy_default as _qos
 
         loop = ctx.loop
         self._control = ctx.control
         self._bad = bad
-        self._msgs, self._tf = msgs, msgs_tf
+        self._msgs, self._tf, self._traj = msgs, msgs_tf, msgs_action
         self.received = 0
         self._entities: list[Any] = []
         self.readers: list[Any] = []
@@ -89,49 +108,78 @@ class UrDriverDds:
         self.urdf = generate(mjm, loop.spec)
         self.frames = FrameTree(mjm)
         self._arm = [j.name for j in loop.spec.joints][:6]
-        self._spaces = namespaces(topic_map)
+        self._spaces = topic_map.namespaces()
         self._tick_dt = loop.batch.tick_dt
 
-        topics_made: dict[tuple[str, type], Any] = {}
+        made: dict[str, Any] = {}
+        self._conditions: list[Any] = []
 
-        def topic(name: str, kind: type) -> Any:
-            if (name, kind) not in topics_made:
-                topics_made[name, kind] = Topic(dp, topics.dds_name(name), kind)
-                self._entities.append(topics_made[name, kind])
-            return topics_made[name, kind]
-
-        def writer(name: str, kind: type, qos: Any) -> Any:
-            w = DataWriter(dp, topic(name, kind), qos=qos)
-            self._entities.append(w)
-            self.writers.append(w)
-            return w
+        def make(role: str, dds_name: str, kind: type, user: Any = None) -> Any:
+            """A reader or writer on DDS topic `dds_name`: role reader / writer / latched."""
+            if dds_name not in made:
+                made[dds_name] = Topic(dp, dds_name, kind)
+                self._entities.append(made[dds_name])
+            qos = (
+                latched_qos()
+                if role == "latched"
+                else _qos(_READER_DEPTH if role == "reader" else 10)
+            )
+            if user is not None:
+                qos = qos + Qos(user)
+            if role == "reader":
+                entity = DataReader(dp, made[dds_name], qos=qos)
+                self.readers.append(entity)
+                condition = core.ReadCondition(entity, any_sample)
+                self._conditions.append(condition)
+            else:
+                entity = DataWriter(dp, made[dds_name], qos=qos)
+                self.writers.append(entity)
+            self._entities.append(entity)
+            return entity
 
         self._tf_writers: list[tuple[Any, int]] = []
-        self._commands: list[Any] = []
         self._inputs: list[Callable[[], bool]] = []
         sec, nanosec = topics.stamp(topics.sim_seconds(loop.latest, self._tick_dt))
         static = self._static_message(msgs.Time(sec=sec, nanosec=nanosec))
+        any_sample = core.SampleState.Any | core.ViewState.Any | core.InstanceState.Any
+        self.runner = runner_of(ctx)
+        ids = itertools.count(1)
+        prefix = dp.guid.bytes[:12]
+
+        def service_id() -> bytes:
+            """rmw_cyclonedds_cpp's client/service id: participant prefix + a counter, dotted."""
+            raw = prefix + next(ids).to_bytes(4, "big")
+            return ".".join([f"{raw[0]:02x}", *(f"{b:x}" for b in raw[1:])]).encode()
+
+        self.actions: list[ActionServerDds] = []
         for ns, world in self._spaces.items():
-            writer(f"{ns}/robot_description", msgs_tf.String, latched_qos()).write(
+            rt = topics.dds_name
+            make("latched", rt(f"{ns}/robot_description"), msgs_tf.String).write(
                 msgs_tf.String(data=self.urdf)
             )
-            writer(f"{ns}/tf_static", msgs_tf.TFMessage, latched_qos()).write(static)
-            self._tf_writers.append((writer(f"{ns}/tf", msgs_tf.TFMessage, _qos(100)), world))
+            make("latched", rt(f"{ns}/tf_static"), msgs_tf.TFMessage).write(static)
+            tf_writer = make("writer", rt(f"{ns}/tf"), msgs_tf.TFMessage)
+            self._tf_writers.append((tf_writer, world))
             name = f"{ns}/{FORWARD_COMMANDS}"
-            r = DataReader(dp, topic(name, msgs_tf.Float64MultiArray), qos=_qos(_READER_DEPTH))
-            self._entities.append(r)
-            self.readers.append(r)
-            self._commands.append(r)
+            r = make("reader", rt(name), msgs_tf.Float64MultiArray)
             self._inputs.append(self._command_input(r, name, world))
+            for controller in TRAJECTORY_TOPICS:
+                name = f"{ns}/{controller}"
+                r = make("reader", rt(name), msgs_action.JointTrajectory)
+                self._inputs.append(self._trajectory_input(r, name, world))
+            for action, kind in ACTIONS.items():
+                server = ActionServerDds(
+                    make, service_id, f"{ns}/{action}", kind, world, self.runner, bad
+                )
+                self.actions.append(server)
+                self._inputs += server.inputs()
         self._tf_listened = topics.ListenedWriters(self._tf_writers)
 
         self._waitset = core.WaitSet(dp)
         self._guard = core.GuardCondition(dp)
-        any_sample = core.SampleState.Any | core.ViewState.Any | core.InstanceState.Any
-        for r in self._commands:
-            condition = core.ReadCondition(r, any_sample)
+        for condition in self._conditions:
             self._waitset.attach(condition)
-            self._entities.append(condition)
+        self._entities += self._conditions
         self._waitset.attach(self._guard)
         self._entities += [self._guard, self._waitset]
         self._running = True
@@ -193,6 +241,28 @@ class UrDriverDds:
 
         def serve_one() -> bool:
             kind = self._tf.Float64MultiArray
+            taken, accepted = topics.take_commands(reader, kind, topic, self._bad, apply)
+            self.received += accepted
+            return taken
+
+        return serve_one
+
+    def _trajectory_input(self, reader: Any, topic: str, world: int) -> Callable[[], bool]:
+        """`~/joint_trajectory`: start it (preempting any running one); no points: stop and hold."""
+
+        def apply(msg: Any) -> None:
+            if not msg.points:
+                self._control.cancel_trajectory([world], Source.ROS2)
+                return
+            body = {"trajectory": dds_actions.to_plain(msg)}
+            try:
+                spec = trajectory_spec(self._control.spec, self._arm, body)
+            except GoalRejected as exc:
+                raise topics.BadMessage("rejected", str(exc)) from None
+            self._control.start_trajectory([world], spec, Source.ROS2)
+
+        def serve_one() -> bool:
+            kind = self._traj.JointTrajectory
             taken, accepted = topics.take_commands(reader, kind, topic, self._bad, apply)
             self.received += accepted
             return taken
