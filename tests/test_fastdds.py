@@ -194,3 +194,19 @@ def test_ros_discovery_info_names_node_armfleet(
     for kind in ("writers", "readers"):  # and every endpoint it names is one DDS reported
         discovered = {g + "00" * 8 for guids in seen[kind].values() for g in guids}
         assert set(node[kind]) <= discovered, kind
+
+
+def test_a_joint_trajectory_from_fast_dds_runs(early_peer: FastDdsPeer, ros_server: Server) -> None:
+    """A controller's `~/joint_trajectory` topic (trajectory_msgs/JointTrajectory, fire and
+    forget) from a Fast DDS node: world 1 follows it to its last point."""
+    topic = "/world_1/scaled_joint_trajectory_controller/joint_trajectory"
+    assert early_peer.matched(topic, timeout=15)["count"] >= 1
+    wanted = [0.35, -1.3, 1.45, -1.7, -1.5, 0.25]
+    deadline = time.monotonic() + 15
+    while _target(ros_server, 1)[:6] != wanted and time.monotonic() < deadline:
+        # resent until armfleet's reader has matched this writer too (see assert_command_lands)
+        early_peer.trajectory(topic, JOINTS[:6], wanted, 0.5)
+        wait_until = time.monotonic() + 2.0
+        while _target(ros_server, 1)[:6] != wanted and time.monotonic() < wait_until:
+            time.sleep(0.05)
+    assert _target(ros_server, 1)[:6] == wanted

@@ -1,6 +1,7 @@
 """rosbridge v2 actions (send_action_goal, cancel_action_goal, action_feedback, action_result),
 judged by the real clients: roslibpy 2.1's ActionClient and roslib.js 2.x's Action (Node).
-Goal with feedback and result, cancel, bad goals; rosapi lists the actions.
+Goal with feedback and result, cancel (and roslib.js's cancelAllGoals), bad goals; rosapi
+lists the actions.
 """
 
 from __future__ import annotations
@@ -156,3 +157,4 @@ def test_roslibjs_action(server: Server, node_modules: Path) -> None:  # noqa: F
     assert seen["feedback"] >= 3 and seen["lastFeedback"]["joint_names"] == ARM
     assert "points[0].positions" in seen["bad"]  # the validator's message, status 0
     assert seen["cancelled"].startswith("GoalError: Action was canceled")  # status CANCELED
+    assert seen["cancelledAll"].startswith("GoalError: Action was canceled")

@@ -15,6 +15,7 @@ import os
 import queue
 import shutil
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -137,6 +138,13 @@ class FastDdsPeer:
         nm = ",".join(names) or "-"
         assert self.ask(f"publish {topic} {nm} {','.join(repr(float(p)) for p in positions)}")
 
+    def trajectory(
+        self, topic: str, names: Sequence[str], positions: Sequence[float], seconds: float
+    ) -> None:
+        """Publish a one-point trajectory_msgs/JointTrajectory reaching `positions` at `seconds`."""
+        values = ",".join(repr(float(p)) for p in positions)
+        assert self.ask(f"trajectory {topic} {','.join(names)} {values} {seconds!r}")
+
     def matched(self, topic: str, timeout: float = 20.0) -> dict[str, Any]:
         """{'count': matched endpoints (0: none in time), 'ms': from start to the first match}"""
         return self.ask(f"matched {topic} {timeout}", timeout + 10)
@@ -164,7 +172,8 @@ class FastDdsPeer:
                 assert self.proc.stdin
                 self.proc.stdin.write("quit\n")
                 self.proc.stdin.flush()
-                self.proc.wait(timeout=3)
-            except (OSError, subprocess.TimeoutExpired):
+                self.proc.wait(timeout=10)  # deleting the participant frees its /dev/shm segment
+            except (OSError, subprocess.TimeoutExpired) as exc:
+                print(f"fastdds peer killed ({type(exc).__name__})", file=sys.stderr)
                 self.proc.kill()
                 self.proc.wait()

@@ -16,6 +16,8 @@
 // Protocol: one request a line on stdin, one JSON reply a line on stdout ({"ok":...,"result":...});
 // samples of streamed topics come as {"event":"sample",...} lines in between.
 //   publish TOPIC NAMES POSITIONS   comma-separated (NAMES "-" for none); JointState, rclpy QoS
+//   trajectory TOPIC NAMES POSITIONS SECONDS   a one-point trajectory_msgs/JointTrajectory
+//                                   (a controller's ~/joint_trajectory), reached after SECONDS
 //   matched TOPIC SECONDS           wait for armfleet's endpoint; result: match count (0: none)
 //                                   and ms from participant creation to the first match
 //   latest TOPIC                    newest sample (null if none yet) and how many arrived
@@ -59,6 +61,7 @@ using eprosima::fastrtps::rtps::IPLocator;
 using eprosima::fastrtps::rtps::Locator_t;
 using JointState = sensor_msgs::msg::dds_::JointState_;
 using Clock = rosgraph_msgs::msg::dds_::Clock_;
+using Trajectory = trajectory_msgs::msg::dds_::JointTrajectory_;
 using Info = rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_;
 
 namespace {
@@ -330,6 +333,7 @@ class Peer {
             StatusMask::none());
         if (!dp_) throw std::runtime_error("participant not created");
         for (TypeSupport t : {TypeSupport(new sensor_msgs::msg::dds_::JointState_PubSubType()),
+                              TypeSupport(new trajectory_msgs::msg::dds_::JointTrajectory_PubSubType()),
                               TypeSupport(new rosgraph_msgs::msg::dds_::Clock_PubSubType()),
                               TypeSupport(new rmw_dds_common::msg::dds_::
                                               ParticipantEntitiesInfo_PubSubType())}) {
@@ -352,6 +356,13 @@ class Peer {
             rq);
     }
 
+    // Deleting the participant removes its shared-memory segment from /dev/shm; a killed peer
+    // leaves it behind.
+    ~Peer() {
+        dp_->delete_contained_entities();
+        DomainParticipantFactory::get_instance()->delete_participant(dp_);
+    }
+
     const std::string& scope() const { return scope_; }
 
     std::string handle(const std::string& line) {
@@ -366,6 +377,22 @@ class Peer {
             std::vector<double> pos;
             for (const auto& v : split(positions, ',')) pos.push_back(std::stod(v));
             m.position(pos);
+            return writer(topic)->write(&m) ? "true" : "false";
+        }
+        if (op == "trajectory") {
+            std::string names, positions;
+            double seconds = 1;
+            in >> names >> positions >> seconds;
+            trajectory_msgs::msg::dds_::JointTrajectoryPoint_ point;
+            std::vector<double> pos;
+            for (const auto& v : split(positions, ',')) pos.push_back(std::stod(v));
+            point.positions(pos);
+            point.time_from_start().sec(static_cast<int32_t>(seconds));
+            point.time_from_start().nanosec(
+                static_cast<uint32_t>((seconds - static_cast<int32_t>(seconds)) * 1e9));
+            Trajectory m;
+            m.joint_names(split(names, ','));
+            m.points({point});
             return writer(topic)->write(&m) ? "true" : "false";
         }
         if (op == "matched") {
@@ -401,8 +428,12 @@ class Peer {
     }
 
   private:
+    static bool ends_with(const std::string& s, const std::string& tail) {
+        return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
+    }
+    static bool is_trajectory(const std::string& topic) { return ends_with(topic, "joint_trajectory"); }
     static bool is_command(const std::string& topic) {
-        return topic.size() >= 8 && topic.compare(topic.size() - 8, 8, "commands") == 0;
+        return ends_with(topic, "commands") || is_trajectory(topic);
     }
 
     Topic* topic(const std::string& name, const std::string& type) {
@@ -411,7 +442,8 @@ class Peer {
         return topics_[name] = dp_->create_topic("rt" + name, type, TOPIC_QOS_DEFAULT);
     }
 
-    // rclpy's create_publisher(JointState, name, 10): reliable, volatile, keep last 10.
+    // rclpy's create_publisher(JointState or JointTrajectory, name, 10): reliable, volatile,
+    // keep last 10.
     DataWriter* writer(const std::string& name) {
         auto it = writers_.find(name);
         if (it != writers_.end()) return it->second;
@@ -425,8 +457,9 @@ class Peer {
             eprosima::fastrtps::rtps::PREALLOCATED_WITH_REALLOC_MEMORY_MODE;
         q.data_sharing().off();
         watches_[name] = std::make_unique<WriterWatch>();
-        return writers_[name] = pub_->create_datawriter(
-                   topic(name, "sensor_msgs::msg::dds_::JointState_"), q, watches_[name].get());
+        auto type = is_trajectory(name) ? "trajectory_msgs::msg::dds_::JointTrajectory_"
+                                        : "sensor_msgs::msg::dds_::JointState_";
+        return writers_[name] = pub_->create_datawriter(topic(name, type), q, watches_[name].get());
     }
 
     // rclcpp's default subscription QoS; ClockQoS (best effort, keep last 1) for /clock.
@@ -508,5 +541,5 @@ int main(int argc, char** argv) {
             emit("{\"ok\":false,\"error\":" + quote(e.what()) + "}");
         }
     }
-    std::_Exit(0);  // leave without tearing entities down: the test kills us anyway
+    return 0;
 }

@@ -2,8 +2,8 @@
 // tests/test_rosbridge_actions.py.
 // Usage: node rosbridge_actions_check.mjs ws://127.0.0.1:PORT/rosbridge ACTION
 // Sends a 0.6 s FollowJointTrajectory goal (feedback, result), a bad goal (failed callback),
-// a 20 s goal that it cancels (failed callback with the CANCELED status), and prints one JSON
-// line with what it saw.
+// a 20 s goal that it cancels (failed callback with the CANCELED status), another that
+// cancelAllGoals stops, and prints one JSON line with what it saw.
 import * as ROSLIB from "roslib";
 
 const [url, name] = process.argv.slice(2);
@@ -42,9 +42,19 @@ ros.on("connection", () => {
               }
             }, (error) => {
               seen.cancelled = error;
-              console.log(JSON.stringify({ ok: true, ...seen }));
-              ros.close();
-              process.exit(0);
+              // cancelAllGoals: call_service <action>/_action/cancel_goal with empty args
+              action.sendGoal(goal([-1.0, -1.0, 1.0, -1.0, -1.0, -1.0], 20.0),
+                () => fail("goal succeeded despite cancelAllGoals"), () => {
+                  if (!seen.cancelAllSent) {
+                    seen.cancelAllSent = true;
+                    action.cancelAllGoals();
+                  }
+                }, (error) => {
+                  seen.cancelledAll = error;
+                  console.log(JSON.stringify({ ok: true, ...seen }));
+                  ros.close();
+                  process.exit(0);
+                });
             });
         });
     },

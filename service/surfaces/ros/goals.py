@@ -163,6 +163,12 @@ class GoalRunner:
 
     # -- outcomes ----------------------------------------------------------------------------
 
+    def cancel_all(self, action: str, source: Source) -> list[Goal]:
+        """Cancel every running goal of `action` (a CancelGoal with an empty goal_info)."""
+        with self._lock:
+            running = [g for g in self._active if g.action == action]
+        return [g for g in running if self.cancel(g, source)]
+
     def _outcome(self, status: TrajectoryStatus) -> None:
         """The manager's listener (any thread, its locks held): queue and wake the thread."""
         self._outcomes.put(status)

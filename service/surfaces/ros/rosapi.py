@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from service.surfaces.ros import topics
+from service.surfaces.ros import rosbridge_actions, topics
 from service.surfaces.ros.goal_msgs import action_names
 from service.surfaces.ros.rosbridge_base import topic_name
 from service.surfaces.ros.topics import CLOCK_TYPE, JOINT_STATE_TYPE
@@ -75,3 +75,14 @@ SERVICES: dict[str, Callable[[Any, Any], dict[str, Any]]] = {
     "/rosapi/get_ros_version": get_ros_version,
     "/rosapi/action_servers": action_servers,
 }
+
+
+def find(name: str) -> Callable[[Any, Any], dict[str, Any]] | None:
+    """The service called `name`: rosapi's, or an action's cancel_goal (cancel all)."""
+    if name.endswith(CANCEL_SUFFIX):
+        action = name.removesuffix(CANCEL_SUFFIX)
+        return lambda session, args: rosbridge_actions.cancel_all(session, action)
+    return SERVICES.get(name)
+
+
+CANCEL_SUFFIX = "/_action/cancel_goal"

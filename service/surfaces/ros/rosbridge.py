@@ -247,7 +247,7 @@ class Session:
         reply: dict[str, Any] = {"op": "service_response", "service": name}
         if msg.get("id") is not None:
             reply["id"] = msg["id"]
-        service = rosapi.SERVICES.get(name)
+        service = rosapi.find(name)
         if service is None:
             self.server.bad.report("unknown_service", name, "no such service")
             self._reply({**reply, "values": f"Service {name} does not exist", "result": False})

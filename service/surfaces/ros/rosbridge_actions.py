@@ -22,6 +22,7 @@ from service.core.control import Source
 from service.surfaces.ros.goal_msgs import GoalRejected, Status, action_names
 from service.surfaces.ros.goals import Goal, runner_of
 from service.surfaces.ros.rosbridge_base import ProtocolError, topic_name
+from service.surfaces.ros.topics import stamp
 
 
 def _type_matches(given: Any, kind: str) -> bool:
@@ -118,6 +119,20 @@ def cancel_action_goal(session: Any, msg: dict[str, Any]) -> None:
         raise ProtocolError(f"id: no goal of this client has id {msg.get('id')!r}")
     if goal.status != Status.CANCELED:
         runner_of(session.ctx).cancel(goal, Source.ROSBRIDGE)
+
+
+def cancel_all(session: Any, action: str) -> dict[str, Any]:
+    """`call_service <action>/_action/cancel_goal` (roslib.js's cancelAllGoals): every running
+    goal of the action is cancelled, as a CancelGoal request with an empty goal_info asks."""
+    if action not in action_names(session.server.topic_map.namespaces()):
+        raise ProtocolError(f"service: no action {action}")
+    canceling = runner_of(session.runtime).cancel_all(action, Source.ROSBRIDGE)
+    infos = []
+    for goal in canceling:
+        key = goal.key if isinstance(goal.key, bytes) else bytes(16)
+        sec, nanosec = stamp(goal.accepted_at)
+        infos.append({"goal_id": {"uuid": list(key)}, "stamp": {"sec": sec, "nanosec": nanosec}})
+    return {"return_code": 0 if infos else 1, "goals_canceling": infos}
 
 
 def close(session: Any) -> None:

@@ -119,11 +119,11 @@ class UrDriverDds:
             if dds_name not in made:
                 made[dds_name] = Topic(dp, dds_name, kind)
                 self._entities.append(made[dds_name])
-            qos = (
-                latched_qos()
-                if role == "latched"
-                else _qos(_READER_DEPTH if role == "reader" else 10)
-            )
+            qos = {
+                "latched": latched_qos,
+                "reader": lambda: _qos(_READER_DEPTH, accept_xcdr2=True),  # newer peers' XCDR2
+                "writer": lambda: _qos(10),
+            }[role]()
             if user is not None:
                 qos = qos + Qos(user)
             if role == "reader":
