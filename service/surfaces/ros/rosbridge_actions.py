@@ -126,7 +126,7 @@ def cancel_all(session: Any, action: str) -> dict[str, Any]:
     goal of the action is cancelled, as a CancelGoal request with an empty goal_info asks."""
     if action not in action_names(session.server.topic_map.namespaces()):
         raise ProtocolError(f"service: no action {action}")
-    canceling = runner_of(session.runtime).cancel_all(action, Source.ROSBRIDGE)
+    canceling = runner_of(session.ctx).cancel_all(action, Source.ROSBRIDGE)
     infos = []
     for goal in canceling:
         key = goal.key if isinstance(goal.key, bytes) else bytes(16)
