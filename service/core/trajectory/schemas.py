@@ -101,6 +101,21 @@ class TrajectoryBody(_Strict):
 class BatchTrajectoryBody(_Strict):
     """One trajectory for many worlds, started at the same tick."""
 
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "worlds": "0-3",
+                    "trajectory": {
+                        "joint_names": ["elbow_joint"],
+                        "points": [{"positions": [1.2], "time_from_start": 2.0}],
+                    },
+                }
+            ]
+        },
+    )
+
     worlds: (
         Annotated[list[WorldId], Field(min_length=1, json_schema_extra={"uniqueItems": True})]
         | Annotated[str, Field(pattern=WORLDS_PATTERN)]
