@@ -194,6 +194,8 @@ def test_follow_joint_trajectory_goal_feedback_result_status(
     )
     mine = [s for s in status["status_list"] if s["goal_info"]["goal_id"]["uuid"] == goal_id]
     assert [s["status"] for s in mine] == [SUCCEEDED]
+    actions = httpx.get(f"{ur_server.url}/v1/ros").json()["dds"]["actions"]
+    assert actions[SCALED] == FJT and len(actions) == 6  # 3 actions × (root, /world_1)
 
 
 @pytest.mark.parametrize(
