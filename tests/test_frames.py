@@ -66,8 +66,12 @@ def test_packed_frames_are_the_snapshot_frames_byte_for_byte(batch):
     batch.reset(np.arange(NWORLD))
     targets = np.tile(batch.home_target, (NWORLD, 1))
     targets[:, 1] -= 0.1 * np.arange(NWORLD)  # a different pose per world
-    batch.set_targets(np.arange(NWORLD), targets)
+    batch.apply_targets(np.arange(NWORLD), targets)
     batch.step(5)
+    _check_same_bytes(batch, IDS)
+    # A velocity feed-forward (trajectories) goes into ctrl, never into the reported target.
+    batch.apply_targets(IDS, targets[IDS], velocities=np.full((len(IDS), 7), 0.05))
+    batch.step(2)
     _check_same_bytes(batch, IDS)
     _check_same_bytes(batch, np.arange(NWORLD))  # every world, in order
     state = batch.get_state()

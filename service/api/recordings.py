@@ -9,15 +9,15 @@ from typing import Annotated
 from fastapi import APIRouter, Depends
 
 from service.api.deps import Loop, get_runtime
-from service.core.errors import Conflict, NotFound
+from service.core.errors import NotFound
 from service.core.schemas import RecordingRequest, RecordingStatus
 from service.persistence.recorder import Recorder
 from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
+from service.surfaces.recordings import Recordings
 
 router = APIRouter(prefix="/v1/recordings", tags=["recordings"])
 Rt = Annotated[Runtime, Depends(get_runtime)]
-_starting = asyncio.Lock()  # one start at a time: two POSTs must not both see "none active"
 
 
 def _status(recorder: Recorder) -> RecordingStatus:
@@ -32,23 +32,20 @@ def _status(recorder: Recorder) -> RecordingStatus:
     responses={409: {"description": "a recording is already running"}},
 )
 async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
-    async with _starting:
-        current = runtime.recorder
-        if current is not None and current.status.active:
-            raise Conflict(f"a recording is already running ({current.path}); stop it first")
-        check_state_support(loop.batch)  # a recording starts from the full state
-        path = runtime.snapshots.dir.parent / "recordings" / f"{body.name}.mcap"
-        recorder = Recorder(path, body.worlds, body.rate, runtime.settings.record_queue)
-        await asyncio.to_thread(recorder.start, runtime)  # waits for a tick boundary
-        runtime.surfaces.append(recorder)
-        return _status(recorder)
+    check_state_support(loop.batch)  # a recording starts from the full state
+    path = runtime.snapshots.dir.parent / "recordings" / f"{body.name}.mcap"
+    recorder = Recorder(path, body.worlds, body.rate, runtime.settings.record_queue)
+    # Conflict while one runs; waits for a tick boundary (off the event loop).
+    await asyncio.to_thread(runtime.surfaces.of(Recordings).begin, recorder)
+    return _status(recorder)
 
 
 @router.get("/current", response_model=RecordingStatus, summary="The running (or last) recording")
 async def current(runtime: Rt) -> RecordingStatus:
-    if runtime.recorder is None:
+    recorder = runtime.surfaces.of(Recordings).current
+    if recorder is None:
         raise NotFound("no recording has been started")
-    return _status(runtime.recorder)
+    return _status(recorder)
 
 
 @router.delete(
@@ -58,7 +55,7 @@ async def current(runtime: Rt) -> RecordingStatus:
     responses={404: {"description": "no recording is running"}},
 )
 async def stop(runtime: Rt) -> RecordingStatus:
-    recorder = runtime.recorder
+    recorder = runtime.surfaces.of(Recordings).current
     if recorder is None or not recorder.status.active:
         raise NotFound("no recording is running")
     await asyncio.to_thread(recorder.stop)

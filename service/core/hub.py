@@ -23,8 +23,9 @@ from typing import Any
 import numpy as np
 
 from service.core import frames
+from service.core.batch import Batch
 from service.core.loop import SnapshotSink
-from service.core.types import Batch, Snapshot
+from service.core.types import Snapshot
 
 
 class Subscription:

@@ -13,6 +13,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.core.physics import DEFAULT_PHYSICS_DT
 from service.core.types import Mode
+from service.core.worlds import world_list
 
 
 class Settings(BaseSettings):
@@ -79,7 +80,11 @@ class Settings(BaseSettings):
     save_on_exit: bool = Field(
         True, description="save snapshot `latest` on a clean stop (SIGTERM, Ctrl-C)"
     )
-    record: Path | None = Field(None, description="record to this MCAP file from the start")
+    record: Path | None = Field(
+        None,
+        description="record to this MCAP file from the start (`armfleet replay` reproduces it "
+        "bit for bit on the CPU; on CUDA within a stated tolerance, see its --help)",
+    )
     record_worlds: str | None = Field(
         None, description="worlds whose states are recorded, e.g. 0-7,12 (default: first 8)"
     )
@@ -117,7 +122,5 @@ class Settings(BaseSettings):
 
     @model_validator(mode="after")
     def _ros2_worlds_exist(self) -> Settings:
-        from service.surfaces.ros.topics import parse_world_list
-
-        parse_world_list(self.ros2_worlds, self.worlds)  # ValueError names the bad part
+        world_list(self.ros2_worlds, self.worlds, "ros2_worlds")  # ValueError names the bad part
         return self

@@ -1,7 +1,9 @@
 """Persistence: what outlives the process.
 
-Lives here: snapshot files (`snapshots`) and the batch header they must match (`provenance`),
-MCAP recordings (`recorder`, `mcap_log`) and `armfleet replay` (`replay`).
+Lives here: snapshot files (`snapshots`) and the batch header a state must match
+(`provenance`), MCAP recordings (`recorder` writes one off the sim thread, `mcap_log` is the
+layout) and `armfleet replay` (`replay`, which gives its recorder the same `SurfaceContext` a
+service would).
 
 May import: `service.core` and `service.engines`; never surfaces, api or the app.
 """
