@@ -302,8 +302,9 @@ class SimLoop(TickBoundary):
         now = time.monotonic()
         if self._finish_tick(faulted, mode, now):
             self._publish(now)
-        for sink in self._sinks:
-            sink.on_tick(self.batch, now)
+        for sink in self._sinks:  # sinks need not subclass SnapshotSink: on_tick is optional
+            if (on_tick := getattr(sink, "on_tick", None)) is not None:
+                on_tick(self.batch, now)
         self._release_step_waiters()
         self._update_stats(now)
         seconds = time.perf_counter() - t0
