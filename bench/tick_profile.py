@@ -205,7 +205,13 @@ def profile(
     }
 
 
-@section(18, "tick_profile", "Where a served tick goes: device vs host stages", ("cpu", "cuda"))
+@section(
+    18,
+    "tick_profile",
+    "Where a served tick goes: device vs host stages",
+    ("cpu", "cuda"),
+    default_on=("cuda",),
+)
 def tick_profile(ctx: Context) -> Result:
     """Both frame paths, both formats, at each size: the profile before and after issue 20."""
     sizes = ctx.sizes((16384, 65536) if ctx.cuda else (256, 1024), (1024,))
