@@ -101,31 +101,24 @@ def serve(
     Bound to anything but loopback it needs --token (or ARMFLEET_TOKEN) unless --insecure.
     """
     given = {name: value for name, value in locals().items() if value is not None}
-    import uvicorn
-
     from service.app import create_app
+    from service.errors import ArmfleetError
+    from service.serving import serve_until_stopped
     from service.settings import Settings
 
     settings = Settings(**given)
     _check_port_free(settings.host, settings.port)
-    level = settings.log_level
-    logging.basicConfig(level=level.upper(), format="%(asctime)s %(name)s %(message)s")
+    logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:
         service = create_app(settings)
-    except ValueError as exc:  # an unsafe bind (service/access.py)
+    except (ValueError, ArmfleetError) as exc:  # an unsafe bind, a --record file not writable
         typer.echo(f"armfleet serve: {exc}", err=True)
         raise typer.Exit(2) from None
-    uvicorn.run(
-        service,
-        host=settings.host,
-        port=settings.port,
-        log_level=level,
-        ws_max_size=1 << 20,
-        # Browsers offer permessage-deflate on every socket; deflating binary frames for each
-        # viewer was the largest server cost of many viewers (bench section 9).
-        ws_per_message_deflate=settings.ws_compression,
-        timeout_graceful_shutdown=3,
-    )
+    problems = serve_until_stopped(service, service.state.runtime, settings)
+    for problem in problems:
+        typer.echo(f"armfleet serve: stopped, but {problem}", err=True)
+    if problems:
+        raise typer.Exit(1)
 
 
 @app.command()
@@ -137,12 +130,13 @@ def replay(
     """Re-run a recording's commands at their ticks (fast) and check every recorded state
     bit for bit; exit 1 naming the first tick, world and joint that differ."""
     logging.basicConfig(level="WARNING", format="%(asctime)s %(name)s %(message)s")
+    from service.errors import ArmfleetError
     from service.replay import ReplayError
     from service.replay import replay as run_replay
 
     try:
         report = run_replay(recording, out=out, device=device)
-    except ReplayError as exc:
+    except (ReplayError, ArmfleetError) as exc:  # ArmfleetError: --out cannot be written
         typer.echo(f"armfleet replay: {exc}", err=True)
         raise typer.Exit(2) from None
     if report.recorded_on != report.replayed_on:

@@ -34,6 +34,7 @@ import ray
 from ray.exceptions import RayActorError
 
 from mjcf import SCENE_XML
+from service import ray_local
 from service.engine import SnapshotArrays, WorldBatch, snapshot_from
 from service.errors import Unavailable
 from service.physics import configure
@@ -190,7 +191,8 @@ class RayBatch(Batch):
         checkpoint_s: float = CHECKPOINT_S,
         **kwargs: Any,
     ) -> None:
-        connect(address or "local")
+        with ray_local.starting():  # a local instance's processes leave stopping to us
+            connect(address or "local")
         self.gpu = device.startswith("cuda")
         shards = shards or ray_auto_shards(nworld, device)
         self._plan = ShardPlan(nworld, shards)

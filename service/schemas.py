@@ -140,6 +140,8 @@ _ERROR_MEANING = {
     409: "the request does not fit the current state (e.g. step while not paused)",
     413: "the body is over the size limit",
     503: "the engine is starting, failed or is rebuilding a shard; or too many clients at once",
+    507: "the file cannot be written (disk full, read-only folder, FIFO without a reader): "
+    "the detail names the path and the cause; nothing was replaced",
 }
 
 

@@ -30,6 +30,7 @@ from service.sharding import (
     join_states,
     slice_state,
 )
+from service.stopping import leave_stopping_to_parent, signals_blocked
 from service.types import Batch, BatchState, Snapshot
 
 log = logging.getLogger("armfleet.shards")
@@ -66,7 +67,11 @@ def auto_shards(nworld: int, device: str) -> int:
 
 
 def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
-    """A shard's process: build the batch, then serve step/snapshot/reset/targets requests."""
+    """A shard's process: build the batch, then serve step/snapshot/reset/targets requests.
+
+    Stopping is the parent's (it saves this shard's state first): SIGINT/SIGTERM are ignored.
+    """
+    leave_stopping_to_parent()
     try:
         batch = WorldBatch(nworld, **kwargs)
     except Exception as exc:  # report instead of leaving the parent waiting
@@ -107,7 +112,8 @@ def _spawn(nworld: int, kwargs: dict[str, Any]) -> tuple[Any, Connection]:
     ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
     parent, child = ctx.Pipe()
     proc = ctx.Process(target=_worker, args=(child, nworld, kwargs), daemon=True)
-    proc.start()
+    with signals_blocked():  # until the worker ignores them itself (service/stopping.py)
+        proc.start()
     child.close()  # so that a dead worker shows up as EOFError, not a hang
     return proc, parent
 

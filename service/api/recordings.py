@@ -12,7 +12,7 @@ from service.api.deps import Loop, get_runtime
 from service.errors import Conflict, NotFound
 from service.recorder import Recorder
 from service.runtime import Runtime
-from service.schemas import RecordingRequest, RecordingStatus
+from service.schemas import RecordingRequest, RecordingStatus, errors
 from service.snapshots import check_state_support
 
 router = APIRouter(prefix="/v1/recordings", tags=["recordings"])
@@ -29,7 +29,7 @@ def _status(recorder: Recorder) -> RecordingStatus:
     response_model=RecordingStatus,
     status_code=201,
     summary="Start recording to <data-dir>/recordings/<name>.mcap",
-    responses={409: {"description": "a recording is already running"}},
+    responses={**errors(507), 409: {"description": "a recording is already running"}},
 )
 async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
     async with _starting:
@@ -38,7 +38,10 @@ async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingSta
             raise Conflict(f"a recording is already running ({current.path}); stop it first")
         check_state_support(loop.batch)  # a recording starts from the full state
         path = runtime.snapshots.dir.parent / "recordings" / f"{body.name}.mcap"
-        recorder = Recorder(path, body.worlds, body.rate, runtime.settings.record_queue)
+        # Opening and starting write the file's beginning before answering: a file that
+        # cannot be written is a 507 naming the cause, never an "active" recording that is not.
+        queue_items = runtime.settings.record_queue
+        recorder = await asyncio.to_thread(Recorder, path, body.worlds, body.rate, queue_items)
         await asyncio.to_thread(recorder.start, runtime)  # waits for a tick boundary
         runtime.surfaces.append(recorder)
         return _status(recorder)
@@ -60,6 +63,8 @@ async def current(runtime: Rt) -> RecordingStatus:
 async def stop(runtime: Rt) -> RecordingStatus:
     recorder = runtime.recorder
     if recorder is None or not recorder.status.active:
-        raise NotFound("no recording is running")
+        last = recorder.status if recorder is not None else None
+        why = f"; the last one ({last.path}) stopped early: {last.error}" if last else ""
+        raise NotFound(f"no recording is running{why if last and last.error else ''}")
     await asyncio.to_thread(recorder.stop)
     return _status(recorder)

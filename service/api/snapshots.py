@@ -11,7 +11,7 @@ from fastapi import APIRouter, Depends, Path
 from service.api.deps import Loop, get_runtime
 from service.errors import Conflict
 from service.runtime import Runtime
-from service.schemas import RestoreReply, SnapshotInfo, SnapshotName, SnapshotRequest
+from service.schemas import RestoreReply, SnapshotInfo, SnapshotName, SnapshotRequest, errors
 from service.snapshots import check_state_support
 
 router = APIRouter(prefix="/v1/snapshots", tags=["snapshots"])
@@ -23,7 +23,10 @@ Rt = Annotated[Runtime, Depends(get_runtime)]
     response_model=SnapshotInfo,
     status_code=201,
     summary="Save the full state of every world as snapshot `name` (replaces one of that name)",
-    responses={422: {"description": "bad name (separators, empty, over 64 characters)"}},
+    responses={
+        **errors(507),
+        422: {"description": "bad name (separators, empty, over 64 characters)"},
+    },
 )
 async def save(runtime: Rt, loop: Loop, body: SnapshotRequest) -> SnapshotInfo:
     check_state_support(loop.batch)
