@@ -22,11 +22,11 @@ from typing import Any
 
 import httpx
 
-from service.physics import DEFAULT_PHYSICS_DT
+from service.core.physics import DEFAULT_PHYSICS_DT
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 
-# The engine's defaults (service.settings.Settings): 60 Hz control, the default physics step.
+# The engine's defaults (service.core.settings.Settings): 60 Hz control, the default physics step.
 CONTROL_HZ = 60.0
 PHYSICS_DT = DEFAULT_PHYSICS_DT
 # The physics step before the step study of issue 13 (8 substeps of 2.083 ms per 60 Hz tick).
@@ -278,7 +278,7 @@ def rtf_between(a: tuple[float, dict[str, Any]], b: tuple[float, dict[str, Any]]
 def cuda_available() -> bool:
     import warp as wp
 
-    import service.engine  # noqa: F401  (sets Warp's log level: no banner)
+    import service.engines.warp  # noqa: F401  (sets Warp's log level: no banner)
 
     try:
         return wp.is_cuda_available()

@@ -40,12 +40,12 @@ def _engine_rate(
     says more about the neighbours than about the engine.
     """
     if engine == "mujoco":
-        from service.native import NativeBatch
+        from service.engines.native import NativeBatch
 
         batch: Any = NativeBatch(nworld, physics_dt=physics_dt)
     else:
-        from service.engine import WorldBatch
-        from service.shards import ShardedBatch, auto_shards
+        from service.engines.shards import ShardedBatch, auto_shards
+        from service.engines.warp import WorldBatch
 
         shards = auto_shards(nworld, "cpu")
         batch = (
@@ -84,8 +84,8 @@ class _Rollout:
         import numpy as np
         from mujoco import rollout
 
-        from service.physics import configure
-        from service.robot import load_robot
+        from service.core.physics import configure
+        from service.core.robot import load_robot
 
         robot = load_robot()
         self.mjm = mjm = robot.mjm
@@ -200,7 +200,7 @@ def engines(ctx: Context) -> Result:
                     out[f"{engine}_service"] = asyncio.run(
                         _served_vs_rollout(server, rollout, rounds, window, block_s)
                     )
-                    if engine == "mujoco":  # the same server, binary frames (service/wire.py)
+                    if engine == "mujoco":  # the same server, binary frames (service/core/wire.py)
                         out["mujoco_service_binary"] = asyncio.run(
                             _served_vs_rollout(server, rollout, rounds, window, block_s, "binary")
                         )
@@ -261,7 +261,7 @@ def engines(ctx: Context) -> Result:
 
 
 def _default_step() -> tuple[int, float]:
-    from service.physics import tick_timing
+    from service.core.physics import tick_timing
 
     return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
 
@@ -317,7 +317,7 @@ def capacity_engines(ctx: Context) -> Result:
 @section(12, "physics_step", "Physics step: before (2.083 ms) vs today's default, engine alone")
 def physics_step(ctx: Context) -> Result:
     """Each engine alone at the old and the new step: ticks/s and 60 Hz worlds that rate holds."""
-    from service.physics import tick_timing
+    from service.core.physics import tick_timing
 
     sizes = ctx.sizes((64, 1024), (64,))
     block_s, rounds = ctx.pick((1.0, 5), (0.3, 2))
@@ -373,7 +373,7 @@ def _kernel_profile(nworld: int, ticks: int) -> dict[str, Any]:
 
     import warp as wp
 
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     batch = WorldBatch(nworld, capture=False)
     batch.step(2)

@@ -136,8 +136,8 @@ def run(
     loss_worlds: int = 0,
 ) -> dict[str, Any]:
     """Every measurement on one machine, into `out` (saved after each step); returns it."""
-    from service.engine import WorldBatch
-    from service.ray_shards import RayBatch, connect
+    from service.engines.ray_shards import RayBatch, connect
+    from service.engines.warp import WorldBatch
 
     out = {} if out is None else out
     out.update({"device": device, "worlds_per_shard": worlds, "fast": {}, "steps": {}, "rt": {}})

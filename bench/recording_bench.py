@@ -3,8 +3,9 @@
 * Recording overhead at 64 worlds: the same service without and with `--record` of every world
   at every tick (`--record-worlds 0-63 --record-rate 60`, the heaviest setting), measured as the
   real-time factor in realtime mode and as ticks/s in fast mode, one window each.
-* Replay: `service.replay.replay` of that recording (one WorldBatch, paused loop stepped tick by
-  tick through the control layer, every recorded state compared): ticks/s and world-steps/s.
+* Replay: `service.persistence.replay.replay` of that recording (one WorldBatch, paused loop
+  stepped tick by tick through the control layer, every recorded state compared): ticks/s and
+  world-steps/s.
 * Snapshots at 1024 worlds: file size, and the wall time of `POST /v1/snapshots` (state taken
   between ticks, written and fsynced) and of `POST /v1/snapshots/{name}/restore` (file read and
   checked, applied between ticks), median of 5 each.
@@ -95,7 +96,7 @@ def _snapshots(ctx: Context, tmp: Path, repeats: int) -> dict[str, Any]:
 
 @section(16, "recording", "Recording overhead at 64 worlds, replay speed, snapshots at 1024")
 def recording(ctx: Context) -> Result:
-    from service.replay import replay
+    from service.persistence.replay import replay
 
     window = ctx.pick(10.0, 4.0)
     data: dict[str, Any] = {"errors": {}}
@@ -155,7 +156,7 @@ def recording(ctx: Context) -> Result:
 
 
 def _substeps(ctx: Context) -> int:
-    from service.physics import DEFAULT_PHYSICS_DT, tick_timing
+    from service.core.physics import DEFAULT_PHYSICS_DT, tick_timing
 
     return tick_timing(60.0, DEFAULT_PHYSICS_DT)[0]
 

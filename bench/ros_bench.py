@@ -6,8 +6,11 @@
   direction (``responds``: >= 1e-5 rad, the first state stepped with the new target; the hold
   error at rest is < 1e-12 rad) and where it has moved >= 0.01 rad (``moved``). The next command
   goes out after a random 0-17 ms pause so that the samples spread over the tick phase.
-  Over DDS the client is a Cyclone DDS participant of its own (this process); over rosbridge it
-  is a WebSocket client at `/rosbridge`.
+  Over DDS the client is a Cyclone DDS participant of its own (this process), or a Fast DDS
+  node set up as Humble's rmw_fastrtps_cpp (bench/dds_peers.py); over rosbridge it is a
+  WebSocket client at `/rosbridge`.
+* Time to first match of a fresh Fast DDS or Cyclone node started after armfleet
+  (bench/dds_peers.py).
 * Flood: 1000 JointState commands per second, spread over `/world_0..15/joint_commands`, for
   `duration` seconds at 16 worlds; the loop's real-time factor meanwhile and how many commands
   the service accepted (`GET /v1/ros`).
@@ -27,7 +30,7 @@ from typing import Any
 import httpx
 import orjson
 
-from bench import common
+from bench import common, dds_peers
 from bench.registry import Context, Result, section
 
 SECTION = "ros"
@@ -55,8 +58,8 @@ class DdsClient:
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
-        from service.ros import msgs
-        from service.ros.dds import LOOPBACK_CONFIG, _qos
+        from service.surfaces.ros import msgs
+        from service.surfaces.ros.dds import LOOPBACK_CONFIG, _qos
 
         self.msgs = msgs
         self.domain = Domain(domain, LOOPBACK_CONFIG)
@@ -224,7 +227,12 @@ def flood(server: common.Served, client: DdsClient, rate: float, seconds: float)
     }
 
 
-@section(8, "ros", "ROS 2 over DDS and rosbridge: JointState round trip, 1000 commands/s")
+@section(
+    8,
+    "ros",
+    "ROS 2 over DDS and rosbridge: JointState round trip (Cyclone, Fast DDS, rosbridge), "
+    "time to first match, 1000 commands/s",
+)
 def ros(ctx: Context) -> Result:
     """One realtime server with `--ros2` on every world; round trips, then the flood."""
     worlds = (ctx.worlds or [WORLDS])[0]
@@ -245,6 +253,11 @@ def ros(ctx: Context) -> Result:
             for key, measure in (
                 ("dds", lambda: dds_round_trip(client, round_trips)),
                 ("rosbridge", lambda: rosbridge_round_trip(server.ws_url, round_trips)),
+                (
+                    "fastdds",
+                    lambda: dds_peers.fastdds_round_trip(domain, round_trips, _round_trips, JOINT),
+                ),
+                ("first_match", lambda: first_matches(domain, ctx.pick(30, 10))),
                 ("flood", lambda: flood(server, client, FLOOD_RATE, flood_s)),
             ):
                 try:
@@ -257,7 +270,11 @@ def ros(ctx: Context) -> Result:
         finally:
             client.close()
     rows: list[dict[str, Any]] = []
-    for key, label in (("dds", "DDS"), ("rosbridge", "rosbridge")):
+    for key, label in (
+        ("dds", "DDS (Cyclone)"),
+        ("fastdds", "DDS (Fast DDS node)"),
+        ("rosbridge", "rosbridge"),
+    ):
         r = data.get(key)
         for what in ("responds", "moved") if r else ():
             rows.append(
@@ -267,6 +284,18 @@ def ros(ctx: Context) -> Result:
                     "p99 ms": r[what]["p99_ms"],
                     "n": r[what]["n"],
                     "notes": f"timeouts {r['timeouts']}",
+                }
+            )
+    for kind, label in FIRST_MATCH.items():
+        m = data.get("first_match", {}).get(kind)
+        if m:
+            rows.append(
+                {
+                    "measure": f"time to first match: {label}",
+                    "p50 ms": m["p50_ms"],
+                    "p99 ms": m["p99_ms"],
+                    "n": m["n"],
+                    "notes": "fresh node started after armfleet",
                 }
             )
     f = data.get("flood")
@@ -286,6 +315,28 @@ def ros(ctx: Context) -> Result:
         f"{RESPONDS:g} rad toward the command, moved = >= {MOVED:g} rad"
     ]
     return Result(rows, data, notes)
+
+
+FIRST_MATCH = {
+    "fastdds": "Fast DDS node (Humble rmw_fastrtps_cpp, ROS_LOCALHOST_ONLY=1)",
+    "cyclone_unicast": "Cyclone node (unicast-only discovery on 127.0.0.1)",
+    "cyclone_loopback": "Cyclone node (armfleet's loopback configuration)",
+}
+
+
+def first_matches(domain: int, n: int) -> dict[str, Any]:
+    """Time to first match of fresh nodes of each kind (bench/dds_peers.py says how)."""
+    from service.surfaces.ros.discovery import LOOPBACK_CONFIG
+
+    return {
+        "fastdds": common.summary_ms(dds_peers.fastdds_first_matches(domain, n)),
+        "cyclone_unicast": common.summary_ms(
+            dds_peers.cyclone_first_matches(domain, n, dds_peers.UNICAST_ONLY)
+        ),
+        "cyclone_loopback": common.summary_ms(
+            dds_peers.cyclone_first_matches(domain, n, LOOPBACK_CONFIG)
+        ),
+    }
 
 
 def _after(server: common.Served, seconds: float) -> tuple[float, dict[str, Any]]:

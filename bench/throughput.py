@@ -54,7 +54,7 @@ DESCRIPTIONS = {
 
 def physics_dt() -> tuple[int, float]:
     """(substeps, physics_dt) of the engine's defaults, exactly as WorldBatch derives them."""
-    from service.physics import tick_timing
+    from service.core.physics import tick_timing
 
     return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
 
@@ -76,7 +76,7 @@ def _result(timing: common.Timing, steps_per_call: int, nworld: int, **extra: An
 
 
 def bench_engine(nworld: int, device: str, min_time: float, warmup_time: float) -> dict:
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     t0 = time.perf_counter()
     batch = WorldBatch(nworld, device=device)
@@ -95,7 +95,7 @@ def bench_engine(nworld: int, device: str, min_time: float, warmup_time: float) 
 
 def bench_engine_cores(nworld: int, device: str, min_time: float, warmup_time: float) -> dict:
     """The engine as `armfleet serve` builds it on the CPU: one shard per core when big enough."""
-    from service.shards import ShardedBatch, auto_shards
+    from service.engines.shards import ShardedBatch, auto_shards
 
     shards = auto_shards(nworld, device)
     if shards < 2:
@@ -118,7 +118,7 @@ def engine_model():
     the MjModel it loads; building a one-world batch without capture and taking its model keeps
     the baselines on the same physics whatever the engine changes. A fresh model each call.
     """
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     batch = WorldBatch(1, capture=False)
     return batch.robot.mjm, batch.robot.home_key
@@ -148,7 +148,7 @@ def _raw_warp(nworld: int, device: str, substeps: int, dt: float):
     import mujoco_warp as mjw
     import warp as wp
 
-    from service.engine import NCONMAX, NJMAX
+    from service.engines.warp import NCONMAX, NJMAX
 
     mjm, home_key = engine_model()
     assert abs(mjm.opt.timestep - dt) < 1e-12, (mjm.opt.timestep, dt)

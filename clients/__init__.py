@@ -9,7 +9,9 @@ The UIs (`clients.tk_controller`, `clients.tui`, `clients.watch`) are imported o
 is `clients.testing` (a real server for your own tests; `armfleet_server` fixture for pytest).
 
 Layout: `errors` (exceptions), `models` (typed replies), `_http` and `_stream` (requests, frames
-and reconnects, without I/O), `client` and `async_client` (the I/O twins).
+and reconnects, without I/O), `client` and `async_client` (the I/O twins). Those library modules
+also install alone, on Python 3.10+ and without the service (packaging/armfleet-client), so they
+import nothing of `service` and keep to 3.10's language and standard library.
 """
 
 from clients._stream import Backoff
@@ -36,6 +38,13 @@ from clients.models import (
     SimStatus,
     WorldState,
 )
+from clients.trajectory import (
+    TrajectoriesStarted,
+    TrajectoryStarted,
+    TrajectoryStatus,
+    point,
+    tolerance,
+)
 
 __all__ = [
     "ArmfleetClient",
@@ -57,7 +66,12 @@ __all__ = [
     "PayloadTooLarge",
     "ResetResult",
     "SimStatus",
+    "TrajectoriesStarted",
+    "TrajectoryStarted",
+    "TrajectoryStatus",
     "Unreachable",
     "WorldSession",
     "WorldState",
+    "point",
+    "tolerance",
 ]

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import AsyncIterator, Iterable, Mapping
-from typing import Any, Self, Unpack
+from collections.abc import AsyncIterator, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 import httpx
 from websockets.asyncio.client import ClientConnection
@@ -22,9 +22,13 @@ from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import InvalidURI
 
 from clients import _http, _stream, models
+from clients import trajectory as tj
 from clients._http import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable, unreachable
 from clients.models import JointRef, WorldSpec
+
+if TYPE_CHECKING:  # typing has both from 3.11 on; the client also runs on 3.10
+    from typing_extensions import Self, Unpack
 
 
 class _Closes:
@@ -81,6 +85,45 @@ class AsyncArmfleetClient(_Closes):
 
     async def reset(self, world: int | Iterable[int] | None = None) -> models.ResetResult:
         return await self._call(_http.reset_call(world))
+
+    # -- trajectories: as ArmfleetClient's -------------------------------------------------
+
+    async def start_trajectory(
+        self, world: int, joint_names: Sequence[str], points: Iterable[Any], **options: Any
+    ) -> tj.TrajectoryStarted:
+        body = tj.trajectory_body(joint_names, points, **options)
+        return await self._call(tj.start_call(world, body))
+
+    async def start_trajectories(
+        self, worlds: WorldSpec, joint_names: Sequence[str], points: Iterable[Any], **options: Any
+    ) -> tj.TrajectoriesStarted:
+        body = tj.trajectory_body(joint_names, points, **options)
+        return await self._call(tj.start_many_call(worlds, body))
+
+    async def trajectory(self, world: int, wait: float = 0.0) -> tj.TrajectoryStatus:
+        return await self._call(tj.status_call(world, wait))
+
+    async def cancel_trajectory(self, world: int) -> tj.TrajectoryStatus:
+        return await self._call(tj.cancel_call(world))
+
+    async def wait_trajectory(
+        self, traj_id: int, timeout: float | None = None
+    ) -> tj.TrajectoryStatus:
+        wait = tj.OutcomeWait(traj_id, timeout)
+        while not wait.finished(status := await self._call(wait.call())):
+            pass
+        return status
+
+    async def follow_trajectory(
+        self,
+        world: int,
+        joint_names: Sequence[str],
+        points: Iterable[Any],
+        timeout: float | None = None,
+        **options: Any,
+    ) -> tj.TrajectoryStatus:
+        started = await self.start_trajectory(world, joint_names, points, **options)
+        return await self.wait_trajectory(started.id, timeout)
 
     async def pause(self) -> models.SimStatus:
         return await self._call(_http.pause_call())

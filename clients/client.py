@@ -16,8 +16,8 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator, Mapping
-from typing import Any, Self, Unpack
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 import httpx
 from websockets.exceptions import InvalidURI
@@ -25,9 +25,13 @@ from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as ws_connect
 
 from clients import _http, _stream, models
+from clients import trajectory as tj
 from clients._http import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable
 from clients.models import JointRef, WorldSpec
+
+if TYPE_CHECKING:  # typing has both from 3.11 on; the client also runs on 3.10
+    from typing_extensions import Self, Unpack
 
 
 class _Closes:
@@ -89,6 +93,50 @@ class ArmfleetClient(_Closes):
     def reset(self, world: int | Iterable[int] | None = None) -> models.ResetResult:
         """Reset one world, a list of worlds, or (None) all worlds to home."""
         return self._call(_http.reset_call(world))
+
+    # -- trajectories (bodies and calls: clients.trajectory) ---------------------------------
+
+    def start_trajectory(
+        self, world: int, joint_names: Sequence[str], points: Iterable[Any], **options: Any
+    ) -> tj.TrajectoryStarted:
+        """Follow a JointTrajectory (`tj.point(...)`s); options: path_tolerance, goal_tolerance
+        (`tj.tolerance(...)`s), goal_time_tolerance [s]. Replaces a running one."""
+        body = tj.trajectory_body(joint_names, points, **options)
+        return self._call(tj.start_call(world, body))
+
+    def start_trajectories(
+        self, worlds: WorldSpec, joint_names: Sequence[str], points: Iterable[Any], **options: Any
+    ) -> tj.TrajectoriesStarted:
+        """One trajectory on many worlds (ids, or "0-9999"), all from the same tick."""
+        body = tj.trajectory_body(joint_names, points, **options)
+        return self._call(tj.start_many_call(worlds, body))
+
+    def trajectory(self, world: int, wait: float = 0.0) -> tj.TrajectoryStatus:
+        """The world's running (else last) trajectory; `wait` s for its outcome at most."""
+        return self._call(tj.status_call(world, wait))
+
+    def cancel_trajectory(self, world: int) -> tj.TrajectoryStatus:
+        """Stop the world's trajectory; it holds where it was (Conflict if none runs)."""
+        return self._call(tj.cancel_call(world))
+
+    def wait_trajectory(self, traj_id: int, timeout: float | None = None) -> tj.TrajectoryStatus:
+        """Block until the trajectory succeeds or aborts; TimeoutError after `timeout` s."""
+        wait = tj.OutcomeWait(traj_id, timeout)
+        while not wait.finished(status := self._call(wait.call())):
+            pass
+        return status
+
+    def follow_trajectory(
+        self,
+        world: int,
+        joint_names: Sequence[str],
+        points: Iterable[Any],
+        timeout: float | None = None,
+        **options: Any,
+    ) -> tj.TrajectoryStatus:
+        """start_trajectory, then wait for its outcome (`.succeeded`, else `.reason`)."""
+        started = self.start_trajectory(world, joint_names, points, **options)
+        return self.wait_trajectory(started.id, timeout)
 
     def pause(self) -> models.SimStatus:
         return self._call(_http.pause_call())

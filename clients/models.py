@@ -1,10 +1,10 @@
 """What the service returns, as typed results built from its JSON.
 
-Each class follows one reply schema of the server (service/schemas.py); `from_json` reads the
+Each class follows one reply schema of the server (service/core/schemas.py); `from_json` reads the
 fields it knows and ignores the rest, so a newer server that adds a field does not break an
 older client. Nothing about the robot is written here: joint names, limits and home come from
-`/v1/info` (`Info.joints`, each the service's own `JointSpec`) and every state carries its
-joint names (`name`).
+`/v1/info` (`Info.joints`, each a `JointSpec`, the class the service itself describes joints
+with) and every state carries its joint names (`name`).
 
 Arrays are numpy float64; JSON null (a NaN on the server side) becomes NaN.
 """
@@ -16,8 +16,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
-from service.types import JointSpec
 
 JointRef = str | int  # a joint by name ("elbow_joint") or by index in `Info.joints` (2)
 WorldSpec = int | str | Iterable[int] | None  # one world, "0-63", [0, 3, 7], or None: all
@@ -45,9 +43,28 @@ def joint_index(names: Sequence[str], joint: JointRef) -> int:
         raise KeyError(f"unknown joint {joint!r}; joints are {list(names)}") from None
 
 
-# One commanded joint (name, lower, upper, home, velocity_limit, effort_limit): the service's
-# own description, so the two cannot drift apart.
-JointInfo = JointSpec
+@dataclass(frozen=True)
+class JointSpec:
+    """One commanded joint as the outside world sees it: `/v1/info` lists these. The service
+    builds its robot description from this very class (service.core.types imports it from here), so
+    the two cannot drift apart, and the client needs nothing of the service.
+
+    name: joint name, as in sensor_msgs/JointState and the MJCF
+    lower, upper: joint range [rad]; targets are clamped to it
+    home: value in the `home` keyframe [rad]
+    velocity_limit: rated maximum speed [rad/s] (informative; MuJoCo does not enforce it)
+    effort_limit: actuator force limit [N·m]
+    """
+
+    name: str
+    lower: float
+    upper: float
+    home: float
+    velocity_limit: float
+    effort_limit: float
+
+
+JointInfo = JointSpec  # the client's name for it
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,10 @@
 Set-up is idempotent and quick when nothing changed: a virtualenv in .venv, the project
 installed editable with its pinned dependencies (re-installed only when pyproject.toml
 changes), and MuJoCo Warp's kernels compiled into ~/.cache/warp with visible progress.
+
+armfleet needs Python 3.11+; started by an older python3 (Ubuntu 22.04's is 3.10) this script
+restarts itself with a newer one found on the machine, or stops naming what to install
+(scripts/_pyfind.py). It must therefore still parse and start on Python 3.8.
 """
 
 from __future__ import annotations
@@ -18,10 +22,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import _pyfind  # beside this file
+
 ROOT = Path(__file__).resolve().parents[1]
 VENV = ROOT / ".venv"
 BIN = VENV / "bin"
 STAMP = VENV / ".armfleet-installed"
+RESTARTED = "ARMFLEET_DEV_RESTARTED"  # set when this script restarted itself with another Python
 # What the UI tests drive: a virtual X display, a pointer, a terminal multiplexer, and the
 # browser the page's tests load it in (Playwright drives it; its own download is not used).
 TEST_DEBS = {
@@ -30,6 +37,10 @@ TEST_DEBS = {
     "tmux": "tmux",
     "xwd": "x11-apps",
     "chromium": "chromium",
+    # the Fast DDS peer of the ROS 2 tests (tests/fastdds_peer): a header stands for the library
+    "fastddsgen": "fastddsgen",
+    "g++": "g++",
+    "/usr/include/fastdds/dds/domain/DomainParticipant.hpp": "libfastrtps-dev",
 }
 
 
@@ -41,10 +52,33 @@ def run(*cmd: str | Path, **kw) -> None:
     subprocess.run([str(c) for c in cmd], check=True, cwd=ROOT, **kw)
 
 
+def use_new_enough_python(argv: list[str]) -> None:
+    """Restart with a Python 3.11+ when this one is older, or with the one ARMFLEET_PYTHON
+    names."""
+    if os.environ.get(RESTARTED):
+        return
+    exe = _pyfind.choose(sys.version_info[:2], dict(os.environ), Path.home())
+    if exe is None:
+        return
+    old = sys.version_info < _pyfind.NEED
+    why = "is too old for armfleet (3.11+)" if old else f"is not {_pyfind.EXPLICIT}"
+    say(f"python {sys.version.split()[0]} {why}: restarting with {exe}")
+    env = {**os.environ, RESTARTED: exe}
+    os.execve(exe, [exe, str(Path(__file__).resolve()), *argv], env)
+
+
 def ensure_venv() -> None:
-    if not (BIN / "python").exists():
-        say(f"creating virtualenv in {VENV}")
-        run(sys.executable, "-m", "venv", VENV)
+    python = BIN / "python"
+    stale = _pyfind.stale_venv(python)
+    if stale:
+        say(f"removing {VENV}: {stale}")
+        shutil.rmtree(VENV)
+    if not python.exists():
+        say(f"creating virtualenv in {VENV} with {sys.executable}")
+        if subprocess.run([sys.executable, "-m", "venv", str(VENV)], cwd=ROOT).returncode:
+            shutil.rmtree(VENV, ignore_errors=True)
+            hint = _pyfind.venv_hint(sys.version_info[:2], _pyfind.os_release())
+            sys.exit(f"{sys.executable} cannot create a virtualenv. Install: {hint}")
     want = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
     if STAMP.exists() and STAMP.read_text() == want:
         return
@@ -61,7 +95,9 @@ def warm_kernel_cache() -> None:
 
 
 def ensure_test_tools() -> None:
-    missing = [deb for tool, deb in TEST_DEBS.items() if shutil.which(tool) is None]
+    missing = [
+        deb for tool, deb in TEST_DEBS.items() if not (shutil.which(tool) or Path(tool).exists())
+    ]
     if not missing:
         return
     sudo = [] if os.geteuid() == 0 else ["sudo", "-n"]
@@ -72,6 +108,13 @@ def ensure_test_tools() -> None:
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
     run(*sudo, "apt-get", "update", "-qq", env=env)
     run(*sudo, "apt-get", "install", "-y", "-qq", "--no-install-recommends", *missing, env=env)
+
+
+def build_test_peers() -> None:
+    """The Fast DDS peer, compiled once per source change (cached under build/fastdds_peer)."""
+    done = subprocess.run([BIN / "python", "-m", "tests.fastdds_peer"], cwd=ROOT)
+    if done.returncode:
+        say("the Fast DDS peer could not be built: its ROS 2 tests will be skipped")
 
 
 def ensure_js_tools() -> None:
@@ -88,6 +131,7 @@ def ensure_js_tools() -> None:
 
 
 def main(argv: list[str]) -> int:
+    use_new_enough_python(argv)
     if not argv or argv[0] not in ("serve", "test"):
         print(__doc__)
         return 2
@@ -95,6 +139,7 @@ def main(argv: list[str]) -> int:
     ensure_venv()
     if command == "test":
         ensure_test_tools()
+        build_test_peers()
         ensure_js_tools()
     warm_kernel_cache()
     if command == "serve":

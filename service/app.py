@@ -15,7 +15,6 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service import access
 from service.api import (
     health,
     info,
@@ -24,17 +23,19 @@ from service.api import (
     scene,
     sim,
     snapshots,
+    trajectory,
     web,
     worlds,
     ws,
 )
-from service.errors import ArmfleetError, BadCommand
-from service.metrics import CommandCounter
-from service.ros import rosbridge
-from service.ros.topics import TopicMap, parse_world_list
+from service.core import access
+from service.core.errors import ArmfleetError, BadCommand
+from service.core.metrics import CommandCounter
+from service.core.schemas import ANY, errors, fit_openapi
+from service.core.settings import Settings
 from service.runtime import Runtime
-from service.schemas import ANY, errors, fit_openapi
-from service.settings import Settings
+from service.surfaces.ros import rosbridge
+from service.surfaces.ros.topics import TopicMap, parse_world_list
 
 DESCRIPTION = """
 Many simulated UR10e + Robotiq 2F-140 worlds stepped together by MuJoCo Warp.
@@ -50,7 +51,7 @@ WebSocket streams (not listed by OpenAPI):
 * `/v1/ws?worlds=0-63&rate=10`: `{"op": "states", ...}` frames, column-wise over the listed
   worlds; commands carry `"world"`.
 * `/v1/ws/view?worlds=0-63&focus=3&rate=30`: the browser page's socket: binary pose frames
-  (every body of every listed world, plus the focus world's state; layout in service/wire.py)
+  (every body of every listed world, plus the focus world's state; layout in service/core/wire.py)
   drawn with the geoms of `GET /v1/scene`; commands carry `"world"`.
 
 The browser page is served at `/`.
@@ -167,7 +168,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (health, metrics, web, rosbridge):
         app.include_router(module.router)
     # Every /v1 route can also answer 401/403 (token, origin) and 503 (not ready, client cap).
-    for module in (info, worlds, sim, scene, ws, snapshots, recordings):
+    for module in (info, worlds, trajectory, sim, scene, ws, snapshots, recordings):
         app.include_router(module.router, responses=errors(*ANY))
     web.mount_static(app)
     generate = app.openapi

@@ -15,7 +15,7 @@ from typing import Annotated, Any
 
 import typer
 
-from service.types import Mode
+from service.core.types import Mode
 
 # Nothing here renders with MuJoCo's OpenGL: without this, `import mujoco` loads GLFW (~0.1-0.3 s
 # of every start). A value the user set wins.
@@ -34,7 +34,7 @@ def _opt(name: str) -> Any:
     Options default to None so that only what the user typed overrides the settings, which
     themselves come from ARMFLEET_* variables or the field defaults.
     """
-    from service.settings import Settings
+    from service.core.settings import Settings
 
     field = Settings.model_fields[name]
     default = field.default.value if isinstance(field.default, Mode) else field.default
@@ -102,9 +102,9 @@ def serve(
     """
     given = {name: value for name, value in locals().items() if value is not None}
     from service.app import create_app
-    from service.errors import ArmfleetError
+    from service.core.errors import ArmfleetError
+    from service.core.settings import Settings
     from service.serving import serve_until_stopped
-    from service.settings import Settings
 
     settings = Settings(**given)
     _check_port_free(settings.host, settings.port)
@@ -130,9 +130,9 @@ def replay(
     """Re-run a recording's commands at their ticks (fast) and check every recorded state
     bit for bit; exit 1 naming the first tick, world and joint that differ."""
     logging.basicConfig(level="WARNING", format="%(asctime)s %(name)s %(message)s")
-    from service.errors import ArmfleetError
-    from service.replay import ReplayError
-    from service.replay import replay as run_replay
+    from service.core.errors import ArmfleetError
+    from service.persistence.replay import ReplayError
+    from service.persistence.replay import replay as run_replay
 
     try:
         report = run_replay(recording, out=out, device=device)
@@ -169,7 +169,7 @@ def setup(
         "(first time: about a minute on CPU, several on CUDA; cached afterwards)...",
     )
     t0 = time.perf_counter()
-    from service.engine import WorldBatch
+    from service.engines.warp import WorldBatch
 
     batch = WorldBatch(1, device=device)
     batch.step(2)

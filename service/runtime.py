@@ -15,20 +15,20 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import orjson
 
-from service import provenance
-from service.access import ClientSlots
-from service.control import Accepted, Control
-from service.errors import ArmfleetError, Conflict, NotFound
-from service.hub import StreamHub
-from service.loop import SimLoop
-from service.metrics import Metrics
-from service.settings import Settings
-from service.snapshots import LATEST, SnapshotStore, check_state_support
-from service.stopping import reclaim_stop_signals
-from service.types import Batch
+from service.core.access import ClientSlots
+from service.core.control import Accepted, Control
+from service.core.errors import ArmfleetError, Conflict, NotFound
+from service.core.hub import StreamHub
+from service.core.loop import SimLoop
+from service.core.metrics import Metrics
+from service.core.settings import Settings
+from service.core.stopping import reclaim_stop_signals
+from service.core.types import Batch
+from service.persistence import provenance
+from service.persistence.snapshots import LATEST, SnapshotStore, check_state_support
 
 if TYPE_CHECKING:
-    from service.recorder import Recorder
+    from service.persistence.recorder import Recorder
 
 log = logging.getLogger("armfleet")
 
@@ -47,7 +47,7 @@ def build_batch(s: Settings) -> Batch:
     """The engine the settings ask for: native MuJoCo on every core, or MuJoCo Warp (split over
     CPU cores when it pays). Imported here, so that the native engine never loads warp."""
     if s.engine == "mujoco":
-        from service.native import NativeBatch
+        from service.engines.native import NativeBatch
 
         return NativeBatch(
             s.worlds,
@@ -56,15 +56,17 @@ def build_batch(s: Settings) -> Batch:
             nthread=s.shards,
             device=s.device,
         )
-    from service.engine import WorldBatch
-    from service.shards import ShardedBatch, auto_shards
+    from service.engines.shards import ShardedBatch, auto_shards
+    from service.engines.warp import WorldBatch
 
     shards = s.shards or auto_shards(s.worlds, s.device)
     kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
     if s.ray:
-        from service.ray_shards import RayBatch  # imports Ray only when asked for
+        from service.engines import ray_local
+        from service.engines.ray_shards import RayBatch  # imports Ray only when asked for
 
-        return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
+        with ray_local.starting():  # what Ray starts leaves stopping to us (core/stopping)
+            return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
     if shards > 1:
         return ShardedBatch(s.worlds, shards, **kwargs)
     return WorldBatch(s.worlds, **kwargs)
@@ -74,11 +76,11 @@ def optional_surfaces(s: Settings) -> list[Surface]:
     """The add-ons the settings ask for (imported only when asked for)."""
     out: list[Surface] = []
     if s.record is not None:
-        from service.recorder import Recorder
+        from service.persistence.recorder import Recorder
 
         out.append(Recorder(s.record, s.record_worlds, s.record_rate, s.record_queue))
     if s.foxglove:
-        from service.foxglove_live import FoxgloveLive
+        from service.surfaces.foxglove_live import FoxgloveLive
 
         out.append(
             FoxgloveLive(
@@ -90,7 +92,7 @@ def optional_surfaces(s: Settings) -> list[Surface]:
             )
         )
     if s.ros2:
-        from service.ros.dds import DdsBridge
+        from service.surfaces.ros.dds import DdsBridge
 
         out.append(DdsBridge(s.ros2_rate, s.ros2_worlds, s.ros2_network))
     return out
@@ -116,7 +118,7 @@ class Runtime:
     @property
     def recorder(self) -> Recorder | None:
         """The recording that is running or last ran (None if there was none)."""
-        from service.recorder import Recorder
+        from service.persistence.recorder import Recorder
 
         found = [x for x in self.surfaces if isinstance(x, Recorder)]
         return found[-1] if found else None
@@ -321,7 +323,7 @@ class Runtime:
 
 def unfinished_recordings(surfaces: list[Surface]) -> list[str]:
     """Why each recording among `surfaces` is not a complete file (stopped early, stuck)."""
-    from service.recorder import Recorder
+    from service.persistence.recorder import Recorder
 
     return [
         f"recording {s.path} is incomplete: {s.status.error}"

@@ -2,7 +2,7 @@
 
 uvicorn's own handlers stop on the first SIGINT, skip the application's shutdown on a second
 one (where `latest` is saved), and re-raise the signal afterwards, so the exit status never said
-whether saving worked. Here `service.stopping.StopSignals` owns both signals: the first closes
+whether saving worked. Here `service.core.stopping.StopSignals` owns both signals: the first closes
 every stream with 1001 (going away, not 1012 restarting) and then asks uvicorn to stop, which
 runs the application's shutdown (`Runtime.stop`: recordings finished, `latest` saved); a second
 signal exits at once. The exit status is 1 when stopping left something unsaved.
@@ -16,9 +16,9 @@ from collections.abc import Awaitable, Callable, Iterator
 
 import uvicorn
 
+from service.core.settings import Settings
+from service.core.stopping import StopSignals
 from service.runtime import Runtime
-from service.settings import Settings
-from service.stopping import StopSignals
 
 GOING_AWAY_S = 1.0  # how long closing the streams may hold up the stop
 
@@ -72,7 +72,7 @@ def serve_until_stopped(app: object, runtime: Runtime, settings: Settings) -> li
     )
     _Server(config, runtime.going_away).run()
     if settings.ray == "local":  # a private instance, already saved from: it goes with us
-        from service.ray_local import stop_local_instance
+        from service.engines.ray_local import stop_local_instance
 
         stop_local_instance()
     return list(runtime.stop_problems)

@@ -9,6 +9,7 @@ that compares what the service publishes with them checks the service, not a cop
 from __future__ import annotations
 
 import contextlib
+import random
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -20,7 +21,8 @@ import pytest
 from clients import ArmfleetClient, WorldState
 from clients import pytest_plugin as armfleet_plugin
 from clients.testing import Server, free_port, serve
-from service.robot import load_robot
+from service.core.robot import load_robot
+from tests.peer_stdio import UrPeer
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -64,6 +66,19 @@ def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
         time.sleep(0.05)
 
 
+def node_armfleet(seen: dict[str, Any], owned: dict[str, str]) -> dict[str, Any]:
+    """Node /armfleet from a peer's `ros_discovery_info` view (`seen`: 'nodes', and the GUIDs
+    DDS discovery reported as 'writers'/'readers' by topic), checked to own exactly one
+    endpoint on each topic of `owned` (topic -> 'writers' or 'readers'): how `ros2 node list`
+    and `ros2 topic info -v` attribute them. Node GIDs are the 16-byte GUID padded to 24."""
+    (node,) = [n for n in seen["nodes"] if n["name"] == "armfleet"]
+    assert node["namespace"] == "/"
+    for topic, kind in owned.items():
+        ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
+        assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
+    return node
+
+
 def target_after(client: ArmfleetClient, world: int, pred: Callable[[WorldState], bool]) -> Any:
     """The world's targets once `pred(state)` holds (commands apply at the next tick)."""
 
@@ -85,3 +100,31 @@ def http(server: Server) -> Iterator[httpx.Client]:
     """An HTTP client on the module's server."""
     with httpx.Client(base_url=server.url, timeout=10) as client:
         yield client
+
+
+# -- the UR driver's DDS surface (tests/test_ros_ur.py, tests/test_ros_actions.py) ----------
+
+
+@pytest.fixture(scope="module")
+def ur_domain() -> int:
+    """A DDS domain of the module's own, so that parallel runs do not hear each other."""
+    return random.SystemRandom().randrange(1, 233)
+
+
+@pytest.fixture(scope="module")
+def ur_server(tmp_path_factory: pytest.TempPathFactory, ur_domain: int) -> Iterator[Server]:
+    """`serve --ros2` with 2 worlds, world 1 also under /world_1."""
+    extra = ("--ros2", "--ros2-worlds", "1", "--ros2-rate", "30")
+    env = {"ROS_DOMAIN_ID": str(ur_domain)}
+    with serve(worlds=2, extra_args=extra, env=env, log_dir=tmp_path_factory.mktemp("ur")) as s:
+        yield s
+
+
+@pytest.fixture(scope="module")
+def ur_peer(ur_server: Server, ur_domain: int) -> Iterator[UrPeer]:
+    """An independent ROS 2 peer process (tests/ros2_ur_peer.py) on the server's domain."""
+    p = UrPeer(ur_domain)
+    try:
+        yield p
+    finally:
+        p.close()

@@ -15,9 +15,7 @@ Protocol: one JSON request per stdin line, one JSON reply per stdout line.
   {"op": "matched", "topic": "..."}            wait until armfleet's endpoint on it is matched
 """
 
-import json
 import os
-import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -38,6 +36,8 @@ from cyclonedds.qos import Policy, Qos
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from rosbags.typesys import Stores, get_typestore
+
+from tests.peer_stdio import serve_lines
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -237,14 +237,7 @@ class Peer:
 
 
 def main() -> None:
-    peer = Peer()
-    print(json.dumps({"ready": True}), flush=True)
-    for line in sys.stdin:
-        try:
-            reply = {"ok": True, "result": peer.handle(json.loads(line))}
-        except Exception as exc:
-            reply = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        print(json.dumps(reply), flush=True)
+    serve_lines(Peer().handle)
 
 
 if __name__ == "__main__":

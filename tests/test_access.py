@@ -13,8 +13,8 @@ from conftest import ROOT, running_server, wait_for
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
-from service import access
-from service.settings import Settings
+from service.core import access
+from service.core.settings import Settings
 
 TOKEN = "s3cret-token"
 

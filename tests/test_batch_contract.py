@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 from mjcf import SCENE_XML
-from service.engine import WorldBatch
-from service.errors import Conflict
-from service.native import NativeBatch
-from service.shards import ShardedBatch
-from service.snapshots import check_state_support
-from service.types import Batch
+from service.core.errors import Conflict
+from service.core.types import Batch
+from service.engines.native import NativeBatch
+from service.engines.shards import ShardedBatch
+from service.engines.warp import WorldBatch
+from service.persistence.snapshots import check_state_support
 
 NWORLD = 4
 
@@ -27,7 +27,7 @@ NWORLD = 4
 def _ray_batch(n: int) -> Batch:
     """One CPU actor on a local Ray instance (shared with tests/test_ray_shards.py, which covers
     worlds split over several actors); one actor keeps this module's cost down."""
-    from service.ray_shards import RayBatch, connect
+    from service.engines.ray_shards import RayBatch, connect
 
     connect("local", num_cpus=4)
     return RayBatch(n, shards=1)
@@ -195,3 +195,26 @@ def test_a_state_continues_bit_identically_in_the_same_and_another_batch(fresh):
         np.testing.assert_array_equal(a, b)
         np.testing.assert_array_equal(a, c)
     np.testing.assert_array_equal(other.snapshot().position, batch.snapshot().position)
+
+
+def test_velocity_feedforward_defaults_to_zero_and_cuts_the_servo_lag(fresh):
+    """Trajectories send a velocity feed-forward with their targets: zero (or none) steps
+    exactly as targets alone always did, and 1 rad/s on a ramp removes most of the lag."""
+    a, b = fresh
+    worlds = np.arange(NWORLD)
+    speed = np.zeros((NWORLD, 7))
+    speed[1, 0] = 1.0  # world 1 of `a` follows the ramp with feed-forward
+    for k in range(1, 31):
+        targets = np.tile(a.home_target, (NWORLD, 1))
+        targets[:2, 0] += k * a.tick_dt  # worlds 0 and 1 ramp shoulder_pan at 1 rad/s
+        a.set_targets(worlds, targets, speed)
+        b.set_targets(worlds, targets)
+        a.step(1)
+        b.step(1)
+    keep = [0, 2, 3]  # zero feed-forward: bit-identical to none
+    np.testing.assert_array_equal(a.qpos()[keep], b.qpos()[keep])
+    np.testing.assert_array_equal(a.targets, b.targets)  # targets are positions, not ctrl
+    lag_with = a.targets[1, 0] - a.snapshot().position[1, 0]
+    lag_without = b.targets[1, 0] - b.snapshot().position[1, 0]
+    assert lag_without > 0.05  # kv/kp × speed = 0.1 rad, less the part caught up
+    assert abs(lag_with) < lag_without / 3

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from service import commands
-from service.errors import BadCommand
-from service.robot import load_robot
+from service.core import commands
+from service.core.errors import BadCommand
+from service.core.robot import load_robot
 
 SPEC = load_robot().spec
 HOME = SPEC.home

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from test_model import solve_ik
 
-from service.engine import WorldBatch
-from service.native import NativeBatch
+from service.engines.native import NativeBatch
+from service.engines.warp import WorldBatch
 
 NWORLD = 4
 ENGINES = {"warp": WorldBatch, "mujoco": NativeBatch}

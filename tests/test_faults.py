@@ -22,9 +22,9 @@ import pytest
 from conftest import running_server, wait_for
 from websockets.sync.client import connect
 
-from service.engine import WorldBatch
-from service.loop import SimLoop
-from service.types import Mode
+from service.core.loop import SimLoop
+from service.core.types import Mode
+from service.engines.warp import WorldBatch
 
 
 def _shard_workers(pid: int) -> list[psutil.Process]:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.hub import Subscription
-from service.types import Snapshot
+from service.core.hub import Subscription
+from service.core.types import Snapshot
 
 
 def snap(tick: int) -> Snapshot:

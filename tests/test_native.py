@@ -15,8 +15,8 @@ import pytest
 from conftest import ELBOW, HOME, Server, serve, wait_for
 from websockets.sync.client import connect
 
-from service import wire
-from service.native import NativeBatch, auto_threads, usable_cores
+from service.core import wire
+from service.engines.native import NativeBatch, auto_threads, usable_cores
 
 
 def test_native_batch_uses_every_usable_core_once_the_batch_is_big_enough():

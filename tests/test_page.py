@@ -71,7 +71,7 @@ def http(srv):
 
 
 def read_pose_frame(data: bytes) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
-    """Parse an AFP1 frame by the layout documented in service/wire.py."""
+    """Parse an AFP1 frame by the layout documented in service/core/wire.py."""
     assert data[:4] == b"AFP1"
     hlen = int.from_bytes(data[4:8], "little")
     assert hlen % 4 == 0
@@ -364,3 +364,22 @@ def test_a_killed_server_shows_disconnected_and_the_page_recovers_when_it_is_bac
         wrist = page.locator('tr[data-joint="wrist_1_joint"]')
         wrist.get_by_role("button", name="Down (-0.1)").click()
         wait_for(lambda: target(http, 2)[3] == pytest.approx(before[3] - 0.1), "world 2's wrist_1")
+
+
+def test_a_running_trajectory_shows_its_progress_and_cancel_stops_it(srv, http, page):
+    arm = JOINTS[:6]
+    goal = (np.array(HOME[:6]) + 0.3).tolist()
+    body = {"joint_names": arm, "points": [{"positions": goal, "time_from_start": 20.0}]}
+    started = http.post("/v1/worlds/2/trajectory", json=body)
+    assert started.status_code == 200, started.text
+    open_page(page, srv, "?world=2")
+    box = page.locator("#trajectory")
+    expect(box).to_be_visible()
+    expect(page.locator("#trajText")).to_contain_text(f"#{started.json()['id']} ")
+    wait_for(lambda: page.locator("#trajProgress").evaluate("p => p.value") > 0, "progress")
+    box.get_by_role("button", name="Cancel").click()
+    traj_id = started.json()["id"]
+    expect(page.locator("#trajText")).to_have_text(f"#{traj_id} aborted: cancelled")
+    expect(page.locator("#trajCancel")).to_be_hidden()
+    status = http.get("/v1/worlds/2/trajectory").json()
+    assert status["state"] == "aborted" and status["reason"] == "cancelled"

@@ -18,9 +18,9 @@ ray = pytest.importorskip("ray")
 
 from ray.exceptions import RayActorError  # noqa: E402
 
-from service.engine import WorldBatch  # noqa: E402
-from service.ray_shards import RayBatch, connect  # noqa: E402
-from service.sharding import join_states, slice_state  # noqa: E402
+from service.engines.ray_shards import RayBatch, connect  # noqa: E402
+from service.engines.sharding import join_states, slice_state  # noqa: E402
+from service.engines.warp import WorldBatch  # noqa: E402
 
 NWORLD = 6
 FIELDS = ("position", "velocity", "effort", "target", "flange_pos", "flange_quat", "sim_time")

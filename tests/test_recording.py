@@ -20,7 +20,7 @@ from mcap.reader import make_reader
 from rosbags.typesys import Stores, get_typestore
 from websockets.sync.client import connect
 
-from service.replay import read_recording, replay_recording
+from service.persistence.replay import read_recording, replay_recording
 
 NWORLD = 8
 TICKS = 600

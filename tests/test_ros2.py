@@ -8,15 +8,11 @@ its `/joint_states` and `/clock` with rosbags. Everything stays on loopback.
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import random
-import subprocess
-import sys
 import time
+import xml.etree.ElementTree as ET
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
@@ -24,12 +20,20 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
-from service.ros import msgs, topics
-from service.ros.dds import LOOPBACK_CONFIG, choose_config
-from tests.conftest import ELBOW, FINGER, JOINTS, Server, serve, wait_for
+from service.surfaces.ros import msgs, topics
+from service.surfaces.ros.dds import LOOPBACK_CONFIG, choose_config
+from tests.conftest import ELBOW, FINGER, JOINTS, Server, node_armfleet, serve, wait_for
+from tests.peer_stdio import PeerProcess
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
-PEER = Path(__file__).with_name("ros2_peer.py")
+# The Cyclone peer discovers by unicast on 127.0.0.1 only (no multicast at all): armfleet's
+# own unicast peer list must find it, as its multicast on lo finds Fast DDS (test_fastdds.py).
+UNICAST_ONLY = (
+    '<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"/>'
+    "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery><Peers>"
+    '<Peer address="127.0.0.1"/></Peers><ParticipantIndex>auto</ParticipantIndex>'
+    "<MaxAutoParticipantIndex>50</MaxAutoParticipantIndex></Discovery></Domain></CycloneDDS>"
+)
 
 
 # -- the types, byte for byte --------------------------------------------------------------
@@ -150,6 +154,63 @@ def test_dds_scope_follows_flags_and_environment() -> None:
         choose_config(False, {"ROS_DOMAIN_ID": "abc"})
 
 
+def test_loopback_discovery_announces_by_multicast_on_lo_and_unicast() -> None:
+    """What lets a Fast DDS node (multicast only, no initial peers) started later find us."""
+    general = ET.fromstring(LOOPBACK_CONFIG).find("Domain/General")
+    assert general is not None
+    (nic,) = general.findall("Interfaces/NetworkInterface")
+    assert nic.attrib == {"address": "127.0.0.1", "multicast": "true"}
+    assert general.findtext("AllowMulticast") == "spdp"
+    peers = ET.fromstring(LOOPBACK_CONFIG).findall("Domain/Discovery/Peers/Peer")
+    assert [p.get("address") for p in peers] == ["127.0.0.1"]
+
+
+def _peers(config: str | None) -> list[str]:
+    xml = (config or "").split(",")[0]
+    return [p.get("address", "") for p in ET.fromstring(xml).iter("Peer")] if xml else []
+
+
+@pytest.mark.parametrize(
+    ("network", "env", "scope", "peers"),
+    [
+        (False, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}, "loopback", ["127.0.0.1"]),
+        (True, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}, "loopback", ["127.0.0.1"]),
+        (False, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}, "network", []),
+        (False, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "system_default"}, "loopback", ["127.0.0.1"]),
+        (
+            True,
+            {"ROS_STATIC_PEERS": "10.0.0.7; robot.local"},
+            "network",
+            ["10.0.0.7", "robot.local"],
+        ),
+        (False, {"ROS_STATIC_PEERS": "127.0.0.2"}, "loopback", ["127.0.0.1", "127.0.0.2"]),
+        (
+            False,
+            {"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF", "ROS_STATIC_PEERS": "127.0.0.1"},
+            "off (static peers only)",
+            ["127.0.0.1"],
+        ),
+        (
+            False,
+            {"ROS_LOCALHOST_ONLY": "1", "CYCLONEDDS_URI": "file:///etc/dds.xml"},
+            "loopback + user CYCLONEDDS_URI",
+            ["127.0.0.1"],
+        ),
+    ],
+)
+def test_jazzy_discovery_variables_are_honoured(
+    network: bool, env: dict[str, str], scope: str, peers: list[str]
+) -> None:
+    cfg = choose_config(network, env)
+    assert cfg.scope == scope and _peers(cfg.config) == peers
+    if "CYCLONEDDS_URI" in env:  # applied after ours, so the user's settings win
+        assert cfg.config and cfg.config.endswith("," + env["CYCLONEDDS_URI"])
+    if scope == "off (static peers only)":
+        assert "<AllowMulticast>false</AllowMulticast>" in (cfg.config or "")
+    with pytest.raises(ValueError, match="ROS_AUTOMATIC_DISCOVERY_RANGE must be one of"):
+        choose_config(network, {**env, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LAN"})
+
+
 def test_bad_message_log_is_rate_limited(caplog: pytest.LogCaptureFixture) -> None:
     counter = topics.BadMessageCounter("test")
     with caplog.at_level("WARNING", logger="armfleet.ros"):
@@ -163,34 +224,16 @@ def test_bad_message_log_is_rate_limited(caplog: pytest.LogCaptureFixture) -> No
 # -- a running server and an independent DDS peer ------------------------------------------
 
 
-class Peer:
+class Peer(PeerProcess):
     """tests/ros2_peer.py in its own process: rosbags bytes over its own DDS participant."""
 
     def __init__(self, domain: int) -> None:
-        env = {**os.environ, "CYCLONEDDS_URI": LOOPBACK_CONFIG, "ROS_DOMAIN_ID": str(domain)}
-        self.proc = subprocess.Popen(
-            [sys.executable, str(PEER)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            text=True,
-            env=env,
+        super().__init__(
+            "tests.ros2_peer", {"CYCLONEDDS_URI": UNICAST_ONLY, "ROS_DOMAIN_ID": str(domain)}
         )
-        assert json.loads(self.proc.stdout.readline()) == {"ready": True}  # type: ignore[union-attr]
-
-    def ask(self, **req: Any) -> Any:
-        assert self.proc.stdin and self.proc.stdout
-        self.proc.stdin.write(json.dumps(req) + "\n")
-        self.proc.stdin.flush()
-        reply = json.loads(self.proc.stdout.readline())
-        assert reply["ok"], reply
-        return reply["result"]
 
     def publish(self, topic: str, name: list[str], position: list[float]) -> None:
         assert self.ask(op="publish", topic=topic, msg={"name": name, "position": position}) == 0
-
-    def close(self) -> None:
-        self.proc.kill()
-        self.proc.wait()
 
 
 @pytest.fixture(scope="module")
@@ -327,26 +370,29 @@ def test_ros2_tools_see_node_armfleet_owning_its_endpoints(peer: Peer) -> None:
     """`ros_discovery_info` (rosbags-decoded) names node /armfleet with the GIDs of exactly the
     readers and writers DDS discovery reports on its topics: how `ros2 node list` and
     `ros2 topic info -v` attribute them."""
-    seen = peer.ask(op="discovery")
-    (node,) = [n for n in seen["nodes"] if n["name"] == "armfleet"]
-    assert node["namespace"] == "/"
     owned = {
         "rt/joint_states": "writers",
         "rt/world_1/joint_states": "writers",
         "rt/clock": "writers",
         "rt/joint_commands": "readers",
         "rt/world_2/joint_commands": "readers",
+        "rt/world_2/tf": "writers",
+        "rt/robot_description": "writers",
+        "rt/world_1/forward_position_controller/commands": "readers",
     }
-    for topic, kind in owned.items():
-        ours = [g for g in seen[kind].get(topic, []) if g + "00" * 8 in node[kind]]
-        assert len(ours) == 1, (topic, seen[kind].get(topic), node[kind])
-    assert len(node["writers"]) == 4 and len(node["readers"]) == 3  # world 0, 1, 2 (+ /clock)
+    node = node_armfleet(peer.ask(op="discovery"), owned)
+    # per namespace (root, world_1, world_2): joint_states, tf, tf_static, robot_description
+    # and 3 actions × (3 service replies + feedback + status) written; joint_commands,
+    # forward_position_controller/commands, 2 joint_trajectory topics and 3 actions × 3
+    # service requests read; plus /clock
+    assert len(node["writers"]) == 3 * (4 + 3 * 5) + 1
+    assert len(node["readers"]) == 3 * (4 + 3 * 3)
 
 
 def test_ros2_worlds_must_exist() -> None:
     from pydantic import ValidationError
 
-    from service.settings import Settings
+    from service.core.settings import Settings
 
     assert topics.parse_world_list("0-2,3", 4) == (0, 1, 2, 3)
     with pytest.raises(ValidationError, match="ros2_worlds '2-9'"):

@@ -7,7 +7,7 @@ import pytest
 from pydantic import ValidationError
 
 from clients.testing import ServerFailed, serve
-from service.settings import Settings
+from service.core.settings import Settings
 
 
 def test_environment_applies_and_a_typed_option_overrides_it(tmp_path, monkeypatch):

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from clients.testing import serve
-from service.engine import WorldBatch
-from service.shards import ShardedBatch, auto_shards
+from service.engines.shards import ShardedBatch, auto_shards
+from service.engines.warp import WorldBatch
 
 NWORLD = 6
 

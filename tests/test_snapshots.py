@@ -14,10 +14,10 @@ from conftest import ELBOW, FINGER, Server, running_server
 from mcap.reader import make_reader
 
 from clients.testing import stop
-from service.errors import Conflict
+from service.core.errors import Conflict
+from service.core.settings import Settings
+from service.persistence.snapshots import decode_state, encode_state, read_header
 from service.runtime import Runtime
-from service.settings import Settings
-from service.snapshots import decode_state, encode_state, read_header
 
 NWORLD = 4
 
@@ -124,8 +124,8 @@ def test_foreign_truncated_or_corrupt_files_get_409_and_change_nothing(paused, h
 
 def test_a_flipped_array_byte_is_caught_by_the_file_checks():
     """Zip CRCs and the digest each catch damage; decode never returns a damaged state."""
-    from service.engine import WorldBatch
-    from service.provenance import batch_header
+    from service.engines.warp import WorldBatch
+    from service.persistence.provenance import batch_header
 
     batch = WorldBatch(2)
     header = batch_header(batch)

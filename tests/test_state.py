@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from service.engine import WorldBatch
-from service.shards import ShardedBatch
-from service.types import PHYSICS_FIELDS, BatchState
+from service.core.types import PHYSICS_FIELDS, BatchState
+from service.engines.shards import ShardedBatch
+from service.engines.warp import WorldBatch
 
 NWORLD = 4
 

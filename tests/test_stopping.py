@@ -21,8 +21,8 @@ import httpx
 import pytest
 from conftest import ELBOW, serve, wait_for
 
-from service.replay import read_recording, replay_recording
-from service.snapshots import decode_state
+from service.persistence.replay import read_recording, replay_recording
+from service.persistence.snapshots import decode_state
 
 TARGET = 0.5  # elbow target [rad] commanded before the signal (within the joint's range)
 CONFIGS = {

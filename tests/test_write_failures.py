@@ -21,7 +21,7 @@ import httpx
 import pytest
 from conftest import ROOT, free_port, serve, wait_for
 
-from service.snapshots import decode_state
+from service.persistence.snapshots import decode_state
 
 NATIVE = ("--engine", "mujoco")  # starts in a second; how files are written is the same
 

@@ -1,19 +1,20 @@
 """Dependencies shared by the routers: the runtime, the loop, the control layer, world ids.
 
 They are `async def` on purpose: plain `def` dependencies each hop through the threadpool
-(~0.1 ms apiece on every request). Errors are raised as service.errors exceptions; the app maps
+(~0.1 ms apiece on every request). Errors are raised as service.core.errors exceptions; the app maps
 them to status codes in one place.
 """
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, Path, Request
 
-from service.control import Control
-from service.errors import Unavailable, UnknownWorld
-from service.loop import SimLoop
+from service.core.control import Control
+from service.core.errors import Unavailable, UnknownWorld
+from service.core.loop import SimLoop
+from service.core.schemas import ErrorReply
 from service.runtime import Runtime
 
 
@@ -46,3 +47,12 @@ async def world_id(loop: Loop, world: Annotated[int, Path(description="world ind
 
 
 World = Annotated[int, Depends(world_id)]
+
+# `responses=` of routes that write a file (snapshots, recordings): the domain error CannotWrite.
+CANNOT_WRITE: dict[int | str, dict[str, Any]] = {
+    507: {
+        "model": ErrorReply,
+        "description": "the file cannot be written (disk full, read-only folder, a FIFO nobody "
+        "reads): the detail names the path and the cause; nothing was replaced",
+    }
+}

@@ -1,4 +1,4 @@
-"""GET /metrics: Prometheus text format (see service/metrics.py for what is counted)."""
+"""GET /metrics: Prometheus text format (see service/core/metrics.py for what is counted)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends
 from fastapi.responses import Response
 
 from service.api.deps import get_runtime
-from service.metrics import CONTENT_TYPE
+from service.core.metrics import CONTENT_TYPE
 from service.runtime import Runtime
 
 router = APIRouter(tags=["health"])

@@ -8,12 +8,12 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends
 
-from service.api.deps import Loop, get_runtime
-from service.errors import Conflict, NotFound
-from service.recorder import Recorder
+from service.api.deps import CANNOT_WRITE, Loop, get_runtime
+from service.core.errors import Conflict, NotFound
+from service.core.schemas import RecordingRequest, RecordingStatus
+from service.persistence.recorder import Recorder
+from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
-from service.schemas import RecordingRequest, RecordingStatus, errors
-from service.snapshots import check_state_support
 
 router = APIRouter(prefix="/v1/recordings", tags=["recordings"])
 Rt = Annotated[Runtime, Depends(get_runtime)]
@@ -29,7 +29,7 @@ def _status(recorder: Recorder) -> RecordingStatus:
     response_model=RecordingStatus,
     status_code=201,
     summary="Start recording to <data-dir>/recordings/<name>.mcap",
-    responses={**errors(507), 409: {"description": "a recording is already running"}},
+    responses={**CANNOT_WRITE, 409: {"description": "a recording is already running"}},
 )
 async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
     async with _starting:

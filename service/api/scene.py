@@ -1,13 +1,13 @@
-"""GET /v1/scene: what to draw, from the compiled model (see service/scene.py)."""
+"""GET /v1/scene: what to draw, from the compiled model (see service/core/scene.py)."""
 
 from __future__ import annotations
 
 from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
-from service import scene, wire
 from service.api.deps import Loop
-from service.schemas import Scene
+from service.core import scene, wire
+from service.core.schemas import Scene
 
 router = APIRouter(prefix="/v1", tags=["scene"])
 

@@ -7,9 +7,9 @@ import asyncio
 from fastapi import APIRouter
 
 from service.api.deps import Ctl, Loop
-from service.control import Source
-from service.schemas import ANY, WITH_BODY, ModeRequest, SimReply, StepRequest, errors
-from service.types import Mode
+from service.core.control import Source
+from service.core.schemas import ANY, WITH_BODY, ModeRequest, SimReply, StepRequest, errors
+from service.core.types import Mode
 
 router = APIRouter(prefix="/v1/sim", tags=["sim"])
 

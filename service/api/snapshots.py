@@ -8,11 +8,11 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Path
 
-from service.api.deps import Loop, get_runtime
-from service.errors import Conflict
+from service.api.deps import CANNOT_WRITE, Loop, get_runtime
+from service.core.errors import Conflict
+from service.core.schemas import RestoreReply, SnapshotInfo, SnapshotName, SnapshotRequest
+from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
-from service.schemas import RestoreReply, SnapshotInfo, SnapshotName, SnapshotRequest, errors
-from service.snapshots import check_state_support
 
 router = APIRouter(prefix="/v1/snapshots", tags=["snapshots"])
 Rt = Annotated[Runtime, Depends(get_runtime)]
@@ -24,7 +24,7 @@ Rt = Annotated[Runtime, Depends(get_runtime)]
     status_code=201,
     summary="Save the full state of every world as snapshot `name` (replaces one of that name)",
     responses={
-        **errors(507),
+        **CANNOT_WRITE,
         422: {"description": "bad name (separators, empty, over 64 characters)"},
     },
 )

@@ -1,7 +1,7 @@
 """Per-world state and commands: read JointState, press Up/Down, set targets, reset.
 
 Routes only translate HTTP to the control layer and back; validation, staging and the reply
-shape live in service/control.py and service/wire.py, errors are mapped by the app.
+shape live in service/core/control.py and service/core/wire.py, errors are mapped by the app.
 """
 
 from __future__ import annotations
@@ -13,12 +13,12 @@ import numpy as np
 from fastapi import APIRouter, Body, Query
 from fastapi.responses import Response
 
-from service import wire
 from service.api.deps import Ctl, Loop, World
-from service.control import Source
-from service.errors import Unavailable
-from service.loop import SimLoop
-from service.schemas import (
+from service.core import wire
+from service.core.control import Source
+from service.core.errors import Unavailable
+from service.core.loop import SimLoop
+from service.core.schemas import (
     ANY,
     WITH_BODY,
     BatchCommandReply,
@@ -32,7 +32,7 @@ from service.schemas import (
     WorldStates,
     errors,
 )
-from service.types import Mode, Snapshot
+from service.core.types import Mode, Snapshot
 
 router = APIRouter(prefix="/v1", tags=["worlds"])
 

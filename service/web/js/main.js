@@ -48,6 +48,7 @@ const panel = new Panel({
     command({ op: 'set_targets', name: [g.name], position: [closed ? g.upper : g.lower] });
   },
   world: (w) => focus(w),
+  cancelTrajectory: () => command({ op: 'cancel_trajectory' }),
   toggleView: () => {
     page.view = page.view === 'fleet' ? 'world' : 'fleet';
     go();
@@ -69,6 +70,11 @@ const conn = new Connection({
   },
   frame: onFrame,
   ack: (msg) => {
+    if ('trajectory' in msg) {
+      // A trajectory op's ack: the status rides on the next frames; say what the cancel did.
+      if (msg.world === page.world && msg.trajectory) panel.showTrajectory(msg.trajectory);
+      return;
+    }
     if (msg.world === page.world) {
       page.lastAck = msg;
       panel.showTargets(msg.target);
@@ -177,6 +183,7 @@ function onFrame(f) {
   if (now - panelShown < PANEL_MS) return;
   panelShown = now;
   const st = f.header.focus;
+  if (f.header.stats && st && st.world === page.world) panel.showTrajectory(f.header.stats.trajectory);
   if (st && st.world === page.world) {
     panel.showMeasured(st.position);
     // A target acked for a later tick is newer than this frame's.

@@ -12,7 +12,8 @@ const setText = (el, text) => {
 const fmt = (v) => (Math.abs(v) < 0.005 ? 0 : v).toFixed(2); // no "-0.00"
 
 export class Panel {
-  /** actions: step(joint, delta), reset(), gripper(closed), world(id), toggleView() */
+  /** actions: step(joint, delta), reset(), gripper(closed), world(id), toggleView(),
+   * cancelTrajectory() */
   constructor(actions) {
     this.actions = actions;
     this.rows = new Map();
@@ -22,6 +23,7 @@ export class Panel {
     $('open').addEventListener('click', () => actions.gripper(false));
     $('close').addEventListener('click', () => actions.gripper(true));
     $('viewToggle').addEventListener('click', () => actions.toggleView());
+    $('trajCancel').addEventListener('click', () => actions.cancelTrajectory());
     $('world').addEventListener('change', () => {
       const w = Number($('world').value);
       if (Number.isInteger(w)) actions.world(w);
@@ -68,6 +70,18 @@ export class Panel {
 
   showMeasured(position) {
     this.names.forEach((n, i) => setText(this.rows.get(n).measured, fmt(position[i])));
+  }
+
+  /** The focus world's trajectory ({id, state, reason, progress} or null): a progress bar and
+   * Cancel while it runs, its outcome after. */
+  showTrajectory(t) {
+    $('trajectory').hidden = !t;
+    if (!t) return;
+    const running = t.state === 'running';
+    $('trajProgress').value = t.progress;
+    $('trajCancel').hidden = !running;
+    const outcome = t.state === 'aborted' ? `aborted: ${t.reason}` : t.state;
+    setText($('trajText'), running ? `#${t.id} ${Math.round(100 * t.progress)}%` : `#${t.id} ${outcome}`);
   }
 
   clearValues() {

@@ -1,0 +1,177 @@
+"""The import graph of `service` and `clients`, drawn from the source with `ast`.
+
+Why: issue 16 asks for no import cycles (TYPE_CHECKING imports included) and no import from
+the core up into a surface. Reading the imports from the text (not importing anything) sees
+every edge, lazy ones inside functions and type-only ones alike, so the check cannot be fooled
+by an import that only runs on some path.
+
+    python scripts/import_graph.py            # cycles, layer violations, figures; exit 1 if any
+    python scripts/import_graph.py --edges    # every edge, one a line
+
+Layers, lowest first: a module may import its own layer and the ones below it, never above.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("service", "clients")
+
+# (prefix, rank): the longest matching prefix decides a module's layer.
+LAYERS: tuple[tuple[str, int], ...] = (
+    ("service.core", 0),
+    ("service.engines", 1),
+    ("service.persistence", 2),
+    ("service.surfaces", 3),
+    ("service.api", 3),
+    ("service.app", 4),
+)
+
+
+def module_name(path: Path) -> str:
+    """`service/core/loop.py` -> `service.core.loop`; a package's `__init__` is the package."""
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def discover() -> dict[str, Path]:
+    """Every module of the packages, by dotted name."""
+    found: dict[str, Path] = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            found[module_name(path)] = path
+    return found
+
+
+def _resolve(name: str, modules: dict[str, Path]) -> str | None:
+    """The module a dotted name lands in: itself, or its nearest enclosing package/module."""
+    while name:
+        if name in modules:
+            return name
+        name = name.rpartition(".")[0]
+    return None
+
+
+def imports_of(mod: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """The project modules `mod` imports, anywhere in its text."""
+    is_pkg = path.name == "__init__.py"
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        targets: list[str] = []
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+                base = base[: len(base) - (node.level - 1)]
+                prefix = ".".join([*base, node.module] if node.module else base)
+            else:
+                prefix = node.module or ""
+            # `from pkg import sub` names the submodule when one exists, else the package.
+            targets = [
+                f"{prefix}.{a.name}" if f"{prefix}.{a.name}" in modules else prefix
+                for a in node.names
+            ]
+        for t in targets:
+            hit = _resolve(t, modules)
+            if hit and hit != mod:
+                out.add(hit)
+    return out
+
+
+def graph() -> dict[str, set[str]]:
+    modules = discover()
+    return {m: imports_of(m, p, modules) for m, p in modules.items()}
+
+
+def cycles(g: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+    counter = 0
+
+    def visit(v: str) -> None:
+        nonlocal counter
+        index[v] = low[v] = counter
+        counter += 1
+        stack.append(v)
+        on.add(v)
+        for w in sorted(g.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    sys.setrecursionlimit(10000)
+    for v in sorted(g):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def layer(mod: str) -> int | None:
+    best: tuple[int, int] | None = None
+    for prefix, rank in LAYERS:
+        if (mod == prefix or mod.startswith(prefix + ".")) and (
+            best is None or len(prefix) > best[0]
+        ):
+            best = (len(prefix), rank)
+    return None if best is None else best[1]
+
+
+def upward(g: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """Edges from a lower layer into a higher one (e.g. core -> surfaces)."""
+    bad = []
+    for src, dsts in g.items():
+        ls = layer(src)
+        for dst in dsts:
+            ld = layer(dst)
+            if ls is not None and ld is not None and ld > ls:
+                bad.append((src, dst))
+    return sorted(bad)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--edges", action="store_true", help="print every edge")
+    args = ap.parse_args()
+    g = graph()
+    if args.edges:
+        for src in sorted(g):
+            for dst in sorted(g[src]):
+                print(f"{src} -> {dst}")
+        return 0
+    cyc = cycles(g)
+    up = upward(g)
+    for comp in cyc:
+        print("cycle: " + " <-> ".join(comp))
+    for src, dst in up:
+        print(f"upward: {src} -> {dst}")
+    print(
+        f"{len(g)} modules, {sum(map(len, g.values()))} edges, {len(cyc)} cycles, {len(up)} upward"
+    )
+    return 1 if cyc or up else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,139 @@
+"""Trajectory routes: start one world's (POST), watch it (GET, optionally waiting for the
+outcome), cancel and hold (DELETE), and start one trajectory on many worlds at one tick.
+
+Validation is `service.trajectory.parse` (422 naming the field and the limit, nothing changed);
+running it is `Control.start_trajectory`, as for every other surface.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Annotated
+
+import numpy as np
+from fastapi import APIRouter, Query
+from fastapi.responses import Response
+
+from service.api.deps import Ctl, World
+from service.core import wire
+from service.core.control import Control, Source
+from service.core.errors import BadCommand, Conflict, NotFound
+from service.core.schemas import ANY, WITH_BODY, errors
+from service.core.trajectory import TrajectoryStatus, parse
+from service.core.trajectory.schemas import (
+    BatchStartedReply,
+    BatchTrajectoryBody,
+    StartedReply,
+    TrajectoryBody,
+    TrajectoryStatusReply,
+)
+
+router = APIRouter(prefix="/v1", tags=["trajectories"])
+MAX_WAIT_S = 60.0
+
+
+def _json(payload: object) -> Response:
+    return Response(wire.dumps(payload), media_type="application/json")
+
+
+@router.post(
+    "/worlds/{world}/trajectory",
+    response_model=StartedReply,
+    summary="Follow a JointTrajectory (replaces a running one); answers its id and ticks",
+    responses=errors(404, *WITH_BODY),
+)
+async def start(control: Ctl, world: World, body: TrajectoryBody) -> Response:
+    spec = parse(control.spec, body.as_json())
+    started = control.start_trajectory([world], spec, Source.HTTP)[0]
+    return _json(started.as_json())
+
+
+Wait = Annotated[
+    float,
+    Query(
+        ge=0,
+        le=MAX_WAIT_S,
+        allow_inf_nan=False,
+        description="seconds to wait for a running trajectory's outcome before answering",
+    ),
+]
+
+
+@router.get(
+    "/worlds/{world}/trajectory",
+    response_model=TrajectoryStatusReply,
+    summary="Status, progress and feedback of the world's running (else last) trajectory",
+    responses=errors(404, *ANY),
+)
+async def status(control: Ctl, world: World, wait: Wait = 0.0) -> Response:
+    current = control.trajectories.status(world)
+    if current is None:
+        raise NotFound(f"world {world} has not run a trajectory", "world")
+    return _json((await _outcome(control, current, wait)).as_json())
+
+
+@router.get(
+    "/trajectories/{trajectory_id}",
+    response_model=TrajectoryStatusReply,
+    summary="One trajectory by id (also after a newer one replaced it on its world)",
+    responses=errors(404, *ANY),
+)
+async def by_id(control: Ctl, trajectory_id: int, wait: Wait = 0.0) -> Response:
+    current = control.trajectories.get(trajectory_id)
+    if current is None:
+        raise NotFound(f"no trajectory {trajectory_id} (unknown, or long forgotten)", "id")
+    return _json((await _outcome(control, current, wait)).as_json())
+
+
+async def _outcome(control: Control, current: TrajectoryStatus, wait: float) -> TrajectoryStatus:
+    """`current`, or its final status if it comes within `wait` seconds."""
+    if wait <= 0 or current.done:
+        return current
+    fut = control.trajectories.wait(current.id)
+    try:
+        return await asyncio.wait_for(asyncio.wrap_future(fut), timeout=wait)
+    except TimeoutError:
+        return control.trajectories.get(current.id) or current
+
+
+@router.delete(
+    "/worlds/{world}/trajectory",
+    response_model=TrajectoryStatusReply,
+    summary="Cancel the world's running trajectory; the world holds where it was",
+    responses=errors(404, 409, *ANY),
+)
+async def cancel(control: Ctl, world: World) -> Response:
+    stopped = control.cancel_trajectory([world], Source.HTTP)
+    if not stopped:
+        raise Conflict(f"world {world} runs no trajectory", "world")
+    return _json(stopped[0].as_json())
+
+
+@router.post(
+    "/trajectories",
+    response_model=BatchStartedReply,
+    summary="Start one trajectory on many worlds, all at the same tick",
+    responses=errors(404, *WITH_BODY),
+)
+async def start_many(control: Ctl, body: BatchTrajectoryBody) -> Response:
+    worlds = _worlds(control, body.worlds)
+    spec = parse(control.spec, body.trajectory.as_json())
+    started = control.start_trajectory(worlds, spec, Source.HTTP)
+    return _json(
+        {
+            "start_tick": started[0].start_tick,
+            "end_tick": started[0].end_tick,
+            "started": len(started),
+            "ids": np.array([s.id for s in started], dtype=np.int64),
+            "worlds": np.array(worlds, dtype=np.int64),
+        }
+    )
+
+
+def _worlds(control: Control, worlds: list[int] | str) -> list[int]:
+    if isinstance(worlds, str):
+        return wire.parse_worlds(worlds, control.nworld).tolist()
+    ids = control.worlds(worlds)  # unknown ids are named first (404), then a repeat (422)
+    if len(set(ids)) != len(ids):
+        raise BadCommand("worlds", "a world may be listed only once")
+    return ids

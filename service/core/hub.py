@@ -1,0 +1,150 @@
+"""StreamHub: fans snapshots out to WebSocket subscribers with latest-state delivery.
+
+Each subscription holds at most one undelivered snapshot (a newer one replaces it) plus its
+queue of command acks, which are never dropped. A slow reader therefore costs one snapshot of
+memory and delays nobody else; a fast one gets every frame it asked for, at most one per tick.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections import deque
+from collections.abc import Awaitable, Callable
+
+import numpy as np
+
+from service.core.loop import SnapshotSink
+from service.core.types import Snapshot
+
+
+class Subscription:
+    """One WebSocket's interest: which worlds, how often, and its outbox."""
+
+    def __init__(
+        self,
+        worlds: np.ndarray,
+        rate: float | None,
+        render: Callable[[Snapshot], bytes],
+        kind: str,
+        binary: bool = False,
+    ):
+        self.worlds = worlds
+        self.binary = binary  # frames go out as binary WebSocket messages
+        # Sockets with the same kind of frame over the same worlds share one serialisation.
+        self.key = (kind, worlds.tobytes())
+        self.period = 1.0 / rate if rate else 0.0  # 0: every tick
+        self.render = render
+        self.next_due = 0.0
+        self.latest: Snapshot | None = None
+        self.owed_tick: int | None = None  # the earliest tick an acked command takes effect
+        self.acks: deque[bytes] = deque()
+        self.ready = asyncio.Event()
+        # Set by the socket that owns it: close the socket (code, reason), e.g. 1001 at shutdown.
+        self.close: Callable[[int, str], Awaitable[None]] | None = None
+        self.status_frames = False  # the socket speaks our protocol: send it status frames
+        # The writer drops a frame when this says so (the page's socket: nothing moved).
+        self.skip: Callable[[Snapshot], bool] | None = None
+
+    def due(self, now: float) -> bool:
+        # A little slack so that a 30 Hz stream on a 60 Hz loop really gets every other tick.
+        return now >= self.next_due - 0.1 * self.period
+
+    def owe(self, tick: int) -> None:
+        """A command from this socket takes effect at `tick`: send the first frame that carries
+        it whatever the cadence (called on the event loop when the command is acked)."""
+        self.owed_tick = tick if self.owed_tick is None else min(self.owed_tick, tick)
+
+    def wants(self, snap: Snapshot, now: float) -> bool:
+        return self.due(now) or (self.owed_tick is not None and snap.tick >= self.owed_tick)
+
+    def offer(self, snap: Snapshot, now: float) -> None:
+        self.latest = snap  # replaces one the reader has not taken yet
+        if self.owed_tick is not None and snap.tick >= self.owed_tick:
+            self.owed_tick = None
+        if self.period and self.due(now):
+            # Keep the cadence; after a stall start afresh instead of sending a burst. A frame
+            # sent early because a command was owed does not move the cadence.
+            self.next_due += self.period
+            if self.next_due < now:
+                self.next_due = now + self.period
+        self.ready.set()
+
+    def push_ack(self, message: bytes) -> None:
+        self.acks.append(message)
+        self.ready.set()
+
+
+class StreamHub(SnapshotSink):
+    """The loop's snapshot sink: decides demand on the sim thread, delivers on the event loop."""
+
+    def __init__(self, aio_loop: asyncio.AbstractEventLoop):
+        self._aio = aio_loop
+        self._subs: tuple[Subscription, ...] = ()  # replaced, never mutated: read from two threads
+        self._lock = threading.Lock()
+        self._incoming: Snapshot | None = None
+        self._scheduled = False
+        self._frame_cache: dict[tuple[int, tuple[str, bytes]], bytes] = {}
+        self.frames_skipped = 0  # frames replaced before a slow reader took them (metrics)
+
+    def add(self, sub: Subscription) -> None:
+        self._subs = (*self._subs, sub)
+
+    def remove(self, sub: Subscription) -> None:
+        self._subs = tuple(s for s in self._subs if s is not sub)
+
+    @property
+    def subscribers(self) -> int:
+        return len(self._subs)
+
+    # -- sim thread -------------------------------------------------------------------------
+
+    def wants_snapshot(self, now: float) -> bool:
+        return any(s.due(now) or s.owed_tick is not None for s in self._subs)
+
+    def publish(self, snapshot: Snapshot) -> None:
+        if not self._subs:
+            return
+        with self._lock:
+            self._incoming = snapshot  # a newer snapshot supersedes one not yet delivered
+            if self._scheduled:
+                return
+            self._scheduled = True
+        self._aio.call_soon_threadsafe(self._deliver)
+
+    # -- event loop -------------------------------------------------------------------------
+
+    def _deliver(self) -> None:  # now from time.monotonic, the same clock as the sim thread
+        with self._lock:
+            snap, self._incoming = self._incoming, None
+            self._scheduled = False
+        if snap is None:
+            return
+        now = time.monotonic()
+        for sub in self._subs:
+            if sub.wants(snap, now):
+                if sub.latest is not None:
+                    self.frames_skipped += 1
+                sub.offer(snap, now)
+
+    def broadcast(self, message: bytes) -> None:
+        """Queue a message (a status frame) for every subscriber, in order with its acks."""
+        for sub in self._subs:
+            if sub.status_frames:
+                sub.push_ack(message)
+
+    async def close_all(self, code: int, reason: str) -> None:
+        """Close every subscriber's socket with `code` (1001 when the service stops)."""
+        closing = [sub.close(code, reason) for sub in self._subs if sub.close is not None]
+        await asyncio.gather(*closing, return_exceptions=True)
+
+    def frame(self, sub: Subscription, snap: Snapshot) -> bytes:
+        """Serialise once per (tick, world selection) however many sockets share it."""
+        key = (snap.tick, sub.key)
+        frame = self._frame_cache.get(key)
+        if frame is None:
+            if len(self._frame_cache) > 256:
+                self._frame_cache.clear()
+            frame = self._frame_cache[key] = sub.render(snap)
+        return frame

@@ -1,0 +1,548 @@
+"""SimLoop: owns a WorldBatch on a thread of its own; time, commands and snapshots.
+
+Data flows one way. Commands arrive from any thread and are folded, under one lock, into a
+*pending* target table (validated first, so a rejected command changes nothing). At each tick
+boundary the loop thread moves what is pending into the engine in one write, steps the tick with
+the lock released (the graph replay releases the GIL too), then publishes a snapshot. A command
+therefore takes effect at a tick that is known when it is accepted: that is the `tick` in every
+reply, and the first snapshot whose `tick` is >= it carries the new target.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+
+from service.core import commands
+from service.core.errors import NotPaused, UnknownWorld
+from service.core.staging import Override, Staging, TrajectoryHook
+from service.core.types import Batch, BatchState, Mode, Snapshot
+
+log = logging.getLogger("armfleet.loop")
+T = TypeVar("T")
+# Called on the sim thread after a restore: (tick before, the state restored, its name).
+RestoreListener = Callable[[int, BatchState, str], None]
+
+# In fast mode with nobody streaming, a snapshot is still taken this often so that reads are
+# never older than this; readers that need the current tick ask for one explicitly.
+_IDLE_SNAPSHOT_PERIOD = 0.1
+_STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
+
+
+@dataclass(frozen=True)
+class CommandResult:
+    """Reply to a target command: the world's target row after it, what clamped, when it applies."""
+
+    world: int
+    target: np.ndarray
+    clamped: list[str]
+    tick: int
+
+
+@dataclass(frozen=True)
+class LoopStats:
+    tick: int
+    mode: Mode
+    ticks_per_s: float
+    realtime_factor: float
+
+
+class SnapshotSink:
+    """Where snapshots go (the stream hub, the ROS 2 bridge, the recorder, ...).
+
+    Both methods run on the sim thread between ticks: they must be quick and hand any real work
+    (serialising, sending, writing) to a thread or event loop of their own.
+    """
+
+    def wants_snapshot(self, now: float) -> bool:
+        return False
+
+    def publish(self, snapshot: Snapshot) -> None:  # called on the loop thread
+        pass
+
+
+class SimLoop:
+    """Advance a Batch in realtime, fast or paused mode and serialise commands into it."""
+
+    def __init__(
+        self,
+        batch: Batch,
+        mode: Mode = Mode.REALTIME,
+        sinks: tuple[SnapshotSink, ...] = (),
+    ):
+        self.batch = batch
+        self.spec = batch.spec
+        self._sinks = tuple(sinks)  # replaced, never mutated: read by the sim thread
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._mode = Mode(mode)
+        self._running = False
+        self._thread: threading.Thread | None = None
+        # Everything below is guarded by _lock.
+        self._pending = batch.targets  # float64 (nworld, 7): targets as of all accepted commands
+        self._velocity = np.zeros_like(self._pending)  # velocity feed-forward staged with them
+        self._traj: TrajectoryHook | None = None
+        self._dirty = np.zeros(batch.nworld, dtype=bool)
+        self._reset = np.zeros(batch.nworld, dtype=bool)
+        self._stepping = False
+        self._tick = batch.tick
+        self._step_goal = self._tick  # paused mode: run until the tick counter reaches this
+        self._step_waiters: list[tuple[int, concurrent.futures.Future[int]]] = []
+        # Readers waiting for a snapshot of at least this tick (read-your-writes).
+        self._snapshot_waiters: list[tuple[int, concurrent.futures.Future[Snapshot]]] = []
+        # Per world: the tick from which its latest accepted command is in effect.
+        self._effective = np.zeros(batch.nworld, dtype=np.int64)
+        self._tick_listeners: tuple[TickListener, ...] = ()
+        self.failure: str | None = None  # why the last tick failed; None while ticks succeed
+        self._latest = batch.snapshot()
+        self._last_snapshot_wall = 0.0
+        self._stats = LoopStats(self._tick, self._mode, 0.0, 0.0)
+        self._window: tuple[float, int] = (time.monotonic(), self._tick)
+        # Work for the sim thread between two ticks (state, restore, reads of the batch).
+        self._requests: list[tuple[Callable[[Batch], Any], concurrent.futures.Future[Any]]] = []
+        self._restore_listeners: tuple[RestoreListener, ...] = ()
+
+    # -- life cycle -------------------------------------------------------------------------
+
+    def start(self) -> None:
+        self._running = True
+        self._thread = threading.Thread(target=self._run, name="armfleet-sim", daemon=True)
+        self._thread.start()
+
+    def add_sink(self, sink: SnapshotSink) -> None:
+        """Also publish snapshots to `sink` (from the next tick on)."""
+        self._sinks = (*self._sinks, sink)
+
+    def remove_sink(self, sink: SnapshotSink) -> None:
+        self._sinks = tuple(s for s in self._sinks if s is not sink)
+
+    def stop(self) -> None:
+        with self._wake:
+            self._running = False
+            self._wake.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout=10)
+        self._serve_requests()  # the thread is gone: requests that raced the stop are served here
+        for _, fut in self._step_waiters:
+            fut.cancel()
+        for _, fut in self._snapshot_waiters:
+            fut.cancel()
+
+    # -- commands (any thread) --------------------------------------------------------------
+
+    def _accept_tick(self) -> int:
+        """The tick whose stepping first uses a command accepted now (lock held)."""
+        return self._tick + (2 if self._stepping else 1)
+
+    def _check_world(self, world: int) -> None:
+        if not 0 <= world < self.batch.nworld:
+            raise UnknownWorld(world, self.batch.nworld)
+
+    def increment(self, world: int, deltas: Mapping[int, float]) -> CommandResult:
+        """Add deltas (joint index → rad) to the world's latest target, clamped."""
+        self._check_world(world)
+        with self._lock:
+            update = commands.increment(self.spec, self._pending[world], deltas)
+            return self._stage(world, update)
+
+    def set_targets(self, world: int, values: Mapping[int, float]) -> CommandResult:
+        """Set the named joints' targets (others keep theirs), clamped."""
+        self._check_world(world)
+        with self._lock:
+            update = commands.set_targets(self.spec, self._pending[world], values)
+            return self._stage(world, update)
+
+    def set_many(self, worlds: list[int], positions: np.ndarray) -> list[CommandResult]:
+        """Full 7-joint targets for many worlds, all applied at the same tick boundary."""
+        for w in worlds:
+            self._check_world(w)
+        every = dict.fromkeys(range(len(self.spec.joints)), 0.0)
+        with self._lock:
+            updates = [
+                commands.set_targets(
+                    self.spec, self._pending[w], dict(zip(every, row, strict=True))
+                )
+                for w, row in zip(worlds, positions, strict=True)
+            ]
+            return [self._stage(w, u) for w, u in zip(worlds, updates, strict=True)]
+
+    def _stage(self, world: int, update: commands.TargetUpdate) -> CommandResult:
+        self._pending[world] = update.target
+        self._velocity[world] = 0.0
+        self._dirty[world] = True
+        if self._traj is not None:
+            self._traj.overridden(np.array([world]), Override.MANUAL)
+        tick = self._accept_tick()
+        self._effective[world] = tick
+        return CommandResult(world, update.target.copy(), update.clamped, tick)
+
+    def reset(self, worlds: list[int] | None = None) -> int:
+        """Reset worlds (all when None) to home, state and targets; returns the effective tick."""
+        idx = np.arange(self.batch.nworld) if worlds is None else np.asarray(worlds, dtype=int)
+        for w in idx:
+            self._check_world(int(w))
+        with self._lock:
+            self._reset[idx] = True
+            self._dirty[idx] = False
+            self._pending[idx] = self.batch.home_target
+            self._velocity[idx] = 0.0
+            if self._traj is not None:
+                self._traj.overridden(idx, Override.RESET)
+            tick = self._accept_tick()
+            self._effective[idx] = tick
+            return tick
+
+    def attach_trajectories(self, hook: TrajectoryHook) -> None:
+        """Let `hook` run trajectories: it is called at every stage of a tick (see staging)."""
+        self._traj = hook
+
+    @contextlib.contextmanager
+    def staging(self, worlds: np.ndarray | None = None) -> Iterator[Staging]:
+        """Hold the command lock and lend the pending tables; `worlds` get the effective tick."""
+        with self._lock:
+            st = Staging(self._pending, self._velocity, self._dirty, self._accept_tick())
+            yield st
+            if worlds is not None:
+                self._effective[worlds] = st.tick
+
+    def pending_targets(self, world: int | np.ndarray) -> np.ndarray:
+        """Targets as of every command accepted so far (some may not be in effect yet)."""
+        with self._lock:
+            return self._pending[world].copy()
+
+    # -- work between ticks (any thread) ---------------------------------------------------
+
+    def call(self, fn: Callable[[Batch], T]) -> concurrent.futures.Future[T]:
+        """Run `fn(batch)` on the sim thread between two ticks; the future gets its result.
+
+        The batch belongs to the sim thread, so this is how other threads read or change it. In
+        paused mode the request is served at once. Never wait on it from the sim thread itself.
+        """
+        fut: concurrent.futures.Future[T] = concurrent.futures.Future()
+        with self._wake:
+            if self._running:
+                self._requests.append((fn, fut))
+                self._wake.notify_all()
+                return fut
+        _run_request(fn, fut, self.batch)  # not running: no other thread touches the batch
+        return fut
+
+    def request_state(self) -> concurrent.futures.Future[BatchState]:
+        """Every world's full state at the next tick boundary (`Batch.get_state`)."""
+        return self.call(lambda batch: batch.get_state())
+
+    def restore(self, state: BatchState, name: str = "") -> concurrent.futures.Future[int]:
+        """Continue from `state` at the next tick boundary; the future gets the restored tick.
+
+        Commands accepted but not yet applied are dropped (they belonged to the replaced state);
+        step requests waiting in paused mode complete at the restored tick. A state that does not
+        fit fails the future with ValueError, and nothing changes.
+        """
+        return self.call(lambda batch: self._restore(batch, state, name))
+
+    def add_restore_listener(self, listener: RestoreListener) -> None:
+        self._restore_listeners = (*self._restore_listeners, listener)
+
+    def remove_restore_listener(self, listener: RestoreListener) -> None:
+        self._restore_listeners = tuple(x for x in self._restore_listeners if x is not listener)
+
+    def _restore(self, batch: Batch, state: BatchState, name: str) -> int:
+        tick_before = batch.tick
+        batch.set_state(state)  # checks everything before changing anything
+        with self._lock:
+            self._tick = batch.tick
+            self._step_goal = self._tick
+            self._pending = batch.targets
+            self._velocity[:] = 0.0
+            if self._traj is not None:
+                self._traj.restored()
+            self._dirty[:] = False
+            self._reset[:] = False
+            self._effective[:] = self._tick  # what was accepted before belongs to the old state
+            self._window = (time.monotonic(), self._tick)
+            waiting, self._step_waiters = self._step_waiters, []
+        for listener in self._restore_listeners:
+            try:
+                listener(tick_before, state, name)
+            except Exception:
+                log.exception("restore listener %r failed", listener)
+        self._publish(time.monotonic())
+        with self._lock:  # readers waiting for a tick of the old timeline get the restored state
+            readers, self._snapshot_waiters = self._snapshot_waiters, []
+        for _, reader in readers:
+            _resolve(reader, self._latest)
+        for _, fut in waiting:
+            fut.set_result(self._tick)
+        return self._tick
+
+    def _serve_requests(self) -> None:
+        with self._lock:
+            requests, self._requests = self._requests, []
+        for fn, fut in requests:
+            _run_request(fn, fut, self.batch)
+
+    # -- time control -----------------------------------------------------------------------
+
+    @property
+    def mode(self) -> Mode:
+        return self._mode
+
+    def set_mode(self, mode: Mode) -> None:
+        with self._wake:
+            self._mode = Mode(mode)
+            self._window = (time.monotonic(), self._tick)
+            self._wake.notify_all()
+            waiters = self._stranded_waiters()
+        for fut in waiters:  # paused: the ticks they waited for will not come
+            _resolve(fut, self._latest)
+
+    def step(self, ticks: int) -> concurrent.futures.Future[int]:
+        """Paused only: advance exactly `ticks`; the future resolves with the tick reached."""
+        fut: concurrent.futures.Future[int] = concurrent.futures.Future()
+        with self._wake:
+            if self._mode is not Mode.PAUSED:
+                raise NotPaused(f"step needs mode 'paused' (mode is {self._mode.value!r})")
+            self._step_goal = max(self._step_goal, self._tick) + ticks
+            self._step_waiters.append((self._step_goal, fut))
+            self._wake.notify_all()
+        return fut
+
+    # -- reading ----------------------------------------------------------------------------
+
+    @property
+    def tick(self) -> int:
+        """Control ticks completed so far."""
+        return self._tick
+
+    @property
+    def latest(self) -> Snapshot:
+        return self._latest
+
+    def fresh_snapshot(
+        self, worlds: np.ndarray | list[int] | None = None
+    ) -> concurrent.futures.Future[Snapshot]:
+        """A snapshot that includes every command accepted for `worlds` (all when None) so far.
+
+        Read-your-writes: it waits for the tick from which the latest accepted command of those
+        worlds is in effect (at most the tick in progress and the next one while running), and
+        never returns a tick older than the last completed one. While paused those ticks do not
+        come: the latest snapshot is returned at once and the caller shows `pending_targets`.
+        """
+        fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
+        with self._wake:
+            need = self._tick + (1 if self._stepping else 0)
+            if self._effective.size:
+                chosen = self._effective if worlds is None else self._effective[worlds]
+                need = max(need, int(chosen.max(initial=0)))
+            if self._latest.tick >= need or not self._running or self._will_not_advance():
+                fut.set_result(self._latest)
+            else:
+                self._snapshot_waiters.append((need, fut))
+        return fut
+
+    def _will_not_advance(self) -> bool:
+        """Paused with no step requested and no tick in progress (lock held)."""
+        return self._mode is Mode.PAUSED and self._tick >= self._step_goal and not self._stepping
+
+    def _stranded_waiters(self) -> list[concurrent.futures.Future[Snapshot]]:
+        """Readers whose tick will not come because time stands still (lock held)."""
+        if not self._will_not_advance():
+            return []
+        stranded = [f for _, f in self._snapshot_waiters]
+        self._snapshot_waiters = []
+        return stranded
+
+    def add_tick_listener(self, listener: TickListener) -> None:
+        """Call `listener(tick, seconds, faulted_count)` on the sim thread after every tick.
+
+        For counters (metrics): it must be quick and must not block.
+        """
+        self._tick_listeners = (*self._tick_listeners, listener)
+
+    @property
+    def stats(self) -> LoopStats:
+        if self._mode is Mode.PAUSED:
+            return LoopStats(self._tick, self._mode, 0.0, 0.0)
+        return self._stats
+
+    # -- the loop thread --------------------------------------------------------------------
+
+    def _run(self) -> None:
+        next_deadline = time.perf_counter()
+        while True:
+            self._serve_requests()
+            with self._wake:
+                if not self._running:
+                    return
+                if self._requests:  # arrived while serving: serve before waiting or stepping
+                    continue
+                mode = self._mode
+                if mode is Mode.PAUSED and self._tick >= self._step_goal:
+                    self._wake.wait()
+                    next_deadline = time.perf_counter()
+                    continue
+                if mode is Mode.REALTIME:
+                    delay = next_deadline - time.perf_counter()
+                    if delay > 0:
+                        self._wake.wait(delay)
+                        continue
+            try:
+                self._tick_once(mode)
+            except Exception as exc:  # never let a bad tick kill the loop, nor flood the log
+                self._tick_failed(exc)
+                time.sleep(0.1)
+            else:
+                if self.failure is not None:
+                    log.warning("ticks succeed again after: %s", self.failure)
+                    self.failure = None
+            if mode is Mode.REALTIME:
+                # Keep the cadence. A tick that overran is made up by starting the next one at
+                # once, but never more than one tick of lag is carried: further behind, the time
+                # is given up (the real-time factor shows it) instead of bursting to catch up.
+                next_deadline += self.batch.tick_dt
+                now = time.perf_counter()
+                if now - next_deadline > self.batch.tick_dt:
+                    next_deadline = now
+
+    def _tick_failed(self, exc: Exception) -> None:
+        """Log the first failure with its traceback, then stay quiet until ticks succeed."""
+        with self._lock:
+            self._stepping = False
+        why = f"{type(exc).__name__}: {exc}"
+        if self.failure is None:
+            log.error("tick failed; the service is not ready until ticks succeed", exc_info=exc)
+        elif why != self.failure:
+            log.error("tick still failing, now with: %s", why)
+        self.failure = why
+        for listener in self._tick_listeners:
+            with contextlib.suppress(Exception):
+                listener(self._tick, 0.0, -1)  # -1: the tick failed
+
+    def _tick_once(self, mode: Mode) -> None:
+        """One tick as named stages, each holding the lock only for its own bookkeeping."""
+        t0 = time.perf_counter()
+        resets, dirty, targets, velocity = self._take_commands()
+        self._apply(resets, dirty, targets, velocity)
+        faulted = self.batch.step(1)
+        now = time.monotonic()
+        if self._finish_tick(faulted, mode, now):
+            self._publish(now)
+        self._release_step_waiters()
+        self._update_stats(now)
+        seconds = time.perf_counter() - t0
+        if self._traj is not None:
+            self._traj.dispatch()
+        for listener in self._tick_listeners:
+            try:
+                listener(self._tick, seconds, int(faulted.size))
+            except Exception:
+                log.exception("tick listener %r failed", listener)
+
+    def _take_commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """Take what is pending from under the lock: (resets, dirty worlds, their targets and
+        velocity feed-forward, None when all zero); running trajectories are sampled first."""
+        with self._lock:
+            if self._traj is not None:
+                self._traj.sample(self._tick + 1, self._staged())
+            resets = np.flatnonzero(self._reset)
+            dirty = np.flatnonzero(self._dirty)
+            targets = self._pending[dirty].copy()
+            velocity = self._velocity[dirty].copy()
+            self._reset[:] = False
+            self._dirty[:] = False
+            self._stepping = True
+        return resets, dirty, targets, velocity if velocity.any() else None
+
+    def _staged(self) -> Staging:
+        """The pending tables for the hook (lock held)."""
+        return Staging(self._pending, self._velocity, self._dirty, self._accept_tick())
+
+    def _apply(
+        self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray, vel: np.ndarray | None
+    ) -> None:
+        """Hand the tick's commands to the engine: resets first, then targets."""
+        self.batch.reset(resets)
+        if dirty.size:
+            if vel is None:  # no feed-forward: the plain call every engine has always had
+                self.batch.set_targets(dirty, targets)
+            else:
+                self.batch.set_targets(dirty, targets, vel)
+
+    def _finish_tick(self, faulted: np.ndarray, mode: Mode, now: float) -> bool:
+        """Count the tick, forget targets of worlds reset for faults; is a snapshot wanted?"""
+        with self._lock:
+            self._tick = self.batch.tick
+            self._stepping = False
+            if faulted.size:
+                keep = faulted[~self._dirty[faulted]]  # commands that arrived since still apply
+                self._pending[keep] = self.batch.home_target
+                self._velocity[keep] = 0.0
+            traj = self._traj is not None and self._traj.after_step(
+                self._tick, faulted, self._staged()
+            )
+            return (
+                traj
+                or mode is Mode.REALTIME
+                or (mode is Mode.PAUSED and self._tick >= self._step_goal)
+                or bool(self._snapshot_waiters)
+                or now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
+                or any(sink.wants_snapshot(now) for sink in self._sinks)
+            )
+
+    def _publish(self, now: float) -> None:
+        """Take a snapshot, wake the readers waiting for one, hand it to every sink."""
+        snap = self.batch.snapshot()
+        with self._lock:
+            self._latest = snap
+            self._last_snapshot_wall = now
+            if self._traj is not None:
+                self._traj.observe(snap, self._staged())
+            ready = [f for need, f in self._snapshot_waiters if need <= snap.tick]
+            self._snapshot_waiters = [(n, f) for n, f in self._snapshot_waiters if n > snap.tick]
+            ready += self._stranded_waiters()
+        for fut in ready:
+            _resolve(fut, snap)
+        for sink in self._sinks:
+            sink.publish(snap)
+
+    def _release_step_waiters(self) -> None:
+        with self._lock:
+            done = [f for g, f in self._step_waiters if g <= self._tick]
+            self._step_waiters = [(g, f) for g, f in self._step_waiters if g > self._tick]
+        for fut in done:
+            fut.set_result(self._tick)
+
+    def _update_stats(self, now: float) -> None:
+        t0, tick0 = self._window
+        if now - t0 < _STATS_WINDOW:
+            return
+        ticks = self._tick - tick0
+        rate = ticks / (now - t0)
+        self._stats = LoopStats(self._tick, self._mode, rate, rate * self.batch.tick_dt)
+        self._window = (now, self._tick)
+
+
+TickListener = Callable[[int, float, int], None]
+
+
+def _resolve(fut: concurrent.futures.Future[Snapshot], snap: Snapshot) -> None:
+    if not fut.done():  # a reader that gave up may have cancelled it
+        with contextlib.suppress(concurrent.futures.InvalidStateError):
+            fut.set_result(snap)
+
+
+def _run_request(fn: Callable[[Batch], T], fut: concurrent.futures.Future[T], batch: Batch) -> None:
+    if not fut.set_running_or_notify_cancel():
+        return
+    try:
+        fut.set_result(fn(batch))
+    except BaseException as exc:  # handed to whoever waits on the future
+        fut.set_exception(exc)

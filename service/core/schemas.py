@@ -1,0 +1,511 @@
+"""The wire contract: pydantic models for every HTTP body and WebSocket message.
+
+Numbers are finite floats (NaN/Inf are refused at the edge, before anything is staged).
+Joint-state fields follow sensor_msgs/JointState (`name`, `position`, `velocity`, `effort`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    WithJsonSchema,
+    model_validator,
+)
+
+from service.core.robot import default_spec
+from service.core.types import JointSpec, Mode
+
+# Strict: numbers only ("0.1" and true are refused); ints are fine.
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
+Delta = Annotated[
+    float,
+    Field(
+        allow_inf_nan=False,
+        strict=True,
+        ge=-2 * math.pi,
+        le=2 * math.pi,
+        description="rad, |delta| <= 2π",
+    ),
+]
+MAX_STEP_TICKS = 100_000
+
+
+def _paired(keys_name: str, keys: list, values_name: str, values: list) -> None:
+    """Parallel lists (JointState's name/position, worlds/position): same length, keys unique."""
+    if len(keys) != len(values):
+        raise ValueError(
+            f"{keys_name} and {values_name} must have the same length "
+            f"(got {len(keys)} and {len(values)})"
+        )
+    if len(set(keys)) != len(keys):
+        raise ValueError(f"{keys_name} lists an entry twice")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+# -- replies ----------------------------------------------------------------------------------
+
+
+class Info(BaseModel):
+    robot: str
+    joints: list[JointSpec] = Field(description="the commanded joints, in command order")
+    nworld: int
+    device: str
+    shards: int = Field(description="processes the worlds are split across (CPU cores used)")
+    control_hz: float
+    physics_dt: float
+    substeps: int
+    mode: Mode
+    tick: int
+    sim_time: float = Field(description="tick / control_hz: simulated seconds since start")
+    ticks_per_s: float = Field(description="measured over the last second")
+    realtime_factor: float = Field(description="simulated seconds per wall second")
+    captured: bool = Field(description="the control tick replays a captured graph")
+
+
+class Flange(BaseModel):
+    position: list[float] = Field(description="x y z [m], world frame")
+    quaternion: list[float] = Field(description="w x y z")
+
+
+class WorldState(BaseModel):
+    """sensor_msgs/JointState fields plus the target in effect and the flange pose."""
+
+    world: int
+    tick: int
+    sim_time: float = Field(description="simulated seconds since this world's last reset")
+    name: list[str]
+    position: list[float]
+    velocity: list[float]
+    effort: list[float]
+    target: list[float]
+    flange: Flange
+    faults: int = Field(description="times this world was reset for NaN or capacity overflow")
+    pending_target: list[float] | None = Field(
+        None,
+        description="only while paused: the targets as of every accepted command, which the "
+        "next step puts in effect (`target` is what the last step used) [rad]",
+    )
+
+
+class WorldStates(BaseModel):
+    tick: int
+    worlds: list[WorldState]
+
+
+class CommandReply(BaseModel):
+    world: int
+    target: list[float] = Field(description="the world's 7 targets after this command [rad]")
+    clamped: list[str] = Field(description="joints whose target hit a range limit")
+    tick: int = Field(description="first tick stepped with this command")
+
+
+class BatchCommandReply(BaseModel):
+    tick: int
+    results: list[CommandReply]
+
+
+class ResetReply(BaseModel):
+    worlds: list[int]
+    tick: int
+
+
+class SimReply(BaseModel):
+    mode: Mode
+    tick: int
+
+
+# -- error replies ----------------------------------------------------------------------------
+
+
+class ErrorReply(BaseModel):
+    """Every 4xx/5xx except 422: what went wrong, in words naming the field and the limit."""
+
+    detail: str
+
+
+_ERROR_MEANING = {
+    400: "the body is not JSON (or not UTF-8)",
+    401: "a write (or, with token_reads, a read) without the token",
+    403: "a write from a browser page of a foreign origin",
+    404: "no such world (the detail names the ids and the valid range)",
+    409: "the request does not fit the current state (e.g. step while not paused)",
+    413: "the body is over the size limit",
+    503: "the engine is starting, failed or is rebuilding a shard; or too many clients at once",
+}
+
+
+def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
+    """`responses=` for a route: the error statuses it can answer (422 FastAPI adds itself)."""
+    return {code: {"model": ErrorReply, "description": _ERROR_MEANING[code]} for code in codes}
+
+
+# Statuses every /v1 route can answer (engine not ready, client cap, token and origin checks).
+ANY = (401, 403, 503)
+WITH_BODY = (*ANY, 400, 413)
+
+
+# -- requests ---------------------------------------------------------------------------------
+#
+# The JSON Schema of every request states every rule the server enforces (joint names, equal
+# lengths, which of increment's two shapes, strict integers), so that what the schema calls
+# valid is accepted and what it calls invalid is refused: schemathesis holds us to that
+# (tests/test_contract.py).
+
+JOINT_NAMES = tuple(default_spec().names)  # the model names them (service/core/robot.py)
+JOINT_KEYS = (*JOINT_NAMES, *(str(i) for i in range(len(JOINT_NAMES))))  # names or "0".."6"
+MAX_BATCH_WORLDS = 64  # worlds per POST /v1/targets; the schema lists every allowed length
+
+
+def _joint_key(value: object) -> str:
+    """A joint named by its name or by its index as a string (JSON object keys are strings)."""
+    if not isinstance(value, str):
+        raise ValueError(f"a joint is named by a string, got {value!r}")
+    if value not in JOINT_KEYS:
+        raise ValueError(f"unknown joint {value!r}; joints are {list(JOINT_NAMES)} (or 0..6)")
+    return value
+
+
+def _joint_ref(value: object) -> str | int:
+    """A joint named by its name or its index 0..6 (booleans are not indices; 2.0 is 2)."""
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, int) and not isinstance(value, bool):
+        if not 0 <= value < len(JOINT_NAMES):
+            raise ValueError(f"joint index {value} out of range 0..{len(JOINT_NAMES) - 1}")
+        return value
+    return _joint_key(value)
+
+
+_JOINT_KEY_SCHEMA = {
+    "type": "string",
+    "enum": list(JOINT_KEYS),
+    "description": "joint name, or its index as a string",
+}
+JointKey = Annotated[str, PlainValidator(_joint_key), WithJsonSchema(_JOINT_KEY_SCHEMA)]
+JointRef = Annotated[
+    str | int,
+    PlainValidator(_joint_ref),
+    WithJsonSchema(
+        {
+            "anyOf": [
+                {"type": "string", "enum": list(JOINT_NAMES)},
+                {"type": "integer", "minimum": 0, "maximum": len(JOINT_NAMES) - 1},
+            ],
+            "description": "joint name or index 0..6",
+        }
+    ),
+]
+
+
+def json_int(minimum: int | None = None, maximum: int | None = None, description: str = "") -> Any:
+    """An integer as JSON Schema means it: 3 and 3.0 (JSON has one number type), never true/false
+    (Python's bools are ints), "3" or 3.5; with optional bounds, stated in the schema too."""
+
+    def check(value: object) -> int:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"must be an integer, got {value!r}")
+        if isinstance(value, float) and not value.is_integer():
+            raise ValueError(f"must be an integer, got {value!r}")
+        number = int(value)
+        if minimum is not None and number < minimum:
+            raise ValueError(f"must be >= {minimum}, got {number}")
+        if maximum is not None and number > maximum:
+            raise ValueError(f"must be <= {maximum}, got {number}")
+        return number
+
+    schema: dict[str, Any] = {"type": "integer"}
+    if minimum is not None:
+        schema["minimum"] = minimum
+    if maximum is not None:
+        schema["maximum"] = maximum
+    if description:
+        schema["description"] = description
+    return Annotated[int, PlainValidator(check), WithJsonSchema(schema)]
+
+
+WorldId = json_int(minimum=0, description="world index")
+
+
+def _equal_lengths(a: str, b: str, lengths: range) -> list[dict[str, Any]]:
+    """oneOf branches saying arrays `a` and `b` have the same length (JSON Schema cannot
+    compare two arrays, so every allowed length is listed)."""
+    return [
+        {"properties": {a: {"minItems": k, "maxItems": k}, b: {"minItems": k, "maxItems": k}}}
+        for k in lengths
+    ]
+
+
+class IncrementRequest(_Strict):
+    """One joint (`joint` + `delta`) or several (`deltas`): the seed's Up/Down buttons."""
+
+    joint: JointRef | None = None
+    delta: Delta | None = None
+    deltas: Annotated[dict[JointKey, Delta], Field(min_length=1)] | None = None
+
+    @staticmethod
+    def _schema(schema: dict[str, Any]) -> None:
+        # Exactly one of the two shapes, and no nulls (the validator below refuses them too).
+        props = schema.pop("properties")
+        plain = {k: _non_null(v) for k, v in props.items()}
+        schema.pop("additionalProperties", None)
+        schema["oneOf"] = [
+            {
+                "title": "one joint",
+                "type": "object",
+                "properties": {"joint": plain["joint"], "delta": plain["delta"]},
+                "required": ["joint", "delta"],
+                "additionalProperties": False,
+            },
+            {
+                "title": "several joints",
+                "type": "object",
+                "properties": {"deltas": plain["deltas"]},
+                "required": ["deltas"],
+                "additionalProperties": False,
+            },
+        ]
+        schema["examples"] = [
+            {"joint": "elbow_joint", "delta": 0.1},
+            {"deltas": {"elbow_joint": 0.1, "finger_joint": -0.1}},
+        ]
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_schema)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_nulls(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            for key in ("joint", "delta", "deltas"):
+                if key in data and data[key] is None:
+                    raise ValueError(f"`{key}` may be left out but not null")
+        return data
+
+    @model_validator(mode="after")
+    def _one_form(self) -> IncrementRequest:
+        single = self.joint is not None or self.delta is not None
+        if single == (self.deltas is not None):
+            raise ValueError("give either `joint` and `delta`, or `deltas`")
+        if single and (self.joint is None or self.delta is None):
+            raise ValueError("`joint` and `delta` go together")
+        return self
+
+    def as_mapping(self) -> dict[str | int, float]:
+        if self.deltas is not None:
+            return dict(self.deltas)
+        assert self.joint is not None and self.delta is not None
+        return {self.joint: self.delta}
+
+
+def _non_null(prop: dict[str, Any]) -> dict[str, Any]:
+    """`X | None` as pydantic writes it (anyOf [X, null]) → X, keeping description/title."""
+    if "anyOf" not in prop:
+        return prop
+    kept = [p for p in prop["anyOf"] if p.get("type") != "null"]
+    out = {k: v for k, v in prop.items() if k not in ("anyOf", "default")}
+    if len(kept) == 1:
+        out.update(kept[0])
+    else:
+        out["anyOf"] = kept
+    return out
+
+
+class JointTargets(_Strict):
+    """sensor_msgs/JointState-shaped: a subset of names is allowed; others keep their targets."""
+
+    name: list[JointKey] = Field(
+        min_length=1, max_length=len(JOINT_NAMES), json_schema_extra={"uniqueItems": True}
+    )
+    position: list[FiniteFloat] = Field(min_length=1, max_length=len(JOINT_NAMES))
+
+    model_config = ConfigDict(
+        extra="allow",  # JointState also carries header/velocity/effort; they are ignored
+        json_schema_extra={
+            "examples": [{"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]}],
+            "oneOf": _equal_lengths("name", "position", range(1, len(JOINT_NAMES) + 1)),
+        },
+    )
+
+    @model_validator(mode="after")
+    def _same_length(self) -> JointTargets:
+        _paired("name", self.name, "position", self.position)
+        return self
+
+
+class BatchTargets(_Strict):
+    """Full 7-joint targets for many worlds in one request, applied at one tick boundary."""
+
+    worlds: list[WorldId] = Field(
+        min_length=1,
+        max_length=MAX_BATCH_WORLDS,
+        json_schema_extra={"uniqueItems": True},
+        description=f"distinct world ids, at most {MAX_BATCH_WORLDS} per request",
+    )
+    position: list[Annotated[list[FiniteFloat], Field(min_length=7, max_length=7)]] = Field(
+        min_length=1, max_length=MAX_BATCH_WORLDS, description="one row of 7 targets per world"
+    )
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2}
+            ],
+            "oneOf": _equal_lengths("worlds", "position", range(1, MAX_BATCH_WORLDS + 1)),
+        },
+    )
+
+    @model_validator(mode="after")
+    def _same_length(self) -> BatchTargets:
+        _paired("worlds", self.worlds, "position", self.position)
+        return self
+
+
+class ResetRequest(_Strict):
+    worlds: list[WorldId] | None = Field(default=None, description="omit for all worlds")
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"worlds": [0, 3]}]})
+
+
+class ModeRequest(_Strict):
+    mode: Mode
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"mode": "fast"}]})
+
+
+class StepRequest(_Strict):
+    ticks: json_int(minimum=1, maximum=MAX_STEP_TICKS) = 1  # type: ignore[valid-type]
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"ticks": 60}]})
+
+
+# -- snapshots and recordings -----------------------------------------------------------------
+
+# Names become file names under the data directory (see service/persistence/snapshots.py).
+SNAPSHOT_NAME = r"^[A-Za-z0-9_][A-Za-z0-9._-]{0,63}$"
+SnapshotName = Annotated[
+    str,
+    Field(
+        pattern=SNAPSHOT_NAME,
+        min_length=1,
+        max_length=64,
+        description="1-64 letters, digits, '.', '_', '-'; not starting with '.' or '-'",
+    ),
+]
+
+
+class SnapshotRequest(_Strict):
+    name: SnapshotName
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"name": "before"}]})
+
+
+class SnapshotInfo(BaseModel):
+    name: str
+    size_bytes: int
+    created: str = Field(description="UTC, ISO 8601")
+    tick: int = Field(description="batch tick the snapshot was taken at")
+    nworld: int
+    model_hash: str = Field(description="sha256 of the compiled model (MJB)")
+
+
+class RestoreReply(BaseModel):
+    name: str
+    tick: int = Field(description="the tick the batch continues from")
+
+
+class RecordingRequest(_Strict):
+    name: SnapshotName = Field(description="file <data-dir>/recordings/<name>.mcap")
+    worlds: str | None = Field(
+        default=None, description="worlds whose states are recorded, e.g. '0-7,12'; default first 8"
+    )
+    rate: float = Field(default=30.0, gt=0, le=1000, description="states per simulated second")
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"name": "run1", "worlds": "0-3", "rate": 30}]},
+    )
+
+
+class RecordingStatus(BaseModel):
+    path: str
+    worlds: list[int]
+    every_ticks: int = Field(description="a state every this many ticks")
+    start_tick: int
+    active: bool = Field(description="still writing")
+    written: int = Field(description="items written so far")
+    error: str | None = Field(description="why the recording stopped early, if it did")
+
+
+# -- the drawable scene (GET /v1/scene; built by service/core/scene.py) -------------------------
+
+
+class SceneBody(BaseModel):
+    id: int = Field(description="MjModel body index; row of the pose frames' body axis")
+    name: str
+    parent: int = Field(description="parent body id (the world body, 0, is its own parent)")
+
+
+class SceneMesh(BaseModel):
+    vertices: list[float] = Field(description="x y z per vertex, flattened [m], geom frame")
+    faces: list[int] = Field(description="3 vertex indices per triangle, flattened")
+
+
+class SceneGeom(BaseModel):
+    """One visible geom, described in its body's frame as MuJoCo compiled it."""
+
+    id: int = Field(description="MjModel geom index")
+    name: str = Field(description="empty when the MJCF gave none")
+    body: int = Field(description="body the geom is attached to")
+    type: str = Field(description="plane, sphere, capsule, ellipsoid, cylinder, box or mesh")
+    size: list[float] = Field(
+        description="MuJoCo geom_size [m]: box half-extents; sphere radius; capsule/cylinder "
+        "radius and half-length along the local z axis; plane half-sizes (0 = infinite)"
+    )
+    pos: list[float] = Field(description="x y z in the body frame [m]")
+    quat: list[float] = Field(description="orientation in the body frame, w x y z")
+    rgba: list[float] = Field(description="colour, 0..1 (the material's when it has one)")
+    mesh: SceneMesh | None = Field(None, description="mesh geoms only")
+
+
+class Scene(BaseModel):
+    nbody: int = Field(description="bodies per world in the pose frames (world body included)")
+    bodies: list[SceneBody]
+    geoms: list[SceneGeom] = Field(description="geoms of groups 0-2 (MuJoCo's visible groups)")
+    skipped: int = Field(description="visible geoms of types not described (height fields, SDFs)")
+
+
+_ERROR_CONTENT = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorReply"}}}
+
+
+def fit_openapi(spec: dict[str, Any], nworld: int) -> dict[str, Any]:
+    """Tighten the generated OpenAPI to this service's size: a batch lists distinct worlds, so
+    it never holds more than `nworld` of them; listing only the lengths that can occur keeps
+    the equal-length rule exact and the document small."""
+    # Whatever route a surface adds: a JSON body can be unreadable (400) or too large (413), and
+    # every /v1 route is behind the token, origin and client-cap checks and needs the engine.
+    for path, operations in spec.get("paths", {}).items():
+        for op in operations.values():
+            if not isinstance(op, dict) or "responses" not in op:
+                continue
+            codes = [*ANY] if path.startswith("/v1/") else []
+            if "requestBody" in op:
+                codes += [400, 413]
+            for code, response in errors(*codes).items():
+                response = {"description": response["description"], "content": _ERROR_CONTENT}
+                op["responses"].setdefault(str(code), response)
+    batch = spec.get("components", {}).get("schemas", {}).get("BatchTargets")
+    if batch is not None:
+        most = min(nworld, MAX_BATCH_WORLDS)
+        batch["oneOf"] = _equal_lengths("worlds", "position", range(1, most + 1))
+        for key in ("worlds", "position"):
+            batch["properties"][key]["maxItems"] = most
+    return spec

@@ -1,0 +1,123 @@
+"""All service settings in one place; every field can also come from an ARMFLEET_* variable.
+
+Precedence: a `armfleet serve` option the user typed > ARMFLEET_* variable > the default here.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from service.core.physics import DEFAULT_PHYSICS_DT
+from service.core.types import Mode
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="ARMFLEET_")
+
+    worlds: int = Field(16, ge=1, le=1_048_576, description="number of parallel worlds")
+    engine: Literal["warp", "mujoco"] = Field(
+        "warp",
+        description="warp: MuJoCo Warp (CPU or GPU, the default); "
+        "mujoco: native MuJoCo on every CPU core (fastest on a CPU-only machine)",
+    )
+    device: str = Field("cpu", description="warp device: cpu, cuda or cuda:N")
+    host: str = Field("127.0.0.1", description="bind address (loopback by default)")
+    port: int = Field(8000, ge=0, le=65535, description="TCP port")
+    shards: int = Field(
+        0,
+        ge=0,
+        le=256,
+        description="warp: CPU worker processes (one per core), mujoco: threads; 0 = auto",
+    )
+    ray: str | None = Field(
+        None,
+        description="put the shards on Ray actors: auto (the cluster `ray start` runs here), "
+        "local (a private instance on 127.0.0.1) or HOST:PORT of a head node; "
+        "unset = in-process shards",
+    )
+    mode: Mode = Field(Mode.REALTIME, description="how time advances: realtime, fast or paused")
+    control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
+    physics_dt: float = Field(
+        DEFAULT_PHYSICS_DT, gt=0, le=0.01, description="approximate physics step [s]"
+    )
+    max_body_bytes: int = Field(1 << 20, description="larger request bodies get 413")
+    ws_compression: bool = Field(
+        False,
+        description="permessage-deflate on WebSockets (off: a 34 KB float32 pose frame costs "
+        "milliseconds to deflate, per socket, and shrinks by 7%)",
+    )
+    log_level: Literal["debug", "info", "warning", "error"] = Field(
+        "info", description="debug, info, warning or error"
+    )
+    # -- access (service/core/access.py) --
+    token: str | None = Field(
+        None, description="token that writes (and with token_reads, reads) must present"
+    )
+    insecure: bool = Field(False, description="allow a non-loopback bind without a token")
+    token_reads: bool = Field(False, description="reads need the token too")
+    allow_origins: list[str] = Field(
+        [],
+        description="browser origins besides the service's own that may command (exact match)",
+    )
+    max_clients: int = Field(
+        256, ge=0, description="clients served at once (HTTP requests + sockets); 0 = no limit"
+    )
+    command_rate: float = Field(200.0, gt=0, description="commands per second per connection")
+    command_burst: int | None = Field(
+        None, ge=1, description="commands a connection may send at once (default: one second's)"
+    )
+    data_dir: Path = Field(
+        Path("~/.local/share/armfleet"), description="where snapshots and recordings are kept"
+    )
+    restore: str | None = Field(
+        None, description="start from this snapshot: latest or a snapshot name"
+    )
+    save_on_exit: bool = Field(
+        True, description="save snapshot `latest` on a clean stop (SIGTERM, Ctrl-C)"
+    )
+    record: Path | None = Field(None, description="record to this MCAP file from the start")
+    record_worlds: str | None = Field(
+        None, description="worlds whose states are recorded, e.g. 0-7,12 (default: first 8)"
+    )
+    record_rate: float = Field(
+        30.0, gt=0, le=1000, description="recorded states per simulated second"
+    )
+    record_queue: int = Field(
+        2048,
+        ge=16,
+        le=1_000_000,
+        description="items a recording may hold waiting for the disk; when full it stops",
+    )
+    foxglove: bool = Field(False, description="serve Foxglove's WebSocket protocol")
+    foxglove_port: int = Field(8765, ge=0, le=65535, description="Foxglove WebSocket port")
+    foxglove_worlds: str | None = Field(
+        None, description="worlds shown in Foxglove, e.g. 0-3 (default: first 8)"
+    )
+    foxglove_rate: float = Field(30.0, gt=0, le=240, description="Foxglove frames per second")
+    ros2: bool = Field(False, description="join the ROS 2 graph over DDS (Cyclone DDS)")
+    ros2_rate: float = Field(
+        60.0, gt=0, le=1000, description="/joint_states and /clock rate over DDS and rosbridge [Hz]"
+    )
+    ros2_worlds: str = Field(
+        "", description="worlds with /world_N/ topics, e.g. 0-7 (world 0 always has /joint_*)"
+    )
+    ros2_network: bool = Field(
+        False, description="open DDS to the network (default: loopback only, like the HTTP bind)"
+    )
+
+    @model_validator(mode="after")
+    def _ray_runs_the_warp_engine(self) -> Settings:
+        if self.ray and self.engine != "warp":
+            raise ValueError("ray: Ray actors run the warp engine only (use --engine warp)")
+        return self
+
+    @model_validator(mode="after")
+    def _ros2_worlds_exist(self) -> Settings:
+        from service.surfaces.ros.topics import parse_world_list
+
+        parse_world_list(self.ros2_worlds, self.worlds)  # ValueError names the bad part
+        return self

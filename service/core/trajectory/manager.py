@@ -1,0 +1,347 @@
+"""TrajectoryManager: runs JointTrajectories in the loop, one per world, and reports outcomes.
+
+The manager is the loop's trajectory hook (see `SimLoop.attach_trajectories`). Every method
+marked *lock held* runs on the sim thread (or a command caller) with the loop's command lock
+held, through `SimLoop.staging()`; that one lock orders trajectories against manual commands,
+so "a button press after the trajectory stops it" means after in acceptance order.
+
+Per tick (sim thread): `sample` writes every running trajectory's desired positions and
+velocity feed-forward into the loop's pending tables (one vectorised pass, `TrajectoryTable`);
+`after_step` aborts trajectories of faulted worlds and asks for a snapshot of the tick while any
+tolerance is checked or any trajectory has reached its end; `observe`, on that snapshot, records
+feedback, checks tolerances and finishes what reached its end. Outcomes are handed to listeners
+and futures by `dispatch`, outside the lock.
+
+An aborted or cancelled trajectory holds: the world keeps the last desired position as its
+target, with zero velocity feed-forward. Manual commands and resets abort; so does a restore.
+Everything is a function of ticks and simulated state, so a recording replays it exactly.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import itertools
+import logging
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from service.core.loop import SimLoop
+from service.core.staging import Override, Staging
+from service.core.trajectory.spec import JointTrajectorySpec
+from service.core.trajectory.status import AbortReason, Started, TrajectoryState, TrajectoryStatus
+from service.core.trajectory.table import TrajectoryTable
+from service.core.types import Snapshot
+
+log = logging.getLogger("armfleet.trajectory")
+Listener = Callable[[TrajectoryStatus], None]
+_KEEP_FINISHED = 100_000  # finished trajectories kept for GET and waiters (oldest dropped)
+
+
+@dataclass
+class _Run:
+    """A trajectory's bookkeeping (the table holds what is sampled)."""
+
+    id: int
+    world: int
+    spec: JointTrajectorySpec
+    source: str
+    start_tick: int
+    end_tick: int
+    status: TrajectoryStatus
+    waiters: list[concurrent.futures.Future[TrajectoryStatus]] = field(default_factory=list)
+
+
+class TrajectoryManager:
+    """Start, cancel and watch trajectories on the worlds of one SimLoop (thread-safe)."""
+
+    def __init__(self, loop: SimLoop) -> None:
+        self.loop = loop
+        self.spec = loop.spec
+        self.table = TrajectoryTable(loop.batch.tick_dt)
+        self._ids = itertools.count(1)
+        self._runs: dict[int, _Run] = {}  # running, by id
+        self._finished: OrderedDict[int, _Run] = OrderedDict()
+        self._by_world: dict[int, int] = {}  # world → id of its latest trajectory
+        self._done: list[_Run] = []  # finished under the lock, dispatched outside it
+        self._listeners: tuple[Listener, ...] = ()
+        self._last = np.zeros((0, 7))  # the last sample's desired positions, by slot
+        self._last_vel = np.zeros((0, 7))
+        self._last_tick = -1
+        # The last observed tick: (tick, trajectory id per slot, desired, actual) (S, 7).
+        self._feedback: tuple[int, np.ndarray, np.ndarray, np.ndarray] = (
+            -1,
+            np.zeros(0, dtype=np.int64),
+            np.zeros((0, 7)),
+            np.zeros((0, 7)),
+        )
+        self._dispatching = threading.Lock()
+        loop.attach_trajectories(self)
+
+    # -- the API (any thread) ---------------------------------------------------------------
+
+    def start(self, worlds: Sequence[int], spec: JointTrajectorySpec, source: str) -> list[Started]:
+        """Run `spec` on every world of `worlds` (valid ids) from the same tick.
+
+        Each starts from its world's current target (and velocity feed-forward, when a running
+        trajectory is preempted, which is then aborted with reason `preempted`).
+        """
+        ids = np.asarray(worlds, dtype=np.int64)
+        out: list[Started] = []
+        with self.loop.staging(ids) as st:
+            self._abort(st, ids, AbortReason.PREEMPTED, "a newer trajectory replaced it")
+            for w in ids.tolist():
+                traj_id = next(self._ids)
+                end = self.table.add(traj_id, w, spec, st.tick, st.pending[w], st.velocity[w])
+                status = self._initial_status(traj_id, w, spec, source, st.tick, end)
+                self._runs[traj_id] = _Run(traj_id, w, spec, source, st.tick, end, status)
+                self._by_world[w] = traj_id
+                out.append(Started(traj_id, w, st.tick, end))
+        self.dispatch()
+        return out
+
+    def cancel(self, worlds: Sequence[int]) -> list[TrajectoryStatus]:
+        """Stop the running trajectories of `worlds` and hold; the statuses of those stopped."""
+        ids = np.asarray(worlds, dtype=np.int64)
+        with self.loop.staging(ids) as st:
+            stopped = self._abort(st, ids, AbortReason.CANCELLED, "cancelled by request")
+        self.dispatch()
+        return [r.status for r in stopped]
+
+    def status(self, world: int) -> TrajectoryStatus | None:
+        """The world's running trajectory, else its last one (None if it never ran one)."""
+        traj_id = self._by_world.get(world)
+        return None if traj_id is None else self.get(traj_id)
+
+    def get(self, traj_id: int) -> TrajectoryStatus | None:
+        """A trajectory's status by id (None when unknown or long forgotten)."""
+        with self.loop.staging() as _:
+            run = self._runs.get(traj_id)
+            if run is not None:
+                return self._live(run)
+            run = self._finished.get(traj_id)
+            return None if run is None else run.status
+
+    def brief(self, world: int) -> dict[str, Any] | None:
+        """id, state, reason and progress of the world's running (else last) trajectory."""
+        status = self.status(world)
+        return None if status is None else status.brief()
+
+    def briefs(self, worlds: np.ndarray) -> dict[str, dict[str, Any]]:
+        """`brief` of those of `worlds` that have run a trajectory, keyed by world id (str)."""
+        known = np.intersect1d(np.fromiter(self._by_world, dtype=np.int64), worlds)
+        return {str(w): b for w in known.tolist() if (b := self.brief(w)) is not None}
+
+    def running_worlds(self) -> np.ndarray:
+        return self.table.worlds.copy()
+
+    def wait(self, traj_id: int) -> concurrent.futures.Future[TrajectoryStatus]:
+        """A future that gets the trajectory's final status (at once if it has finished)."""
+        fut: concurrent.futures.Future[TrajectoryStatus] = concurrent.futures.Future()
+        with self.loop.staging() as _:
+            run = self._runs.get(traj_id)
+            if run is not None:
+                run.waiters.append(fut)
+                return fut
+        done = self.get(traj_id)
+        if done is None:
+            fut.set_exception(KeyError(traj_id))
+        else:
+            fut.set_result(done)
+        return fut
+
+    def add_listener(self, listener: Listener) -> None:
+        """Call `listener(status)` once per trajectory when it finishes (any thread; be quick)."""
+        self._listeners = (*self._listeners, listener)
+
+    def remove_listener(self, listener: Listener) -> None:
+        self._listeners = tuple(x for x in self._listeners if x is not listener)
+
+    # -- the loop's hook (lock held) --------------------------------------------------------
+
+    def overridden(self, worlds: np.ndarray, reason: Override) -> None:
+        """A manual command or reset was staged for `worlds`: their trajectories stop."""
+        if len(self.table):
+            why = "a reset" if reason is Override.RESET else "a manual target command"
+            worlds = np.asarray(worlds, dtype=np.int64)
+            self._abort(None, worlds, AbortReason(reason.value), f"stopped by {why}")
+
+    def sample(self, tick: int, st: Staging) -> None:
+        """Write the desired state of tick `tick` into the pending tables for every slot."""
+        if not len(self.table):
+            return
+        s = self.table.sample(tick)
+        w = self.table.worlds
+        st.pending[w] = s.positions
+        st.velocity[w] = s.velocities
+        st.dirty[w] = True
+        self._last, self._last_vel, self._last_tick = s.positions, s.velocities, tick
+
+    def after_step(self, tick: int, faulted: np.ndarray, st: Staging) -> bool:
+        """After tick `tick`: abort faulted worlds' runs; is a snapshot of the tick needed?
+
+        Vectorised over slots: no per-trajectory Python work unless one finishes.
+        """
+        if not len(self.table):
+            return False
+        if faulted.size:
+            self._abort(st, faulted, AbortReason.FAULT, "the world's physics failed; reset")
+            st.velocity[faulted] = 0.0
+        t = self.table
+        # Ended runs finish in `observe`, on this tick's snapshot, so their final status
+        # carries the feedback of the end tick.
+        return bool(t.has_path.any() or (tick >= t.end_tick).any())
+
+    def observe(self, snap: Snapshot, st: Staging) -> None:
+        """Feedback and tolerance checks against the snapshot of the tick last sampled."""
+        t = self.table
+        if not len(t) or snap.tick != self._last_tick or len(self._last) != len(t):
+            return
+        actual, vel = snap.position[t.worlds], snap.velocity[t.worlds]
+        err = np.abs(np.stack([actual - self._last, vel - self._last_vel], axis=1))
+        self._feedback = (snap.tick, t.ids.copy(), self._last.copy(), actual.astype(np.float64))
+        running = snap.tick < t.end_tick
+        path_bad = running[:, None, None] & (err > t.path_tol)
+        goal_in = (err <= t.goal_tol).all(axis=(1, 2))  # all true without a goal tolerance
+        settling = ~running
+        late = settling & t.has_goal & ~goal_in & (snap.tick >= t.goal_deadline)
+        names = self.spec.names
+        path = AbortReason.PATH_TOLERANCE, t.path_tol, "path"
+        goal = AbortReason.GOAL_TOLERANCE, t.goal_tol, "goal"
+        aborts = [
+            (int(t.worlds[i]), why, _detail(names, i, err, tol, kind))
+            for bad, (why, tol, kind) in ((path_bad.any(axis=(1, 2)), path), (late, goal))
+            for i in np.flatnonzero(bad)
+        ]
+        self._succeed(st, t.worlds[settling & goal_in], snap.tick)
+        for world, reason, detail in aborts:
+            self._abort(st, np.array([world]), reason, detail)
+
+    def restored(self) -> None:
+        """The whole batch was restored from a saved state: every trajectory stops."""
+        self._abort(None, self.table.worlds.copy(), AbortReason.RESET, "the batch was restored")
+
+    def dispatch(self) -> None:
+        """Hand finished trajectories to waiters and listeners (no lock held)."""
+        with self._dispatching:
+            with self.loop.staging() as _:
+                done, self._done = self._done, []
+            for run in done:
+                for fut in run.waiters:
+                    if not fut.done():
+                        fut.set_result(run.status)
+                for listener in self._listeners:
+                    try:
+                        listener(run.status)
+                    except Exception:
+                        log.exception("trajectory listener %r failed", listener)
+
+    # -- internals (lock held) --------------------------------------------------------------
+
+    def _initial_status(
+        self, traj_id: int, world: int, spec: JointTrajectorySpec, source: str, start: int, end: int
+    ) -> TrajectoryStatus:
+        return TrajectoryStatus(
+            id=traj_id,
+            world=world,
+            source=str(source),
+            state=TrajectoryState.RUNNING,
+            reason=None,
+            detail="",
+            joint_names=list(spec.joint_names),
+            start_tick=start,
+            end_tick=end,
+            duration=spec.duration,
+            tick=start - 1,
+            progress=0.0,
+            feedback_tick=None,
+            desired=[],
+            actual=[],
+            error=[],
+            finished_tick=None,
+        )
+
+    def _live(self, run: _Run) -> TrajectoryStatus:
+        """A running trajectory's status with progress and feedback as of the last tick."""
+        tick = max(self._last_tick, run.start_tick - 1)
+        elapsed = (tick - run.start_tick + 1) * self.table.tick_dt
+        d = run.spec.duration
+        progress = min(1.0, max(0.0, elapsed / d)) if d > 0 else float(elapsed > 0)
+        status = replace(run.status, tick=tick, progress=progress)
+        fb_tick, ids, desired, actual = self._feedback
+        rows = np.flatnonzero(ids == run.id)
+        if rows.size:
+            i, j = int(rows[0]), run.spec.joints
+            status = replace(
+                status,
+                feedback_tick=fb_tick,
+                desired=desired[i, j].tolist(),
+                actual=actual[i, j].tolist(),
+                error=(actual[i, j] - desired[i, j]).tolist(),
+            )
+        return status
+
+    def _succeed(self, st: Staging, worlds: np.ndarray, tick: int) -> None:
+        if worlds.size == 0:
+            return
+        st.velocity[worlds] = 0.0  # the end is held without feed-forward
+        st.dirty[worlds] = True
+        self._finish(self.table.slots_of(worlds), TrajectoryState.SUCCEEDED, None, "", tick)
+
+    def _abort(
+        self, st: Staging | None, worlds: np.ndarray, reason: AbortReason, detail: str
+    ) -> list[_Run]:
+        slots = self.table.slots_of(worlds)
+        if slots.size == 0:
+            return []
+        tick = None
+        if st is not None:  # hold the last desired position without feed-forward
+            w = self.table.worlds[slots]
+            st.velocity[w] = 0.0
+            st.dirty[w] = True
+            tick = st.tick - 1  # the last tick it drove
+        return self._finish(slots, TrajectoryState.ABORTED, reason, detail, tick)
+
+    def _finish(
+        self,
+        slots: np.ndarray,
+        state: TrajectoryState,
+        reason: AbortReason | None,
+        detail: str,
+        tick: int | None,
+    ) -> list[_Run]:
+        done = []
+        at = self.loop.tick if tick is None else tick
+        for traj_id in self.table.ids[slots].tolist():
+            run = self._runs[traj_id]
+            run.status = replace(
+                self._live(run), state=state, reason=reason, detail=detail, finished_tick=at
+            )
+            del self._runs[traj_id]
+            self._finished[traj_id] = run
+            done.append(run)
+        keep = np.ones(len(self.table), dtype=bool)
+        keep[slots] = False
+        if len(self._last) == len(keep):
+            self._last, self._last_vel = self._last[keep], self._last_vel[keep]
+        self.table.remove(slots)
+        while len(self._finished) > _KEEP_FINISHED:
+            old_id, old = self._finished.popitem(last=False)
+            if self._by_world.get(old.world) == old_id:
+                del self._by_world[old.world]
+        self._done.extend(done)
+        return done
+
+
+def _detail(names: list[str], slot: int, err: np.ndarray, tol: np.ndarray, kind: str) -> str:
+    """Which joint broke which tolerance, by how much (the first one found)."""
+    q, j = (int(x) for x in np.argwhere(err[slot] > tol[slot])[0])
+    what, unit = ("position", "rad") if q == 0 else ("velocity", "rad/s")
+    return (
+        f"{names[j]}: {kind} tolerance on {what} exceeded "
+        f"(error {err[slot, q, j]:.4g} {unit}, tolerance {tol[slot, q, j]:g})"
+    )

@@ -1,0 +1,269 @@
+"""Data structures shared by the engine, the loop and the API.
+
+They are plain frozen dataclasses over numpy arrays so that the engine (which knows MuJoCo Warp)
+and the API (which knows JSON) meet on something neither owns.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from functools import cached_property
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
+
+import numpy as np
+
+# Defined with the client's models (the wire's own description of a joint), so that the client
+# installs without the service and the two cannot drift apart.
+from clients.models import JointSpec
+
+if TYPE_CHECKING:
+    from service.core.robot import LoadedRobot
+
+
+def _frozen(values: list[float]) -> np.ndarray:
+    out = np.array(values, dtype=np.float64)
+    out.flags.writeable = False
+    return out
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """The commanded joints of the robot, in command order (six arm joints, then finger_joint)."""
+
+    name: str
+    joints: tuple[JointSpec, ...]
+
+    # Derived once: every command clamps against these. Read-only so that sharing is safe.
+    @cached_property
+    def names(self) -> list[str]:
+        return [j.name for j in self.joints]
+
+    @cached_property
+    def lower(self) -> np.ndarray:
+        return _frozen([j.lower for j in self.joints])
+
+    @cached_property
+    def upper(self) -> np.ndarray:
+        return _frozen([j.upper for j in self.joints])
+
+    @cached_property
+    def home(self) -> np.ndarray:
+        return _frozen([j.home for j in self.joints])
+
+    def index(self, joint: str | int) -> int:
+        """Joint index from a name or an index; raises KeyError naming the valid choices."""
+        if isinstance(joint, int) and not isinstance(joint, bool):
+            if 0 <= joint < len(self.joints):
+                return joint
+            raise KeyError(f"joint index {joint} out of range 0..{len(self.joints) - 1}")
+        for i, j in enumerate(self.joints):
+            if j.name == joint:
+                return i
+        raise KeyError(f"unknown joint {joint!r}; joints are {self.names}")
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """One consistent view of every world at the end of one control tick.
+
+    tick: control ticks completed by the batch since start
+    sim_time: per-world simulated seconds since that world's last reset        (nworld,)
+    position, velocity: the commanded joints' qpos [rad] and qvel [rad/s]        (nworld, 7)
+    effort: actuator torque on each commanded joint [N·m], gravity comp included (nworld, 7)
+    target: position targets in effect during this tick [rad]                  (nworld, 7)
+    flange_pos: flange site position in the world frame [m]                    (nworld, 3)
+    flange_quat: flange site orientation, quaternion w x y z                   (nworld, 4)
+    faults: how often each world has been reset for NaN or capacity overflow   (nworld,)
+    body_pos: every body's origin in the world frame [m], float32               (nworld, nbody, 3)
+    body_quat: every body's orientation, quaternion w x y z, float32           (nworld, nbody, 4)
+        (bodies in MjModel order, 0 = world; what viewers draw, see GET /v1/scene)
+    """
+
+    tick: int
+    sim_time: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+    target: np.ndarray
+    flange_pos: np.ndarray
+    flange_quat: np.ndarray
+    faults: np.ndarray
+    body_pos: np.ndarray
+    body_quat: np.ndarray
+
+    @property
+    def nworld(self) -> int:
+        return int(self.position.shape[0])
+
+
+class Mode(enum.StrEnum):
+    """How the loop advances time."""
+
+    REALTIME = "realtime"  # paced to the wall clock; falls behind honestly (RTF < 1), no bursts
+    FAST = "fast"  # as fast as the machine allows
+    PAUSED = "paused"  # only on an explicit step request
+
+
+# MuJoCo's integration state (mjSTATE_INTEGRATION minus plugins, which neither engine uses), as
+# named mjData fields. Everything else in mjData is recomputed from these within a step, so these
+# plus the batch's own counters are what a restored batch needs to continue bit-identically.
+PHYSICS_FIELDS = (
+    "time",
+    "qpos",
+    "qvel",
+    "act",
+    "history",
+    "plastic",
+    "qacc_warmstart",
+    "ctrl",
+    "qfrc_applied",
+    "xfrc_applied",
+    "eq_active",
+    "mocap_pos",
+    "mocap_quat",
+    "userdata",
+    # Not integration state: the actuator forces of the last step, restored so that the snapshot
+    # at the restored tick reports the same effort as the one taken when the state was saved.
+    "qfrc_actuator",
+)
+
+
+@dataclass(frozen=True)
+class BatchState:
+    """Everything a batch needs to continue exactly where it was, at a tick boundary.
+
+    `Batch.get_state()` returns one, `Batch.set_state()` takes one of the same model and number
+    of worlds: after set_state, stepping with the same commands gives bit-identical states to
+    stepping the batch the state was taken from (same engine and device). Arrays are host copies.
+
+    tick: control ticks completed by the batch when the state was taken
+    world_ticks: ticks since each world's last reset (sim_time = world_ticks × tick_dt) (nworld,)
+    faults: how often each world has been reset for NaN or capacity overflow           (nworld,)
+    targets: the commanded position targets [rad], float64 host mirror                 (nworld, 7)
+    physics: MuJoCo integration state, keyed by mjData field name (`PHYSICS_FIELDS`), each
+        (nworld, ...) in the engine's own dtype (float32 on MuJoCo Warp) so that nothing is
+        rounded: time [s] (nworld,), qpos (nworld, nq), qvel (nworld, nv), act (nworld, na),
+        history, plastic, qacc_warmstart (the solver's warm start, nworld × nv), ctrl
+        (nworld, nu), qfrc_applied (nworld, nv), xfrc_applied (nworld, nbody, 6), eq_active
+        (nworld, neq) bool, mocap_pos (nworld, nmocap, 3), mocap_quat (nworld, nmocap, 4),
+        userdata (nworld, nuserdata); and qfrc_actuator (nworld, nv) [N·m], the last step's
+        actuator forces, so that the restored tick's snapshot shows the same effort
+    """
+
+    tick: int
+    world_ticks: np.ndarray
+    faults: np.ndarray
+    targets: np.ndarray
+    physics: dict[str, np.ndarray]
+
+    @property
+    def nworld(self) -> int:
+        return int(self.targets.shape[0])
+
+    def check_compatible(self, nworld: int, shapes: dict[str, tuple[int, ...]]) -> None:
+        """Raise ValueError naming the mismatch unless this state fits a batch of that shape.
+
+        `shapes` maps each physics field to its per-world shape in the receiving batch.
+        """
+        if self.nworld != nworld:
+            raise ValueError(f"state has {self.nworld} worlds, the batch has {nworld}")
+        rows = {"world_ticks": self.world_ticks, "faults": self.faults, "targets": self.targets}
+        for name, arr in rows.items():
+            if arr.shape[0] != nworld:
+                raise ValueError(f"{name} has {arr.shape[0]} rows, expected {nworld}")
+        if self.targets.ndim != 2 or self.targets.shape[1] != 7:
+            raise ValueError(f"targets has shape {self.targets.shape}, expected ({nworld}, 7)")
+        for name, shape in shapes.items():
+            arr = self.physics.get(name)
+            if arr is None:
+                raise ValueError(f"physics field {name!r} missing")
+            if arr.shape != (nworld, *shape):
+                raise ValueError(
+                    f"physics field {name!r} has shape {arr.shape}, expected {(nworld, *shape)}"
+                )
+            if arr.dtype != bool and not np.isfinite(arr).all():
+                raise ValueError(f"physics field {name!r} holds non-finite values")
+
+
+@runtime_checkable
+class Batch(Protocol):
+    """N worlds of one model advanced together in control ticks: what the loop needs of an engine.
+
+    WorldBatch (MuJoCo Warp on one device) and ShardedBatch (worlds split over worker processes)
+    implement it; so must any later engine. One thread owns a Batch: nothing here is thread-safe.
+    tests/test_batch_contract.py runs the same behavioural checks against every implementation.
+    """
+
+    nworld: int  # worlds in the batch
+    shards: int  # processes (or actors) the worlds are split across
+    spec: RobotSpec  # the commanded joints, limits and home
+    robot: LoadedRobot  # the compiled MjModel it steps (viewers describe it: GET /v1/scene)
+    control_hz: float  # control ticks per simulated second
+    tick_dt: float  # simulated seconds per tick (1 / control_hz)
+    substeps: int  # physics steps per tick
+    physics_dt: float  # simulated seconds per physics step (tick_dt / substeps)
+    device_name: str  # where it runs, e.g. "cpu" or "cuda:0"
+    home_target: np.ndarray  # (7,) targets of the `home` keyframe [rad]
+    captured: bool  # the tick replays a captured graph
+    capture_error: str | None  # why capture failed, when it did
+    compile_s: float  # seconds spent compiling/loading kernels at build
+    capture_s: float  # seconds spent capturing the tick at build
+
+    @property
+    def tick(self) -> int:
+        """Control ticks completed since the batch was built."""
+        ...
+
+    @property
+    def targets(self) -> np.ndarray:
+        """A copy of the targets in effect, (nworld, 7) [rad]."""
+        ...
+
+    def step(self, ticks: int = 1) -> np.ndarray:
+        """Advance every world by `ticks`; returns the worlds reset for faults (int64)."""
+        ...
+
+    def set_targets(
+        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+    ) -> None:
+        """Targets for `worlds` (k,) ← `targets` (k, 7), clamped, in effect from the next step.
+
+        `velocities` (k, 7) [rad/s]: a velocity feed-forward for the servos (trajectories send
+        their desired velocity, so tracking has no kv/kp × speed lag); None sets it to zero,
+        and with zero feed-forward every engine steps exactly as with targets alone.
+        """
+        ...
+
+    def reset(self, worlds: np.ndarray) -> None:
+        """Reset `worlds` to `home` (state and targets); every other world stays bit-identical."""
+        ...
+
+    def snapshot(self) -> Snapshot:
+        """All worlds at the end of the last completed tick, in host memory."""
+        ...
+
+    def get_state(self) -> BatchState:
+        """Everything needed to continue bit-identically (see `BatchState`), host copies."""
+        ...
+
+    def set_state(self, state: BatchState) -> None:
+        """Continue from `state` (same model and nworld); ValueError naming the mismatch, and
+        nothing changed, when it does not fit."""
+        ...
+
+    def qpos(self) -> np.ndarray:
+        """Full qpos of every world (nworld, nq), a host copy (tests and diagnostics)."""
+        ...
+
+    def qvel(self) -> np.ndarray:
+        """Full qvel of every world (nworld, nv), a host copy (tests and diagnostics)."""
+        ...
+
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        """Overwrite one world's full qpos (nq,): tests inject faults with it."""
+        ...
+
+    def close(self) -> None:
+        """Release workers and devices; the batch is unusable afterwards."""
+        ...

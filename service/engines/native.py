@@ -1,0 +1,309 @@
+"""NativeBatch: N worlds stepped by MuJoCo's C library on every core (``--engine mujoco``).
+
+Warp's CPU backend runs its kernels on one core without SIMD, so on a CPU-only machine native
+MuJoCo is ~3x faster per world-step. ``mujoco.batch.Batch`` (MuJoCo 4) keeps every world as
+one row of integration state (qpos, qvel, warm start, ctrl, ...) and steps the rows on a C
+thread pool with the GIL released; results are bit-identical to stepping one MjData per world,
+at any thread count. It beats ``mujoco.rollout`` for a per-tick loop because nothing is tiled
+or copied per call beyond the fields we bind (measured: bench/, section throughput).
+
+Semantics match ``service.engines.warp.WorldBatch`` (the Batch protocol): targets are a float64 host
+mirror written straight into the rows' ctrl; a world whose state goes non-finite, whose |qvel|
+passes 1e4, or for which MuJoCo raises or warns (bad qpos/qvel/qacc, contact or constraint
+buffer full: MuJoCo then resets the world to qpos0 itself) is reset to ``home`` after the tick
+and counted in ``faults``; the other worlds are not touched. Effort is the actuator force of the
+last substep (as with mj_step); the flange pose is computed at the state the snapshot reports.
+Not thread-safe: one thread (the loop) owns a NativeBatch.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from mujoco import batch as mjbatch
+
+from mjcf import SCENE_XML
+from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
+from service.core.robot import LoadedRobot, load_robot
+from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
+
+log = logging.getLogger("armfleet.native")
+
+# A joint spinning faster than this [rad/s or m/s] has blown up even if it is still finite
+# (the same limit as the warp engine's).
+DIVERGED_QVEL = 1.0e4
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (the affinity mask, not the machine's count)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+# Below this many worlds per thread a tick is too short for the pool: handing work to a second
+# thread (and waiting for it when the machine is busy) costs more than the thread brings.
+MIN_WORLDS_PER_THREAD = 32
+
+
+def auto_threads(nworld: int) -> int:
+    """Threads to step `nworld` worlds on: one per usable core once the batch is big enough."""
+    return max(1, min(usable_cores(), nworld // MIN_WORLDS_PER_THREAD))
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of quaternions (w, x, y, z), row-wise: (n, 4) x (4,) -> (n, 4)."""
+    aw, ax, ay, az = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
+    bw, bx, by, bz = b
+    return np.stack(
+        (
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ),
+        axis=1,
+    )
+
+
+class NativeBatch:
+    """N worlds of one model in native MuJoCo, advanced a control tick at a time on a pool."""
+
+    shards = 1  # one batch; the cores are used by threads, not processes
+    captured = False  # no graph: there is nothing to capture on this engine
+    capture_error: str | None = None
+    capture_s = 0.0
+
+    def __init__(
+        self,
+        nworld: int,
+        control_hz: float = 60.0,
+        physics_dt: float = DEFAULT_PHYSICS_DT,
+        nthread: int = 0,
+        model_path: Path | str = SCENE_XML,
+        robot: LoadedRobot | None = None,
+        device: str = "cpu",
+    ) -> None:
+        if nworld < 1:
+            raise ValueError(f"nworld must be >= 1, got {nworld}")
+        if not device.startswith("cpu"):
+            raise ValueError(f"the mujoco engine runs on the CPU only, not on {device!r}")
+        t0 = time.perf_counter()
+        self.robot = robot or load_robot(model_path)
+        self.spec = self.robot.spec
+        self.nworld = nworld
+        self.control_hz = float(control_hz)
+        self.tick_dt = 1.0 / self.control_hz
+        self.substeps, self.physics_dt = tick_timing(self.control_hz, physics_dt)
+        self.nthread = max(1, min(nthread or auto_threads(nworld), nworld))
+        self.device_name = f"cpu (native MuJoCo, {self.nthread} thread{'s' * (self.nthread > 1)})"
+
+        mjm = self.robot.mjm
+        configure(mjm, self.physics_dt)
+        self.home_target = np.array(mjm.key_ctrl[self.robot.home_key], dtype=np.float64)
+        self._key = self.robot.home_key
+        self._dof = self.robot.dof_adr
+        self._qpos_adr = self.robot.qpos_adr
+        self._flange = self.robot.flange_site
+        self._flange_body = int(mjm.site_bodyid[self._flange])
+        self._flange_local_quat = np.array(mjm.site_quat[self._flange], dtype=np.float64)
+
+        # The batch copies the model: options are set above, before it is built.
+        self._b = mjbatch.Batch(mjm, nworld, nthread=self.nthread)
+        self._qpos = self._b.bind("qpos")  # live views of the state rows
+        self._qvel = self._b.bind("qvel")
+        self._ctrl = self._b.bind("ctrl")
+        self._qfrc_actuator = self._b.bind("qfrc_actuator")  # outputs, refreshed per call
+        self._site_xpos = self._b.bind("site_xpos")
+        self._xquat = self._b.bind("xquat")
+        self._xpos = self._b.bind("xpos")
+
+        self._tick = 0
+        self._world_ticks = np.zeros(nworld, dtype=np.int64)
+        self._faults = np.zeros(nworld, dtype=np.int64)
+        self._targets = np.tile(self.home_target, (nworld, 1))
+        self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
+        self._effort = np.zeros((nworld, 7))
+        self._flange_pos = np.zeros((nworld, 3))
+        self._flange_quat = np.zeros((nworld, 4))
+        self._warnings_seen = np.zeros(nworld, dtype=np.int64)
+        self._kinematics_stale = False
+        self.reset(np.arange(nworld))
+        self.compile_s = time.perf_counter() - t0  # nothing compiles: this is the build time
+
+    # -- stepping ---------------------------------------------------------------------------
+
+    def _warnings(self) -> np.ndarray:
+        """Per world, how many warnings MuJoCo has raised in it (all kinds together)."""
+        return self._b.warning[:, :, 1].sum(axis=1, dtype=np.int64)
+
+    def _step_tick(self) -> np.ndarray:
+        """One control tick for every world; returns the worlds that went bad in it."""
+        raised = np.zeros(0, dtype=np.int64)
+        try:
+            self._b.step(nstep=self.substeps)
+        except mjbatch.SimulationError as exc:  # those worlds kept their pre-call state
+            raised = np.asarray(exc.ids, dtype=np.int64)
+            log.warning("MuJoCo raised in worlds %s: %s", raised, exc)
+        qpos, qvel = self._qpos, self._qvel
+        bad = ~np.isfinite(qpos).all(axis=1)
+        bad |= ~(np.abs(qvel) <= DIVERGED_QVEL).all(axis=1)  # NaN compares False: caught too
+        warnings = self._warnings()
+        bad |= warnings != self._warnings_seen
+        bad[raised] = True
+        self._effort[:] = self._qfrc_actuator[:, self._dof]
+        self._kinematics_stale = True
+        return np.flatnonzero(bad)
+
+    def step(self, ticks: int = 1) -> np.ndarray:
+        """Advance every world by `ticks` control ticks; returns the worlds reset for faults."""
+        faulted: list[np.ndarray] = []
+        for _ in range(ticks):
+            bad = self._step_tick()
+            self._tick += 1
+            self._world_ticks += 1
+            if bad.size:
+                self._faults[bad] += 1
+                log.warning("worlds %s went non-finite or diverged; reset to home", bad)
+                self.reset(bad)
+                faulted.append(bad)
+        return np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
+
+    # -- commands ---------------------------------------------------------------------------
+
+    def set_targets(
+        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+    ) -> None:
+        """Position targets for `worlds` (k,) <- `targets` (k, 7), written into their rows,
+        with a velocity feed-forward (k, 7) [rad/s] (None: zero) folded in (see physics)."""
+        worlds = np.asarray(worlds, dtype=np.int64)
+        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
+        if velocities is None or not np.any(velocities):
+            self._ctrl[worlds] = self._targets[worlds]
+        else:
+            self._ctrl[worlds] = self._targets[worlds] + self._ff_gain * velocities
+
+    def reset(self, worlds: np.ndarray) -> None:
+        """Reset `worlds` to `home`, state and targets; every other world stays bit-identical."""
+        worlds = np.asarray(worlds, dtype=np.int64)
+        if worlds.size == 0:
+            return
+        # mj_resetDataKeyframe + mj_forward per world: ctrl = home, outputs current.
+        self._b.reset(worlds, keyframe=self._key)
+        self._targets[worlds] = self.home_target
+        self._world_ticks[worlds] = 0
+        self._warnings_seen[worlds] = self._warnings()[worlds]
+        self._effort[worlds] = self._qfrc_actuator[worlds][:, self._dof]
+        self._read_flange(worlds)
+
+    # -- reading ----------------------------------------------------------------------------
+
+    def _read_flange(self, worlds: np.ndarray | slice) -> None:
+        self._flange_pos[worlds] = self._site_xpos[worlds, self._flange]
+        body_quat = self._xquat[worlds, self._flange_body]
+        self._flange_quat[worlds] = _quat_mul(body_quat, self._flange_local_quat)
+
+    def _refresh_kinematics(self) -> None:
+        """Site poses at the current state (after mj_step they describe the last substep's)."""
+        if self._kinematics_stale:
+            self._b.forward(stage=mujoco.mjtStage.mjSTAGE_POS)
+            self._read_flange(slice(None))
+            self._kinematics_stale = False
+
+    @property
+    def tick(self) -> int:
+        return self._tick
+
+    @property
+    def targets(self) -> np.ndarray:
+        return self._targets.copy()
+
+    def snapshot(self) -> Snapshot:
+        """All worlds at the end of the last completed tick, copied.
+
+        States are float32 as the warp engine's are: the same frames on the wire (a float64
+        JSON number is ~twice as long, and serialising frames is what a CPU service spends
+        most on besides physics); targets stay float64, as commanded.
+        """
+        self._refresh_kinematics()
+        f32 = np.float32
+        return Snapshot(
+            tick=self._tick,
+            sim_time=self._world_ticks * self.tick_dt,
+            # New C-ordered arrays (the wire serialises rows of them; fancy indexing alone
+            # may hand back a column-major array).
+            position=np.ascontiguousarray(self._qpos[:, self._qpos_adr], dtype=f32),
+            velocity=np.ascontiguousarray(self._qvel[:, self._dof], dtype=f32),
+            effort=self._effort.astype(f32, order="C"),
+            target=self._targets.copy(),
+            flange_pos=self._flange_pos.astype(f32, order="C"),
+            flange_quat=self._flange_quat.astype(f32, order="C"),
+            faults=self._faults.copy(),
+            body_pos=self._xpos.astype(np.float32),  # astype copies
+            body_quat=self._xquat.astype(np.float32),
+        )
+
+    # -- state ------------------------------------------------------------------------------
+
+    def _state_field(self, name: str) -> np.ndarray:
+        """A live row view of an integration-state field (qfrc_actuator: read-only output)."""
+        return self._b.bind(name)
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        return {f: tuple(self._state_field(f).shape[1:]) for f in PHYSICS_FIELDS}
+
+    def get_state(self) -> BatchState:
+        """Every world's full state (see `BatchState`); float64 rows, eq_active as bool."""
+        physics = {f: np.array(self._state_field(f), copy=True) for f in PHYSICS_FIELDS}
+        physics["eq_active"] = physics["eq_active"] != 0
+        # The effort the snapshot reports is the last tick's, kept in _effort: store it there.
+        physics["qfrc_actuator"][:, self._dof] = self._effort
+        return BatchState(
+            tick=self._tick,
+            world_ticks=self._world_ticks.copy(),
+            faults=self._faults.copy(),
+            targets=self._targets.copy(),
+            physics=physics,
+        )
+
+    def set_state(self, state: BatchState) -> None:
+        """Continue from `state`; checked fully first (ValueError, nothing changed)."""
+        state.check_compatible(self.nworld, self.physics_shapes())
+        for f in PHYSICS_FIELDS:
+            if f != "qfrc_actuator" and state.physics[f].size:
+                self._state_field(f)[:] = state.physics[f]
+        self._tick = int(state.tick)
+        self._world_ticks = np.array(state.world_ticks, dtype=np.int64)
+        self._faults = np.array(state.faults, dtype=np.int64)
+        self._targets = np.array(state.targets, dtype=np.float64)
+        self._effort[:] = state.physics["qfrc_actuator"][:, self._dof]
+        self._warnings_seen[:] = self._warnings()
+        self._kinematics_stale = True
+
+    # -- test and diagnostics hooks ---------------------------------------------------------
+
+    def qpos(self) -> np.ndarray:
+        """Full qpos of every world (nworld, nq), a copy; for tests and diagnostics."""
+        return self._qpos.copy()
+
+    def qvel(self) -> np.ndarray:
+        return self._qvel.copy()
+
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        """Overwrite one world's qpos (used to inject faults on purpose in tests)."""
+        self._qpos[world] = qpos
+
+    def capacity_usage(self) -> tuple[int, int]:
+        """(contacts in all worlds together, largest constraint count of any world) as of the
+        last call; native MuJoCo grows its buffers, this is for comparison with the warp engine.
+        The first call binds the fields and reads zeros."""
+        ncon, nefc = self._b.bind("ncon"), self._b.bind("nefc")
+        return int(ncon.sum()), int(nefc.max())
+
+    def close(self) -> None:
+        """Nothing to release: the pool's threads go with the object."""

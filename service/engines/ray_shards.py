@@ -1,0 +1,542 @@
+"""RayBatch: the batch's shards on Ray actors, on one machine or many, behind the Batch protocol.
+
+One machine's GPUs (or cores) are the ceiling of WorldBatch and ShardedBatch. Here every shard is
+a Ray actor holding a WorldBatch of its block of worlds: one actor per GPU (`num_gpus=1`) when the
+batch runs on CUDA, else one per CPU core (warp runs CPU kernels on one core, so a core is the
+unit of parallelism there, as in ShardedBatch). The API process keeps the loop, the target table
+and the lockstep tick: every tick it sends each shard its staged commands with the step (all
+`step.remote` calls are fired before any result is awaited, so the shards step in parallel), then
+gathers the faulted worlds. Worlds are independent, so the result is bit-identical to one
+WorldBatch of the same worlds (tests/test_ray_shards.py).
+
+A shard whose actor dies (node lost, process killed) is noticed by the next call that reaches it
+(`RayActorError`), and a new actor is started at once. The other shards keep stepping meanwhile;
+the lost shard's worlds keep their last reported state in snapshots until the new actor is ready.
+Every `checkpoint_s` (10 s) each shard's full state (`BatchState`) is copied into this process;
+the new actor resumes from the last copy, with the targets commanded since. Without a copy the
+worlds come back at `home` (state and targets) and are returned by `step` as faulted worlds, the
+same way a NaN world comes back, so the loop and its clients treat them alike.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import ray
+from ray.exceptions import RayActorError
+
+from mjcf import SCENE_XML
+from service.core.errors import Unavailable
+from service.core.physics import configure
+from service.core.robot import load_robot
+from service.core.types import Batch, BatchState, Snapshot
+from service.engines.sharding import (
+    ShardPlan,
+    StagedCommands,
+    apply_and_step,
+    command_rows,
+    join_states,
+    slice_state,
+)
+from service.engines.shards import MIN_WORLDS_PER_SHARD
+from service.engines.warp import SnapshotArrays, WorldBatch, snapshot_from
+
+log = logging.getLogger("armfleet.ray")
+
+# The directory that holds the `service` package: actors import it from there when the node has
+# the same checkout (one machine, or a shared path); elsewhere armfleet must be installed.
+_CODE_ROOT = str(Path(__file__).resolve().parents[2])
+# How often each shard's full state is copied into the API process, so that a lost shard comes
+# back where it was at most this long ago instead of at home (one state copy per shard each time).
+CHECKPOINT_S = 10.0
+# A shard whose new actor fails this many times in a row is left frozen (logged), not retried.
+MAX_REBUILD_ATTEMPTS = 3
+# A private local instance ("local") gets a small object store: snapshots are the largest
+# objects (28 float64 per world) and are freed as soon as they are read.
+_LOCAL_OBJECT_STORE_BYTES = 256 << 20
+
+
+def connect(address: str, num_cpus: int | None = None, num_gpus: int | None = None) -> None:
+    """Join the Ray cluster named by `address`, once per process.
+
+    auto: the cluster that `ray start --head` runs on this machine;
+    local: a private instance for this process only, bound to 127.0.0.1, no dashboard;
+    HOST:PORT or ray://HOST:PORT: a cluster's head node.
+    num_cpus, num_gpus: what a "local" instance offers (None: what Ray detects).
+    """
+    if ray.is_initialized():
+        return
+    path = [p for p in (_CODE_ROOT, os.environ.get("PYTHONPATH")) if p]
+    env = {"PYTHONPATH": os.pathsep.join(path)}
+    os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+    if address == "local":
+        ray.init(
+            address="local",
+            num_cpus=num_cpus,
+            num_gpus=num_gpus,
+            include_dashboard=False,
+            _node_ip_address="127.0.0.1",
+            object_store_memory=_LOCAL_OBJECT_STORE_BYTES,
+            runtime_env={"env_vars": env},
+            log_to_driver=True,
+        )
+    else:
+        ray.init(address=address, runtime_env={"env_vars": env}, log_to_driver=True)
+
+
+def ray_auto_shards(nworld: int, device: str) -> int:
+    """One shard per GPU of the cluster on CUDA, else one per CPU core (big enough batches)."""
+    resources = ray.cluster_resources()
+    if device.startswith("cuda"):
+        gpus = int(resources.get("GPU", 0))
+        if gpus < 1:
+            raise RuntimeError("device is cuda but the Ray cluster has no GPUs")
+        return max(1, min(gpus, nworld))
+    cpus = int(resources.get("CPU", 1))
+    return max(1, min(cpus, nworld // MIN_WORLDS_PER_SHARD))
+
+
+class ShardActor:
+    """A shard's side: a WorldBatch of its worlds, stepped with the commands the driver staged.
+
+    Ray instantiates it as an actor (`ray.remote(ShardActor)`), one process per shard.
+    """
+
+    def __init__(self, nworld: int, kwargs: dict[str, Any]) -> None:
+        self._batch = WorldBatch(nworld, **kwargs)
+
+    def info(self) -> dict[str, Any]:
+        """What the driver reports about the engine (the same for every shard)."""
+        b = self._batch
+        return {
+            "spec": b.spec,
+            "control_hz": b.control_hz,
+            "tick_dt": b.tick_dt,
+            "substeps": b.substeps,
+            "physics_dt": b.physics_dt,
+            "device_name": b.device_name,
+            "home_target": b.home_target,
+            "captured": b.captured,
+            "capture_error": b.capture_error,
+            "compile_s": b.compile_s,
+            "capture_s": b.capture_s,
+            "physics_shapes": b.physics_shapes(),
+            "node": ray.get_runtime_context().get_node_id(),
+        }
+
+    def step(
+        self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray, ticks: int
+    ) -> tuple[np.ndarray, float]:
+        """Apply the staged commands, step; (faulted local ids, seconds the shard spent)."""
+        t0 = time.perf_counter()
+        faulted = apply_and_step(self._batch, resets, dirty, targets, ticks)
+        return faulted, time.perf_counter() - t0
+
+    def snapshot(self) -> SnapshotArrays:
+        """Contiguous arrays, not a Snapshot: Ray ships them without copying field by field."""
+        return self._batch.snapshot_arrays()
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._batch.qpos(), self._batch.qvel()
+
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        self._batch.write_qpos(world, qpos)
+
+    def get_state(self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray) -> BatchState:
+        """The shard's state after the commands staged for it (a step of zero ticks)."""
+        apply_and_step(self._batch, resets, dirty, targets, 0)
+        return self._batch.get_state()
+
+    def set_state(self, state: BatchState) -> None:
+        self._batch.set_state(state)
+
+
+_RemoteShard = ray.remote(ShardActor)
+
+
+@dataclass
+class _Shard:
+    """The driver's view of one shard: its actor, and while it is being rebuilt, its readiness."""
+
+    actor: Any
+    last: SnapshotArrays | None = None  # the shard's last snapshot, shown while it is rebuilt
+    building: Any = None  # ObjectRef of the new actor's info() while it is being built
+    failures: int = 0  # consecutive failed builds
+    checkpoint: BatchState | None = None  # the shard's last state copied here (CHECKPOINT_S)
+    lost: list[float] = field(default_factory=list)  # wall times at which the actor was lost
+
+
+class RayBatch(Batch):
+    """N worlds as k contiguous shards, each a Ray actor holding a WorldBatch.
+
+    Implements the Batch protocol (service/core/types.py). `address` is as in `connect`; None uses
+    the Ray connection this process already has, or starts a local instance.
+    """
+
+    def __init__(
+        self,
+        nworld: int,
+        shards: int = 0,
+        *,
+        address: str | None = None,
+        device: str = "cpu",
+        checkpoint_s: float = CHECKPOINT_S,
+        **kwargs: Any,
+    ) -> None:
+        connect(address or "local")
+        self.gpu = device.startswith("cuda")
+        shards = shards or ray_auto_shards(nworld, device)
+        self._plan = ShardPlan(nworld, shards)
+        # On a GPU actor Ray exposes only its own GPU (CUDA_VISIBLE_DEVICES), so it is "cuda".
+        self._kwargs = {"device": "cuda" if self.gpu else device, **kwargs}
+        self._options: dict[str, Any] = {"num_cpus": 1, "max_restarts": 0}
+        if self.gpu:
+            self._options["num_gpus"] = 1
+        self._shards = [_Shard(actor=self._spawn(i)) for i in range(shards)]
+        try:
+            infos = ray.get([s.actor.info.remote() for s in self._shards])
+        except RayActorError as exc:
+            self.close()
+            raise RuntimeError(f"a Ray shard failed to start: {exc}") from exc
+        info = infos[0]
+        self.nworld = nworld
+        self.shards = shards
+        self.spec = info["spec"]
+        self.control_hz, self.tick_dt = info["control_hz"], info["tick_dt"]
+        self.substeps, self.physics_dt = info["substeps"], info["physics_dt"]
+        # The model as the actors step it, for viewers (GET /v1/scene); nothing steps it here.
+        self.robot = load_robot(kwargs.get("model_path", SCENE_XML))
+        configure(self.robot.mjm, self.physics_dt)
+        self.device_name = f"ray: {shards} × {info['device_name']}"
+        self.nodes = len({i["node"] for i in infos})
+        self.home_target = info["home_target"]
+        self.captured = all(i["captured"] for i in infos)
+        self.capture_error = next((i["capture_error"] for i in infos if i["capture_error"]), None)
+        self.compile_s = max(i["compile_s"] for i in infos)
+        self.capture_s = max(i["capture_s"] for i in infos)
+        self.rebuilds = 0
+        self._physics_shapes = info["physics_shapes"]
+        # Seconds between copies of every shard's state into this process (0: after every
+        # step, for tests; inf: never, lost worlds come back at home).
+        self.checkpoint_s = checkpoint_s
+        self._checkpoint_at = time.monotonic()  # when the last copies were asked for
+        self._checkpoint_refs: tuple[int, dict[int, Any]] | None = None  # (tick, shard → ref)
+        self.restored: list[tuple[int, int]] = []  # (shard, tick of the state it came back at)
+        # (driver wall seconds, slowest shard's own seconds) of the last step: the difference is
+        # what the Ray round trip costs per tick (bench/ray_bench.py reports it).
+        self.last_step: tuple[float, float] = (0.0, 0.0)
+        self._tick = 0
+        self._targets = np.tile(self.home_target, (nworld, 1))
+        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
+        self._faults = np.zeros(nworld, dtype=np.int64)
+        self._staged = StagedCommands(shards)
+        self._asked = (-1, -1)  # ticks of the last two snapshot() calls
+        self.prefetched = 0  # snapshots that came with their step (diagnostics, bench)
+        self._prefetch: tuple[int, dict[int, Any]] | None = None  # (tick, shard → snapshot ref)
+        first = ray.get([s.actor.snapshot.remote() for s in self._shards])
+        for s, part in zip(self._shards, first, strict=True):
+            s.last = part
+
+    def _spawn(self, shard: int) -> Any:
+        size = int(self._plan.sizes[shard])
+        return _RemoteShard.options(**self._options).remote(size, self._kwargs)
+
+    @property
+    def actors(self) -> list[Any]:
+        """The shards' actor handles, in shard order (diagnostics and fault-injection tests)."""
+        return [s.actor for s in self._shards]
+
+    @property
+    def tick(self) -> int:
+        return self._tick
+
+    @property
+    def targets(self) -> np.ndarray:
+        return self._targets.copy()
+
+    # -- commands: staged per shard, sent with the next step ---------------------------------
+
+    def set_targets(
+        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+    ) -> None:
+        worlds = np.asarray(worlds, dtype=np.int64)
+        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
+        self._velocity[worlds] = 0.0 if velocities is None else velocities
+        for i, local_ids in enumerate(self._plan.split(worlds)):
+            self._staged.targets(i, local_ids)
+
+    def reset(self, worlds: np.ndarray) -> None:
+        worlds = np.asarray(worlds, dtype=np.int64)
+        if worlds.size == 0:
+            return
+        self._targets[worlds] = self.home_target
+        self._velocity[worlds] = 0.0
+        for i, local_ids in enumerate(self._plan.split(worlds)):
+            self._staged.reset(i, local_ids)
+
+    # -- stepping ---------------------------------------------------------------------------
+
+    def step(self, ticks: int = 1) -> np.ndarray:
+        """Advance every shard together; returns the (global) worlds that came back at home."""
+        faulted = [self._plan.worlds_of(i) for i in self._revive_ready()]
+        t0 = time.perf_counter()
+        refs = {}
+        for i, s in enumerate(self._shards):
+            if s.building is not None:
+                continue  # its staged commands wait; it comes back at home anyway
+            resets, dirty = self._staged.take(i)
+            targets = command_rows(self._targets, self._velocity, dirty + self._plan.starts[i])
+            refs[i] = s.actor.step.remote(resets, dirty, targets, ticks)
+        after = self._tick + ticks
+        if self._snapshot_expected(after):
+            # Asked for now, the snapshot follows the step's reply at once (an actor runs its
+            # calls in order) instead of costing a second round trip after it.
+            self._prefetch = (after, {i: self._shards[i].actor.snapshot.remote() for i in refs})
+        slowest = 0.0
+        for i, ref in refs.items():
+            try:
+                local, spent = ray.get(ref)
+            except RayActorError as exc:
+                self._lose(i, exc)
+                continue
+            slowest = max(slowest, spent)
+            faulted.append(local + self._plan.starts[i])
+        self.last_step = (time.perf_counter() - t0, slowest)
+        self._tick += ticks
+        self._checkpoint()
+        out = np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
+        self._targets[out] = self.home_target
+        self._velocity[out] = 0.0
+        np.add.at(self._faults, out, 1)
+        return out
+
+    def _checkpoint(self) -> None:
+        """Keep each shard's state of a recent tick here, so that a lost shard resumes from it.
+
+        The copy is asked for after a step and fetched once it is done (a later tick), so the
+        loop never waits for it; only the shard pays its device-to-host copy, once per period.
+        """
+        if self._checkpoint_refs is not None:
+            tick, refs = self._checkpoint_refs
+            done, _ = ray.wait(list(refs.values()), num_returns=len(refs), timeout=0)
+            if len(done) < len(refs):
+                return
+            self._checkpoint_refs = None
+            for i, ref in refs.items():
+                with contextlib.suppress(RayActorError):  # a loss shows at the next step
+                    self._shards[i].checkpoint = dataclasses.replace(ray.get(ref), tick=tick)
+        if time.monotonic() - self._checkpoint_at < self.checkpoint_s:
+            return
+        self._checkpoint_at = time.monotonic()
+        none = np.zeros(0, dtype=np.int64)
+        refs = {
+            i: s.actor.get_state.remote(none, none, np.zeros((0, 7)))
+            for i, s in enumerate(self._shards)
+            if s.building is None
+        }
+        self._checkpoint_refs = (self._tick, refs)
+
+    def _resume(self, shard: int) -> bool:
+        """Put the shard's last checkpoint into its new actor, with today's targets; False if
+        there is none (the worlds then start at home)."""
+        s = self._shards[shard]
+        if s.checkpoint is None:
+            return False
+        lo = int(self._plan.starts[shard])
+        hi = lo + int(self._plan.sizes[shard])
+        targets = self._targets[lo:hi].copy()
+        physics = dict(s.checkpoint.physics)
+        physics["ctrl"] = targets.astype(physics["ctrl"].dtype)  # what set_targets would push
+        resumed = dataclasses.replace(s.checkpoint, targets=targets, physics=physics)
+        ray.get(s.actor.set_state.remote(resumed))
+        self.restored.append((shard, s.checkpoint.tick))
+        log.warning(
+            "Ray shard %d rebuilt; worlds %s resume from tick %d (now %d), with their targets",
+            shard,
+            self._span(shard),
+            s.checkpoint.tick,
+            self._tick,
+        )
+        return True
+
+    def _lose(self, shard: int, exc: BaseException) -> None:
+        """The shard's actor is gone: start a new one now; step revives it once it is ready."""
+        s = self._shards[shard]
+        s.lost.append(time.time())
+        log.error("Ray shard %d (worlds %s) lost: %s; rebuilding", shard, self._span(shard), exc)
+        with contextlib.suppress(Exception):
+            ray.kill(s.actor, no_restart=True)
+        self._rebuild(shard)
+
+    def _rebuild(self, shard: int) -> None:
+        s = self._shards[shard]
+        s.actor = self._spawn(shard)
+        s.building = s.actor.info.remote()
+        self.rebuilds += 1
+
+    def _revive_ready(self) -> list[int]:
+        """Shards whose new actor finished building since the last step (their worlds at home)."""
+        revived = []
+        for i, s in enumerate(self._shards):
+            if s.building is None or s.building is _NEVER:
+                continue
+            done, _ = ray.wait([s.building], timeout=0)
+            if not done:
+                continue
+            try:
+                ray.get(s.building)
+            except RayActorError as exc:
+                s.failures += 1
+                s.building = None
+                if s.failures >= MAX_REBUILD_ATTEMPTS:
+                    log.error("Ray shard %d failed to rebuild %d times: %s", i, s.failures, exc)
+                    s.building = _NEVER
+                else:
+                    self._rebuild(i)
+                continue
+            s.building, s.failures = None, 0
+            try:
+                resumed = self._resume(i)
+            except RayActorError as exc:  # lost again while resuming: start over
+                self._lose(i, exc)
+                continue
+            if resumed:
+                continue  # staged commands go with the next step, as for any live shard
+            self._staged.take(i)  # commands for the lost worlds are dropped with them
+            log.warning("Ray shard %d rebuilt; worlds %s are back at home", i, self._span(i))
+            revived.append(i)
+        return revived
+
+    def _span(self, shard: int) -> str:
+        start = int(self._plan.starts[shard])
+        return f"{start}..{start + int(self._plan.sizes[shard]) - 1}"
+
+    # -- reading ----------------------------------------------------------------------------
+
+    def _snapshot_expected(self, tick: int) -> bool:
+        """Whether the loop will ask for a snapshot at `tick`: the last two asks were as far
+        apart as `tick` is from the last (every tick in fast mode on big batches, every other
+        tick at 60 Hz with a 30 Hz stream). A wrong guess costs one unused copy, never a stale
+        snapshot: snapshot() uses a prefetch only for the tick it was taken at."""
+        before, last = self._asked
+        return before >= 0 and tick - last == last - before > 0
+
+    def snapshot(self) -> Snapshot:
+        """Every shard's snapshot, joined; a shard being rebuilt shows its last one."""
+        if self._tick != self._asked[1]:
+            self._asked = (self._asked[1], self._tick)
+        ready = self._prefetch[1] if self._prefetch and self._prefetch[0] == self._tick else {}
+        self._prefetch = None
+        self.prefetched += bool(ready)
+        live = [i for i, s in enumerate(self._shards) if s.building is None]
+        refs = {
+            i: ready[i] if i in ready else self._shards[i].actor.snapshot.remote() for i in live
+        }
+        for i, ref in refs.items():
+            try:
+                self._shards[i].last = ray.get(ref)
+            except RayActorError as exc:
+                self._lose(i, exc)
+        parts = [s.last for s in self._shards if s.last is not None]
+        joined = SnapshotArrays(
+            self._tick,
+            np.concatenate([p.sim_time for p in parts]),
+            np.concatenate([p.state for p in parts]),
+            np.concatenate([p.bodies for p in parts]),
+            self._faults.copy(),  # kept here, so that a rebuilt shard keeps its worlds' history
+        )
+        return snapshot_from(joined, self._targets.copy())
+
+    def qpos(self) -> np.ndarray:
+        return self._gather_state()[0]
+
+    def qvel(self) -> np.ndarray:
+        return self._gather_state()[1]
+
+    def _gather_state(self) -> tuple[np.ndarray, np.ndarray]:
+        if any(s.building is not None for s in self._shards):
+            raise RuntimeError("a Ray shard is being rebuilt; its state is not available")
+        parts = ray.get([s.actor.state.remote() for s in self._shards])
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        """Per-world shape of each physics field of `BatchState` for this model."""
+        return dict(self._physics_shapes)
+
+    def _all_live(self, what: str) -> None:
+        building = [i for i, s in enumerate(self._shards) if s.building is not None]
+        if building:
+            raise Unavailable(f"{what}: Ray shard(s) {building} are being rebuilt; try again")
+
+    def get_state(self) -> BatchState:
+        """Every shard's state (staged commands applied first), joined in world order."""
+        self._all_live("get_state")
+        refs = []
+        for i, s in enumerate(self._shards):
+            resets, dirty = self._staged.take(i)
+            targets = command_rows(self._targets, self._velocity, dirty + self._plan.starts[i])
+            refs.append(s.actor.get_state.remote(resets, dirty, targets))
+        try:
+            parts = ray.get(refs)
+        except RayActorError as exc:
+            raise Unavailable(f"get_state: a Ray shard was lost ({exc}); try again") from exc
+        joined = join_states(parts, self._targets)
+        return dataclasses.replace(joined, tick=self._tick, faults=self._faults.copy())
+
+    def set_state(self, state: BatchState) -> None:
+        """Split `state` over the shards; checked whole first so no shard is half-restored."""
+        state.check_compatible(self.nworld, self._physics_shapes)
+        self._all_live("set_state")
+        for i in range(self.shards):
+            self._staged.take(i)  # staged commands belonged to the state being replaced
+        bounds = [*self._plan.starts.tolist(), self.nworld]
+        refs = [
+            s.actor.set_state.remote(slice_state(state, bounds[i], bounds[i + 1]))
+            for i, s in enumerate(self._shards)
+        ]
+        try:
+            ray.get(refs)
+        except RayActorError as exc:
+            raise Unavailable(f"set_state: a Ray shard was lost ({exc}); try again") from exc
+        self._tick = int(state.tick)
+        self._targets = np.array(state.targets, dtype=np.float64)
+        self._velocity = np.zeros_like(self._targets)
+        self._faults = np.array(state.faults, dtype=np.int64)
+        self._prefetch, self._asked = None, (-1, -1)
+        self._checkpoint_refs = None  # copies of the replaced state
+        parts = ray.get([s.actor.snapshot.remote() for s in self._shards])
+        for s, part in zip(self._shards, parts, strict=True):
+            s.last = part
+
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        """Overwrite one world's qpos now (fault-injection tests), on the shard that holds it."""
+        shard = int(np.searchsorted(self._plan.starts, world, side="right")) - 1
+        local = world - int(self._plan.starts[shard])
+        actor = self._shards[shard].actor
+        # Commands staged before this call happen before it, as on a WorldBatch: send them
+        # with a step of zero ticks first (an actor runs its calls in order).
+        resets, dirty = self._staged.take(shard)
+        targets = command_rows(self._targets, self._velocity, dirty + self._plan.starts[shard])
+        actor.step.remote(resets, dirty, targets, 0)
+        ray.get(actor.write_qpos.remote(local, np.asarray(qpos)))
+
+    def close(self) -> None:
+        """Stop every shard's actor (the Ray connection stays for others in this process)."""
+        for s in self._shards:
+            with contextlib.suppress(Exception):
+                ray.kill(s.actor, no_restart=True)
+
+
+class _Never:
+    """Stands in for a build that will not be retried: never ready, so the shard stays frozen."""
+
+
+_NEVER = _Never()

@@ -1,0 +1,152 @@
+"""What every sharded engine shares: the world split, staged commands, the shard's step, joining.
+
+ShardedBatch (worker processes on one machine) and RayBatch (Ray actors, one machine or many)
+differ only in how they reach a shard. Both split N worlds into contiguous blocks, stage commands
+per shard until the next step (a shard applies them just before it steps, so they cross the wire
+once, with the step), and join the shards' snapshots back into one. That logic lives here, once,
+so the two engines cannot drift apart in the lockstep semantics the tests pin down.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from service.core.types import BatchState, Snapshot
+from service.engines.warp import WorldBatch
+
+_EMPTY = np.zeros(0, dtype=np.int64)
+
+# Snapshot fields that are per world and are joined shard after shard.
+WORLD_FIELDS = (
+    "sim_time",
+    "position",
+    "velocity",
+    "effort",
+    "flange_pos",
+    "flange_quat",
+    "body_pos",
+    "body_quat",
+)
+
+
+class ShardPlan:
+    """`nworld` worlds as `shards` contiguous blocks of near-equal size.
+
+    starts: first global world id of each shard   (shards,)
+    sizes: worlds in each shard                     (shards,)
+    """
+
+    def __init__(self, nworld: int, shards: int) -> None:
+        if not 1 <= shards <= nworld:
+            raise ValueError(f"shards must be in 1..{nworld}, got {shards}")
+        bounds = np.linspace(0, nworld, shards + 1).astype(np.int64)
+        self.nworld = nworld
+        self.shards = shards
+        self.starts = bounds[:-1]
+        self.sizes = np.diff(bounds)
+
+    def split(self, worlds: np.ndarray) -> list[np.ndarray]:
+        """Global world ids → the local ids of each shard (one array per shard, maybe empty)."""
+        worlds = np.asarray(worlds, dtype=np.int64)
+        return [
+            worlds[(worlds >= start) & (worlds < start + size)] - start
+            for start, size in zip(self.starts, self.sizes, strict=True)
+        ]
+
+    def worlds_of(self, shard: int) -> np.ndarray:
+        """The global ids of one shard's worlds."""
+        start = int(self.starts[shard])
+        return np.arange(start, start + int(self.sizes[shard]), dtype=np.int64)
+
+
+class StagedCommands:
+    """Per shard, the resets and target changes waiting to travel with that shard's next step.
+
+    Targets are not copied here: the caller keeps one target table and reads the dirty rows when
+    the step is sent, so a world commanded twice in one tick sends its last target once.
+    """
+
+    def __init__(self, shards: int) -> None:
+        self._resets: list[np.ndarray] = [_EMPTY] * shards
+        self._dirty: list[np.ndarray] = [_EMPTY] * shards
+
+    def targets(self, shard: int, local_ids: np.ndarray) -> None:
+        if local_ids.size:
+            self._dirty[shard] = np.union1d(self._dirty[shard], local_ids)
+
+    def reset(self, shard: int, local_ids: np.ndarray) -> None:
+        """A reset overrides targets staged before it in the same tick (a reset sets home)."""
+        if local_ids.size:
+            self._resets[shard] = np.union1d(self._resets[shard], local_ids)
+            self._dirty[shard] = np.setdiff1d(self._dirty[shard], local_ids)
+
+    def take(self, shard: int) -> tuple[np.ndarray, np.ndarray]:
+        """(resets, dirty) local ids for the shard's next step; the shard's stage is emptied."""
+        out = self._resets[shard], self._dirty[shard]
+        self._resets[shard] = _EMPTY
+        self._dirty[shard] = _EMPTY
+        return out
+
+
+def command_rows(targets: np.ndarray, velocity: np.ndarray, worlds: np.ndarray) -> np.ndarray:
+    """The rows of `worlds` to send to a shard: targets (k, 7), with the velocity feed-forward
+    appended, (k, 14), only when some of it is non-zero (so plain commands travel as before)."""
+    vel = velocity[worlds]
+    return np.concatenate([targets[worlds], vel], axis=1) if vel.any() else targets[worlds]
+
+
+def apply_targets(batch: WorldBatch, dirty: np.ndarray, rows: np.ndarray) -> None:
+    """A shard's side of `command_rows`: targets, and feed-forward when the rows carry it."""
+    if dirty.size:
+        if rows.shape[1] > 7:
+            batch.set_targets(dirty, rows[:, :7], rows[:, 7:])
+        else:
+            batch.set_targets(dirty, rows)
+
+
+def apply_and_step(
+    batch: WorldBatch, resets: np.ndarray, dirty: np.ndarray, rows: np.ndarray, ticks: int
+) -> np.ndarray:
+    """A shard's side of one step: staged resets, then staged targets, then the ticks.
+
+    The order is the loop's (resets before targets, both before stepping), so a shard behaves
+    exactly like the same worlds inside one WorldBatch. Returns the shard's faulted local ids.
+    """
+    batch.reset(resets)
+    apply_targets(batch, dirty, rows)
+    return batch.step(ticks)
+
+
+def join_snapshots(parts: Sequence[Snapshot], tick: int, targets: np.ndarray) -> Snapshot:
+    """One Snapshot from the shards' snapshots, in shard order; `targets` is the caller's table."""
+    joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in WORLD_FIELDS}
+    return Snapshot(
+        tick=tick,
+        target=targets.copy(),
+        faults=np.concatenate([p.faults for p in parts]),
+        **joined,
+    )
+
+
+def slice_state(state: BatchState, start: int, stop: int) -> BatchState:
+    """Worlds start..stop of a state, as a state of its own (one shard's part)."""
+    return BatchState(
+        tick=state.tick,
+        world_ticks=state.world_ticks[start:stop],
+        faults=state.faults[start:stop],
+        targets=state.targets[start:stop],
+        physics={k: v[start:stop] for k, v in state.physics.items()},
+    )
+
+
+def join_states(parts: Sequence[BatchState], targets: np.ndarray) -> BatchState:
+    """One state from the shards' states, in shard order; `targets` is the caller's table."""
+    return BatchState(
+        tick=parts[0].tick,
+        world_ticks=np.concatenate([p.world_ticks for p in parts]),
+        faults=np.concatenate([p.faults for p in parts]),
+        targets=targets.copy(),
+        physics={k: np.concatenate([p.physics[k] for p in parts]) for k in parts[0].physics},
+    )

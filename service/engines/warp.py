@@ -1,0 +1,427 @@
+"""WorldBatch: N independent UR10e worlds stepped together by MuJoCo Warp on one device.
+
+The unit of work is a control tick: a fixed number of physics substeps followed by a gather of
+the commanded joints' state into one compact array. The tick is recorded once as a graph
+(``wp.ScopedCapture``: a CUDA graph on GPUs, an API capture replayed in C++ on the CPU) and
+replayed every tick, because launching ~150 kernels per substep from Python costs ~6 ms on the CPU
+whatever the batch size. Nothing in here is thread-safe: one thread (the loop) owns a WorldBatch.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+import mujoco
+import mujoco_warp as mjw
+import numpy as np
+import warp as wp
+
+from mjcf import SCENE_XML
+from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
+from service.core.robot import LoadedRobot, load_robot
+from service.core.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
+
+log = logging.getLogger("armfleet.engine")
+
+# Warp logs a banner and one line per compiled module at INFO; the service keeps warnings only,
+# `armfleet setup` (ARMFLEET_WARP_LOG=info) shows them as compile progress.
+_VERBOSE_WARP = os.environ.get("ARMFLEET_WARP_LOG") == "info"
+wp.config.log_level = wp.LOG_INFO if _VERBOSE_WARP else wp.LOG_WARNING
+
+NJOINT = 7
+# Columns of the gathered state array, one row per world.
+_POS, _VEL, _EFF = (slice(i * NJOINT, (i + 1) * NJOINT) for i in range(3))
+_FPOS = slice(3 * NJOINT, 3 * NJOINT + 3)
+_FQUAT = slice(3 * NJOINT + 3, 3 * NJOINT + 7)
+_NCOL = 3 * NJOINT + 7
+
+# Overflows that mean contacts or constraints were dropped: the world's physics is no longer
+# trustworthy. (Solver iteration limits are not faults: the solution is just less converged.)
+CAPACITY_OVERFLOWS = int(
+    mjw.OverflowType.NEFC
+    | mjw.OverflowType.NJMAX_NNZ
+    | mjw.OverflowType.BROADPHASE
+    | mjw.OverflowType.NARROWPHASE
+    | mjw.OverflowType.CCD
+)
+# A joint spinning faster than this [rad/s or m/s] has blown up even if it is still finite.
+_DIVERGED_QVEL = wp.constant(1.0e4)
+
+# Per-world contact and constraint capacity. Measured on the grasp (pads on the cube, cube on
+# the table, arm near the table): see tests/test_engine.py::test_grasp_never_overflows_capacity.
+NCONMAX = 32
+NJMAX = 128
+
+
+@wp.kernel(enable_backward=False)
+def _gather_state(
+    qpos: wp.array2d(dtype=float),
+    qvel: wp.array2d(dtype=float),
+    qfrc_actuator: wp.array2d(dtype=float),
+    site_xpos: wp.array2d(dtype=wp.vec3),
+    site_xmat: wp.array2d(dtype=wp.mat33),
+    overflow: wp.array(dtype=int),
+    qpos_adr: wp.array(dtype=int),
+    dof_adr: wp.array(dtype=int),
+    flange: int,
+    overflow_mask: int,
+    state_out: wp.array2d(dtype=float),
+    fault_out: wp.array(dtype=int),
+    nfault_out: wp.array(dtype=int),
+):
+    w = wp.tid()
+    bad = (overflow[w] & overflow_mask) != 0
+    for i in range(qpos.shape[1]):
+        if not wp.isfinite(qpos[w, i]):
+            bad = True
+    for i in range(qvel.shape[1]):
+        v = qvel[w, i]
+        if not wp.isfinite(v) or wp.abs(v) > _DIVERGED_QVEL:
+            bad = True
+    for j in range(7):
+        state_out[w, j] = qpos[w, qpos_adr[j]]
+        state_out[w, 7 + j] = qvel[w, dof_adr[j]]
+        state_out[w, 14 + j] = qfrc_actuator[w, dof_adr[j]]
+    p = site_xpos[w, flange]
+    q = wp.quat_from_matrix(site_xmat[w, flange])  # warp quats are x, y, z, w
+    state_out[w, 21] = p[0]
+    state_out[w, 22] = p[1]
+    state_out[w, 23] = p[2]
+    state_out[w, 24] = q[3]
+    state_out[w, 25] = q[0]
+    state_out[w, 26] = q[1]
+    state_out[w, 27] = q[2]
+    if bad:
+        fault_out[w] = 1
+        wp.atomic_add(nfault_out, 0, 1)
+    else:
+        fault_out[w] = 0
+
+
+def _host_layout(arr: wp.array) -> tuple[tuple[int, ...], type]:
+    """(shape, numpy dtype) of `arr.numpy()` without copying a device array to find out."""
+    scalar = getattr(arr.dtype, "_wp_scalar_type_", arr.dtype)
+    inner = tuple(getattr(arr.dtype, "_shape_", ()))
+    return (*arr.shape, *inner), wp.dtype_to_numpy(scalar)
+
+
+@wp.kernel(enable_backward=False)
+def _gather_bodies(
+    xpos: wp.array2d(dtype=wp.vec3),
+    xquat: wp.array2d(dtype=wp.quat),
+    out: wp.array3d(dtype=float),
+):
+    # Every body's world pose, for viewers: position, then the quaternion as MuJoCo stores it
+    # (w, x, y, z; mujoco_warp keeps MuJoCo's component order in its quat arrays).
+    w, b = wp.tid()
+    p = xpos[w, b]
+    q = xquat[w, b]
+    for i in range(3):
+        out[w, b, i] = p[i]
+    for i in range(4):
+        out[w, b, 3 + i] = q[i]
+
+
+class SnapshotArrays(NamedTuple):
+    """A Snapshot before it is cut into fields: contiguous host arrays, as the gather kernels
+    write them, so that shipping one between processes copies no field on its own.
+
+    state: position, velocity, effort, flange_pos, flange_quat side by side   (nworld, 28) f32
+    bodies: body_pos then body_quat of every body                          (nworld, nbody, 7) f32
+    sim_time, faults: as in Snapshot                                                 (nworld,)
+    """
+
+    tick: int
+    sim_time: np.ndarray
+    state: np.ndarray
+    bodies: np.ndarray
+    faults: np.ndarray
+
+
+def snapshot_from(a: SnapshotArrays, target: np.ndarray) -> Snapshot:
+    """The Snapshot whose fields are views of `a`'s arrays (no copy); `target` is the caller's."""
+    state, bodies = a.state, a.bodies
+    return Snapshot(
+        tick=a.tick,
+        sim_time=a.sim_time,
+        position=state[:, _POS],
+        velocity=state[:, _VEL],
+        effort=state[:, _EFF],
+        target=target,
+        flange_pos=state[:, _FPOS],
+        flange_quat=state[:, _FQUAT],
+        faults=a.faults,
+        body_pos=bodies[:, :, :3],
+        body_quat=bodies[:, :, 3:],
+    )
+
+
+class WorldBatch(Batch):
+    """N worlds of one model on one Warp device, advanced in captured control ticks.
+
+    Targets live in a float64 host mirror (what was commanded, reported as `target`) and are
+    written to the device in one array write per change, so commands for any subset of worlds
+    cost the same. A world whose state goes non-finite or
+    whose contact/constraint capacity overflows is reset to `home` after the tick that broke it
+    and counted in `faults`; the other worlds are not touched.
+    """
+
+    def __init__(
+        self,
+        nworld: int,
+        device: str = "cpu",
+        control_hz: float = 60.0,
+        physics_dt: float = DEFAULT_PHYSICS_DT,
+        model_path: Path | str = SCENE_XML,
+        capture: bool = True,
+        nconmax: int = NCONMAX,
+        njmax: int = NJMAX,
+        robot: LoadedRobot | None = None,
+    ) -> None:
+        if nworld < 1:
+            raise ValueError(f"nworld must be >= 1, got {nworld}")
+        self.robot = robot or load_robot(model_path)
+        self.spec = self.robot.spec
+        self.nworld = nworld
+        self.shards = 1
+        self.control_hz = float(control_hz)
+        self.tick_dt = 1.0 / self.control_hz
+        self.substeps, self.physics_dt = tick_timing(self.control_hz, physics_dt)
+        self.device = wp.get_device(device)
+        self.device_name = str(self.device)
+
+        mjm = self.robot.mjm
+        configure(mjm, self.physics_dt)
+        home = mujoco.MjData(mjm)
+        mujoco.mj_resetDataKeyframe(mjm, home, self.robot.home_key)
+        mujoco.mj_forward(mjm, home)
+        self.home_target = np.array(mjm.key_ctrl[self.robot.home_key], dtype=np.float64)
+
+        self._tick = 0
+        self._world_ticks = np.zeros(nworld, dtype=np.int64)
+        self._faults = np.zeros(nworld, dtype=np.int64)
+        self._targets = np.tile(self.home_target, (nworld, 1))
+        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
+        self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
+        self._graph = None
+        self.capture_error: str | None = None
+
+        t0 = time.perf_counter()
+        with wp.ScopedDevice(self.device):
+            self._m = mjw.put_model(mjm)
+            self._d = mjw.put_data(mjm, home, nworld=nworld, nconmax=nconmax, njmax=njmax)
+            self._qpos_adr = wp.array(self.robot.qpos_adr, dtype=int)
+            self._dof_adr = wp.array(self.robot.dof_adr, dtype=int)
+            self._state = wp.zeros((nworld, _NCOL), dtype=float)
+            self._bodies = wp.zeros((nworld, mjm.nbody, 7), dtype=float)
+            self._fault = wp.zeros(nworld, dtype=int)
+            self._nfault = wp.zeros(1, dtype=int)
+            # One uncaptured tick compiles (or loads from cache) every kernel the tick uses;
+            # capture needs them loaded. Then every world goes back to home.
+            self._run_tick_ops()
+            self.reset(np.arange(nworld))
+            self._gather()  # tick 0's snapshot is exactly home
+            self.compile_s = time.perf_counter() - t0
+            t1 = time.perf_counter()
+            if capture:
+                self._capture()
+            self.capture_s = time.perf_counter() - t1
+
+    # -- stepping ---------------------------------------------------------------------------
+
+    def _run_tick_ops(self) -> None:
+        """The work of one tick: substeps, then gather + fault check."""
+        for _ in range(self.substeps):
+            mjw.step(self._m, self._d)
+        self._gather()
+
+    def _gather(self) -> None:
+        # Site poses from the last step are from before its integration; refresh them so the
+        # flange pose belongs to the same instant as qpos.
+        mjw.kinematics(self._m, self._d)
+        self._nfault.zero_()
+        d = self._d
+        wp.launch(
+            _gather_state,
+            dim=self.nworld,
+            inputs=[
+                d.qpos,
+                d.qvel,
+                d.qfrc_actuator,
+                d.site_xpos,
+                d.site_xmat,
+                d.overflow,
+                self._qpos_adr,
+                self._dof_adr,
+                self.robot.flange_site,
+                CAPACITY_OVERFLOWS,
+            ],
+            outputs=[self._state, self._fault, self._nfault],
+        )
+        # One more launch per tick (~nbody x 7 floats per world) so viewers get every body.
+        wp.launch(
+            _gather_bodies,
+            dim=(self.nworld, self._bodies.shape[1]),
+            inputs=[d.xpos, d.xquat],
+            outputs=[self._bodies],
+        )
+
+    def _capture(self) -> None:
+        try:
+            with wp.ScopedCapture(device=self.device) as cap:
+                self._run_tick_ops()
+            self._graph = cap.graph
+        except Exception as exc:  # capture support differs by device and driver
+            self._graph = None
+            self.capture_error = f"{type(exc).__name__}: {exc}"
+            log.warning(
+                "graph capture failed on %s (%s); stepping without capture (~6 ms/tick more)",
+                self.device_name,
+                self.capture_error,
+            )
+
+    @property
+    def captured(self) -> bool:
+        return self._graph is not None
+
+    def step(self, ticks: int = 1) -> np.ndarray:
+        """Advance every world by `ticks` control ticks; returns the worlds reset for faults."""
+        faulted: list[np.ndarray] = []
+        with wp.ScopedDevice(self.device):
+            for _ in range(ticks):
+                if self._graph is not None:
+                    wp.capture_launch(self._graph)
+                else:
+                    self._run_tick_ops()
+                self._tick += 1
+                self._world_ticks += 1
+                if self._nfault.numpy()[0]:
+                    bad = np.flatnonzero(self._fault.numpy())
+                    self._faults[bad] += 1
+                    log.warning("worlds %s hit NaN or capacity overflow; reset to home", bad)
+                    self.reset(bad)
+                    faulted.append(bad)
+        return np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
+
+    # -- commands ---------------------------------------------------------------------------
+
+    def set_targets(
+        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
+    ) -> None:
+        """Position targets for `worlds` (k,) ← `targets` (k, 7), in one device write, with a
+        velocity feed-forward (k, 7) [rad/s] (None: zero) folded into ctrl (see physics)."""
+        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
+        self._velocity[worlds] = 0.0 if velocities is None else velocities
+        self._push_targets()
+
+    def _push_targets(self) -> None:
+        ctrl = self._targets
+        if self._velocity.any():  # else exactly the targets, as before feed-forward existed
+            ctrl = self._targets + self._ff_gain * self._velocity
+        if self.device.is_cpu:
+            self._d.ctrl.numpy()[:] = ctrl  # a view of the same memory
+        else:
+            self._d.ctrl.assign(ctrl.astype(np.float32))
+
+    def reset(self, worlds: np.ndarray) -> None:
+        """Reset `worlds` to `home`, state and targets; every other world stays bit-identical."""
+        worlds = np.asarray(worlds, dtype=np.int64)
+        if worlds.size == 0:
+            return
+        key = np.full(self.nworld, -1, dtype=np.int32)
+        key[worlds] = self.robot.home_key
+        with wp.ScopedDevice(self.device):
+            mjw.reset_data_keyframe(self._m, self._d, wp.array(key, dtype=int))
+        self._targets[worlds] = self.home_target
+        self._velocity[worlds] = 0.0
+        self._world_ticks[worlds] = 0
+
+    # -- reading ----------------------------------------------------------------------------
+
+    @property
+    def tick(self) -> int:
+        return self._tick
+
+    @property
+    def targets(self) -> np.ndarray:
+        return self._targets.copy()
+
+    def snapshot(self) -> Snapshot:
+        """All worlds at the end of the last completed tick, copied to host memory."""
+        return snapshot_from(self.snapshot_arrays(), self._targets.copy())
+
+    def snapshot_arrays(self) -> SnapshotArrays:
+        """The snapshot as the few contiguous host arrays it is made of (cheap to ship: Ray)."""
+        state = self._state.numpy()
+        bodies = self._bodies.numpy()
+        if self.device.is_cpu:
+            # On the CPU .numpy() is a view the next tick overwrites.
+            state, bodies = state.copy(), bodies.copy()
+        return SnapshotArrays(
+            self._tick, self._world_ticks * self.tick_dt, state, bodies, self._faults.copy()
+        )
+
+    # -- state -----------------------------------------------------------------------------
+
+    def physics_shapes(self) -> dict[str, tuple[int, ...]]:
+        """Per-world shape of each physics field of `BatchState` for this model."""
+        return {f: _host_layout(getattr(self._d, f))[0][1:] for f in PHYSICS_FIELDS}
+
+    def get_state(self) -> BatchState:
+        """Every world's full state at the last tick boundary (host copies), see `BatchState`."""
+        physics = {f: np.array(getattr(self._d, f).numpy(), copy=True) for f in PHYSICS_FIELDS}
+        return BatchState(
+            tick=self._tick,
+            world_ticks=self._world_ticks.copy(),
+            faults=self._faults.copy(),
+            targets=self._targets.copy(),
+            physics=physics,
+        )
+
+    def set_state(self, state: BatchState) -> None:
+        """Continue from `state` (same model and nworld): checked fully before anything changes.
+
+        Raises ValueError naming the first mismatch; the batch is then untouched.
+        """
+        state.check_compatible(self.nworld, self.physics_shapes())
+        with wp.ScopedDevice(self.device):
+            for f in PHYSICS_FIELDS:
+                arr = state.physics[f]
+                if arr.size:
+                    dst = getattr(self._d, f)
+                    dst.assign(arr.astype(_host_layout(dst)[1], copy=False))
+            # Overflow flags are sticky until a reset; at a tick boundary no world has a
+            # capacity overflow (it would have been reset), so the restored batch starts clean.
+            self._d.overflow.zero_()
+            self._tick = int(state.tick)
+            self._world_ticks = np.array(state.world_ticks, dtype=np.int64)
+            self._faults = np.array(state.faults, dtype=np.int64)
+            self._targets = np.array(state.targets, dtype=np.float64)
+            self._velocity[:] = 0.0  # ctrl came with the state; the next command sets it anew
+            self._gather()  # the snapshot shows the restored state at once
+
+    # -- test and diagnostics hooks ---------------------------------------------------------
+
+    def qpos(self) -> np.ndarray:
+        """Full qpos of every world (nworld, nq), a host copy; for tests and diagnostics."""
+        return np.array(self._d.qpos.numpy(), copy=True)
+
+    def qvel(self) -> np.ndarray:
+        return np.array(self._d.qvel.numpy(), copy=True)
+
+    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
+        """Overwrite one world's qpos (used to inject faults on purpose in tests)."""
+        full = self._d.qpos.numpy().copy()
+        full[world] = qpos
+        self._d.qpos.assign(full)
+
+    def close(self) -> None:
+        """Nothing to release (device memory goes with the object); ShardedBatch stops workers."""
+
+    def capacity_usage(self) -> tuple[int, int]:
+        """(contacts in all worlds together, largest constraint count of any world) right now."""
+        return int(self._d.nacon.numpy()[0]), int(self._d.nefc.numpy().max())

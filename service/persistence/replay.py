@@ -1,0 +1,279 @@
+"""Replay: rebuild a recording's batch, re-apply its commands at their ticks, compare bit for bit.
+
+The recording (`mcap_log.py`) holds the batch header, the full starting state, every
+accepted command with its effective tick, every restore with the restored state, and states of
+some worlds at some ticks. Replay builds a batch of the same model and size, restores the
+starting state into a paused loop, and then, tick by tick, stages the recorded commands through
+the control layer (source `replay`) exactly where they took effect and steps; at every recorded
+tick it compares position, velocity and effort of every recorded world with `==` on float64.
+The first difference names the tick, world, joint and quantity. Going through the same loop and
+control code as the live service means the same staging rules (resets before targets, the last
+target of a tick wins) apply, instead of a second implementation of them.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.records import Attachment, Channel, Message, Metadata
+from mcap.stream_reader import StreamReader
+
+from service.core.control import Control, Source
+from service.core.loop import SimLoop
+from service.core.trajectory import parse as parse_trajectory
+from service.core.types import BatchState, Mode
+from service.persistence.mcap_log import (
+    COMMANDS,
+    METADATA,
+    RESTORES,
+    decode_joint_state,
+    parse_metadata,
+    tick_of,
+)
+from service.persistence.provenance import batch_header, mismatch
+from service.persistence.recorder import Recorder
+from service.persistence.snapshots import decode_state
+
+log = logging.getLogger("armfleet.replay")
+
+_QUANTITIES = ("position", "velocity", "effort")
+
+
+class ReplayError(RuntimeError):
+    """The recording cannot be replayed (unreadable, no metadata, another model, ...)."""
+
+
+@dataclass(frozen=True)
+class Divergence:
+    """The first recorded number the replay did not reproduce exactly."""
+
+    tick: int
+    world: int
+    joint: str
+    quantity: str
+    recorded: float
+    replayed: float
+
+    def __str__(self) -> str:
+        return (
+            f"diverged at tick {self.tick}, world {self.world}, joint {self.joint} "
+            f"({self.quantity}): recorded {self.recorded!r}, replayed {self.replayed!r}"
+        )
+
+
+@dataclass
+class Segment:
+    """A stretch of the recording between restores: where it starts and what happened in it."""
+
+    start: BatchState
+    commands: dict[int, list[dict[str, Any]]] = field(default_factory=lambda: defaultdict(list))
+    states: dict[int, dict[int, tuple[np.ndarray, ...]]] = field(
+        default_factory=lambda: defaultdict(dict)
+    )
+    end_tick: int | None = None  # the tick at which a restore ended it
+
+
+@dataclass
+class Recording:
+    path: str
+    header: dict[str, Any]
+    segments: list[Segment]
+    names: list[str]
+    worlds: list[int]
+    rate: float
+    truncated: str | None = None
+
+
+@dataclass(frozen=True)
+class ReplayReport:
+    """What a replay did: ticks stepped, states and commands, wall time, the first divergence."""
+
+    path: str
+    nworld: int
+    ticks: int
+    states_compared: int
+    commands: int
+    restores: int
+    wall_s: float
+    divergence: Divergence | None
+    truncated: str | None
+    out: str | None
+    recorded_on: str = ""
+    replayed_on: str = ""
+
+    @property
+    def ticks_per_s(self) -> float:
+        return self.ticks / self.wall_s if self.wall_s > 0 else 0.0
+
+
+def read_recording(path: Path | str) -> Recording:
+    """Parse a recording in file order (the order things happened), checking CRCs."""
+    header: dict[str, Any] | None = None
+    attachments: dict[str, bytes] = {}
+    channels: dict[int, str] = {}
+    events: list[tuple[str, Any]] = []
+    truncated = None
+    with open(path, "rb") as f:
+        try:
+            for record in StreamReader(f, validate_crcs=True).records:
+                if isinstance(record, Metadata) and record.name == METADATA:
+                    header = parse_metadata(record.metadata)
+                elif isinstance(record, Attachment):
+                    attachments[record.name] = record.data
+                elif isinstance(record, Channel):
+                    channels[record.id] = record.topic
+                elif isinstance(record, Message):
+                    events.append((channels[record.channel_id], record))
+        except Exception as exc:  # a recording cut short (crash, kill): use what was read
+            truncated = f"{type(exc).__name__}: {exc}"
+    if header is None:
+        raise ReplayError(f"{path}: no '{METADATA}' metadata record; not an armfleet recording")
+    names = list(header["joint_names"])
+    hz = float(header["control_hz"])
+
+    def state(name: str) -> BatchState:
+        if name not in attachments:
+            raise ReplayError(f"{path}: attachment {name!r} missing (truncated recording?)")
+        return decode_state(attachments[name])
+
+    segments = [Segment(state(header["start_state"]))]
+    for topic, msg in events:
+        seg = segments[-1]
+        if topic == COMMANDS:
+            body = json.loads(msg.data)
+            if body["kind"] != "mode":
+                seg.commands[int(body["tick"])].append(body)
+        elif topic == RESTORES:
+            body = json.loads(msg.data)
+            seg.end_tick = int(body["tick_before"])
+            segments.append(Segment(state(body["attachment"])))
+        elif topic.endswith("/joint_states") and topic.startswith("/world_"):
+            world = int(topic[len("/world_") : -len("/joint_states")])
+            stamp, msg_names, pos, vel, eff = decode_joint_state(msg.data)
+            if msg_names != names:
+                raise ReplayError(f"{topic}: joint names {msg_names} differ from {names}")
+            seg.states[tick_of(stamp, hz)][world] = (pos, vel, eff)
+    worlds = [int(w) for w in header["worlds"]]
+    rate = float(header["rate"])
+    return Recording(str(path), header, segments, names, worlds, rate, truncated)
+
+
+def replay(
+    path: Path | str,
+    out: Path | str | None = None,
+    device: str | None = None,
+) -> ReplayReport:
+    """Replay `path` (see the module doc); `out` also writes the replayed run as a recording."""
+    return replay_recording(read_recording(path), out, device)
+
+
+def replay_recording(
+    rec: Recording, out: Path | str | None = None, device: str | None = None
+) -> ReplayReport:
+    """Replay a parsed recording (tests change one on purpose to see divergence named)."""
+    from service.engines.warp import WorldBatch
+
+    path = rec.path
+    h = rec.header
+    batch = WorldBatch(
+        int(h["nworld"]),
+        device=device or "cpu",
+        control_hz=float(h["control_hz"]),
+        physics_dt=float(h["physics_dt"]),
+    )
+    if why := mismatch(h, batch_header(batch)):
+        batch.close()
+        raise ReplayError(f"{path}: cannot replay here: {why}")
+    loop = SimLoop(batch, Mode.PAUSED)
+    control = Control(loop)
+    loop.start()
+    recorder = None
+    try:
+        t0 = time.perf_counter()
+        loop.restore(rec.segments[0].start, "start").result()
+        if out is not None:  # the replayed run, recorded like the live one (from the same state)
+            recorder = Recorder(out, rec.worlds, rec.rate, block=True)
+            recorder.start(_Runtime(loop, control))
+        counts = {"ticks": 0, "states": 0, "commands": 0}
+        divergence = None
+        for i, seg in enumerate(rec.segments):
+            if i:
+                loop.restore(seg.start, "restore").result()
+            divergence = _replay_segment(loop, control, seg, rec, counts)
+            if divergence is not None:
+                break
+        wall = time.perf_counter() - t0
+    finally:
+        if recorder is not None:
+            recorder.stop()
+        loop.stop()
+        batch.close()
+    return ReplayReport(
+        path=str(path),
+        nworld=batch.nworld,
+        ticks=counts["ticks"],
+        states_compared=counts["states"],
+        commands=counts["commands"],
+        restores=len(rec.segments) - 1,
+        wall_s=wall,
+        divergence=divergence,
+        truncated=rec.truncated,
+        out=None if out is None else str(out),
+        recorded_on=str(h.get("device", "")),
+        replayed_on=batch.device_name,
+    )
+
+
+class _Runtime:
+    """What a surface needs of a Runtime, for the recorder that writes the replayed run."""
+
+    def __init__(self, loop: SimLoop, control: Control):
+        self.loop, self.control = loop, control
+
+
+def _replay_segment(
+    loop: SimLoop, control: Control, seg: Segment, rec: Recording, counts: dict[str, int]
+) -> Divergence | None:
+    tick = seg.start.tick
+    last = seg.end_tick if seg.end_tick is not None else max([tick, *seg.states, *seg.commands])
+    while tick < last:
+        for cmd in seg.commands.get(tick + 1, ()):
+            _apply(control, cmd)
+            counts["commands"] += 1
+        tick = loop.step(1).result()
+        counts["ticks"] += 1
+        recorded = seg.states.get(tick)
+        if recorded:
+            snap = loop.latest
+            assert snap.tick == tick
+            for world, values in sorted(recorded.items()):
+                counts["states"] += 1
+                for quantity, want in zip(_QUANTITIES, values, strict=True):
+                    got = np.asarray(getattr(snap, quantity)[world], dtype=np.float64)
+                    bad = np.flatnonzero(got != want)
+                    if bad.size:
+                        j = int(bad[0])
+                        return Divergence(
+                            tick, world, rec.names[j], quantity, float(want[j]), float(got[j])
+                        )
+    return None
+
+
+def _apply(control: Control, cmd: dict[str, Any]) -> None:
+    worlds = [int(w) for w in cmd["worlds"]]
+    if cmd["kind"] == "reset":
+        control.reset(worlds, Source.REPLAY)
+    elif cmd["kind"] == "trajectory":  # re-run from the same tick: sampled exactly as it was
+        spec = parse_trajectory(control.spec, cmd["trajectory"])
+        control.start_trajectory(worlds, spec, Source.REPLAY)
+    elif cmd["kind"] == "trajectory_cancel":
+        control.cancel_trajectory(worlds, Source.REPLAY)
+    else:  # increment or set_targets: the recorded rows are the targets after the command
+        control.set_many(worlds, np.asarray(cmd["targets"], dtype=np.float64), Source.REPLAY)

@@ -1,0 +1,281 @@
+"""The UR driver's action goals, shared by DDS and rosbridge: accept, run, feed back, finish.
+
+Both surfaces hand a goal over as the ROS message in JSON shape (what rosbridge carries; DDS
+samples are converted) and get feedback and the result back in the same shape, so the rules
+live once, here:
+
+- `FollowJointTrajectory` (on `scaled_joint_trajectory_controller` and
+  `joint_trajectory_controller`): the goal becomes a `JointTrajectorySpec` (validated before
+  anything moves; a bad goal is rejected with the validator's message) and runs on the
+  trajectory manager; feedback is its desired / actual / error; the outcome maps to
+  control_msgs' error codes (path / goal tolerance) and to SUCCEEDED, CANCELED or ABORTED.
+  The controllers drive the six arm joints, as the UR driver's do.
+- `GripperCommand` (on `robotiq_gripper_controller`): a finger_joint target, watched as
+  ros2_controllers' GripperActionController does (with `allow_stalling`, as the Robotiq driver
+  configures it): reached within `GOAL_TOLERANCE`, or stalled when the finger stops short of
+  the goal for `STALL_TIMEOUT_S` of simulated time, which is what closing on the cube gives.
+  `max_effort` is validated but not applied (the finger servo's force limit is the model's).
+
+One thread of its own feeds back at `FEEDBACK_HZ` and watches grippers; it sleeps while no
+goal is active. Trajectory outcomes arrive from the manager's listener on any thread and are
+queued to that thread, so no lock of ours is ever held while the manager holds its own.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from service.core.control import Source
+from service.core.trajectory import AbortReason, TrajectoryStatus
+from service.surfaces.ros import topics
+from service.surfaces.ros.goal_msgs import (
+    FEEDBACK_HZ,
+    FJT_TYPE,
+    GOAL_TOLERANCE,
+    GOAL_TOLERANCE_VIOLATED,
+    GRIPPER_TYPE,
+    INVALID_GOAL,
+    PATH_TOLERANCE_VIOLATED,
+    STALL_TIMEOUT_S,
+    STALL_VELOCITY,
+    SUCCESSFUL,
+    GoalRejected,
+    Status,
+    gripper_position,
+    trajectory_feedback,
+    trajectory_spec,
+)
+
+log = logging.getLogger("armfleet.ros")
+
+
+@dataclass
+class Goal:
+    """One accepted goal as its surface sees it; `result` is set when `status` is terminal."""
+
+    action: str
+    kind: str
+    world: int
+    accepted_at: float  # simulated seconds
+    on_feedback: Callable[[Goal, dict[str, Any]], None]
+    on_done: Callable[[Goal], None]
+    status: Status = Status.EXECUTING
+    key: Any = None  # the surface's id of the goal (DDS: the goal's UUID bytes)
+    result: dict[str, Any] = field(default_factory=dict)
+    traj_id: int | None = None
+    finger_target: float = 0.0
+    effective_tick: int = 0  # the gripper target is in effect from this tick
+    moved_at: float = 0.0  # simulated time the finger last moved
+    cancel_requested: bool = False
+
+
+class GoalRunner:
+    """Runs the action goals of one service; both surfaces submit to the same runner."""
+
+    def __init__(self, runtime: Any) -> None:
+        self.loop = runtime.loop
+        self.control = runtime.control
+        self.spec = self.loop.spec
+        self.arm = list(self.spec.names)[:6]
+        self.finger = self.spec.index("finger_joint")
+        self.tick_dt = self.loop.batch.tick_dt
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._active: list[Goal] = []
+        self._by_traj: dict[int, Goal] = {}
+        self._outcomes: queue.SimpleQueue[TrajectoryStatus] = queue.SimpleQueue()
+        self._early: dict[int, TrajectoryStatus] = {}
+        self.control.trajectories.add_listener(self._outcome)
+        self._running = True
+        self._thread = threading.Thread(target=self._run, name="armfleet-ros-goals", daemon=True)
+        self._thread.start()
+
+    def now(self) -> float:
+        return topics.sim_seconds(self.loop.latest, self.tick_dt)
+
+    # -- submit and cancel (any thread) -----------------------------------------------------
+
+    def submit(
+        self,
+        action: str,
+        kind: str,
+        world: int,
+        goal: dict[str, Any],
+        source: Source,
+        on_feedback: Callable[[Goal, dict[str, Any]], None],
+        on_done: Callable[[Goal], None],
+    ) -> Goal:
+        """Validate and start a goal; GoalRejected (nothing moved) if it is invalid."""
+        if not isinstance(goal, dict):
+            raise GoalRejected(f"the goal must be a {kind} goal object")
+        g = Goal(action, kind, world, self.now(), on_feedback, on_done)
+        if kind == FJT_TYPE:
+            spec = trajectory_spec(self.spec, self.arm, goal)
+            with self._lock:
+                (started,) = self.control.start_trajectory([world], spec, source)
+                g.traj_id = started.id
+                self._by_traj[started.id] = g
+                early = self._early.pop(started.id, None)
+                if early is not None:
+                    self._outcomes.put(early)
+        else:
+            position = gripper_position(goal)
+            done = self.control.set_targets(world, ["finger_joint"], [position], source)
+            g.finger_target = float(done.target[self.finger])
+            g.effective_tick = done.tick
+            g.moved_at = math.inf  # counted from the first tick with the new target
+        with self._lock:
+            replaced = [
+                old
+                for old in self._active
+                if old.kind == GRIPPER_TYPE == kind and old.world == world
+            ]
+            self._active.append(g)
+            self._wake.notify()
+        for old in replaced:  # a newer gripper goal replaces the running one
+            self._finish(old, Status.ABORTED, self._gripper_state(old, stalled=False))
+        return g
+
+    def cancel(self, g: Goal, source: Source) -> bool:
+        """Ask a goal to stop (it holds); False if it already finished."""
+        with self._lock:
+            if g.status.terminal or g.cancel_requested:
+                return not g.status.terminal
+            g.cancel_requested = True
+            g.status = Status.CANCELING
+        if g.kind == FJT_TYPE:
+            self.control.cancel_trajectory([g.world], source)  # the outcome comes as CANCELLED
+        else:
+            state = self.loop.latest
+            hold = float(state.position[g.world, self.finger])
+            self.control.set_targets(g.world, ["finger_joint"], [hold], source)
+            self._finish(g, Status.CANCELED, self._gripper_state(g, stalled=False))
+        return True
+
+    # -- outcomes ----------------------------------------------------------------------------
+
+    def cancel_all(self, action: str, source: Source) -> list[Goal]:
+        """Cancel every running goal of `action` (a CancelGoal with an empty goal_info)."""
+        with self._lock:
+            running = [g for g in self._active if g.action == action]
+        return [g for g in running if self.cancel(g, source)]
+
+    def _outcome(self, status: TrajectoryStatus) -> None:
+        """The manager's listener (any thread, its locks held): queue and wake the thread."""
+        self._outcomes.put(status)
+        with self._lock:
+            self._wake.notify()
+
+    def _trajectory_done(self, status: TrajectoryStatus) -> None:
+        with self._lock:
+            g = self._by_traj.pop(status.id, None)
+            if g is None:
+                self._early[status.id] = status  # finished before submit stored its id
+                return
+        if status.reason is None:
+            self._finish(g, Status.SUCCEEDED, {"error_code": SUCCESSFUL, "error_string": ""})
+            return
+        code = {
+            AbortReason.PATH_TOLERANCE: PATH_TOLERANCE_VIOLATED,
+            AbortReason.GOAL_TOLERANCE: GOAL_TOLERANCE_VIOLATED,
+        }.get(status.reason, INVALID_GOAL if status.reason is not AbortReason.CANCELLED else 0)
+        end = Status.CANCELED if status.reason is AbortReason.CANCELLED else Status.ABORTED
+        text = f"{status.reason.value}: {status.detail}" if status.detail else status.reason.value
+        self._finish(g, end, {"error_code": code, "error_string": text})
+
+    def _finish(self, g: Goal, status: Status, result: dict[str, Any]) -> None:
+        with self._lock:
+            if g not in self._active:
+                return
+            self._active.remove(g)
+            g.status, g.result = status, result
+        try:
+            g.on_done(g)
+        except Exception:
+            log.exception("action result of %s could not be delivered", g.action)
+
+    # -- the thread ---------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        period = 1.0 / FEEDBACK_HZ
+        while self._running:
+            with self._lock:
+                while self._running and not self._active and self._outcomes.empty():
+                    self._wake.wait()
+            started = time.monotonic()
+            while not self._outcomes.empty():
+                self._trajectory_done(self._outcomes.get())
+            with self._lock:
+                active = list(self._active)
+            for g in active:
+                try:
+                    self._tend(g)
+                except Exception:
+                    log.exception("action goal on %s failed", g.action)
+            with self._lock:
+                self._wake.wait(max(0.0, started + period - time.monotonic()))
+
+    def _tend(self, g: Goal) -> None:
+        if g.kind == FJT_TYPE:
+            status = self.control.trajectories.get(g.traj_id) if g.traj_id else None
+            if status is not None and status.feedback_tick is not None:
+                g.on_feedback(g, trajectory_feedback(status, self.tick_dt))
+        else:
+            self._tend_gripper(g)
+
+    def _gripper_state(self, g: Goal, stalled: bool) -> dict[str, Any]:
+        snap = self.loop.latest
+        position = float(snap.position[g.world, self.finger])
+        return {
+            "position": position,
+            "effort": float(snap.effort[g.world, self.finger]),
+            "stalled": stalled,
+            "reached_goal": abs(position - g.finger_target) < GOAL_TOLERANCE,
+        }
+
+    def _tend_gripper(self, g: Goal) -> None:
+        snap = self.loop.latest
+        if snap.tick < g.effective_tick:
+            return  # the new target is not stepped yet
+        now = topics.sim_seconds(snap, self.tick_dt)
+        g.moved_at = min(g.moved_at, now)
+        if abs(float(snap.target[g.world, self.finger]) - g.finger_target) > 1e-9:
+            result = self._gripper_state(g, stalled=False)
+            self._finish(g, Status.ABORTED, result)  # another command took the finger over
+            return
+        state = self._gripper_state(g, stalled=False)
+        if state["reached_goal"]:
+            self._finish(g, Status.SUCCEEDED, state)
+            return
+        if abs(float(snap.velocity[g.world, self.finger])) > STALL_VELOCITY:
+            g.moved_at = now
+        elif now - g.moved_at >= STALL_TIMEOUT_S:
+            self._finish(g, Status.SUCCEEDED, {**state, "stalled": True})
+            return
+        g.on_feedback(g, state)
+
+    def stop(self) -> None:
+        self.control.trajectories.remove_listener(self._outcome)
+        with self._lock:
+            self._running = False
+            self._wake.notify()
+        self._thread.join(timeout=5)
+
+
+def runner_of(runtime: Any) -> GoalRunner:
+    """The runtime's one GoalRunner (made on first use; DDS and rosbridge share it)."""
+    with _RUNNERS_LOCK:
+        runner = getattr(runtime, "goal_runner", None)
+        if runner is None:
+            runner = runtime.goal_runner = GoalRunner(runtime)
+        return runner
+
+
+_RUNNERS_LOCK = threading.Lock()

@@ -1,0 +1,89 @@
+"""The robot's frames as tf2 sees them: fixed transforms for `/tf_static`, moving ones for `/tf`.
+
+The frame tree is the URDF's (urdf.py): one frame per link, named like it. Fixed
+joints (bodies without joints, sites) never change and go to `/tf_static` once; a joint's
+transform is read from the snapshot's body poses (MuJoCo's own forward kinematics, mimic joints
+included), parent frame to child frame, for every world with one vectorised step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from service.surfaces.ros.urdf import ROOT_LINK, robot_links
+
+
+@dataclass(frozen=True)
+class Transform:
+    """child's pose in parent's frame; quat is w x y z."""
+
+    parent: str
+    child: str
+    pos: tuple[float, float, float]
+    quat: tuple[float, float, float, float]
+
+
+def _quat_conj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
+
+
+def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v by unit quaternions q (broadcast over leading axes)."""
+    u, w = q[..., 1:], q[..., :1]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+class FrameTree:
+    """Which frames move and how to read them from body poses."""
+
+    def __init__(self, mjm: mujoco.MjModel) -> None:
+        links = robot_links(mjm)
+        body_of = {ROOT_LINK: 0} | {link.name: link.body for link in links if link.site < 0}
+        self.static = [
+            Transform(link.parent, link.name, link.pos, link.quat)
+            for link in links
+            if link.joint < 0
+        ]
+        moving = [link for link in links if link.joint >= 0]
+        self.moving_parents = [link.parent for link in moving]
+        self.moving_children = [link.name for link in moving]
+        self._parent_body = np.array([body_of[link.parent] for link in moving], dtype=np.int64)
+        self._child_body = np.array([link.body for link in moving], dtype=np.int64)
+
+    @property
+    def frames(self) -> list[str]:
+        """Every frame of the tree, root first."""
+        return [ROOT_LINK] + [t.child for t in self.static] + self.moving_children
+
+    def moving(self, body_pos: np.ndarray, body_quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Moving frames in their parents' frames from world-frame body poses.
+
+        body_pos (..., nbody, 3), body_quat (..., nbody, 4 as w x y z) → pos (..., k, 3),
+        quat (..., k, 4 as w x y z), in the order of `moving_children`.
+        """
+        pos = np.asarray(body_pos, dtype=np.float64)
+        quat = np.asarray(body_quat, dtype=np.float64)
+        pp, pq = pos[..., self._parent_body, :], quat[..., self._parent_body, :]
+        cp, cq = pos[..., self._child_body, :], quat[..., self._child_body, :]
+        inv = _quat_conj(pq)
+        rel_q = _quat_mul(inv, cq)
+        rel_q /= np.linalg.norm(rel_q, axis=-1, keepdims=True)  # float32 poses: renormalise
+        return _rotate(inv, cp - pp), rel_q

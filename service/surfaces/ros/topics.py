@@ -1,0 +1,257 @@
+"""What DDS and rosbridge share: topic names ↔ worlds, JointState ↔ commands, bad-message counts.
+
+Both bridges speak the same ROS graph: `/joint_commands` and `/joint_states` are world 0 (the
+seed's topics), `/world_N/joint_commands` and `/world_N/joint_states` are world N for the worlds
+the user exposes, and `/clock` is the simulated time. A JointState command is checked here before
+it reaches the control layer so that a bad one is counted under a stable kind (the control layer
+validates again and stays the authority).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from service.core import wire
+from service.core.errors import ArmfleetError
+from service.core.types import Snapshot
+
+log = logging.getLogger("armfleet.ros")
+
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
+CLOCK_TOPIC = "/clock"
+
+
+class BadMessage(ValueError):
+    """A message that changes nothing; `kind` is the counter it goes to, the text says why."""
+
+    def __init__(self, kind: str, detail: str) -> None:
+        super().__init__(f"{kind}: {detail}")
+        self.kind = kind
+        self.detail = detail
+
+
+@dataclass(frozen=True)
+class TopicMap:
+    """Which worlds are on the ROS graph and under which names.
+
+    worlds: the worlds with `/world_N/...` topics (world 0 also has the seed's plain names)
+    """
+
+    worlds: tuple[int, ...]
+
+    def command_topics(self) -> dict[str, int]:
+        """Topic name → world, for every topic a command may arrive on."""
+        out = {"/joint_commands": 0}
+        out.update({f"/world_{w}/joint_commands": w for w in self.worlds})
+        return out
+
+    def state_topics(self) -> dict[str, int]:
+        """Topic name → world, for every JointState topic armfleet publishes."""
+        out = {"/joint_states": 0}
+        out.update({f"/world_{w}/joint_states": w for w in self.worlds})
+        return out
+
+    def namespaces(self) -> dict[str, int]:
+        """Namespace → world: the root is world 0 (the seed's), `/world_N` each exposed world."""
+        return {"": 0} | {f"/world_{w}": w for w in self.worlds}
+
+    def all_topics(self) -> dict[str, str]:
+        """Topic name → ROS 2 type, everything armfleet has on the graph."""
+        out = dict.fromkeys([*self.command_topics(), *self.state_topics()], JOINT_STATE_TYPE)
+        out[CLOCK_TOPIC] = CLOCK_TYPE
+        return dict(sorted(out.items()))
+
+
+def dds_name(topic: str) -> str:
+    """ROS 2 topic name → DDS topic name (the rmw convention: `rt` prefix)."""
+    return "rt" + topic
+
+
+def sim_seconds(snap: Snapshot, tick_dt: float) -> float:
+    """The service's simulated time: control ticks since start × tick length [s].
+
+    One clock for `/clock` and every header stamp (per-world `sim_time` restarts at a world's
+    reset, which would make ROS time jump backwards).
+    """
+    return snap.tick * tick_dt
+
+
+def stamp(seconds: float) -> tuple[int, int]:
+    """Seconds → (sec, nanosec), rounded to the nanosecond, never negative."""
+    ns = max(0, round(seconds * 1e9))
+    return ns // 1_000_000_000, ns % 1_000_000_000
+
+
+def command_from_joint_state(
+    joints: Sequence[str], name: Sequence[Any], position: Sequence[Any]
+) -> tuple[list[str], list[float]]:
+    """A JointState command → (joint names, positions) for `control.set_targets`.
+
+    With names, positions pair up with them (a subset moves only those joints). With no names,
+    seven positions in joint order are accepted, as the seed's Isaac subscriber read them.
+    Velocity and effort are ignored. Raises BadMessage before anything changes.
+    """
+    if len(position) == 0:
+        raise BadMessage("empty", "position is empty; nothing to command")
+    if len(name) == 0:
+        if len(position) != len(joints):
+            raise BadMessage(
+                "length_mismatch",
+                f"without names, position needs all {len(joints)} joints (got {len(position)})",
+            )
+        name = joints
+    elif len(name) != len(position):
+        raise BadMessage(
+            "length_mismatch",
+            f"name has {len(name)} entries but position has {len(position)}",
+        )
+    names: list[str] = []
+    for n in name:
+        if not isinstance(n, str) or n not in joints:
+            raise BadMessage("unknown_joint", f"unknown joint {n!r}; joints are {list(joints)}")
+        if n in names:
+            raise BadMessage("duplicate_joint", f"joint {n!r} named twice")
+        names.append(n)
+    values: list[float] = []
+    for n, p in zip(names, position, strict=True):
+        if isinstance(p, bool) or not isinstance(p, int | float):
+            raise BadMessage("bad_type", f"position of {n} must be a number, got {p!r}")
+        if not math.isfinite(p):
+            raise BadMessage("not_finite", f"position of {n} is {p} (must be finite)")
+        values.append(float(p))
+    return names, values
+
+
+def _floats(row: np.ndarray) -> list[float | None]:
+    """JSON-safe floats: NaN/Inf become null, as rosbridge sends them."""
+    return [v if math.isfinite(v) else None for v in row.tolist()]
+
+
+def joint_state_dict(
+    snap: Snapshot, world: int, joints: Sequence[str], seconds: float
+) -> dict[str, Any]:
+    """One world's JointState as rosbridge JSON (keys in field order, time as sec/nanosec)."""
+    sec, nanosec = stamp(seconds)
+    return {
+        "header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": ""},
+        "name": list(joints),
+        "position": _floats(snap.position[world]),
+        "velocity": _floats(snap.velocity[world]),
+        "effort": _floats(snap.effort[world]),
+    }
+
+
+def clock_dict(seconds: float) -> dict[str, Any]:
+    """rosgraph_msgs/Clock as rosbridge JSON."""
+    sec, nanosec = stamp(seconds)
+    return {"clock": {"sec": sec, "nanosec": nanosec}}
+
+
+class BadMessageCounter:
+    """Counts rejected messages per kind; logs each kind at most once per second (thread-safe).
+
+    A flood of bad messages (a misconfigured node at 1 kHz) would otherwise fill the log; the
+    counts stay exact and are shown by `GET /v1/ros`.
+    """
+
+    def __init__(self, source: str, interval: float = 1.0) -> None:
+        self._source = source
+        self._interval = interval
+        self._lock = threading.Lock()
+        self._counts: dict[str, int] = {}
+        self._last_log: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+
+    def report(self, kind: str, topic: str, detail: str) -> None:
+        now = time.monotonic()
+        with self._lock:
+            self._counts[kind] = self._counts.get(kind, 0) + 1
+            if now - self._last_log.get(kind, -math.inf) < self._interval:
+                self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
+                return
+            self._last_log[kind] = now
+            hidden = self._suppressed.pop(kind, 0)
+        more = f" ({hidden} more of this kind since the last log line)" if hidden else ""
+        log.warning("%s: rejected message on %s: %s: %s%s", self._source, topic, kind, detail, more)
+
+    def counts(self) -> dict[str, int]:
+        with self._lock:
+            return dict(self._counts)
+
+    @property
+    def total(self) -> int:
+        with self._lock:
+            return sum(self._counts.values())
+
+
+class ListenedWriters:
+    """The DDS writers somebody subscribes to, refreshed every `interval` seconds: a message
+    nobody reads is not even built (many `--ros2-worlds` cost nothing until someone listens)."""
+
+    def __init__(self, writers: list[tuple[Any, int]], interval: float = 0.5) -> None:
+        self.writers = writers  # (writer, world)
+        self._interval = interval
+        self._checked = -math.inf
+        self._listened: list[tuple[Any, int]] = []
+
+    def current(self) -> list[tuple[Any, int]]:
+        now = time.monotonic()
+        if now - self._checked >= self._interval:
+            self._checked = now
+            self._listened = [
+                (w, world)
+                for w, world in self.writers
+                if w.get_publication_matched_status().current_count
+            ]
+        return self._listened
+
+
+def take_commands(
+    reader: Any, kind: type, topic: str, bad: BadMessageCounter, apply: Callable[[Any], None]
+) -> tuple[bool, int]:
+    """Take up to a batch of samples from a DDS reader and `apply` each message in order.
+
+    Returns (whether anything was taken, how many were accepted). A BadMessage or a refusal of
+    the control layer is counted under its kind, never raised: one bad message must not end
+    the reader thread. Cyclone checks every sample's CDR against the type before handing it
+    over, so a take that fails to decode should not happen; if it does, it counts as malformed.
+    """
+    try:
+        samples = reader.take(N=64)
+    except Exception as exc:
+        bad.report("malformed", topic, f"undecodable CDR ({type(exc).__name__}: {exc})")
+        return True, 0
+    accepted = 0
+    for msg in samples:
+        if not isinstance(msg, kind):
+            continue  # a dispose/unregister notice, not a message
+        try:
+            apply(msg)
+        except BadMessage as exc:
+            bad.report(exc.kind, topic, exc.detail)
+        except ArmfleetError as exc:
+            bad.report("rejected", topic, str(exc))
+        except Exception:
+            log.exception("ROS 2 command on %s failed", topic)
+        else:
+            accepted += 1
+    return bool(samples), accepted
+
+
+def parse_world_list(spec: str | None, nworld: int) -> tuple[int, ...]:
+    """'0-7,9' → (0, ..., 7, 9); empty or None → no per-world topics. ValueError if invalid."""
+    if not spec or not spec.strip():
+        return ()
+    try:
+        return tuple(int(w) for w in wire.parse_worlds(spec, nworld))
+    except ArmfleetError as exc:
+        raise ValueError(f"ros2_worlds {spec!r}: {exc.detail}") from None
