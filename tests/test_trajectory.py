@@ -211,7 +211,7 @@ def test_the_table_passes_through_every_point_with_its_velocity(kind):
     ]
     spec = JointTrajectorySpec.build(SPEC, ["elbow_joint"], points)
     start = SPEC.home.copy()
-    end = table.add(1, 0, spec, 1, start, np.zeros(7))
+    end = table.add(np.array([1]), np.array([0]), spec, 1, start[None], np.zeros((1, 7)))
     assert end == 100  # sampled at the end of each tick: tick 100 ends at t = 1.0 s
     samples = {k: table.sample(k) for k in range(1, 101)}
     e = SPEC.index("elbow_joint")

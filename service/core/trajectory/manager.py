@@ -94,9 +94,9 @@ class TrajectoryManager:
         out: list[Started] = []
         with self.loop.staging(ids) as st:
             self._abort(st, ids, AbortReason.PREEMPTED, "a newer trajectory replaced it")
-            for w in ids.tolist():
-                traj_id = next(self._ids)
-                end = self.table.add(traj_id, w, spec, st.tick, st.pending[w], st.velocity[w])
+            traj_ids = np.array([next(self._ids) for _ in range(len(ids))], dtype=np.int64)
+            end = self.table.add(traj_ids, ids, spec, st.tick, st.pending[ids], st.velocity[ids])
+            for traj_id, w in zip(traj_ids.tolist(), ids.tolist(), strict=True):
                 status = self._initial_status(traj_id, w, spec, source, st.tick, end)
                 self._runs[traj_id] = _Run(traj_id, w, spec, source, st.tick, end, status)
                 self._by_world[w] = traj_id
@@ -132,9 +132,29 @@ class TrajectoryManager:
         return None if status is None else status.brief()
 
     def briefs(self, worlds: np.ndarray) -> dict[str, dict[str, Any]]:
-        """`brief` of those of `worlds` that have run a trajectory, keyed by world id (str)."""
-        known = np.intersect1d(np.fromiter(self._by_world, dtype=np.int64), worlds)
-        return {str(w): b for w in known.tolist() if (b := self.brief(w)) is not None}
+        """`brief` of those of `worlds` that have run a trajectory, keyed by world id (str).
+
+        For state frames of many worlds: running ones come from the table in one pass."""
+        out: dict[str, dict[str, Any]] = {}
+        with self.loop.staging() as _:
+            t = self.table
+            elapsed = (max(self._last_tick, 0) - t.start_tick + 1) * t.tick_dt
+            progress = np.clip(elapsed / np.maximum(t.duration, 1e-9), 0.0, 1.0)
+            running = dict(
+                zip(
+                    t.worlds.tolist(),
+                    zip(t.ids.tolist(), progress.tolist(), strict=True),
+                    strict=True,
+                )
+            )
+            known = np.intersect1d(np.fromiter(self._by_world, dtype=np.int64), worlds)
+            for w in known.tolist():
+                if w in running:
+                    traj_id, p = running[w]
+                    out[str(w)] = {"id": traj_id, "state": "running", "reason": None, "progress": p}
+                elif (run := self._finished.get(self._by_world[w])) is not None:
+                    out[str(w)] = run.status.brief()
+        return out
 
     def running_worlds(self) -> np.ndarray:
         return self.table.worlds.copy()
@@ -265,17 +285,26 @@ class TrajectoryManager:
             finished_tick=None,
         )
 
-    def _live(self, run: _Run) -> TrajectoryStatus:
-        """A running trajectory's status with progress and feedback as of the last tick."""
-        tick = max(self._last_tick, run.start_tick - 1)
-        elapsed = (tick - run.start_tick + 1) * self.table.tick_dt
-        d = run.spec.duration
-        progress = min(1.0, max(0.0, elapsed / d)) if d > 0 else float(elapsed > 0)
+    def _progress(self, start_tick: int, duration: float) -> tuple[int, float]:
+        """(last tick sampled, elapsed / duration in 0..1) of a run that started then."""
+        tick = max(self._last_tick, start_tick - 1)
+        elapsed = (tick - start_tick + 1) * self.table.tick_dt
+        if duration > 0:
+            return tick, min(1.0, max(0.0, elapsed / duration))
+        return tick, float(elapsed > 0)
+
+    def _live(self, run: _Run, row: int | None = -1) -> TrajectoryStatus:
+        """A running trajectory's status with progress and feedback as of the last tick.
+
+        row: its row in the last feedback (None: none; -1: look it up)."""
+        tick, progress = self._progress(run.start_tick, run.spec.duration)
         status = replace(run.status, tick=tick, progress=progress)
         fb_tick, ids, desired, actual = self._feedback
-        rows = np.flatnonzero(ids == run.id)
-        if rows.size:
-            i, j = int(rows[0]), run.spec.joints
+        if row == -1:
+            rows = np.flatnonzero(ids == run.id)
+            row = int(rows[0]) if rows.size else None
+        if row is not None:
+            i, j = row, run.spec.joints
             status = replace(
                 status,
                 feedback_tick=fb_tick,
@@ -316,11 +345,11 @@ class TrajectoryManager:
     ) -> list[_Run]:
         done = []
         at = self.loop.tick if tick is None else tick
+        rows = {traj_id: i for i, traj_id in enumerate(self._feedback[1].tolist())}
         for traj_id in self.table.ids[slots].tolist():
             run = self._runs[traj_id]
-            run.status = replace(
-                self._live(run), state=state, reason=reason, detail=detail, finished_tick=at
-            )
+            live = self._live(run, rows.get(traj_id))
+            run.status = replace(live, state=state, reason=reason, detail=detail, finished_tick=at)
             del self._runs[traj_id]
             self._finished[traj_id] = run
             done.append(run)

@@ -38,6 +38,7 @@ _PUBLIC_PER_SLOT = (
     "has_path",
     "has_goal",
     "goal_deadline",
+    "duration",
 )
 
 
@@ -75,6 +76,11 @@ class TrajectoryTable:
         self._first = np.zeros(0, dtype=np.int64)  # row of the slot's first point
         self._npts = np.zeros(0, dtype=np.int64)
         self._seg = np.zeros(0, dtype=np.int64)  # current segment: 0 = start → point 0
+        # The current segment's polynomial per slot, refitted only when the segment changes.
+        self._coef = np.zeros((0, 6, NJOINT))
+        self._ta = np.zeros(0)  # the segment's start [s after the trajectory's start]
+        self._len = np.zeros(0)  # its length [s]
+        self._coef_seg = np.zeros(0, dtype=np.int64)  # segment the coefficients are for
         # Tolerances per slot and joint (+inf: not checked), and the last tick the goal may be
         # met by (end tick + goal_time_tolerance).
         self.path_tol = np.zeros((0, 2, NJOINT))  # position, velocity
@@ -82,6 +88,7 @@ class TrajectoryTable:
         self.has_path = np.zeros(0, dtype=bool)
         self.has_goal = np.zeros(0, dtype=bool)
         self.goal_deadline = np.zeros(0, dtype=np.int64)
+        self.duration = np.zeros(0)  # time_from_start of the last point [s]
         # Flat point rows of every slot: time [s], and position/velocity/acceleration (7 wide).
         self._t = np.zeros(0)
         self._pva = np.zeros((0, 3, NJOINT))
@@ -91,52 +98,64 @@ class TrajectoryTable:
 
     def add(
         self,
-        traj_id: int,
-        world: int,
+        traj_ids: np.ndarray,
+        worlds: np.ndarray,
         spec: JointTrajectorySpec,
         start_tick: int,
         start_pos: np.ndarray,
         start_vel: np.ndarray,
     ) -> int:
-        """Add a slot; `start_pos`/`start_vel` (7,) are the world's target and feed-forward now.
+        """Add one slot per world, all following `spec` from `start_tick`; returns the end tick.
 
-        Returns the trajectory's end tick. The caller removes any slot of the same world first.
+        traj_ids, worlds: (k,); start_pos, start_vel: (k, 7), each world's target and velocity
+        feed-forward now. One concatenation per table array whatever k is. The caller removes
+        any slot of the same worlds first.
         """
-        j = spec.joints
-        rows = np.zeros((len(spec.times), 3, NJOINT))
-        rows[:, 0, :] = start_pos  # joints outside the trajectory hold their target
-        rows[:, 0, j] = spec.positions
+        k, n, j = len(worlds), len(spec.times), spec.joints
+        mask = np.zeros((k, NJOINT), dtype=bool)
+        mask[:, j] = True
+        rows = np.zeros((k, n, 3, NJOINT))
+        rows[:, :, 0, :] = start_pos[:, None, :]  # joints outside the trajectory hold
+        rows[:, :, 0, j] = spec.positions
         if spec.velocities is not None:
-            rows[:, 1, j] = spec.velocities
+            rows[:, :, 1, j] = spec.velocities
         if spec.accelerations is not None:
-            rows[:, 2, j] = spec.accelerations
-        start = np.zeros((1, 3, NJOINT))
-        start[0, 0] = start_pos
-        mask = np.zeros((1, NJOINT), dtype=bool)
-        mask[0, j] = True
-        start[0, 1] = np.where(mask[0], start_vel, 0.0)
+            rows[:, :, 2, j] = spec.accelerations
+        start = np.zeros((k, 3, NJOINT))
+        start[:, 0] = start_pos
+        start[:, 1] = np.where(mask, start_vel, 0.0)
         end = end_tick(start_tick, spec.duration, self.tick_dt)
         tol = np.full((2, 2, NJOINT), np.inf)
         tol[0, 0, j], tol[0, 1, j] = spec.path_position, spec.path_velocity
         tol[1, 0, j], tol[1, 1, j] = spec.goal_position, spec.goal_velocity
-        self.path_tol = np.concatenate([self.path_tol, tol[:1]])
-        self.goal_tol = np.concatenate([self.goal_tol, tol[1:]])
-        self.has_path = np.append(self.has_path, spec.has_path_tolerance)
-        self.has_goal = np.append(self.has_goal, spec.has_goal_tolerance)
         grace = math.ceil(spec.goal_time_tolerance / self.tick_dt - _EPS)
-        self.goal_deadline = np.append(self.goal_deadline, end + grace)
-        self._first = np.append(self._first, self._t.size)
-        self._t = np.append(self._t, spec.times)
-        self._pva = np.concatenate([self._pva, rows])
-        self.ids = np.append(self.ids, traj_id)
-        self.worlds = np.append(self.worlds, world)
-        self.start_tick = np.append(self.start_tick, start_tick)
-        self.end_tick = np.append(self.end_tick, end)
-        self._order = np.append(self._order, spec.order)
-        self._mask = np.concatenate([self._mask, mask])
-        self._start = np.concatenate([self._start, start])
-        self._npts = np.append(self._npts, len(spec.times))
-        self._seg = np.append(self._seg, 0)
+        each = np.ones(k, dtype=np.int64)
+        self._first = np.concatenate([self._first, self._t.size + n * np.arange(k)])
+        self._t = np.concatenate([self._t, np.tile(spec.times, k)])
+        self._pva = np.concatenate([self._pva, rows.reshape(k * n, 3, NJOINT)])
+        grow = {
+            "path_tol": np.repeat(tol[None, 0], k, axis=0),
+            "goal_tol": np.repeat(tol[None, 1], k, axis=0),
+            "has_path": np.full(k, spec.has_path_tolerance),
+            "has_goal": np.full(k, spec.has_goal_tolerance),
+            "goal_deadline": (end + grace) * each,
+            "duration": np.full(k, spec.duration),
+            "ids": np.asarray(traj_ids, dtype=np.int64),
+            "worlds": np.asarray(worlds, dtype=np.int64),
+            "start_tick": start_tick * each,
+            "end_tick": end * each,
+            "_order": spec.order * each,
+            "_mask": mask,
+            "_start": start,
+            "_npts": n * each,
+            "_seg": 0 * each,
+            "_coef": np.zeros((k, 6, NJOINT)),
+            "_ta": np.zeros(k),
+            "_len": np.zeros(k),
+            "_coef_seg": -each,
+        }
+        for name, new in grow.items():
+            setattr(self, name, np.concatenate([getattr(self, name), new]))
         return end
 
     def remove(self, slots: np.ndarray) -> None:
@@ -154,7 +173,7 @@ class TrajectoryTable:
         self._npts = new_npts
         for name in _PUBLIC_PER_SLOT:
             setattr(self, name, getattr(self, name)[keep])
-        for name in ("_order", "_mask", "_start", "_seg"):
+        for name in ("_order", "_mask", "_start", "_seg", "_coef", "_ta", "_len", "_coef_seg"):
             setattr(self, name, getattr(self, name)[keep])
 
     def slots_of(self, worlds: np.ndarray) -> np.ndarray:
@@ -175,55 +194,66 @@ class TrajectoryTable:
             if not more.any():
                 break
             self._seg += more
-        b_row = self._first + self._seg
-        a_row = b_row - 1
-        first = self._seg == 0
-        a = np.where(first[:, None, None], self._start, self._pva[np.maximum(a_row, 0)])
-        b = self._pva[b_row]
-        ta = np.where(first, 0.0, self._t[np.maximum(a_row, 0)])
-        seg_t = self._t[b_row] - ta
+        stale = np.flatnonzero(self._coef_seg != self._seg)
+        if stale.size:  # a new segment (or slot): its polynomial, once
+            self._fit(stale)
+        tau = np.clip(t - self._ta, 0.0, self._len)[:, None]
+        c = self._coef
+        pos = c[:, 0] + tau * (
+            c[:, 1] + tau * (c[:, 2] + tau * (c[:, 3] + tau * (c[:, 4] + tau * c[:, 5])))
+        )
+        vel = c[:, 1] + tau * (
+            2 * c[:, 2] + tau * (3 * c[:, 3] + tau * (4 * c[:, 4] + tau * 5 * c[:, 5]))
+        )
+        acc = 2 * c[:, 2] + tau * (6 * c[:, 3] + tau * (12 * c[:, 4] + tau * 20 * c[:, 5]))
+        # At and after the end: exactly the last point with zero velocity, so the hold is
+        # bit-exact whatever the float path above gave. (Joints outside a slot's trajectory
+        # have constant polynomials: their start target, exactly, and zero velocity.)
         ended = tick >= self.end_tick
-        tau = np.clip(t - ta, 0.0, seg_t)
-        pos, vel, acc = _evaluate(a, b, seg_t, tau, self._order)
-        # At and after the end: exactly the last point, with the last point's velocity (zero
-        # after the end tick), so the hold is bit-exact whatever the float path above gave.
-        pos = np.where(ended[:, None], b[:, 0], pos)
-        vel = np.where(ended[:, None], 0.0, vel)
-        acc = np.where(ended[:, None], 0.0, acc)
-        hold = ~self._mask
-        pos = np.where(hold, self._start[:, 0], pos)
-        vel = np.where(hold, 0.0, vel)
-        acc = np.where(hold, 0.0, acc)
+        if ended.any():
+            e = ended[:, None]
+            pos = np.where(e, self._pva[last, 0], pos)
+            vel = np.where(e, 0.0, vel)
+            acc = np.where(e, 0.0, acc)
         return Sample(pos, vel, acc, ended)
 
+    def _fit(self, slots: np.ndarray) -> None:
+        """The current segment's polynomial of `slots`: coefficients, start time, length."""
+        seg = self._seg[slots]
+        b_row = self._first[slots] + seg
+        a_row = np.maximum(b_row - 1, 0)
+        first = seg == 0
+        a = np.where(first[:, None, None], self._start[slots], self._pva[a_row])
+        b = self._pva[b_row]
+        ta = np.where(first, 0.0, self._t[a_row])
+        length = self._t[b_row] - ta
+        self._coef[slots] = _coefficients(a, b, length, self._order[slots])
+        self._ta[slots] = ta
+        self._len[slots] = length
+        self._coef_seg[slots] = seg
 
-def _evaluate(
-    a: np.ndarray, b: np.ndarray, seg_t: np.ndarray, tau: np.ndarray, order: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Position, velocity, acceleration (S, 7) on each slot's segment a → b at local time tau.
 
-    a, b: (S, 3, 7) position/velocity/acceleration at the segment's ends; seg_t, tau: (S,).
-    The polynomial has up to six coefficients; lower orders leave the high ones zero.
+def _coefficients(a: np.ndarray, b: np.ndarray, seg_t: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """(S, 6, 7) polynomial coefficients in local time of each slot's segment a → b.
+
+    a, b: (S, 3, 7) position/velocity/acceleration at the segment's ends; seg_t: (S,) its length.
+    linear: constant slope; cubic: Hermite on p, v; quintic: Hermite on p, v, a (the orders of
+    ros2_controllers' joint_trajectory_controller). Lower orders leave the high ones zero.
+    A zero-length segment (a first point at t = 0) is never current: t >= tick_dt > 0.
     """
     T = np.where(seg_t > 0, seg_t, 1.0)[:, None]
     pa, va, aa = a[:, 0], a[:, 1], a[:, 2]
     pb, vb, ab = b[:, 0], b[:, 1], b[:, 2]
     h = pb - pa
     o = order[:, None]
-    c = np.zeros((6, *pa.shape))
-    c[0] = pa
-    # linear: constant slope; cubic: Hermite on p, v; quintic: Hermite on p, v, a.
-    c[1] = np.where(o == 1, h / T, va)
-    c[2] = np.where(o == 3, (3 * h - (2 * va + vb) * T) / T**2, np.where(o == 5, aa / 2, 0.0))
+    c = np.zeros((len(T), 6, pa.shape[1]))
+    c[:, 0] = pa
+    c[:, 1] = np.where(o == 1, h / T, va)
+    c[:, 2] = np.where(o == 3, (3 * h - (2 * va + vb) * T) / T**2, np.where(o == 5, aa / 2, 0.0))
     quintic3 = (20 * h - (8 * vb + 12 * va) * T - (3 * aa - ab) * T**2) / (2 * T**3)
-    c[3] = np.where(o == 3, (-2 * h + (va + vb) * T) / T**3, np.where(o == 5, quintic3, 0.0))
-    c[4] = np.where(
+    c[:, 3] = np.where(o == 3, (-2 * h + (va + vb) * T) / T**3, np.where(o == 5, quintic3, 0.0))
+    c[:, 4] = np.where(
         o == 5, (-30 * h + (14 * vb + 16 * va) * T + (3 * aa - 2 * ab) * T**2) / (2 * T**4), 0.0
     )
-    c[5] = np.where(o == 5, (12 * h - 6 * (vb + va) * T + (ab - aa) * T**2) / (2 * T**5), 0.0)
-    s = tau[:, None]
-    pos = c[0] + s * (c[1] + s * (c[2] + s * (c[3] + s * (c[4] + s * c[5]))))
-    vel = c[1] + s * (2 * c[2] + s * (3 * c[3] + s * (4 * c[4] + s * 5 * c[5])))
-    acc = 2 * c[2] + s * (6 * c[3] + s * (12 * c[4] + s * 20 * c[5]))
-    # A zero-length segment (a first point at t = 0) is never current: t >= tick_dt > 0.
-    return pos, vel, acc
+    c[:, 5] = np.where(o == 5, (12 * h - 6 * (vb + va) * T + (ab - aa) * T**2) / (2 * T**5), 0.0)
+    return c
