@@ -23,6 +23,7 @@ from typing import Any
 import httpx
 
 from service.core.physics import DEFAULT_PHYSICS_DT
+from service.engines.cores import usable_cores
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 
@@ -53,13 +54,6 @@ def cpu_model() -> str:
             if line.lower().startswith("model name"):
                 return line.split(":", 1)[1].strip()
     return platform.processor() or platform.machine()
-
-
-def usable_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 def gpu_name(device: str) -> str | None:

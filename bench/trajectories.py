@@ -3,6 +3,9 @@
 1. Tracking (in process, paused and stepped tick by tick, so the figures are simulated-time
    facts): a 2 s trajectory through three points for all six arm joints; the largest path error
    |actual - desired| over the run, and the distance to the last point 0.5 s after the end.
+   Then the CPU seconds a tick of 1024 worlds takes in process without and with a trajectory
+   holding the pose on every world (what the trajectory work costs, whatever else loads the
+   machine).
 2. Fast mode at 1024 worlds (``armfleet serve --mode fast``): ticks/s with no trajectory, with
    every world running a 300 s, 150-point trajectory that holds the pose (all the trajectory
    work, the physics unchanged) and one that swings the arm ±0.3 rad, windows interleaved in
@@ -95,6 +98,47 @@ def tracking(engine: str) -> dict[str, Any]:
     finally:
         loop.stop()
         batch.close()
+
+
+def cpu_ratio(engine: str, ticks: int, rounds: int) -> dict[str, Any]:
+    """CPU seconds per tick of 1024 worlds in process, no trajectory vs one holding the pose on
+    every world (rounds interleaved): the trajectory work's cost, robust to a loaded machine in
+    a way wall-clock rates are not (what other processes take is not counted)."""
+    from service.core.control import Control, Source
+    from service.core.loop import SimLoop
+    from service.core.trajectory import parse
+    from service.core.types import Mode
+
+    if engine == "warp":
+        from service.engines.warp import WorldBatch
+
+        batch = WorldBatch(SCALE_WORLDS)
+    else:
+        from service.engines.native import NativeBatch
+
+        batch = NativeBatch(SCALE_WORLDS, nthread=1)
+    loop = SimLoop(batch, Mode.PAUSED)
+    control = Control(loop)
+    loop.start()
+    everyone = list(range(SCALE_WORLDS))
+    body = _long_body(batch.home_target[:6], batch.spec.names[:6], 0.0)
+    spec = parse(batch.spec, body)
+    cpu: dict[str, list[float]] = {"none": [], "hold": []}
+    try:
+        loop.step(3).result()  # warm-up
+        for _ in range(rounds):
+            for kind in cpu:
+                control.reset(None, Source.HTTP)
+                if kind == "hold":
+                    control.start_trajectory(everyone, spec, Source.HTTP)
+                loop.step(1).result()
+                t0 = time.process_time()
+                loop.step(ticks).result()
+                cpu[kind].append((time.process_time() - t0) / ticks)
+    finally:
+        loop.stop()
+        batch.close()
+    return {"cpu_s_per_tick": cpu, "ratio": float(np.mean(cpu["none"]) / np.mean(cpu["hold"]))}
 
 
 def _ticks_per_s(url: str, window: float) -> float:
@@ -197,9 +241,16 @@ def trajectories(ctx: Context) -> Result:
             f"move {m['move']:.1f} ticks/s ({f['ratio_move']:.3f}x)"
         )
 
+    def cpu(c: dict[str, Any]) -> str:
+        none, hold = (np.mean(c["cpu_s_per_tick"][k]) * 1000 for k in ("none", "hold"))
+        return f"{hold:.1f} vs {none:.1f} CPU ms a tick: {c['ratio']:.3f}x throughput"
+
     window, rounds = ctx.pick((10.0, 3), (5.0, 2))
     for engine in ("warp", "mujoco"):
         measure(f"tracking {engine}", lambda e=engine: tracking(e), tracked)
+    for engine in ("warp", "mujoco"):
+        run = lambda e=engine: cpu_ratio(e, *ctx.pick((30, 3), (15, 2)))  # noqa: E731
+        measure(f"hold, CPU per tick, {SCALE_WORLDS} worlds {engine}", run, cpu)
     for engine in ("warp", "mujoco"):
         run = lambda e=engine: fast_ratio(ctx, e, window, rounds)  # noqa: E731
         measure(f"fast mode {SCALE_WORLDS} worlds {engine}", run, ratio)

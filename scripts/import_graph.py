@@ -27,8 +27,11 @@ LAYERS: tuple[tuple[str, int], ...] = (
     ("service.engines", 1),
     ("service.persistence", 2),
     ("service.surfaces", 3),
-    ("service.api", 3),
+    # the app: HTTP routes, the runtime that composes everything, the command line
+    ("service.api", 4),
     ("service.app", 4),
+    ("service.runtime", 4),
+    ("service.cli", 4),
 )
 
 

@@ -1,0 +1,11 @@
+"""armfleet, the service: many UR10e + Robotiq worlds stepped together, driven from outside.
+
+The folders are the layers, lowest first; a module imports its own layer and those below,
+never above (scripts/import_graph.py checks it, tests/test_layout.py runs it):
+
+- core/         types, the `Batch` protocol, the loop, `Control`, hub, wire, schemas, settings
+- engines/      the `Batch` implementations (Warp, native MuJoCo, process shards, Ray)
+- persistence/  snapshots, MCAP recordings, replay
+- surfaces/     ROS 2 over DDS, rosbridge, Foxglove, recordings: plug-ins on core/surface.py
+- api/, app.py, runtime.py, cli.py   the app: HTTP routes, composition, the `armfleet` command
+"""

@@ -34,8 +34,6 @@ from service.core.metrics import CommandCounter
 from service.core.schemas import ANY, errors, fit_openapi
 from service.core.settings import Settings
 from service.runtime import Runtime
-from service.surfaces.ros import rosbridge
-from service.surfaces.ros.topics import TopicMap, parse_world_list
 
 DESCRIPTION = """
 Many simulated UR10e + Robotiq 2F-140 worlds stepped together by MuJoCo Warp.
@@ -158,15 +156,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         },
     )
     app.state.runtime = runtime
-    app.state.rosbridge = rosbridge.RosbridgeServer(
-        TopicMap(parse_world_list(settings.ros2_worlds, settings.worlds)), settings.ros2_rate
-    )
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Added last = runs first: count refused commands, then check token, origin and slots.
     app.add_middleware(access.AccessMiddleware, settings=settings, slots=runtime.slots)
     app.add_middleware(CommandCounter, metrics=runtime.metrics)
-    for module in (health, metrics, web, rosbridge):
+    for module in (health, metrics, web):
         app.include_router(module.router)
+    for router in runtime.surfaces.routers():  # rosbridge's socket and GET /v1/ros
+        app.include_router(router)
     # Every /v1 route can also answer 401/403 (token, origin) and 503 (not ready, client cap).
     for module in (info, worlds, trajectory, sim, scene, ws, snapshots, recordings):
         app.include_router(module.router, responses=errors(*ANY))

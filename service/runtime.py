@@ -2,20 +2,20 @@
 
 The engine is built off the event loop because the first build compiles kernels (tens of
 seconds cold); the HTTP server is up meanwhile, `/healthz` answers and `/readyz` says 503.
-Surfaces are optional add-ons (ROS 2 bridge, Foxglove server, recorder, ...) that command through
-`control` and listen through `loop.add_sink`; they start once the loop runs and stop before it.
+Surfaces (ROS 2 bridge, rosbridge, Foxglove server, recordings: surfaces/registry.py) get a
+`SurfaceContext` once the loop runs and stop before it; this module names none of them.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any
 
 import orjson
 
 from service.core.access import ClientSlots
+from service.core.batch import Batch, Supervised
 from service.core.control import Accepted, Control
 from service.core.errors import ArmfleetError, Conflict, NotFound
 from service.core.hub import StreamHub
@@ -23,88 +23,22 @@ from service.core.loop import SimLoop
 from service.core.metrics import Metrics
 from service.core.settings import Settings
 from service.core.stopping import reclaim_stop_signals
-from service.core.types import Batch
+from service.core.surface import Finishing, SurfaceContext
+from service.engines.choice import build_batch
 from service.persistence import provenance
 from service.persistence.snapshots import LATEST, SnapshotStore, check_state_support
-
-if TYPE_CHECKING:
-    from service.persistence.recorder import Recorder
+from service.surfaces.registry import build_surfaces
 
 log = logging.getLogger("armfleet")
 
 
-class Surface(Protocol):
-    """An optional way in or out of the service, started with the loop and stopped before it."""
-
-    name: str
-
-    def start(self, runtime: Runtime) -> None: ...
-
-    def stop(self) -> None: ...
-
-
-def build_batch(s: Settings) -> Batch:
-    """The engine the settings ask for: native MuJoCo on every core, or MuJoCo Warp (split over
-    CPU cores when it pays). Imported here, so that the native engine never loads warp."""
-    if s.engine == "mujoco":
-        from service.engines.native import NativeBatch
-
-        return NativeBatch(
-            s.worlds,
-            control_hz=s.control_hz,
-            physics_dt=s.physics_dt,
-            nthread=s.shards,
-            device=s.device,
-        )
-    from service.engines.shards import ShardedBatch, auto_shards
-    from service.engines.warp import WorldBatch
-
-    shards = s.shards or auto_shards(s.worlds, s.device)
-    kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
-    if s.ray:
-        from service.engines import ray_local
-        from service.engines.ray_shards import RayBatch  # imports Ray only when asked for
-
-        with ray_local.starting():  # what Ray starts leaves stopping to us (core/stopping)
-            return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
-    if shards > 1:
-        return ShardedBatch(s.worlds, shards, **kwargs)
-    return WorldBatch(s.worlds, **kwargs)
-
-
-def optional_surfaces(s: Settings) -> list[Surface]:
-    """The add-ons the settings ask for (imported only when asked for)."""
-    out: list[Surface] = []
-    if s.record is not None:
-        from service.persistence.recorder import Recorder
-
-        out.append(Recorder(s.record, s.record_worlds, s.record_rate, s.record_queue))
-    if s.foxglove:
-        from service.surfaces.foxglove_live import FoxgloveLive
-
-        out.append(
-            FoxgloveLive(
-                s.host,
-                s.foxglove_port,
-                s.foxglove_worlds,
-                s.foxglove_rate,
-                commands=s.token is None,
-            )
-        )
-    if s.ros2:
-        from service.surfaces.ros.dds import DdsBridge
-
-        out.append(DdsBridge(s.ros2_rate, s.ros2_worlds, s.ros2_network))
-    return out
-
-
 class Runtime:
-    def __init__(self, settings: Settings, surfaces: tuple[Surface, ...] = ()):
+    def __init__(self, settings: Settings):
         self.settings = settings
         self.loop: SimLoop | None = None
         self.control: Control | None = None
         self.hub: StreamHub | None = None
-        self.surfaces: list[Surface] = [*surfaces, *optional_surfaces(settings)]
+        self.surfaces = build_surfaces(settings)
         self.error: str | None = None
         self.metrics = Metrics()
         self.slots = ClientSlots(settings.max_clients)  # shared by HTTP and every socket surface
@@ -114,14 +48,6 @@ class Runtime:
         self._register_levels()
         self.snapshots = SnapshotStore(settings.data_dir)
         self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
-
-    @property
-    def recorder(self) -> Recorder | None:
-        """The recording that is running or last ran (None if there was none)."""
-        from service.persistence.recorder import Recorder
-
-        found = [x for x in self.surfaces if isinstance(x, Recorder)]
-        return found[-1] if found else None
 
     @property
     def ready(self) -> bool:
@@ -134,9 +60,8 @@ class Runtime:
         out = []
         if self.loop.failure:
             out.append(f"ticks are failing: {self.loop.failure}")
-        health: Callable[[], list[str]] | None = getattr(self.loop.batch, "health", None)
-        if health is not None:
-            out += health()
+        if isinstance(self.loop.batch, Supervised):
+            out += self.loop.batch.health()
         return out
 
     async def _watch(self, period: float = 0.1) -> None:
@@ -186,8 +111,13 @@ class Runtime:
         m.counter_level(
             "armfleet_shard_restarts",
             "shard worker processes rebuilt after dying",
-            lambda: getattr(self.loop.batch, "restarts", 0) if self.loop else None,
+            self._restarts,
         )
+
+    def _restarts(self) -> float | None:
+        if self.loop is None:
+            return None
+        return self.loop.batch.restarts if isinstance(self.loop.batch, Supervised) else 0
 
     def _loop_attr(self, name: str) -> Any:
         return None if self.loop is None else getattr(self.loop, name)
@@ -224,11 +154,8 @@ class Runtime:
         loop.start()
         self.loop = loop
         self._watchdog = asyncio.create_task(self._watch())
-        for surface in self.surfaces:
-            try:
-                surface.start(self)
-            except ArmfleetError as exc:  # e.g. --record's file full: its status says so
-                log.error("%s did not start: %s", surface.name, exc)
+        ctx = SurfaceContext(loop, self.control, self.hub, s, self.slots, self.metrics)
+        self.surfaces.start(ctx)
         log.info(
             "armfleet ready at http://%s:%d (docs /docs): %d worlds on %s (%d shard%s), "
             "%d substeps of %.3f ms per %.0f Hz tick, mode %s; compile %.1f s, capture %.2f s%s",
@@ -283,13 +210,10 @@ class Runtime:
         """
         if self._watchdog is not None:
             self._watchdog.cancel()
-        for surface in reversed(self.surfaces):
-            try:
-                surface.stop()
-            except Exception:
-                log.exception("surface %s failed to stop", surface.name)
-                self.stop_problems.append(f"{surface.name} failed to stop")
-        self.stop_problems += unfinished_recordings(self.surfaces)
+        self.surfaces.stop()
+        for surface in self.surfaces:
+            if isinstance(surface, Finishing):
+                self.stop_problems += surface.unfinished()
         if self.loop is not None:
             self.loop.stop()
             if self.settings.save_on_exit and self._can_save():
@@ -319,14 +243,3 @@ class Runtime:
             why = f"{type(exc).__name__}: {exc}"
         log.error("could not save snapshot 'latest' in %s: %s", self.snapshots.dir, why)
         self.stop_problems.append(f"snapshot 'latest' not saved: {why}")
-
-
-def unfinished_recordings(surfaces: list[Surface]) -> list[str]:
-    """Why each recording among `surfaces` is not a complete file (stopped early, stuck)."""
-    from service.persistence.recorder import Recorder
-
-    return [
-        f"recording {s.path} is incomplete: {s.status.error}"
-        for s in surfaces
-        if isinstance(s, Recorder) and s.status.error
-    ]

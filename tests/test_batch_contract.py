@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from mjcf import SCENE_XML
+from service.core.batch import Batch
 from service.core.errors import Conflict
-from service.core.types import Batch
 from service.engines.native import NativeBatch
 from service.engines.shards import ShardedBatch
 from service.engines.warp import WorldBatch
@@ -88,7 +88,7 @@ def test_snapshot_body_poses_are_native_kinematics_of_the_same_qpos(fresh):
     batch, _ = fresh
     targets = np.tile(batch.home_target, (NWORLD, 1))
     targets[:, 0] += 0.2 * np.arange(NWORLD)  # a different pose per world (both shards)
-    batch.set_targets(np.arange(NWORLD), targets)
+    batch.apply_targets(np.arange(NWORLD), targets)
     batch.step(15)
     snap = batch.snapshot()
     mjm = mujoco.MjModel.from_xml_path(str(SCENE_XML))
@@ -106,7 +106,7 @@ def test_targets_move_only_the_named_worlds(fresh):
     batch, _ = fresh
     target = batch.home_target.copy()
     target[2] += 0.3
-    batch.set_targets(np.array([1, 3]), np.array([target, target]))
+    batch.apply_targets(np.array([1, 3]), np.array([target, target]))
     batch.step(45)
     snap = batch.snapshot()
     np.testing.assert_allclose(snap.position[[1, 3], 2], target[2], atol=5e-3)
@@ -116,7 +116,7 @@ def test_targets_move_only_the_named_worlds(fresh):
 
 def test_targets_are_clamped_to_joint_ranges(fresh):
     batch, _ = fresh
-    batch.set_targets(np.array([0]), np.array([[9.0, 0, 0, 0, 0, 0, 5.0]]))
+    batch.apply_targets(np.array([0]), np.array([[9.0, 0, 0, 0, 0, 0, 5.0]]))
     assert batch.targets[0, 0] == pytest.approx(batch.spec.upper[0])
     assert batch.targets[0, 6] == pytest.approx(batch.spec.upper[6])
 
@@ -126,7 +126,7 @@ def test_masked_reset_leaves_other_worlds_bit_identical(fresh):
     moved = np.tile(a.home_target, (NWORLD, 1))
     moved[:, 0] += 0.2 * np.arange(NWORLD)
     for batch in (a, b):
-        batch.set_targets(np.arange(NWORLD), moved)
+        batch.apply_targets(np.arange(NWORLD), moved)
         batch.step(10)
     a.reset(np.array([2]))  # only the disturbed twin
     a.step(10)
@@ -171,7 +171,7 @@ def test_a_state_continues_bit_identically_in_the_same_and_another_batch(fresh):
     def run(b: Batch, steps: list[np.ndarray]) -> list[np.ndarray]:
         out = []
         for targets in steps:
-            b.set_targets(np.array([0, NWORLD - 1]), targets)
+            b.apply_targets(np.array([0, NWORLD - 1]), targets)
             b.step(1)
             out.append(np.concatenate([b.qpos(), b.qvel()], axis=1))
         return out
@@ -180,7 +180,7 @@ def test_a_state_continues_bit_identically_in_the_same_and_another_batch(fresh):
     # A command staged but not yet stepped (on a worker shard, for sharded engines) is part of
     # the state: world 2 only moves if the state carried its new target.
     staged = batch.home_target + 0.2
-    batch.set_targets(np.array([2]), staged[None])
+    batch.apply_targets(np.array([2]), staged[None])
     state = batch.get_state()
     np.testing.assert_array_equal(
         state.targets[2], np.clip(staged, batch.spec.lower, batch.spec.upper)
@@ -207,8 +207,8 @@ def test_velocity_feedforward_defaults_to_zero_and_cuts_the_servo_lag(fresh):
     for k in range(1, 31):
         targets = np.tile(a.home_target, (NWORLD, 1))
         targets[:2, 0] += k * a.tick_dt  # worlds 0 and 1 ramp shoulder_pan at 1 rad/s
-        a.set_targets(worlds, targets, speed)
-        b.set_targets(worlds, targets)
+        a.apply_targets(worlds, targets, speed)
+        b.apply_targets(worlds, targets)
         a.step(1)
         b.step(1)
     keep = [0, 2, 3]  # zero feed-forward: bit-identical to none

@@ -42,7 +42,7 @@ def test_delta_over_a_full_turn_is_refused_before_anything_changes():
 
 
 def test_absolute_targets_clamp_and_report_each_joint_that_hit_a_limit():
-    update = commands.set_targets(SPEC, HOME, {2: 4.0, 6: -1.0, 0: 1.0})
+    update = commands.replace_targets(SPEC, HOME, {2: 4.0, 6: -1.0, 0: 1.0})
     assert update.target[2] == pytest.approx(math.pi)
     assert update.target[6] == 0.0 and update.target[0] == 1.0
     assert sorted(update.clamped) == ["elbow_joint", "finger_joint"]

@@ -41,7 +41,7 @@ def test_tick_is_captured_and_replays_like_uncaptured_stepping():
     plain = WorldBatch(2, capture=False)
     assert captured.captured and not plain.captured
     for b in (captured, plain):
-        b.set_targets(np.array([1]), np.array([[0.3, -1.2, 1.2, -1.5, -1.5, 0.4, 0.5]]))
+        b.apply_targets(np.array([1]), np.array([[0.3, -1.2, 1.2, -1.5, -1.5, 0.4, 0.5]]))
         b.step(5)
     np.testing.assert_array_equal(captured.qpos(), plain.qpos())
     assert captured.tick == plain.tick == 5
@@ -85,7 +85,7 @@ def test_grasp_never_overflows_capacity(fresh):
             s = min(1.0, 1.5 * (k + 1) / n)
             arm = q_from + s * (q_to - q_from)
             finger = finger_from + s * (finger_to - finger_from)
-            batch.set_targets(np.array([1]), np.append(arm, finger)[None])
+            batch.apply_targets(np.array([1]), np.append(arm, finger)[None])
             batch.step(1)
             peak_rows = max(peak_rows, batch.capacity_usage()[1])
 
@@ -112,7 +112,7 @@ def test_float32_warp_tracks_float64_native_mujoco_within_a_milliradian():
         if tick % 6 == 0:
             j = rng.integers(6)
             target[j] += rng.choice([-0.1, 0.1])
-        batch.set_targets(np.array([0]), target[None])
+        batch.apply_targets(np.array([0]), target[None])
         data.ctrl[:] = target
         mujoco.mj_step(mjm, data, nstep=batch.substeps)
         batch.step(1)
@@ -134,7 +134,7 @@ def test_warp_and_native_engines_agree_within_a_milliradian_over_2_s():
                 [-0.1, 0.1], size=NWORLD
             )
             for b in (warp, native):
-                b.set_targets(np.arange(NWORLD), targets)
+                b.apply_targets(np.arange(NWORLD), targets)
         for b in (warp, native):
             assert b.step(1).size == 0
         a, n = warp.snapshot(), native.snapshot()
@@ -155,7 +155,7 @@ def test_native_engine_is_bit_identical_to_mj_step_per_world():
     targets[:, 0] += 0.2 * np.arange(3)
     targets[:, 2] -= 0.1 * np.arange(3)
     targets[:, 6] = 0.35
-    batch.set_targets(np.arange(3), targets)
+    batch.apply_targets(np.arange(3), targets)
     for d, t in zip(datas, batch.targets, strict=True):
         d.ctrl[:] = t
     for _ in range(30):
@@ -199,7 +199,7 @@ def test_random_presses_for_60_s_never_produce_nan_in_any_world(engine):
             joints = rng.integers(7, size=NWORLD)
             targets[np.arange(NWORLD), joints] += rng.choice([-0.1, 0.1], size=NWORLD)
             targets = np.clip(targets, lo, hi)
-            batch.set_targets(np.arange(NWORLD), targets)
+            batch.apply_targets(np.arange(NWORLD), targets)
         assert batch.step(1).size == 0, f"a world faulted at tick {tick}"
     assert np.isfinite(batch.qpos()).all()
     assert batch.snapshot().faults.sum() == 0

@@ -16,7 +16,8 @@ from conftest import ELBOW, HOME, Server, serve, wait_for
 from websockets.sync.client import connect
 
 from service.core import wire
-from service.engines.native import NativeBatch, auto_threads, usable_cores
+from service.engines.cores import usable_cores
+from service.engines.native import NativeBatch, auto_threads
 
 
 def test_native_batch_uses_every_usable_core_once_the_batch_is_big_enough():

@@ -46,7 +46,7 @@ def drive(pair, rng, ticks: int) -> None:
         for b in pair:
             if tick % 15 == 7:
                 b.reset(np.array([1, 4]))
-            b.set_targets(worlds, targets)
+            b.apply_targets(worlds, targets)
         assert sharded.step(1).size == 0
         single.step(1)
 
@@ -77,7 +77,7 @@ def test_snapshots_asked_every_tick_or_every_other_are_those_of_one_batch(pair):
     for tick in range(24):
         targets = single.home_target + rng.uniform(-0.2, 0.2, size=(NWORLD, 7))
         for b in pair:
-            b.set_targets(np.arange(NWORLD), targets)
+            b.apply_targets(np.arange(NWORLD), targets)
             b.step(1)
         if tick < 12 or tick % 2:
             a, b = sharded.snapshot(), single.snapshot()
@@ -91,7 +91,7 @@ def test_snapshots_asked_every_tick_or_every_other_are_those_of_one_batch(pair):
 def test_reset_after_targets_in_the_same_tick_wins(pair):
     sharded, single = pair
     for b in pair:
-        b.set_targets(np.array([5]), b.home_target[None] + 0.2)
+        b.apply_targets(np.array([5]), b.home_target[None] + 0.2)
         b.reset(np.array([5]))
         b.step(1)
     np.testing.assert_array_equal(sharded.snapshot().target[5], sharded.home_target)
@@ -124,7 +124,7 @@ def test_a_killed_actor_is_rebuilt_and_its_worlds_come_back_at_home(pair):
     # The other shard keeps stepping while the lost one is rebuilt; commands still go in.
     while True:
         for b in pair:
-            b.set_targets(np.array([0, 4]), b.home_target[None] + 0.05)
+            b.apply_targets(np.array([0, 4]), b.home_target[None] + 0.05)
         back = sharded.step(1)
         if back.size:
             np.testing.assert_array_equal(np.sort(back), lost_worlds)
@@ -163,7 +163,7 @@ def test_a_killed_actor_resumes_from_its_last_checkpoint_with_todays_targets(pai
     while True:
         targets = single.home_target + rng.uniform(-0.2, 0.2, size=(NWORLD, 7))
         for b in pair:
-            b.set_targets(np.arange(NWORLD), targets)
+            b.apply_targets(np.arange(NWORLD), targets)
         now = single.get_state()
         history[single.tick] = now
         assert sharded.step(1).size == 0  # resumed worlds are not faults

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
+from service.core.worlds import world_list
 from service.surfaces.ros import msgs, topics
 from service.surfaces.ros.dds import LOOPBACK_CONFIG, choose_config
 from tests.conftest import ELBOW, FINGER, JOINTS, Server, node_armfleet, serve, wait_for
@@ -394,7 +395,7 @@ def test_ros2_worlds_must_exist() -> None:
 
     from service.core.settings import Settings
 
-    assert topics.parse_world_list("0-2,3", 4) == (0, 1, 2, 3)
+    assert world_list("0-2,3", 4, "ros2_worlds") == (0, 1, 2, 3)
     with pytest.raises(ValidationError, match="ros2_worlds '2-9'"):
         Settings(worlds=4, ros2_worlds="2-9")
     with pytest.raises(ValidationError, match="ros2_worlds 'x'"):

@@ -33,7 +33,7 @@ def test_sharded_worlds_step_bit_identically_to_one_batch(pair):
             for b in (sharded, single):
                 b.reset(np.array([1, 4]))
         for b in (sharded, single):
-            b.set_targets(worlds, targets)
+            b.apply_targets(worlds, targets)
             b.step(1)
     np.testing.assert_array_equal(sharded.qpos(), single.qpos())
     a, b = sharded.snapshot(), single.snapshot()
@@ -45,7 +45,7 @@ def test_sharded_worlds_step_bit_identically_to_one_batch(pair):
 
 def test_reset_after_targets_in_the_same_tick_wins_on_a_worker_shard(pair):
     sharded, _ = pair
-    sharded.set_targets(np.array([5]), sharded.home_target[None] + 0.2)
+    sharded.apply_targets(np.array([5]), sharded.home_target[None] + 0.2)
     sharded.reset(np.array([5]))
     sharded.step(1)
     np.testing.assert_allclose(sharded.snapshot().target[5], sharded.home_target)

@@ -23,7 +23,7 @@ def drive(batch: WorldBatch | ShardedBatch, ticks: int, seed: int) -> list[np.nd
         worlds = rng.choice(batch.nworld, size=2, replace=False)
         targets = batch.home_target + rng.uniform(-0.4, 0.4, size=(2, 7))
         targets[:, 6] = rng.uniform(0.0, 0.7, size=2)
-        batch.set_targets(worlds, targets)
+        batch.apply_targets(worlds, targets)
         if t == ticks // 2:
             batch.reset(np.array([batch.nworld - 1]))
         batch.step(1)

@@ -9,15 +9,15 @@ from typing import Annotated
 from fastapi import APIRouter, Depends
 
 from service.api.deps import CANNOT_WRITE, Loop, get_runtime
-from service.core.errors import Conflict, NotFound
+from service.core.errors import NotFound
 from service.core.schemas import RecordingRequest, RecordingStatus
 from service.persistence.recorder import Recorder
 from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
+from service.surfaces.recordings import Recordings
 
 router = APIRouter(prefix="/v1/recordings", tags=["recordings"])
 Rt = Annotated[Runtime, Depends(get_runtime)]
-_starting = asyncio.Lock()  # one start at a time: two POSTs must not both see "none active"
 
 
 def _status(recorder: Recorder) -> RecordingStatus:
@@ -32,26 +32,23 @@ def _status(recorder: Recorder) -> RecordingStatus:
     responses={**CANNOT_WRITE, 409: {"description": "a recording is already running"}},
 )
 async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
-    async with _starting:
-        current = runtime.recorder
-        if current is not None and current.status.active:
-            raise Conflict(f"a recording is already running ({current.path}); stop it first")
-        check_state_support(loop.batch)  # a recording starts from the full state
-        path = runtime.snapshots.dir.parent / "recordings" / f"{body.name}.mcap"
-        # Opening and starting write the file's beginning before answering: a file that
-        # cannot be written is a 507 naming the cause, never an "active" recording that is not.
-        queue_items = runtime.settings.record_queue
-        recorder = await asyncio.to_thread(Recorder, path, body.worlds, body.rate, queue_items)
-        await asyncio.to_thread(recorder.start, runtime)  # waits for a tick boundary
-        runtime.surfaces.append(recorder)
-        return _status(recorder)
+    check_state_support(loop.batch)  # a recording starts from the full state
+    path = runtime.snapshots.dir.parent / "recordings" / f"{body.name}.mcap"
+    # Opening and starting write the file's beginning before answering: a file that cannot be
+    # written is a 507 naming the cause, never an "active" recording that is not.
+    queue_items = runtime.settings.record_queue
+    recorder = await asyncio.to_thread(Recorder, path, body.worlds, body.rate, queue_items)
+    # Conflict while one runs; waits for a tick boundary (off the event loop).
+    await asyncio.to_thread(runtime.surfaces.of(Recordings).begin, recorder)
+    return _status(recorder)
 
 
 @router.get("/current", response_model=RecordingStatus, summary="The running (or last) recording")
 async def current(runtime: Rt) -> RecordingStatus:
-    if runtime.recorder is None:
+    recorder = runtime.surfaces.of(Recordings).current
+    if recorder is None:
         raise NotFound("no recording has been started")
-    return _status(runtime.recorder)
+    return _status(recorder)
 
 
 @router.delete(
@@ -61,7 +58,7 @@ async def current(runtime: Rt) -> RecordingStatus:
     responses={404: {"description": "no recording is running"}},
 )
 async def stop(runtime: Rt) -> RecordingStatus:
-    recorder = runtime.recorder
+    recorder = runtime.surfaces.of(Recordings).current
     if recorder is None or not recorder.status.active:
         last = recorder.status if recorder is not None else None
         why = f"; the last one ({last.path}) stopped early: {last.error}" if last else ""

@@ -8,38 +8,23 @@ from fastapi import APIRouter
 
 from service.api.deps import Ctl, Loop
 from service.core.control import Source
-from service.core.schemas import ANY, WITH_BODY, ModeRequest, SimReply, StepRequest, errors
+from service.core.schemas import ModeRequest, SimReply, StepRequest, errors
 from service.core.types import Mode
 
 router = APIRouter(prefix="/v1/sim", tags=["sim"])
 
 
-@router.post(
-    "/pause",
-    response_model=SimReply,
-    summary="Stop advancing time (mode paused)",
-    responses=errors(*ANY),
-)
+@router.post("/pause", response_model=SimReply, summary="Stop advancing time (mode paused)")
 async def pause(control: Ctl) -> SimReply:
     return SimReply(mode=Mode.PAUSED, tick=control.set_mode(Mode.PAUSED, Source.HTTP))
 
 
-@router.post(
-    "/resume",
-    response_model=SimReply,
-    summary="Advance in real time again",
-    responses=errors(*ANY),
-)
+@router.post("/resume", response_model=SimReply, summary="Advance in real time again")
 async def resume(control: Ctl) -> SimReply:
     return SimReply(mode=Mode.REALTIME, tick=control.set_mode(Mode.REALTIME, Source.HTTP))
 
 
-@router.post(
-    "/mode",
-    response_model=SimReply,
-    summary="Switch to realtime, fast or paused",
-    responses=errors(*WITH_BODY),
-)
+@router.post("/mode", response_model=SimReply, summary="Switch to realtime, fast or paused")
 async def set_mode(control: Ctl, body: ModeRequest) -> SimReply:
     return SimReply(mode=body.mode, tick=control.set_mode(body.mode, Source.HTTP))
 
@@ -48,7 +33,7 @@ async def set_mode(control: Ctl, body: ModeRequest) -> SimReply:
     "/step",
     response_model=SimReply,
     summary="Paused only: advance exactly `ticks` control ticks; replies once they are done",
-    responses=errors(409, *WITH_BODY),
+    responses=errors(409),
 )
 async def step(loop: Loop, body: StepRequest) -> SimReply:
     tick = await asyncio.wrap_future(loop.step(body.ticks))  # NotPaused → 409 (app handler)

@@ -18,7 +18,7 @@ from service.api.deps import Ctl, World
 from service.core import wire
 from service.core.control import Control, Source
 from service.core.errors import BadCommand, Conflict, NotFound
-from service.core.schemas import ANY, WITH_BODY, errors
+from service.core.schemas import errors
 from service.core.trajectory import TrajectoryStatus, parse
 from service.core.trajectory.schemas import (
     BatchStartedReply,
@@ -27,6 +27,7 @@ from service.core.trajectory.schemas import (
     TrajectoryBody,
     TrajectoryStatusReply,
 )
+from service.core.worlds import parse_worlds
 
 router = APIRouter(prefix="/v1", tags=["trajectories"])
 MAX_WAIT_S = 60.0
@@ -40,7 +41,7 @@ def _json(payload: object) -> Response:
     "/worlds/{world}/trajectory",
     response_model=StartedReply,
     summary="Follow a JointTrajectory (replaces a running one); answers its id and ticks",
-    responses=errors(404, *WITH_BODY),
+    responses=errors(404),
 )
 async def start(control: Ctl, world: World, body: TrajectoryBody) -> Response:
     spec = parse(control.spec, body.as_json())
@@ -63,25 +64,30 @@ Wait = Annotated[
     "/worlds/{world}/trajectory",
     response_model=TrajectoryStatusReply,
     summary="Status, progress and feedback of the world's running (else last) trajectory",
-    responses=errors(404, *ANY),
+    responses=errors(404),
 )
 async def status(control: Ctl, world: World, wait: Wait = 0.0) -> Response:
-    current = control.trajectories.status(world)
-    if current is None:
-        raise NotFound(f"world {world} has not run a trajectory", "world")
-    return _json((await _outcome(control, current, wait)).as_json())
+    missing = NotFound(f"world {world} has not run a trajectory", "world")
+    return await _answer(control, control.trajectories.status(world), wait, missing)
 
 
 @router.get(
     "/trajectories/{trajectory_id}",
     response_model=TrajectoryStatusReply,
     summary="One trajectory by id (also after a newer one replaced it on its world)",
-    responses=errors(404, *ANY),
+    responses=errors(404),
 )
 async def by_id(control: Ctl, trajectory_id: int, wait: Wait = 0.0) -> Response:
-    current = control.trajectories.get(trajectory_id)
+    missing = NotFound(f"no trajectory {trajectory_id} (unknown, or long forgotten)", "id")
+    return await _answer(control, control.trajectories.get(trajectory_id), wait, missing)
+
+
+async def _answer(
+    control: Control, current: TrajectoryStatus | None, wait: float, missing: NotFound
+) -> Response:
+    """The status reply (after waiting up to `wait` for the outcome), or `missing` (404)."""
     if current is None:
-        raise NotFound(f"no trajectory {trajectory_id} (unknown, or long forgotten)", "id")
+        raise missing
     return _json((await _outcome(control, current, wait)).as_json())
 
 
@@ -100,7 +106,7 @@ async def _outcome(control: Control, current: TrajectoryStatus, wait: float) -> 
     "/worlds/{world}/trajectory",
     response_model=TrajectoryStatusReply,
     summary="Cancel the world's running trajectory; the world holds where it was",
-    responses=errors(404, 409, *ANY),
+    responses=errors(404, 409),
 )
 async def cancel(control: Ctl, world: World) -> Response:
     stopped = control.cancel_trajectory([world], Source.HTTP)
@@ -113,7 +119,7 @@ async def cancel(control: Ctl, world: World) -> Response:
     "/trajectories",
     response_model=BatchStartedReply,
     summary="Start one trajectory on many worlds, all at the same tick",
-    responses=errors(404, *WITH_BODY),
+    responses=errors(404),
 )
 async def start_many(control: Ctl, body: BatchTrajectoryBody) -> Response:
     worlds = _worlds(control, body.worlds)
@@ -132,7 +138,7 @@ async def start_many(control: Ctl, body: BatchTrajectoryBody) -> Response:
 
 def _worlds(control: Control, worlds: list[int] | str) -> list[int]:
     if isinstance(worlds, str):
-        return wire.parse_worlds(worlds, control.nworld).tolist()
+        return parse_worlds(worlds, control.nworld).tolist()
     ids = control.worlds(worlds)  # unknown ids are named first (404), then a repeat (422)
     if len(set(ids)) != len(ids):
         raise BadCommand("worlds", "a world may be listed only once")

@@ -19,8 +19,6 @@ from service.core.control import Source
 from service.core.errors import Unavailable
 from service.core.loop import SimLoop
 from service.core.schemas import (
-    ANY,
-    WITH_BODY,
     BatchCommandReply,
     BatchTargets,
     CommandReply,
@@ -33,6 +31,7 @@ from service.core.schemas import (
     errors,
 )
 from service.core.types import Mode, Snapshot
+from service.core.worlds import WORLDS_PATTERN, parse_worlds
 
 router = APIRouter(prefix="/v1", tags=["worlds"])
 
@@ -67,7 +66,7 @@ async def _read(
     "/worlds/state",
     response_model=WorldStates,
     summary="State of several worlds (default: all), including every command accepted before",
-    responses=errors(404, *ANY),
+    responses=errors(404),
 )
 async def get_states(
     loop: Loop,
@@ -77,12 +76,12 @@ async def get_states(
             description="ids and inclusive ranges, e.g. 0,3,7 or 0-63 (a range may be written "
             "either way round)",
             examples=["0,3,7"],
-            pattern=wire.WORLDS_PATTERN,
+            pattern=WORLDS_PATTERN,
         ),
     ] = None,
 ) -> Response:
     n = loop.batch.nworld
-    ids = np.arange(n) if worlds is None else wire.parse_worlds(worlds, n)
+    ids = np.arange(n) if worlds is None else parse_worlds(worlds, n)
     snap, pending = await _read(loop, ids)
     return _json(wire.states(snap, ids, loop.spec.names, pending))
 
@@ -92,7 +91,7 @@ async def get_states(
     response_model=WorldState,
     summary="One world's JointState, target and flange pose, including every command accepted "
     "before",
-    responses=errors(404, *ANY),
+    responses=errors(404),
 )
 async def get_state(loop: Loop, world: World) -> Response:
     snap, pending = await _read(loop, [world])
@@ -105,7 +104,7 @@ async def get_state(loop: Loop, world: World) -> Response:
     "/worlds/{world}/increments",
     response_model=CommandReply,
     summary="Add to joint targets (the seed's Up/Down buttons); clamps to the joint range",
-    responses=errors(404, *WITH_BODY),
+    responses=errors(404),
 )
 async def increment(control: Ctl, world: World, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
@@ -117,10 +116,10 @@ async def increment(control: Ctl, world: World, body: IncrementRequest) -> Respo
     "/worlds/{world}/targets",
     response_model=CommandReply,
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
-    responses=errors(404, *WITH_BODY),
+    responses=errors(404),
 )
 async def put_targets(control: Ctl, world: World, body: JointTargets) -> Response:
-    result = control.set_targets(world, body.name, body.position, Source.HTTP)
+    result = control.command_targets(world, body.name, body.position, Source.HTTP)
     return _json(wire.command_reply(result))
 
 
@@ -128,7 +127,7 @@ async def put_targets(control: Ctl, world: World, body: JointTargets) -> Respons
     "/targets",
     response_model=BatchCommandReply,
     summary="Full 7-joint targets for many worlds, applied together at one tick boundary",
-    responses=errors(404, *WITH_BODY),
+    responses=errors(404),
 )
 async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     results = control.set_many(body.worlds, body.position, Source.HTTP)
@@ -139,7 +138,7 @@ async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     "/worlds/{world}/reset",
     response_model=ResetReply,
     summary="Reset one world to home",
-    responses=errors(404, *ANY),
+    responses=errors(404),
 )
 async def reset_world(control: Ctl, world: World) -> ResetReply:
     done = control.reset([world], Source.HTTP)
@@ -150,7 +149,7 @@ async def reset_world(control: Ctl, world: World) -> ResetReply:
     "/reset",
     response_model=ResetReply,
     summary="Reset listed worlds (default: all) to home",
-    responses=errors(404, *WITH_BODY),
+    responses=errors(404),
 )
 async def reset_many(
     control: Ctl, body: Annotated[ResetRequest | None, Body()] = None

@@ -22,6 +22,7 @@ from service.core.errors import ArmfleetError, BadCommand
 from service.core.hub import StreamHub, Subscription
 from service.core.loop import SimLoop
 from service.core.types import Snapshot
+from service.core.worlds import parse_worlds
 
 router = APIRouter(prefix="/v1")
 
@@ -73,7 +74,7 @@ async def batch_socket(
     loop, control, hub = running
     n = loop.batch.nworld
     try:
-        ids = np.arange(n) if worlds is None else wire.parse_worlds(worlds, n)
+        ids = np.arange(n) if worlds is None else parse_worlds(worlds, n)
     except ArmfleetError as exc:
         return await _refuse(ws, _CLOSE_POLICY, str(exc))
     names = loop.spec.names
@@ -147,7 +148,7 @@ async def view_socket(
     try:
         focus = None if focus is None else control.world(focus)
         if worlds is not None:
-            ids = wire.parse_worlds(worlds, loop.batch.nworld)
+            ids = parse_worlds(worlds, loop.batch.nworld)
         elif focus is not None:
             ids = np.array([focus])
         else:

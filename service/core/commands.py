@@ -67,7 +67,9 @@ def increment(spec: RobotSpec, current: np.ndarray, deltas: Mapping[int, float])
     return _clamp(spec, row, list(deltas))
 
 
-def set_targets(spec: RobotSpec, current: np.ndarray, values: Mapping[int, float]) -> TargetUpdate:
+def replace_targets(
+    spec: RobotSpec, current: np.ndarray, values: Mapping[int, float]
+) -> TargetUpdate:
     """Replace the named joints' targets (others keep theirs) and clamp to range."""
     row = np.array(current, dtype=np.float64)
     for i, value in values.items():

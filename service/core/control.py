@@ -149,7 +149,7 @@ class Control:
             self._announce_result("increment", source, result)
         return result
 
-    def set_targets(
+    def command_targets(
         self,
         world: int,
         name: Sequence[str | int],
@@ -168,7 +168,7 @@ class Control:
             raise BadCommand("name", "a joint may be named only once")
         values = resolve_joints(self.spec, dict(zip(name, position, strict=True)), "name")
         with self._order:
-            result = self.loop.set_targets(world, values)
+            result = self.loop.stage_targets(world, values)
             self._announce_result("set_targets", source, result)
         return result
 
@@ -283,7 +283,7 @@ class Control:
                 result = self.increment(world, req.as_mapping(), source, field_name)
             elif op == "set_targets":
                 req_t = JointTargets.model_validate(body)
-                result = self.set_targets(world, req_t.name, req_t.position, source)
+                result = self.command_targets(world, req_t.name, req_t.position, source)
             elif op in trajectory_ops.OPS:
                 return trajectory_ops.handle(self, op, msg_id, world, body, source)
             elif op == "reset":

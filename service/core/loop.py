@@ -16,20 +16,26 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 
 from service.core import commands
+from service.core.batch import Batch
 from service.core.errors import NotPaused, UnknownWorld
+from service.core.loop_boundary import TickBoundary
+from service.core.loop_types import (  # re-exported: the loop's vocabulary
+    CommandResult,
+    LoopStats,
+    RestoreListener,
+    SnapshotSink,
+    TickListener,
+    resolve,
+)
 from service.core.staging import Override, Staging, TrajectoryHook
-from service.core.types import Batch, BatchState, Mode, Snapshot
+from service.core.types import Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
-T = TypeVar("T")
-# Called on the sim thread after a restore: (tick before, the state restored, its name).
-RestoreListener = Callable[[int, BatchState, str], None]
 
 # In fast mode with nobody streaming, a snapshot is still taken this often so that reads are
 # never older than this; readers that need the current tick ask for one explicitly.
@@ -37,39 +43,7 @@ _IDLE_SNAPSHOT_PERIOD = 0.1
 _STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
 
 
-@dataclass(frozen=True)
-class CommandResult:
-    """Reply to a target command: the world's target row after it, what clamped, when it applies."""
-
-    world: int
-    target: np.ndarray
-    clamped: list[str]
-    tick: int
-
-
-@dataclass(frozen=True)
-class LoopStats:
-    tick: int
-    mode: Mode
-    ticks_per_s: float
-    realtime_factor: float
-
-
-class SnapshotSink:
-    """Where snapshots go (the stream hub, the ROS 2 bridge, the recorder, ...).
-
-    Both methods run on the sim thread between ticks: they must be quick and hand any real work
-    (serialising, sending, writing) to a thread or event loop of their own.
-    """
-
-    def wants_snapshot(self, now: float) -> bool:
-        return False
-
-    def publish(self, snapshot: Snapshot) -> None:  # called on the loop thread
-        pass
-
-
-class SimLoop:
+class SimLoop(TickBoundary):
     """Advance a Batch in realtime, fast or paused mode and serialise commands into it."""
 
     def __init__(
@@ -153,11 +127,11 @@ class SimLoop:
             update = commands.increment(self.spec, self._pending[world], deltas)
             return self._stage(world, update)
 
-    def set_targets(self, world: int, values: Mapping[int, float]) -> CommandResult:
+    def stage_targets(self, world: int, values: Mapping[int, float]) -> CommandResult:
         """Set the named joints' targets (others keep theirs), clamped."""
         self._check_world(world)
         with self._lock:
-            update = commands.set_targets(self.spec, self._pending[world], values)
+            update = commands.replace_targets(self.spec, self._pending[world], values)
             return self._stage(world, update)
 
     def set_many(self, worlds: list[int], positions: np.ndarray) -> list[CommandResult]:
@@ -167,7 +141,7 @@ class SimLoop:
         every = dict.fromkeys(range(len(self.spec.joints)), 0.0)
         with self._lock:
             updates = [
-                commands.set_targets(
+                commands.replace_targets(
                     self.spec, self._pending[w], dict(zip(every, row, strict=True))
                 )
                 for w, row in zip(worlds, positions, strict=True)
@@ -218,77 +192,6 @@ class SimLoop:
         with self._lock:
             return self._pending[world].copy()
 
-    # -- work between ticks (any thread) ---------------------------------------------------
-
-    def call(self, fn: Callable[[Batch], T]) -> concurrent.futures.Future[T]:
-        """Run `fn(batch)` on the sim thread between two ticks; the future gets its result.
-
-        The batch belongs to the sim thread, so this is how other threads read or change it. In
-        paused mode the request is served at once. Never wait on it from the sim thread itself.
-        """
-        fut: concurrent.futures.Future[T] = concurrent.futures.Future()
-        with self._wake:
-            if self._running:
-                self._requests.append((fn, fut))
-                self._wake.notify_all()
-                return fut
-        _run_request(fn, fut, self.batch)  # not running: no other thread touches the batch
-        return fut
-
-    def request_state(self) -> concurrent.futures.Future[BatchState]:
-        """Every world's full state at the next tick boundary (`Batch.get_state`)."""
-        return self.call(lambda batch: batch.get_state())
-
-    def restore(self, state: BatchState, name: str = "") -> concurrent.futures.Future[int]:
-        """Continue from `state` at the next tick boundary; the future gets the restored tick.
-
-        Commands accepted but not yet applied are dropped (they belonged to the replaced state);
-        step requests waiting in paused mode complete at the restored tick. A state that does not
-        fit fails the future with ValueError, and nothing changes.
-        """
-        return self.call(lambda batch: self._restore(batch, state, name))
-
-    def add_restore_listener(self, listener: RestoreListener) -> None:
-        self._restore_listeners = (*self._restore_listeners, listener)
-
-    def remove_restore_listener(self, listener: RestoreListener) -> None:
-        self._restore_listeners = tuple(x for x in self._restore_listeners if x is not listener)
-
-    def _restore(self, batch: Batch, state: BatchState, name: str) -> int:
-        tick_before = batch.tick
-        batch.set_state(state)  # checks everything before changing anything
-        with self._lock:
-            self._tick = batch.tick
-            self._step_goal = self._tick
-            self._pending = batch.targets
-            self._velocity[:] = 0.0
-            if self._traj is not None:
-                self._traj.restored()
-            self._dirty[:] = False
-            self._reset[:] = False
-            self._effective[:] = self._tick  # what was accepted before belongs to the old state
-            self._window = (time.monotonic(), self._tick)
-            waiting, self._step_waiters = self._step_waiters, []
-        for listener in self._restore_listeners:
-            try:
-                listener(tick_before, state, name)
-            except Exception:
-                log.exception("restore listener %r failed", listener)
-        self._publish(time.monotonic())
-        with self._lock:  # readers waiting for a tick of the old timeline get the restored state
-            readers, self._snapshot_waiters = self._snapshot_waiters, []
-        for _, reader in readers:
-            _resolve(reader, self._latest)
-        for _, fut in waiting:
-            fut.set_result(self._tick)
-        return self._tick
-
-    def _serve_requests(self) -> None:
-        with self._lock:
-            requests, self._requests = self._requests, []
-        for fn, fut in requests:
-            _run_request(fn, fut, self.batch)
-
     # -- time control -----------------------------------------------------------------------
 
     @property
@@ -302,7 +205,7 @@ class SimLoop:
             self._wake.notify_all()
             waiters = self._stranded_waiters()
         for fut in waiters:  # paused: the ticks they waited for will not come
-            _resolve(fut, self._latest)
+            resolve(fut, self._latest)
 
     def step(self, ticks: int) -> concurrent.futures.Future[int]:
         """Paused only: advance exactly `ticks`; the future resolves with the tick reached."""
@@ -325,40 +228,6 @@ class SimLoop:
     @property
     def latest(self) -> Snapshot:
         return self._latest
-
-    def fresh_snapshot(
-        self, worlds: np.ndarray | list[int] | None = None
-    ) -> concurrent.futures.Future[Snapshot]:
-        """A snapshot that includes every command accepted for `worlds` (all when None) so far.
-
-        Read-your-writes: it waits for the tick from which the latest accepted command of those
-        worlds is in effect (at most the tick in progress and the next one while running), and
-        never returns a tick older than the last completed one. While paused those ticks do not
-        come: the latest snapshot is returned at once and the caller shows `pending_targets`.
-        """
-        fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
-        with self._wake:
-            need = self._tick + (1 if self._stepping else 0)
-            if self._effective.size:
-                chosen = self._effective if worlds is None else self._effective[worlds]
-                need = max(need, int(chosen.max(initial=0)))
-            if self._latest.tick >= need or not self._running or self._will_not_advance():
-                fut.set_result(self._latest)
-            else:
-                self._snapshot_waiters.append((need, fut))
-        return fut
-
-    def _will_not_advance(self) -> bool:
-        """Paused with no step requested and no tick in progress (lock held)."""
-        return self._mode is Mode.PAUSED and self._tick >= self._step_goal and not self._stepping
-
-    def _stranded_waiters(self) -> list[concurrent.futures.Future[Snapshot]]:
-        """Readers whose tick will not come because time stands still (lock held)."""
-        if not self._will_not_advance():
-            return []
-        stranded = [f for _, f in self._snapshot_waiters]
-        self._snapshot_waiters = []
-        return stranded
 
     def add_tick_listener(self, listener: TickListener) -> None:
         """Call `listener(tick, seconds, faulted_count)` on the sim thread after every tick.
@@ -472,9 +341,9 @@ class SimLoop:
         self.batch.reset(resets)
         if dirty.size:
             if vel is None:  # no feed-forward: the plain call every engine has always had
-                self.batch.set_targets(dirty, targets)
+                self.batch.apply_targets(dirty, targets)
             else:
-                self.batch.set_targets(dirty, targets, vel)
+                self.batch.apply_targets(dirty, targets, vel)
 
     def _finish_tick(self, faulted: np.ndarray, mode: Mode, now: float) -> bool:
         """Count the tick, forget targets of worlds reset for faults; is a snapshot wanted?"""
@@ -509,7 +378,7 @@ class SimLoop:
             self._snapshot_waiters = [(n, f) for n, f in self._snapshot_waiters if n > snap.tick]
             ready += self._stranded_waiters()
         for fut in ready:
-            _resolve(fut, snap)
+            resolve(fut, snap)
         for sink in self._sinks:
             sink.publish(snap)
 
@@ -528,21 +397,3 @@ class SimLoop:
         rate = ticks / (now - t0)
         self._stats = LoopStats(self._tick, self._mode, rate, rate * self.batch.tick_dt)
         self._window = (now, self._tick)
-
-
-TickListener = Callable[[int, float, int], None]
-
-
-def _resolve(fut: concurrent.futures.Future[Snapshot], snap: Snapshot) -> None:
-    if not fut.done():  # a reader that gave up may have cancelled it
-        with contextlib.suppress(concurrent.futures.InvalidStateError):
-            fut.set_result(snap)
-
-
-def _run_request(fn: Callable[[Batch], T], fut: concurrent.futures.Future[T], batch: Batch) -> None:
-    if not fut.set_running_or_notify_cancel():
-        return
-    try:
-        fut.set_result(fn(batch))
-    except BaseException as exc:  # handed to whoever waits on the future
-        fut.set_exception(exc)

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from mjcf import SCENE_XML
-from service.core.types import JointSpec, RobotSpec
+from service.core.types import NJOINT, JointSpec, RobotSpec
 
 ROBOT_NAME = "UR10e + Robotiq 2F-140"
 HOME_KEY = "home"
@@ -51,6 +51,8 @@ def load_robot(path: Path | str = SCENE_XML) -> LoadedRobot:
         names.append(name)
         qpos_adr.append(mjm.jnt_qposadr[jid])
         dof_adr.append(mjm.jnt_dofadr[jid])
+    if len(names) != NJOINT:
+        raise ValueError(f"{path}: {len(names)} actuated joints, the service commands {NJOINT}")
     home_key = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_KEY, HOME_KEY)
     flange = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_SITE, FLANGE_SITE)
     if home_key < 0 or flange < 0:

@@ -6,49 +6,30 @@ Joint-state fields follow sensor_msgs/JointState (`name`, `position`, `velocity`
 
 from __future__ import annotations
 
-import math
 from typing import Annotated, Any
 
 from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
-    PlainValidator,
-    WithJsonSchema,
     model_validator,
 )
 
-from service.core.robot import default_spec
-from service.core.types import JointSpec, Mode
+from service.core.schema_fields import (
+    Delta,
+    FiniteFloat,
+    JointKey,
+    JointRef,
+    Strict,
+    WorldId,
+    equal_lengths,
+    json_int,
+    non_null,
+    paired,
+)
+from service.core.types import NJOINT, JointSpec, Mode
 
-# Strict: numbers only ("0.1" and true are refused); ints are fine.
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False, strict=True)]
-Delta = Annotated[
-    float,
-    Field(
-        allow_inf_nan=False,
-        strict=True,
-        ge=-2 * math.pi,
-        le=2 * math.pi,
-        description="rad, |delta| <= 2π",
-    ),
-]
 MAX_STEP_TICKS = 100_000
-
-
-def _paired(keys_name: str, keys: list, values_name: str, values: list) -> None:
-    """Parallel lists (JointState's name/position, worlds/position): same length, keys unique."""
-    if len(keys) != len(values):
-        raise ValueError(
-            f"{keys_name} and {values_name} must have the same length "
-            f"(got {len(keys)} and {len(values)})"
-        )
-    if len(set(keys)) != len(keys):
-        raise ValueError(f"{keys_name} lists an entry twice")
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
 
 
 # -- replies ----------------------------------------------------------------------------------
@@ -160,91 +141,10 @@ WITH_BODY = (*ANY, 400, 413)
 # valid is accepted and what it calls invalid is refused: schemathesis holds us to that
 # (tests/test_contract.py).
 
-JOINT_NAMES = tuple(default_spec().names)  # the model names them (service/core/robot.py)
-JOINT_KEYS = (*JOINT_NAMES, *(str(i) for i in range(len(JOINT_NAMES))))  # names or "0".."6"
 MAX_BATCH_WORLDS = 64  # worlds per POST /v1/targets; the schema lists every allowed length
 
 
-def _joint_key(value: object) -> str:
-    """A joint named by its name or by its index as a string (JSON object keys are strings)."""
-    if not isinstance(value, str):
-        raise ValueError(f"a joint is named by a string, got {value!r}")
-    if value not in JOINT_KEYS:
-        raise ValueError(f"unknown joint {value!r}; joints are {list(JOINT_NAMES)} (or 0..6)")
-    return value
-
-
-def _joint_ref(value: object) -> str | int:
-    """A joint named by its name or its index 0..6 (booleans are not indices; 2.0 is 2)."""
-    if isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if isinstance(value, int) and not isinstance(value, bool):
-        if not 0 <= value < len(JOINT_NAMES):
-            raise ValueError(f"joint index {value} out of range 0..{len(JOINT_NAMES) - 1}")
-        return value
-    return _joint_key(value)
-
-
-_JOINT_KEY_SCHEMA = {
-    "type": "string",
-    "enum": list(JOINT_KEYS),
-    "description": "joint name, or its index as a string",
-}
-JointKey = Annotated[str, PlainValidator(_joint_key), WithJsonSchema(_JOINT_KEY_SCHEMA)]
-JointRef = Annotated[
-    str | int,
-    PlainValidator(_joint_ref),
-    WithJsonSchema(
-        {
-            "anyOf": [
-                {"type": "string", "enum": list(JOINT_NAMES)},
-                {"type": "integer", "minimum": 0, "maximum": len(JOINT_NAMES) - 1},
-            ],
-            "description": "joint name or index 0..6",
-        }
-    ),
-]
-
-
-def json_int(minimum: int | None = None, maximum: int | None = None, description: str = "") -> Any:
-    """An integer as JSON Schema means it: 3 and 3.0 (JSON has one number type), never true/false
-    (Python's bools are ints), "3" or 3.5; with optional bounds, stated in the schema too."""
-
-    def check(value: object) -> int:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ValueError(f"must be an integer, got {value!r}")
-        if isinstance(value, float) and not value.is_integer():
-            raise ValueError(f"must be an integer, got {value!r}")
-        number = int(value)
-        if minimum is not None and number < minimum:
-            raise ValueError(f"must be >= {minimum}, got {number}")
-        if maximum is not None and number > maximum:
-            raise ValueError(f"must be <= {maximum}, got {number}")
-        return number
-
-    schema: dict[str, Any] = {"type": "integer"}
-    if minimum is not None:
-        schema["minimum"] = minimum
-    if maximum is not None:
-        schema["maximum"] = maximum
-    if description:
-        schema["description"] = description
-    return Annotated[int, PlainValidator(check), WithJsonSchema(schema)]
-
-
-WorldId = json_int(minimum=0, description="world index")
-
-
-def _equal_lengths(a: str, b: str, lengths: range) -> list[dict[str, Any]]:
-    """oneOf branches saying arrays `a` and `b` have the same length (JSON Schema cannot
-    compare two arrays, so every allowed length is listed)."""
-    return [
-        {"properties": {a: {"minItems": k, "maxItems": k}, b: {"minItems": k, "maxItems": k}}}
-        for k in lengths
-    ]
-
-
-class IncrementRequest(_Strict):
+class IncrementRequest(Strict):
     """One joint (`joint` + `delta`) or several (`deltas`): the seed's Up/Down buttons."""
 
     joint: JointRef | None = None
@@ -255,7 +155,7 @@ class IncrementRequest(_Strict):
     def _schema(schema: dict[str, Any]) -> None:
         # Exactly one of the two shapes, and no nulls (the validator below refuses them too).
         props = schema.pop("properties")
-        plain = {k: _non_null(v) for k, v in props.items()}
+        plain = {k: non_null(v) for k, v in props.items()}
         schema.pop("additionalProperties", None)
         schema["oneOf"] = [
             {
@@ -305,42 +205,29 @@ class IncrementRequest(_Strict):
         return {self.joint: self.delta}
 
 
-def _non_null(prop: dict[str, Any]) -> dict[str, Any]:
-    """`X | None` as pydantic writes it (anyOf [X, null]) → X, keeping description/title."""
-    if "anyOf" not in prop:
-        return prop
-    kept = [p for p in prop["anyOf"] if p.get("type") != "null"]
-    out = {k: v for k, v in prop.items() if k not in ("anyOf", "default")}
-    if len(kept) == 1:
-        out.update(kept[0])
-    else:
-        out["anyOf"] = kept
-    return out
-
-
-class JointTargets(_Strict):
+class JointTargets(Strict):
     """sensor_msgs/JointState-shaped: a subset of names is allowed; others keep their targets."""
 
     name: list[JointKey] = Field(
-        min_length=1, max_length=len(JOINT_NAMES), json_schema_extra={"uniqueItems": True}
+        min_length=1, max_length=NJOINT, json_schema_extra={"uniqueItems": True}
     )
-    position: list[FiniteFloat] = Field(min_length=1, max_length=len(JOINT_NAMES))
+    position: list[FiniteFloat] = Field(min_length=1, max_length=NJOINT)
 
     model_config = ConfigDict(
         extra="allow",  # JointState also carries header/velocity/effort; they are ignored
         json_schema_extra={
             "examples": [{"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]}],
-            "oneOf": _equal_lengths("name", "position", range(1, len(JOINT_NAMES) + 1)),
+            "oneOf": equal_lengths("name", "position", range(1, NJOINT + 1)),
         },
     )
 
     @model_validator(mode="after")
     def _same_length(self) -> JointTargets:
-        _paired("name", self.name, "position", self.position)
+        paired("name", self.name, "position", self.position)
         return self
 
 
-class BatchTargets(_Strict):
+class BatchTargets(Strict):
     """Full 7-joint targets for many worlds in one request, applied at one tick boundary."""
 
     worlds: list[WorldId] = Field(
@@ -359,29 +246,29 @@ class BatchTargets(_Strict):
             "examples": [
                 {"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2}
             ],
-            "oneOf": _equal_lengths("worlds", "position", range(1, MAX_BATCH_WORLDS + 1)),
+            "oneOf": equal_lengths("worlds", "position", range(1, MAX_BATCH_WORLDS + 1)),
         },
     )
 
     @model_validator(mode="after")
     def _same_length(self) -> BatchTargets:
-        _paired("worlds", self.worlds, "position", self.position)
+        paired("worlds", self.worlds, "position", self.position)
         return self
 
 
-class ResetRequest(_Strict):
+class ResetRequest(Strict):
     worlds: list[WorldId] | None = Field(default=None, description="omit for all worlds")
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"worlds": [0, 3]}]})
 
 
-class ModeRequest(_Strict):
+class ModeRequest(Strict):
     mode: Mode
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"mode": "fast"}]})
 
 
-class StepRequest(_Strict):
+class StepRequest(Strict):
     ticks: json_int(minimum=1, maximum=MAX_STEP_TICKS) = 1  # type: ignore[valid-type]
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"ticks": 60}]})
@@ -402,7 +289,7 @@ SnapshotName = Annotated[
 ]
 
 
-class SnapshotRequest(_Strict):
+class SnapshotRequest(Strict):
     name: SnapshotName
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"name": "before"}]})
@@ -422,7 +309,7 @@ class RestoreReply(BaseModel):
     tick: int = Field(description="the tick the batch continues from")
 
 
-class RecordingRequest(_Strict):
+class RecordingRequest(Strict):
     name: SnapshotName = Field(description="file <data-dir>/recordings/<name>.mcap")
     worlds: str | None = Field(
         default=None, description="worlds whose states are recorded, e.g. '0-7,12'; default first 8"
@@ -505,7 +392,7 @@ def fit_openapi(spec: dict[str, Any], nworld: int) -> dict[str, Any]:
     batch = spec.get("components", {}).get("schemas", {}).get("BatchTargets")
     if batch is not None:
         most = min(nworld, MAX_BATCH_WORLDS)
-        batch["oneOf"] = _equal_lengths("worlds", "position", range(1, most + 1))
+        batch["oneOf"] = equal_lengths("worlds", "position", range(1, most + 1))
         for key in ("worlds", "position"):
             batch["properties"][key]["maxItems"] = most
     return spec

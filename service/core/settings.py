@@ -13,6 +13,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.core.physics import DEFAULT_PHYSICS_DT
 from service.core.types import Mode
+from service.core.worlds import world_list
 
 
 class Settings(BaseSettings):
@@ -117,7 +118,5 @@ class Settings(BaseSettings):
 
     @model_validator(mode="after")
     def _ros2_worlds_exist(self) -> Settings:
-        from service.surfaces.ros.topics import parse_world_list
-
-        parse_world_list(self.ros2_worlds, self.worlds)  # ValueError names the bad part
+        world_list(self.ros2_worlds, self.worlds, "ros2_worlds")  # ValueError names the bad part
         return self

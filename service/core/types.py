@@ -1,4 +1,4 @@
-"""Data structures shared by the engine, the loop and the API.
+"""Data structures shared by the engine, the loop and the API (the engine protocol: batch.py).
 
 They are plain frozen dataclasses over numpy arrays so that the engine (which knows MuJoCo Warp)
 and the API (which knows JSON) meet on something neither owns.
@@ -9,7 +9,6 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -17,14 +16,16 @@ import numpy as np
 # installs without the service and the two cannot drift apart.
 from clients.models import JointSpec
 
-if TYPE_CHECKING:
-    from service.core.robot import LoadedRobot
-
 
 def _frozen(values: list[float]) -> np.ndarray:
     out = np.array(values, dtype=np.float64)
     out.flags.writeable = False
     return out
+
+
+# The commanded joints: six arm joints, then finger_joint. Every per-world table of targets and
+# joint states is (nworld, NJOINT); the model names them (robot.py checks it has this many).
+NJOINT = 7
 
 
 @dataclass(frozen=True)
@@ -184,86 +185,3 @@ class BatchState:
                 )
             if arr.dtype != bool and not np.isfinite(arr).all():
                 raise ValueError(f"physics field {name!r} holds non-finite values")
-
-
-@runtime_checkable
-class Batch(Protocol):
-    """N worlds of one model advanced together in control ticks: what the loop needs of an engine.
-
-    WorldBatch (MuJoCo Warp on one device) and ShardedBatch (worlds split over worker processes)
-    implement it; so must any later engine. One thread owns a Batch: nothing here is thread-safe.
-    tests/test_batch_contract.py runs the same behavioural checks against every implementation.
-    """
-
-    nworld: int  # worlds in the batch
-    shards: int  # processes (or actors) the worlds are split across
-    spec: RobotSpec  # the commanded joints, limits and home
-    robot: LoadedRobot  # the compiled MjModel it steps (viewers describe it: GET /v1/scene)
-    control_hz: float  # control ticks per simulated second
-    tick_dt: float  # simulated seconds per tick (1 / control_hz)
-    substeps: int  # physics steps per tick
-    physics_dt: float  # simulated seconds per physics step (tick_dt / substeps)
-    device_name: str  # where it runs, e.g. "cpu" or "cuda:0"
-    home_target: np.ndarray  # (7,) targets of the `home` keyframe [rad]
-    captured: bool  # the tick replays a captured graph
-    capture_error: str | None  # why capture failed, when it did
-    compile_s: float  # seconds spent compiling/loading kernels at build
-    capture_s: float  # seconds spent capturing the tick at build
-
-    @property
-    def tick(self) -> int:
-        """Control ticks completed since the batch was built."""
-        ...
-
-    @property
-    def targets(self) -> np.ndarray:
-        """A copy of the targets in effect, (nworld, 7) [rad]."""
-        ...
-
-    def step(self, ticks: int = 1) -> np.ndarray:
-        """Advance every world by `ticks`; returns the worlds reset for faults (int64)."""
-        ...
-
-    def set_targets(
-        self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
-    ) -> None:
-        """Targets for `worlds` (k,) ← `targets` (k, 7), clamped, in effect from the next step.
-
-        `velocities` (k, 7) [rad/s]: a velocity feed-forward for the servos (trajectories send
-        their desired velocity, so tracking has no kv/kp × speed lag); None sets it to zero,
-        and with zero feed-forward every engine steps exactly as with targets alone.
-        """
-        ...
-
-    def reset(self, worlds: np.ndarray) -> None:
-        """Reset `worlds` to `home` (state and targets); every other world stays bit-identical."""
-        ...
-
-    def snapshot(self) -> Snapshot:
-        """All worlds at the end of the last completed tick, in host memory."""
-        ...
-
-    def get_state(self) -> BatchState:
-        """Everything needed to continue bit-identically (see `BatchState`), host copies."""
-        ...
-
-    def set_state(self, state: BatchState) -> None:
-        """Continue from `state` (same model and nworld); ValueError naming the mismatch, and
-        nothing changed, when it does not fit."""
-        ...
-
-    def qpos(self) -> np.ndarray:
-        """Full qpos of every world (nworld, nq), a host copy (tests and diagnostics)."""
-        ...
-
-    def qvel(self) -> np.ndarray:
-        """Full qvel of every world (nworld, nv), a host copy (tests and diagnostics)."""
-        ...
-
-    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
-        """Overwrite one world's full qpos (nq,): tests inject faults with it."""
-        ...
-
-    def close(self) -> None:
-        """Release workers and devices; the batch is unusable afterwards."""
-        ...

@@ -19,7 +19,6 @@ Not thread-safe: one thread (the loop) owns a NativeBatch.
 from __future__ import annotations
 
 import logging
-import os
 import time
 from pathlib import Path
 
@@ -28,22 +27,18 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from mjcf import SCENE_XML
+from service.core.batch import Batch, Restorable
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
 from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
+from service.engines.cores import usable_cores
+from service.engines.mirror import HostMirror
 
 log = logging.getLogger("armfleet.native")
 
 # A joint spinning faster than this [rad/s or m/s] has blown up even if it is still finite
 # (the same limit as the warp engine's).
 DIVERGED_QVEL = 1.0e4
-
-
-def usable_cores() -> int:
-    """Cores this process may run on (the affinity mask, not the machine's count)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 # Below this many worlds per thread a tick is too short for the pool: handing work to a second
@@ -71,7 +66,7 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-class NativeBatch:
+class NativeBatch(HostMirror, Batch, Restorable):
     """N worlds of one model in native MuJoCo, advanced a control tick at a time on a pool."""
 
     shards = 1  # one batch; the cores are used by threads, not processes
@@ -123,10 +118,7 @@ class NativeBatch:
         self._xquat = self._b.bind("xquat")
         self._xpos = self._b.bind("xpos")
 
-        self._tick = 0
-        self._world_ticks = np.zeros(nworld, dtype=np.int64)
-        self._faults = np.zeros(nworld, dtype=np.int64)
-        self._targets = np.tile(self.home_target, (nworld, 1))
+        self._init_mirror(nworld)
         self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
         self._effort = np.zeros((nworld, 7))
         self._flange_pos = np.zeros((nworld, 3))
@@ -162,27 +154,16 @@ class NativeBatch:
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance every world by `ticks` control ticks; returns the worlds reset for faults."""
-        faulted: list[np.ndarray] = []
-        for _ in range(ticks):
-            bad = self._step_tick()
-            self._tick += 1
-            self._world_ticks += 1
-            if bad.size:
-                self._faults[bad] += 1
-                log.warning("worlds %s went non-finite or diverged; reset to home", bad)
-                self.reset(bad)
-                faulted.append(bad)
-        return np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
+        return self._step_ticks(ticks, self._step_tick, log, "went non-finite or diverged")
 
     # -- commands ---------------------------------------------------------------------------
 
-    def set_targets(
+    def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
         """Position targets for `worlds` (k,) <- `targets` (k, 7), written into their rows,
         with a velocity feed-forward (k, 7) [rad/s] (None: zero) folded in (see physics)."""
-        worlds = np.asarray(worlds, dtype=np.int64)
-        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
+        worlds = self._command(worlds, targets, velocities)
         if velocities is None or not np.any(velocities):
             self._ctrl[worlds] = self._targets[worlds]
         else:
@@ -195,8 +176,7 @@ class NativeBatch:
             return
         # mj_resetDataKeyframe + mj_forward per world: ctrl = home, outputs current.
         self._b.reset(worlds, keyframe=self._key)
-        self._targets[worlds] = self.home_target
-        self._world_ticks[worlds] = 0
+        self._home(worlds)
         self._warnings_seen[worlds] = self._warnings()[worlds]
         self._effort[worlds] = self._qfrc_actuator[worlds][:, self._dof]
         self._read_flange(worlds)
@@ -214,14 +194,6 @@ class NativeBatch:
             self._b.forward(stage=mujoco.mjtStage.mjSTAGE_POS)
             self._read_flange(slice(None))
             self._kinematics_stale = False
-
-    @property
-    def tick(self) -> int:
-        return self._tick
-
-    @property
-    def targets(self) -> np.ndarray:
-        return self._targets.copy()
 
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, copied.
@@ -263,13 +235,7 @@ class NativeBatch:
         physics["eq_active"] = physics["eq_active"] != 0
         # The effort the snapshot reports is the last tick's, kept in _effort: store it there.
         physics["qfrc_actuator"][:, self._dof] = self._effort
-        return BatchState(
-            tick=self._tick,
-            world_ticks=self._world_ticks.copy(),
-            faults=self._faults.copy(),
-            targets=self._targets.copy(),
-            physics=physics,
-        )
+        return self._mirror_state(physics)
 
     def set_state(self, state: BatchState) -> None:
         """Continue from `state`; checked fully first (ValueError, nothing changed)."""
@@ -277,10 +243,7 @@ class NativeBatch:
         for f in PHYSICS_FIELDS:
             if f != "qfrc_actuator" and state.physics[f].size:
                 self._state_field(f)[:] = state.physics[f]
-        self._tick = int(state.tick)
-        self._world_ticks = np.array(state.world_ticks, dtype=np.int64)
-        self._faults = np.array(state.faults, dtype=np.int64)
-        self._targets = np.array(state.targets, dtype=np.float64)
+        self._restore_mirror(state)
         self._effort[:] = state.physics["qfrc_actuator"][:, self._dof]
         self._warnings_seen[:] = self._warnings()
         self._kinematics_stale = True

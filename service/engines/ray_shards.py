@@ -23,10 +23,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
-import os
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -34,147 +31,32 @@ import ray
 from ray.exceptions import RayActorError
 
 from mjcf import SCENE_XML
+from service.core.batch import Batch, Restorable
 from service.core.errors import Unavailable
 from service.core.physics import configure
 from service.core.robot import load_robot
-from service.core.types import Batch, BatchState, Snapshot
+from service.core.types import BatchState, Snapshot
+from service.engines.mirror import HostMirror
+from service.engines.ray_actor import NEVER, RemoteShard, Shard, connect, ray_auto_shards
 from service.engines.sharding import (
     ShardPlan,
     StagedCommands,
-    apply_and_step,
     command_rows,
     join_states,
     slice_state,
 )
-from service.engines.shards import MIN_WORLDS_PER_SHARD
-from service.engines.warp import SnapshotArrays, WorldBatch, snapshot_from
+from service.engines.warp import SnapshotArrays, snapshot_from
 
 log = logging.getLogger("armfleet.ray")
 
-# The directory that holds the `service` package: actors import it from there when the node has
-# the same checkout (one machine, or a shared path); elsewhere armfleet must be installed.
-_CODE_ROOT = str(Path(__file__).resolve().parents[2])
 # How often each shard's full state is copied into the API process, so that a lost shard comes
 # back where it was at most this long ago instead of at home (one state copy per shard each time).
 CHECKPOINT_S = 10.0
 # A shard whose new actor fails this many times in a row is left frozen (logged), not retried.
 MAX_REBUILD_ATTEMPTS = 3
-# A private local instance ("local") gets a small object store: snapshots are the largest
-# objects (28 float64 per world) and are freed as soon as they are read.
-_LOCAL_OBJECT_STORE_BYTES = 256 << 20
 
 
-def connect(address: str, num_cpus: int | None = None, num_gpus: int | None = None) -> None:
-    """Join the Ray cluster named by `address`, once per process.
-
-    auto: the cluster that `ray start --head` runs on this machine;
-    local: a private instance for this process only, bound to 127.0.0.1, no dashboard;
-    HOST:PORT or ray://HOST:PORT: a cluster's head node.
-    num_cpus, num_gpus: what a "local" instance offers (None: what Ray detects).
-    """
-    if ray.is_initialized():
-        return
-    path = [p for p in (_CODE_ROOT, os.environ.get("PYTHONPATH")) if p]
-    env = {"PYTHONPATH": os.pathsep.join(path)}
-    os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
-    if address == "local":
-        ray.init(
-            address="local",
-            num_cpus=num_cpus,
-            num_gpus=num_gpus,
-            include_dashboard=False,
-            _node_ip_address="127.0.0.1",
-            object_store_memory=_LOCAL_OBJECT_STORE_BYTES,
-            runtime_env={"env_vars": env},
-            log_to_driver=True,
-        )
-    else:
-        ray.init(address=address, runtime_env={"env_vars": env}, log_to_driver=True)
-
-
-def ray_auto_shards(nworld: int, device: str) -> int:
-    """One shard per GPU of the cluster on CUDA, else one per CPU core (big enough batches)."""
-    resources = ray.cluster_resources()
-    if device.startswith("cuda"):
-        gpus = int(resources.get("GPU", 0))
-        if gpus < 1:
-            raise RuntimeError("device is cuda but the Ray cluster has no GPUs")
-        return max(1, min(gpus, nworld))
-    cpus = int(resources.get("CPU", 1))
-    return max(1, min(cpus, nworld // MIN_WORLDS_PER_SHARD))
-
-
-class ShardActor:
-    """A shard's side: a WorldBatch of its worlds, stepped with the commands the driver staged.
-
-    Ray instantiates it as an actor (`ray.remote(ShardActor)`), one process per shard.
-    """
-
-    def __init__(self, nworld: int, kwargs: dict[str, Any]) -> None:
-        self._batch = WorldBatch(nworld, **kwargs)
-
-    def info(self) -> dict[str, Any]:
-        """What the driver reports about the engine (the same for every shard)."""
-        b = self._batch
-        return {
-            "spec": b.spec,
-            "control_hz": b.control_hz,
-            "tick_dt": b.tick_dt,
-            "substeps": b.substeps,
-            "physics_dt": b.physics_dt,
-            "device_name": b.device_name,
-            "home_target": b.home_target,
-            "captured": b.captured,
-            "capture_error": b.capture_error,
-            "compile_s": b.compile_s,
-            "capture_s": b.capture_s,
-            "physics_shapes": b.physics_shapes(),
-            "node": ray.get_runtime_context().get_node_id(),
-        }
-
-    def step(
-        self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray, ticks: int
-    ) -> tuple[np.ndarray, float]:
-        """Apply the staged commands, step; (faulted local ids, seconds the shard spent)."""
-        t0 = time.perf_counter()
-        faulted = apply_and_step(self._batch, resets, dirty, targets, ticks)
-        return faulted, time.perf_counter() - t0
-
-    def snapshot(self) -> SnapshotArrays:
-        """Contiguous arrays, not a Snapshot: Ray ships them without copying field by field."""
-        return self._batch.snapshot_arrays()
-
-    def state(self) -> tuple[np.ndarray, np.ndarray]:
-        return self._batch.qpos(), self._batch.qvel()
-
-    def write_qpos(self, world: int, qpos: np.ndarray) -> None:
-        self._batch.write_qpos(world, qpos)
-
-    def get_state(self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray) -> BatchState:
-        """The shard's state after the commands staged for it (a step of zero ticks)."""
-        apply_and_step(self._batch, resets, dirty, targets, 0)
-        return self._batch.get_state()
-
-    def set_state(self, state: BatchState) -> None:
-        self._batch.set_state(state)
-
-
-_RemoteShard = ray.remote(ShardActor)
-
-
-@dataclass
-class _Shard:
-    """The driver's view of one shard: its actor, and while it is being rebuilt, its readiness."""
-
-    actor: Any
-    last: SnapshotArrays | None = None  # the shard's last snapshot, shown while it is rebuilt
-    building: Any = None  # ObjectRef of the new actor's info() while it is being built
-    failures: int = 0  # consecutive failed builds
-    checkpoint: BatchState | None = None  # the shard's last state copied here (CHECKPOINT_S)
-    lost: list[float] = field(default_factory=list)  # wall times at which the actor was lost
-
-
-class RayBatch(Batch):
+class RayBatch(HostMirror, Batch, Restorable):
     """N worlds as k contiguous shards, each a Ray actor holding a WorldBatch.
 
     Implements the Batch protocol (service/core/types.py). `address` is as in `connect`; None uses
@@ -200,7 +82,7 @@ class RayBatch(Batch):
         self._options: dict[str, Any] = {"num_cpus": 1, "max_restarts": 0}
         if self.gpu:
             self._options["num_gpus"] = 1
-        self._shards = [_Shard(actor=self._spawn(i)) for i in range(shards)]
+        self._shards = [Shard(actor=self._spawn(i)) for i in range(shards)]
         try:
             infos = ray.get([s.actor.info.remote() for s in self._shards])
         except RayActorError as exc:
@@ -233,10 +115,7 @@ class RayBatch(Batch):
         # (driver wall seconds, slowest shard's own seconds) of the last step: the difference is
         # what the Ray round trip costs per tick (bench/ray_bench.py reports it).
         self.last_step: tuple[float, float] = (0.0, 0.0)
-        self._tick = 0
-        self._targets = np.tile(self.home_target, (nworld, 1))
-        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
-        self._faults = np.zeros(nworld, dtype=np.int64)
+        self._init_mirror(nworld)  # the faults are kept here: a rebuilt shard keeps its history
         self._staged = StagedCommands(shards)
         self._asked = (-1, -1)  # ticks of the last two snapshot() calls
         self.prefetched = 0  # snapshots that came with their step (diagnostics, bench)
@@ -247,40 +126,26 @@ class RayBatch(Batch):
 
     def _spawn(self, shard: int) -> Any:
         size = int(self._plan.sizes[shard])
-        return _RemoteShard.options(**self._options).remote(size, self._kwargs)
+        return RemoteShard.options(**self._options).remote(size, self._kwargs)
 
     @property
     def actors(self) -> list[Any]:
         """The shards' actor handles, in shard order (diagnostics and fault-injection tests)."""
         return [s.actor for s in self._shards]
 
-    @property
-    def tick(self) -> int:
-        return self._tick
-
-    @property
-    def targets(self) -> np.ndarray:
-        return self._targets.copy()
-
     # -- commands: staged per shard, sent with the next step ---------------------------------
 
-    def set_targets(
+    def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
-        worlds = np.asarray(worlds, dtype=np.int64)
-        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        self._velocity[worlds] = 0.0 if velocities is None else velocities
-        for i, local_ids in enumerate(self._plan.split(worlds)):
-            self._staged.targets(i, local_ids)
+        self._staged.targets_of(self._plan.split(self._command(worlds, targets, velocities)))
 
     def reset(self, worlds: np.ndarray) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
         if worlds.size == 0:
             return
-        self._targets[worlds] = self.home_target
-        self._velocity[worlds] = 0.0
-        for i, local_ids in enumerate(self._plan.split(worlds)):
-            self._staged.reset(i, local_ids)
+        self._home(worlds)
+        self._staged.resets_of(self._plan.split(worlds))
 
     # -- stepping ---------------------------------------------------------------------------
 
@@ -310,12 +175,11 @@ class RayBatch(Batch):
             slowest = max(slowest, spent)
             faulted.append(local + self._plan.starts[i])
         self.last_step = (time.perf_counter() - t0, slowest)
-        self._tick += ticks
+        self._advance(ticks)
         self._checkpoint()
         out = np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
-        self._targets[out] = self.home_target
-        self._velocity[out] = 0.0
-        np.add.at(self._faults, out, 1)
+        self._home(out)
+        self._count_faults(out)
         return out
 
     def _checkpoint(self) -> None:
@@ -354,7 +218,7 @@ class RayBatch(Batch):
         hi = lo + int(self._plan.sizes[shard])
         targets = self._targets[lo:hi].copy()
         physics = dict(s.checkpoint.physics)
-        physics["ctrl"] = targets.astype(physics["ctrl"].dtype)  # what set_targets would push
+        physics["ctrl"] = targets.astype(physics["ctrl"].dtype)  # what apply_targets would push
         resumed = dataclasses.replace(s.checkpoint, targets=targets, physics=physics)
         ray.get(s.actor.set_state.remote(resumed))
         self.restored.append((shard, s.checkpoint.tick))
@@ -386,7 +250,7 @@ class RayBatch(Batch):
         """Shards whose new actor finished building since the last step (their worlds at home)."""
         revived = []
         for i, s in enumerate(self._shards):
-            if s.building is None or s.building is _NEVER:
+            if s.building is None or s.building is NEVER:
                 continue
             done, _ = ray.wait([s.building], timeout=0)
             if not done:
@@ -398,7 +262,7 @@ class RayBatch(Batch):
                 s.building = None
                 if s.failures >= MAX_REBUILD_ATTEMPTS:
                     log.error("Ray shard %d failed to rebuild %d times: %s", i, s.failures, exc)
-                    s.building = _NEVER
+                    s.building = NEVER
                 else:
                     self._rebuild(i)
                 continue
@@ -506,10 +370,7 @@ class RayBatch(Batch):
             ray.get(refs)
         except RayActorError as exc:
             raise Unavailable(f"set_state: a Ray shard was lost ({exc}); try again") from exc
-        self._tick = int(state.tick)
-        self._targets = np.array(state.targets, dtype=np.float64)
-        self._velocity = np.zeros_like(self._targets)
-        self._faults = np.array(state.faults, dtype=np.int64)
+        self._restore_mirror(state)
         self._prefetch, self._asked = None, (-1, -1)
         self._checkpoint_refs = None  # copies of the replaced state
         parts = ray.get([s.actor.snapshot.remote() for s in self._shards])
@@ -533,10 +394,3 @@ class RayBatch(Batch):
         for s in self._shards:
             with contextlib.suppress(Exception):
                 ray.kill(s.actor, no_restart=True)
-
-
-class _Never:
-    """Stands in for a build that will not be retried: never ready, so the shard stays frozen."""
-
-
-_NEVER = _Never()

@@ -82,6 +82,16 @@ class StagedCommands:
             self._resets[shard] = np.union1d(self._resets[shard], local_ids)
             self._dirty[shard] = np.setdiff1d(self._dirty[shard], local_ids)
 
+    def targets_of(self, parts: Sequence[np.ndarray], first: int = 0) -> None:
+        """`targets` for each shard's part of a command (`ShardPlan.split`), from shard `first`."""
+        for shard, local_ids in enumerate(parts, start=first):
+            self.targets(shard, local_ids)
+
+    def resets_of(self, parts: Sequence[np.ndarray], first: int = 0) -> None:
+        """`reset` for each shard's part of a reset (`ShardPlan.split`), from shard `first`."""
+        for shard, local_ids in enumerate(parts, start=first):
+            self.reset(shard, local_ids)
+
     def take(self, shard: int) -> tuple[np.ndarray, np.ndarray]:
         """(resets, dirty) local ids for the shard's next step; the shard's stage is emptied."""
         out = self._resets[shard], self._dirty[shard]
@@ -97,13 +107,13 @@ def command_rows(targets: np.ndarray, velocity: np.ndarray, worlds: np.ndarray) 
     return np.concatenate([targets[worlds], vel], axis=1) if vel.any() else targets[worlds]
 
 
-def apply_targets(batch: WorldBatch, dirty: np.ndarray, rows: np.ndarray) -> None:
+def apply_rows(batch: WorldBatch, dirty: np.ndarray, rows: np.ndarray) -> None:
     """A shard's side of `command_rows`: targets, and feed-forward when the rows carry it."""
     if dirty.size:
         if rows.shape[1] > 7:
-            batch.set_targets(dirty, rows[:, :7], rows[:, 7:])
+            batch.apply_targets(dirty, rows[:, :7], rows[:, 7:])
         else:
-            batch.set_targets(dirty, rows)
+            batch.apply_targets(dirty, rows)
 
 
 def apply_and_step(
@@ -115,7 +125,7 @@ def apply_and_step(
     exactly like the same worlds inside one WorldBatch. Returns the shard's faulted local ids.
     """
     batch.reset(resets)
-    apply_targets(batch, dirty, rows)
+    apply_rows(batch, dirty, rows)
     return batch.step(ticks)
 
 

@@ -12,8 +12,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
-import multiprocessing as mp
-import os
 import threading
 import time
 from multiprocessing.connection import Connection
@@ -21,13 +19,14 @@ from typing import Any
 
 import numpy as np
 
-from service.core.stopping import start_worker
-from service.core.types import Batch, BatchState, Snapshot
+from service.core.batch import Batch, Restorable, Supervised
+from service.core.types import BatchState, Snapshot
+from service.engines.cores import usable_cores
+from service.engines.mirror import HostMirror
+from service.engines.shard_worker import ready_reply, spawn
 from service.engines.sharding import (
     ShardPlan,
     StagedCommands,
-    apply_and_step,
-    apply_targets,
     command_rows,
     join_snapshots,
     join_states,
@@ -64,63 +63,10 @@ def auto_shards(nworld: int, device: str) -> int:
     """How many shards to use: one per core on the CPU when the batch is big enough."""
     if not device.startswith("cpu"):
         return 1
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, min(cores or 1, nworld // MIN_WORLDS_PER_SHARD))
+    return max(1, min(usable_cores(), nworld // MIN_WORLDS_PER_SHARD))
 
 
-def _worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
-    """A shard's process: build the batch, then serve step/snapshot/reset/targets requests."""
-    try:
-        batch = WorldBatch(nworld, **kwargs)
-    except Exception as exc:  # report instead of leaving the parent waiting
-        conn.send(("error", f"{type(exc).__name__}: {exc}"))
-        return
-    conn.send(("ready", batch.compile_s, batch.capture_s, batch.capture_error))
-    while True:
-        try:
-            op, *args = conn.recv()
-        except EOFError:  # parent gone
-            return
-        if op == "step":
-            conn.send(apply_and_step(batch, *args))
-        elif op == "get_state":
-            resets, dirty, rows = args  # staged commands are part of the state
-            batch.reset(resets)
-            apply_targets(batch, dirty, rows)
-            conn.send(batch.get_state())
-        elif op == "set_state":
-            try:
-                batch.set_state(args[0])
-                conn.send(None)
-            except ValueError as exc:
-                conn.send(str(exc))
-        elif op == "snapshot":
-            conn.send(batch.snapshot())
-        elif op == "write_qpos":
-            batch.write_qpos(*args)
-        elif op == "qpos":
-            conn.send((batch.qpos(), batch.qvel()))
-        elif op == "stop":
-            return
-
-
-def _spawn(nworld: int, kwargs: dict[str, Any]) -> tuple[Any, Connection]:
-    """Start a worker process building `nworld` worlds; its first message says ready or not."""
-    ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
-    parent, child = ctx.Pipe()
-    proc = start_worker(ctx, _worker, (child, nworld, kwargs))  # stopping is ours (core/stopping)
-    child.close()  # so that a dead worker shows up as EOFError, not a hang
-    return proc, parent
-
-
-def _ready_reply(conn: Connection) -> tuple[Any, ...]:
-    try:
-        return conn.recv()
-    except (EOFError, OSError):
-        return ("error", "worker exited while building its shard")
-
-
-class ShardedBatch(Batch):
+class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
     def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
@@ -130,12 +76,12 @@ class ShardedBatch(Batch):
         self._conns: list[Connection] = []
         self._procs: list[Any] = []
         for size in self._sizes[1:]:
-            proc, conn = _spawn(int(size), kwargs)
+            proc, conn = spawn(int(size), kwargs)
             self._conns.append(conn)
             self._procs.append(proc)
         self._local = WorldBatch(int(self._sizes[0]), **kwargs)  # builds while workers build
         for conn in self._conns:
-            reply = _ready_reply(conn)
+            reply = ready_reply(conn)
             if reply[0] == "error":
                 self.close()
                 raise RuntimeError(f"shard worker failed to start: {reply[1]}")
@@ -144,8 +90,7 @@ class ShardedBatch(Batch):
         self.robot = self._local.robot
         for name in _FACTS_OF_LOCAL:  # every shard is built alike: the local one speaks for all
             setattr(self, name, getattr(self._local, name))
-        self._targets = np.tile(self.home_target, (nworld, 1))
-        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
+        self._init_mirror(nworld)  # its tick and faults are the shards' own
         self._staged = StagedCommands(shards)
         # Losing a worker (killed, crashed): its worlds pause, showing their last state, while
         # the others go on; a new worker is built in the background and swapped in at a tick
@@ -168,36 +113,26 @@ class ShardedBatch(Batch):
     def tick(self) -> int:
         return self._local.tick
 
-    @property
-    def targets(self) -> np.ndarray:
-        return self._targets.copy()
-
-    def set_targets(
+    def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
         """The local shard gets its targets now, worker shards with their next step."""
-        worlds = np.asarray(worlds, dtype=np.int64)
-        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        self._velocity[worlds] = 0.0 if velocities is None else velocities
-        parts = self._plan.split(worlds)
+        parts = self._plan.split(self._command(worlds, targets, velocities))
         if parts[0].size:
             vel = self._velocity[parts[0]]
-            self._local.set_targets(
+            self._local.apply_targets(
                 parts[0], self._targets[parts[0]], vel if velocities is not None else None
             )
-        for i, local_ids in enumerate(parts[1:], start=1):
-            self._staged.targets(i, local_ids)
+        self._staged.targets_of(parts[1:], first=1)
 
     def reset(self, worlds: np.ndarray) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
         if worlds.size == 0:
             return
-        self._targets[worlds] = self.home_target
-        self._velocity[worlds] = 0.0
+        self._home(worlds)
         parts = self._plan.split(worlds)
         self._local.reset(parts[0])
-        for i, local_ids in enumerate(parts[1:], start=1):
-            self._staged.reset(i, local_ids)
+        self._staged.resets_of(parts[1:], first=1)
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance all live shards together; returns the (global) worlds reset for faults."""
@@ -222,8 +157,7 @@ class ShardedBatch(Batch):
                 self._lost(i, self._exit_reason(i))
         self._copy_states(sent)
         out = np.concatenate(faulted)
-        self._targets[out] = self.home_target
-        self._velocity[out] = 0.0
+        self._home(out)
         return out
 
     def snapshot(self) -> Snapshot:
@@ -281,8 +215,7 @@ class ShardedBatch(Batch):
         errors = [err for err in (conn.recv() for conn in self._conns) if err]
         if errors:  # cannot happen after the check above; say so loudly if it does
             raise RuntimeError(f"shard refused a checked state: {errors[0]}")
-        self._targets = np.array(state.targets, dtype=np.float64)
-        self._velocity = np.zeros_like(self._targets)
+        self._restore_mirror(state)
 
     def qpos(self) -> np.ndarray:
         return self._gather_qpos()[0]
@@ -341,8 +274,8 @@ class ShardedBatch(Batch):
     def _rebuild(self, i: int) -> None:
         """Build a new worker for shard i (off the sim thread); it is swapped in by _swap_in."""
         for attempt in range(1, 4):
-            proc, conn = _spawn(int(self._sizes[i]), self._kwargs)
-            reply = _ready_reply(conn)
+            proc, conn = spawn(int(self._sizes[i]), self._kwargs)
+            reply = ready_reply(conn)
             if reply[0] == "ready":
                 with self._health_lock:
                     self._replacements[i] = (proc, conn)

@@ -21,9 +21,11 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
+from service.core.batch import Batch, Restorable
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
-from service.core.types import PHYSICS_FIELDS, Batch, BatchState, Snapshot
+from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
+from service.engines.mirror import HostMirror
 
 log = logging.getLogger("armfleet.engine")
 
@@ -160,7 +162,7 @@ def snapshot_from(a: SnapshotArrays, target: np.ndarray) -> Snapshot:
     )
 
 
-class WorldBatch(Batch):
+class WorldBatch(HostMirror, Batch, Restorable):
     """N worlds of one model on one Warp device, advanced in captured control ticks.
 
     Targets live in a float64 host mirror (what was commanded, reported as `target`) and are
@@ -201,11 +203,7 @@ class WorldBatch(Batch):
         mujoco.mj_forward(mjm, home)
         self.home_target = np.array(mjm.key_ctrl[self.robot.home_key], dtype=np.float64)
 
-        self._tick = 0
-        self._world_ticks = np.zeros(nworld, dtype=np.int64)
-        self._faults = np.zeros(nworld, dtype=np.int64)
-        self._targets = np.tile(self.home_target, (nworld, 1))
-        self._velocity = np.zeros((nworld, 7))  # velocity feed-forward [rad/s]
+        self._init_mirror(nworld)
         self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
         self._graph = None
         self.capture_error: str | None = None
@@ -290,32 +288,27 @@ class WorldBatch(Batch):
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance every world by `ticks` control ticks; returns the worlds reset for faults."""
-        faulted: list[np.ndarray] = []
         with wp.ScopedDevice(self.device):
-            for _ in range(ticks):
-                if self._graph is not None:
-                    wp.capture_launch(self._graph)
-                else:
-                    self._run_tick_ops()
-                self._tick += 1
-                self._world_ticks += 1
-                if self._nfault.numpy()[0]:
-                    bad = np.flatnonzero(self._fault.numpy())
-                    self._faults[bad] += 1
-                    log.warning("worlds %s hit NaN or capacity overflow; reset to home", bad)
-                    self.reset(bad)
-                    faulted.append(bad)
-        return np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
+            return self._step_ticks(ticks, self._one_tick, log, "hit NaN or capacity overflow")
+
+    def _one_tick(self) -> np.ndarray:
+        """One control tick (the captured graph, else the kernels one by one): worlds it broke."""
+        if self._graph is not None:
+            wp.capture_launch(self._graph)
+        else:
+            self._run_tick_ops()
+        if self._nfault.numpy()[0]:
+            return np.flatnonzero(self._fault.numpy())
+        return np.zeros(0, dtype=np.int64)
 
     # -- commands ---------------------------------------------------------------------------
 
-    def set_targets(
+    def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
         """Position targets for `worlds` (k,) ← `targets` (k, 7), in one device write, with a
         velocity feed-forward (k, 7) [rad/s] (None: zero) folded into ctrl (see physics)."""
-        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
-        self._velocity[worlds] = 0.0 if velocities is None else velocities
+        self._command(worlds, targets, velocities)
         self._push_targets()
 
     def _push_targets(self) -> None:
@@ -336,19 +329,9 @@ class WorldBatch(Batch):
         key[worlds] = self.robot.home_key
         with wp.ScopedDevice(self.device):
             mjw.reset_data_keyframe(self._m, self._d, wp.array(key, dtype=int))
-        self._targets[worlds] = self.home_target
-        self._velocity[worlds] = 0.0
-        self._world_ticks[worlds] = 0
+        self._home(worlds)
 
     # -- reading ----------------------------------------------------------------------------
-
-    @property
-    def tick(self) -> int:
-        return self._tick
-
-    @property
-    def targets(self) -> np.ndarray:
-        return self._targets.copy()
 
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, copied to host memory."""
@@ -374,13 +357,7 @@ class WorldBatch(Batch):
     def get_state(self) -> BatchState:
         """Every world's full state at the last tick boundary (host copies), see `BatchState`."""
         physics = {f: np.array(getattr(self._d, f).numpy(), copy=True) for f in PHYSICS_FIELDS}
-        return BatchState(
-            tick=self._tick,
-            world_ticks=self._world_ticks.copy(),
-            faults=self._faults.copy(),
-            targets=self._targets.copy(),
-            physics=physics,
-        )
+        return self._mirror_state(physics)
 
     def set_state(self, state: BatchState) -> None:
         """Continue from `state` (same model and nworld): checked fully before anything changes.
@@ -397,11 +374,7 @@ class WorldBatch(Batch):
             # Overflow flags are sticky until a reset; at a tick boundary no world has a
             # capacity overflow (it would have been reset), so the restored batch starts clean.
             self._d.overflow.zero_()
-            self._tick = int(state.tick)
-            self._world_ticks = np.array(state.world_ticks, dtype=np.int64)
-            self._faults = np.array(state.faults, dtype=np.int64)
-            self._targets = np.array(state.targets, dtype=np.float64)
-            self._velocity[:] = 0.0  # ctrl came with the state; the next command sets it anew
+            self._restore_mirror(state)
             self._gather()  # the snapshot shows the restored state at once
 
     # -- test and diagnostics hooks ---------------------------------------------------------

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from service.core.types import BatchState, Snapshot
-from service.core.wire import pick_worlds
+from service.core.worlds import pick_worlds
 from service.persistence.mcap_log import COMMANDS, RESTORES, STATUS, McapLog
 from service.persistence.provenance import batch_header
 from service.persistence.snapshots import encode_state
@@ -41,7 +41,7 @@ from service.persistence.storage import GuardedWriter, cannot_write, describe, o
 
 if TYPE_CHECKING:
     from service.core.control import Accepted
-    from service.runtime import Runtime
+    from service.core.surface import SurfaceContext
 
 log = logging.getLogger("armfleet.recorder")
 
@@ -73,7 +73,8 @@ def every_ticks(rate: float, control_hz: float) -> int:
 
 
 class Recorder:
-    """A Runtime surface: one recording from `start` to `stop` (or until it fails)."""
+    """One recording from `start` to `stop` (or until it fails); surfaces/recordings.py holds
+    the running one as a surface."""
 
     name = "recorder"
 
@@ -104,17 +105,16 @@ class Recorder:
         self._start_tick = 0
         self._last_tick: int | None = None
         self._thread: threading.Thread | None = None
-        self._runtime: Runtime | None = None
+        self._ctx: SurfaceContext | None = None
         self._header: dict[str, Any] = {}
         self._names: list[str] = []
 
     # -- life cycle ------------------------------------------------------------------------
 
-    def start(self, runtime: Runtime) -> None:
+    def start(self, ctx: SurfaceContext) -> None:
         """Hook into control and the loop, take the starting state, start the writer thread."""
-        loop, control = runtime.loop, runtime.control
-        assert loop is not None and control is not None
-        self._runtime = runtime
+        loop, control = ctx.loop, ctx.control
+        self._ctx = ctx
         batch = loop.batch
         worlds = self._worlds_arg
         if worlds is None or isinstance(worlds, str):
@@ -156,7 +156,7 @@ class Recorder:
 
     def stop(self) -> None:
         """Stop listening, write what is queued, close the file (waits for the writer)."""
-        if self._runtime is None or self._thread is None:  # never started: nothing to finish
+        if self._ctx is None or self._thread is None:  # never started: nothing to finish
             self._close()
             return
         was_active = self._active
@@ -187,12 +187,12 @@ class Recorder:
                 self._fail(f"closing {self.path} failed: {describe(exc)}")
 
     def _detach(self) -> None:
-        rt = self._runtime
-        if rt is None or rt.loop is None or rt.control is None:
+        ctx = self._ctx
+        if ctx is None:
             return
-        rt.control.remove_listener(self._on_command)
-        rt.loop.remove_restore_listener(self._on_restore)
-        rt.loop.remove_sink(self)
+        ctx.control.remove_listener(self._on_command)
+        ctx.loop.remove_restore_listener(self._on_restore)
+        ctx.loop.remove_sink(self)
 
     @property
     def status(self) -> RecordingStatus:
@@ -238,13 +238,8 @@ class Recorder:
 
     # The loop sink: a snapshot at every `every`-th tick, handed over as it is (immutable).
     def wants_snapshot(self, now: float) -> bool:
-        rt = self._runtime
-        return (
-            self._active
-            and rt is not None
-            and rt.loop is not None
-            and (rt.loop.tick % self._every == 0)
-        )
+        ctx = self._ctx
+        return self._active and ctx is not None and ctx.loop.tick % self._every == 0
 
     def publish(self, snapshot: Snapshot) -> None:
         if snapshot.tick % self._every or snapshot.tick == self._last_tick:

@@ -25,8 +25,12 @@ import numpy as np
 from mcap.records import Attachment, Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 
+from service.core.access import ClientSlots
 from service.core.control import Control, Source
 from service.core.loop import SimLoop
+from service.core.metrics import Metrics
+from service.core.settings import Settings
+from service.core.surface import SurfaceContext
 from service.core.trajectory import parse as parse_trajectory
 from service.core.types import BatchState, Mode
 from service.persistence.mcap_log import (
@@ -200,7 +204,7 @@ def replay_recording(
         loop.restore(rec.segments[0].start, "start").result()
         if out is not None:  # the replayed run, recorded like the live one (from the same state)
             recorder = Recorder(out, rec.worlds, rec.rate, block=True)
-            recorder.start(_Runtime(loop, control))
+            recorder.start(_context(loop, control))
         counts = {"ticks": 0, "states": 0, "commands": 0}
         divergence = None
         for i, seg in enumerate(rec.segments):
@@ -231,11 +235,11 @@ def replay_recording(
     )
 
 
-class _Runtime:
-    """What a surface needs of a Runtime, for the recorder that writes the replayed run."""
-
-    def __init__(self, loop: SimLoop, control: Control):
-        self.loop, self.control = loop, control
+def _context(loop: SimLoop, control: Control) -> SurfaceContext:
+    """The context a surface gets in a service, for the recorder that writes the replayed run:
+    the same loop and control; no sockets (no hub, no clients), metrics nobody reads."""
+    settings = Settings.model_construct(worlds=loop.batch.nworld, mode=Mode.PAUSED)
+    return SurfaceContext(loop, control, None, settings, ClientSlots(0), Metrics())
 
 
 def _replay_segment(

@@ -25,9 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from service.core.batch import Batch, Restorable
 from service.core.errors import BadCommand, CannotWrite, Conflict, NotFound
 from service.core.schemas import SNAPSHOT_NAME
-from service.core.types import PHYSICS_FIELDS, Batch, BatchState
+from service.core.types import PHYSICS_FIELDS, BatchState
 from service.persistence.provenance import mismatch
 from service.persistence.storage import describe
 
@@ -52,8 +53,7 @@ class SnapshotInfo:
 
 def check_state_support(batch: Batch) -> None:
     """Conflict (409) naming the engine when it cannot save and restore state (yet)."""
-    impl = getattr(type(batch), "get_state", None)
-    if impl is None or impl is Batch.get_state:  # missing, or the protocol's empty body
+    if not isinstance(batch, Restorable):
         raise Conflict(f"the {type(batch).__name__} engine cannot save or restore state")
 
 

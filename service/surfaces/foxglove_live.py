@@ -52,13 +52,13 @@ from foxglove.messages import (
 from service.core.control import Source
 from service.core.errors import ArmfleetError
 from service.core.robot import load_robot
-from service.core.wire import pick_worlds
+from service.core.worlds import pick_worlds
 
 if TYPE_CHECKING:
     from foxglove.websocket import ChannelView, Client, ClientChannel
 
+    from service.core.surface import SurfaceContext
     from service.core.types import Snapshot
-    from service.runtime import Runtime
 
 log = logging.getLogger("armfleet.foxglove")
 
@@ -172,7 +172,7 @@ def geom_entities(mjm: mujoco.MjModel, prefix: str, stamp: Timestamp) -> list[Sc
 
 
 class FoxgloveLive:
-    """A Runtime surface: the Foxglove WebSocket server and the thread that feeds it."""
+    """A surface: the Foxglove WebSocket server and the thread that feeds it."""
 
     name = "foxglove"
 
@@ -200,9 +200,8 @@ class FoxgloveLive:
     def port(self) -> int:
         return int(self._server.port) if self._server is not None else self._port
 
-    def start(self, runtime: Runtime) -> None:
-        loop, control = runtime.loop, runtime.control
-        assert loop is not None and control is not None
+    def start(self, ctx: SurfaceContext) -> None:
+        loop, control = ctx.loop, ctx.control
         self._loop, self._control = loop, control
         self.worlds = pick_worlds(self._worlds_spec, loop.batch.nworld)
         self._names = list(loop.batch.spec.names)
@@ -356,7 +355,7 @@ class FoxgloveLive:
             name, position = msg.get("name"), msg.get("position")
             if not isinstance(name, list) or not isinstance(position, list):
                 raise ValueError("a JointState needs `name` and `position` lists")
-            self._control.set_targets(world, name, position, Source.FOXGLOVE)
+            self._control.command_targets(world, name, position, Source.FOXGLOVE)
         except (ArmfleetError, ValueError) as exc:
             log.warning("Foxglove command on %s refused: %s", topic, exc)
             self._server.publish_status(f"{topic}: {exc}", StatusLevel.Warning)

@@ -8,20 +8,35 @@ when none was running). Errors are the usual error frames, raised by the caller'
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 from service.core.errors import BadCommand
+from service.core.loop import SimLoop
 from service.core.trajectory.schemas import TrajectoryBody
-from service.core.trajectory.spec import parse
+from service.core.trajectory.spec import JointTrajectorySpec, parse
+from service.core.trajectory.status import Started, TrajectoryStatus
+from service.core.types import RobotSpec
 
-if TYPE_CHECKING:
-    from service.core.control import Control, Source
+
+class Control(Protocol):
+    """What these ops need of `Control` (control.py imports this module, not the reverse)."""
+
+    spec: RobotSpec
+    loop: SimLoop
+
+    def start_trajectory(
+        self, worlds: Sequence[int], spec: JointTrajectorySpec, source: Any
+    ) -> list[Started]: ...
+
+    def cancel_trajectory(self, worlds: Sequence[int], source: Any) -> list[TrajectoryStatus]: ...
+
 
 OPS = ("cancel_trajectory", "trajectory")
 
 
 def handle(
-    control: Control, op: str, msg_id: Any, world: int, body: dict[str, Any], source: Source
+    control: Control, op: str, msg_id: Any, world: int, body: dict[str, Any], source: str
 ) -> dict[str, Any]:
     """Run one trajectory op; the ack frame (ValidationError / ArmfleetError propagate)."""
     if op == "trajectory":

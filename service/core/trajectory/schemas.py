@@ -13,27 +13,25 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from service.core.schemas import JOINT_NAMES, WorldId, json_int
+from service.core.schema_fields import (
+    FiniteFloat,
+    LazyJsonSchema,
+    Strict,
+    WorldId,
+    bounded_float,
+    joint_names,
+    json_int,
+)
 from service.core.trajectory.spec import MAX_DURATION_S, MAX_POINTS
-from service.core.wire import WORLDS_PATTERN
+from service.core.types import NJOINT
+from service.core.worlds import WORLDS_PATTERN
 
-_N = len(JOINT_NAMES)
-Number = Annotated[float, Field(allow_inf_nan=False, strict=True)]
-Seconds = Annotated[
-    float,
-    Field(
-        allow_inf_nan=False,
-        strict=True,
-        ge=0,
-        le=MAX_DURATION_S,
-        description=f"seconds, 0..{MAX_DURATION_S:g}",
-    ),
-]
-JointName = Annotated[str, Field(json_schema_extra={"enum": list(JOINT_NAMES)})]
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+_N = NJOINT
+Number = FiniteFloat
+Seconds = bounded_float(0, MAX_DURATION_S, f"seconds, 0..{MAX_DURATION_S:g}")
+# The names come from the model when the document is built (importing compiles nothing).
+JointName = Annotated[str, LazyJsonSchema(lambda: {"type": "string", "enum": list(joint_names())})]
+_Strict = Strict
 
 
 class Duration(_Strict):
@@ -102,6 +100,21 @@ class TrajectoryBody(_Strict):
 
 class BatchTrajectoryBody(_Strict):
     """One trajectory for many worlds, started at the same tick."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "worlds": "0-3",
+                    "trajectory": {
+                        "joint_names": ["elbow_joint"],
+                        "points": [{"positions": [1.2], "time_from_start": 2.0}],
+                    },
+                }
+            ]
+        },
+    )
 
     worlds: (
         Annotated[list[WorldId], Field(min_length=1, json_schema_extra={"uniqueItems": True})]

@@ -1,0 +1,3 @@
+"""ROS 2: the DDS bridge (`dds`, `ur_dds`, `discovery`, `qos`, `msgs*`, `urdf`, `tf_frames`),
+rosbridge (`rosbridge` the protocol, `rosbridge_surface` its socket and `/v1/ros`), and the topic
+names and JointState rules both share (`topics`). Imports as its parent package (surfaces)."""

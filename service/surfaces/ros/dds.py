@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from service.core.control import Source
 from service.core.types import Snapshot
+from service.core.worlds import world_list
 from service.surfaces.ros import topics
 from service.surfaces.ros.discovery import LOOPBACK_CONFIG, DdsConfig, choose_config
 from service.surfaces.ros.qos import rclpy_default as _qos
@@ -31,7 +32,7 @@ from service.surfaces.ros.topics import BadMessageCounter, TopicMap
 from service.surfaces.ros.ur_dds import ur_actions, ur_topics
 
 if TYPE_CHECKING:
-    from service.runtime import Runtime
+    from service.core.surface import SurfaceContext
 
 log = logging.getLogger("armfleet.ros2")
 
@@ -46,7 +47,7 @@ _MATCH_CHECK_S = 0.5  # a new subscriber gets its first state within this
 
 
 class DdsBridge:
-    """Runtime surface: `start(runtime)` joins the graph, `stop()` leaves it."""
+    """A surface: `start(ctx)` joins the graph, `stop()` leaves it."""
 
     name = "ros2"
 
@@ -71,7 +72,7 @@ class DdsBridge:
 
     # -- life cycle -------------------------------------------------------------------------
 
-    def start(self, runtime: Runtime) -> None:
+    def start(self, ctx: SurfaceContext) -> None:
         from cyclonedds.core import (
             GuardCondition,
             InstanceState,
@@ -87,13 +88,12 @@ class DdsBridge:
 
         from service.surfaces.ros import msgs
 
-        loop, control = runtime.loop, runtime.control
-        assert loop is not None and control is not None
+        loop, control = ctx.loop, ctx.control
         self._control = control
         self._joints = tuple(loop.spec.names)
         self._joint_list = list(self._joints)
         self._tick_dt = loop.batch.tick_dt
-        self.topics = TopicMap(topics.parse_world_list(self._worlds_spec, loop.batch.nworld))
+        self.topics = TopicMap(world_list(self._worlds_spec, loop.batch.nworld, "ros2_worlds"))
         self.config = cfg = choose_config(self._network)
         if cfg.config is not None:
             self._entities.append(Domain(cfg.domain_id, cfg.config))
@@ -123,7 +123,7 @@ class DdsBridge:
         self._msgs = msgs
         from service.surfaces.ros.ur_dds import UrDriverDds
 
-        self.ur = UrDriverDds(dp, runtime, self.topics, self.bad)
+        self.ur = UrDriverDds(dp, ctx, self.topics, self.bad)
         self._announce_node(dp, msgs)
 
         self._waitset = WaitSet(dp)
@@ -251,7 +251,7 @@ class DdsBridge:
 
         def apply(msg: Any) -> None:
             names, values = topics.command_from_joint_state(self._joints, msg.name, msg.position)
-            self._control.set_targets(world, names, values, Source.ROS2)
+            self._control.command_targets(world, names, values, Source.ROS2)
 
         taken, accepted = topics.take_commands(
             reader, self._msgs.JointState, topic, self.bad, apply

@@ -28,11 +28,13 @@ import math
 import queue
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 from service.core.control import Source
+from service.core.surface import SurfaceContext
 from service.core.trajectory import AbortReason, TrajectoryStatus
 from service.surfaces.ros import topics
 from service.surfaces.ros.goal_msgs import (
@@ -79,9 +81,9 @@ class Goal:
 class GoalRunner:
     """Runs the action goals of one service; both surfaces submit to the same runner."""
 
-    def __init__(self, runtime: Any) -> None:
-        self.loop = runtime.loop
-        self.control = runtime.control
+    def __init__(self, ctx: SurfaceContext) -> None:
+        self.loop = ctx.loop
+        self.control = ctx.control
         self.spec = self.loop.spec
         self.arm = list(self.spec.names)[:6]
         self.finger = self.spec.index("finger_joint")
@@ -127,7 +129,7 @@ class GoalRunner:
                     self._outcomes.put(early)
         else:
             position = gripper_position(goal)
-            done = self.control.set_targets(world, ["finger_joint"], [position], source)
+            done = self.control.command_targets(world, ["finger_joint"], [position], source)
             g.finger_target = float(done.target[self.finger])
             g.effective_tick = done.tick
             g.moved_at = math.inf  # counted from the first tick with the new target
@@ -155,7 +157,7 @@ class GoalRunner:
         else:
             state = self.loop.latest
             hold = float(state.position[g.world, self.finger])
-            self.control.set_targets(g.world, ["finger_joint"], [hold], source)
+            self.control.command_targets(g.world, ["finger_joint"], [hold], source)
             self._finish(g, Status.CANCELED, self._gripper_state(g, stalled=False))
         return True
 
@@ -269,13 +271,15 @@ class GoalRunner:
         self._thread.join(timeout=5)
 
 
-def runner_of(runtime: Any) -> GoalRunner:
-    """The runtime's one GoalRunner (made on first use; DDS and rosbridge share it)."""
+def runner_of(ctx: SurfaceContext) -> GoalRunner:
+    """The service's one GoalRunner (made on first use; DDS and rosbridge, given the same
+    context, share it)."""
     with _RUNNERS_LOCK:
-        runner = getattr(runtime, "goal_runner", None)
+        runner = _RUNNERS.get(ctx)
         if runner is None:
-            runner = runtime.goal_runner = GoalRunner(runtime)
+            runner = _RUNNERS[ctx] = GoalRunner(ctx)
         return runner
 
 
 _RUNNERS_LOCK = threading.Lock()
+_RUNNERS: weakref.WeakKeyDictionary[SurfaceContext, GoalRunner] = weakref.WeakKeyDictionary()

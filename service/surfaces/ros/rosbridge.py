@@ -15,7 +15,6 @@ reads its replies stops being read. Bad input gets a `status` frame with level `
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import time
 from collections import deque
@@ -25,12 +24,13 @@ from typing import Any
 
 import numpy as np
 import orjson
-from fastapi import APIRouter, Request, WebSocket, WebSocketDisconnect
+from fastapi import WebSocket
 
 from service.core import access
 from service.core.control import Source
 from service.core.errors import ArmfleetError
 from service.core.hub import StreamHub, Subscription
+from service.core.surface import SurfaceContext
 from service.core.types import Snapshot
 from service.surfaces.ros import rosapi, rosbridge_actions, topics
 from service.surfaces.ros.rosbridge_base import ProtocolError, same_type, topic_name
@@ -45,9 +45,6 @@ from service.surfaces.ros.topics import (
 
 log = logging.getLogger("armfleet.rosbridge")
 
-router = APIRouter()
-
-_MAX_QUEUED_REPLIES = 256
 _JOINT_STATE_FIELDS = frozenset({"header", "name", "position", "velocity", "effort"})
 
 
@@ -60,7 +57,7 @@ class _TopicSub:
 
 
 class RosbridgeServer:
-    """Shared by every rosbridge client of one app: the topic map, counters, rendering."""
+    """Shared by every rosbridge client of one service: the topic map, counters."""
 
     def __init__(self, topic_map: TopicMap | None = None, max_rate: float = 60.0) -> None:
         self.topic_map = topic_map or TopicMap(())
@@ -81,13 +78,14 @@ class RosbridgeServer:
 class Session:
     """One rosbridge client: its subscriptions, advertisements and outbox."""
 
-    def __init__(self, ws: WebSocket, server: RosbridgeServer, runtime: Any) -> None:
+    def __init__(self, ws: WebSocket, server: RosbridgeServer, ctx: SurfaceContext) -> None:
+        assert ctx.hub is not None  # the service's context always has one
         self.ws = ws
         self.server = server
-        self.runtime = runtime
-        self.loop = runtime.loop
-        self.hub: StreamHub = runtime.hub
-        self.control = runtime.control
+        self.ctx = ctx
+        self.loop = ctx.loop
+        self.hub: StreamHub = ctx.hub
+        self.control = ctx.control
         self.joints = tuple(self.loop.spec.names)
         self.tick_dt = self.loop.batch.tick_dt
         self.replies: deque[bytes] = deque()
@@ -95,7 +93,7 @@ class Session:
         self.advertised: dict[str, str] = {}
         self.ready = asyncio.Event()
         # One access policy for every surface (service/core/access.py): may it publish, how fast.
-        settings = runtime.settings
+        settings = ctx.settings
         self.grant = access.check_websocket(settings, ws)
         self.limiter = access.RateLimiter(settings.command_rate, settings.command_burst)
         self.over_rate = False  # set when the client kept publishing over its rate: close 1008
@@ -183,7 +181,7 @@ class Session:
             raise BadMessage("bad_type", "name and position must be arrays")
         names, values = topics.command_from_joint_state(self.joints, name, position)
         try:
-            self.control.set_targets(world, names, values, Source.ROSBRIDGE)
+            self.control.command_targets(world, names, values, Source.ROSBRIDGE)
         except ArmfleetError as exc:
             raise BadMessage("rejected", str(exc)) from None
         self.server.accepted += 1
@@ -328,64 +326,3 @@ _OPS: dict[str, Callable[[Session, dict[str, Any]], None]] = {
     "send_action_goal": rosbridge_actions.send_action_goal,
     "cancel_action_goal": rosbridge_actions.cancel_action_goal,
 }
-
-
-def server_of(app: Any) -> RosbridgeServer:
-    """The app's rosbridge state, made on first use."""
-    server = getattr(app.state, "rosbridge", None)
-    if server is None:
-        server = app.state.rosbridge = RosbridgeServer()
-    return server
-
-
-@router.websocket("/")
-@router.websocket("/rosbridge")
-async def rosbridge_socket(ws: WebSocket) -> None:
-    """rosbridge v2 clients (roslibpy, roslib.js): JSON ops in text frames."""
-    runtime = ws.app.state.runtime
-    await ws.accept(subprotocol=access.check_websocket(runtime.settings, ws).subprotocol)
-    if runtime.loop is None or runtime.hub is None:
-        await ws.close(code=1013, reason="simulation is starting")
-        return
-    server = server_of(ws.app)
-    session = Session(ws, server, runtime)
-    server.clients += 1
-    writer = asyncio.create_task(session.write())
-    try:
-        while True:
-            message = await ws.receive()
-            if message["type"] == "websocket.disconnect":
-                break
-            while len(session.replies) > _MAX_QUEUED_REPLIES and not writer.done():
-                await asyncio.sleep(0.005)
-            text = message.get("text")
-            if text is None:
-                server.bad.report("binary_frame", "(socket)", "a binary frame was sent")
-                session.status("error", "send JSON as text frames (binary frames are not read)")
-            else:
-                session.handle_text(text)
-                if session.over_rate:
-                    await asyncio.sleep(0.2)  # let the writer send the refusal first
-                    await ws.close(code=access.CLOSE_POLICY, reason="over the command rate")
-                    break
-    except (WebSocketDisconnect, RuntimeError):
-        pass
-    finally:
-        server.clients -= 1
-        session.close()
-        writer.cancel()
-        with contextlib.suppress(asyncio.CancelledError, Exception):
-            await writer
-
-
-@router.get("/v1/ros", tags=["ros"])
-async def ros_status(request: Request) -> dict[str, Any]:
-    """ROS 2 over DDS and rosbridge: topics, accepted commands, rejected messages by kind."""
-    runtime = request.app.state.runtime
-    bridge = next(
-        (s for s in getattr(runtime, "surfaces", ()) if getattr(s, "name", "") == "ros2"), None
-    )
-    return {
-        "dds": bridge.status() if bridge is not None else {"enabled": False},
-        "rosbridge": server_of(request.app).status(),
-    }

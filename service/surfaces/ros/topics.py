@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 
-from service.core import wire
 from service.core.errors import ArmfleetError
 from service.core.types import Snapshot
 
@@ -94,7 +93,7 @@ def stamp(seconds: float) -> tuple[int, int]:
 def command_from_joint_state(
     joints: Sequence[str], name: Sequence[Any], position: Sequence[Any]
 ) -> tuple[list[str], list[float]]:
-    """A JointState command → (joint names, positions) for `control.set_targets`.
+    """A JointState command → (joint names, positions) for `control.command_targets`.
 
     With names, positions pair up with them (a subset moves only those joints). With no names,
     seven positions in joint order are accepted, as the seed's Isaac subscriber read them.
@@ -245,13 +244,3 @@ def take_commands(
         else:
             accepted += 1
     return bool(samples), accepted
-
-
-def parse_world_list(spec: str | None, nworld: int) -> tuple[int, ...]:
-    """'0-7,9' → (0, ..., 7, 9); empty or None → no per-world topics. ValueError if invalid."""
-    if not spec or not spec.strip():
-        return ()
-    try:
-        return tuple(int(w) for w in wire.parse_worlds(spec, nworld))
-    except ArmfleetError as exc:
-        raise ValueError(f"ros2_worlds {spec!r}: {exc.detail}") from None

@@ -18,7 +18,7 @@ import itertools
 import math
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from service.core.control import Source
 from service.surfaces.ros import dds_actions, topics
@@ -33,6 +33,9 @@ from service.surfaces.ros.goals import runner_of
 from service.surfaces.ros.tf_frames import FrameTree
 from service.surfaces.ros.topics import BadMessageCounter, TopicMap
 from service.surfaces.ros.urdf import generate
+
+if TYPE_CHECKING:
+    from service.core.surface import SurfaceContext
 
 FORWARD_COMMANDS = "forward_position_controller/commands"
 # the joint trajectory controllers' fire-and-forget topic (`~/joint_trajectory`)
@@ -81,7 +84,7 @@ def arm_command(arm_joints: list[str], data: list[float]) -> list[float]:
 class UrDriverDds:
     """The UR driver's topics (and actions) on an existing DDS participant."""
 
-    def __init__(self, dp: Any, runtime: Any, topic_map: TopicMap, bad: BadMessageCounter):
+    def __init__(self, dp: Any, ctx: SurfaceContext, topic_map: TopicMap, bad: BadMessageCounter):
         from cyclonedds import core
         from cyclonedds.pub import DataWriter
         from cyclonedds.qos import Qos
@@ -93,8 +96,8 @@ class UrDriverDds:
         from service.surfaces.ros.qos import latched as latched_qos
         from service.surfaces.ros.qos import rclpy_default as _qos
 
-        loop = runtime.loop
-        self._control = runtime.control
+        loop = ctx.loop
+        self._control = ctx.control
         self._bad = bad
         self._msgs, self._tf, self._traj = msgs, msgs_tf, msgs_action
         self.received = 0
@@ -139,7 +142,7 @@ class UrDriverDds:
         sec, nanosec = topics.stamp(topics.sim_seconds(loop.latest, self._tick_dt))
         static = self._static_message(msgs.Time(sec=sec, nanosec=nanosec))
         any_sample = core.SampleState.Any | core.ViewState.Any | core.InstanceState.Any
-        self.runner = runner_of(runtime)
+        self.runner = runner_of(ctx)
         ids = itertools.count(1)
         prefix = dp.guid.bytes[:12]
 
@@ -234,7 +237,7 @@ class UrDriverDds:
     def _command_input(self, reader: Any, topic: str, world: int) -> Callable[[], bool]:
         def apply(msg: Any) -> None:
             values = arm_command(self._arm, list(msg.data))
-            self._control.set_targets(world, self._arm, values, Source.ROS2)
+            self._control.command_targets(world, self._arm, values, Source.ROS2)
 
         def serve_one() -> bool:
             kind = self._tf.Float64MultiArray

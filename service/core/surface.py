@@ -1,0 +1,65 @@
+"""The plug-in point for surfaces: what a surface may use of a running service, and its shape.
+
+A surface is a way in or out of the service besides the HTTP API (ROS 2 over DDS, rosbridge,
+Foxglove, recordings). It is started once the loop runs and stopped before the loop stops, and
+it gets a `SurfaceContext`: the loop (listen with `add_sink`), `Control` (the one door for
+commands), the stream hub, the settings, the client slots it must hold a seat in per client,
+and the metrics. Nothing else: no surface sees the runtime, the engine choice or another
+surface. `armfleet replay` builds the same context for the recorder that writes a replayed run.
+
+A surface that serves HTTP or WebSocket routes also has a `router` (`Routed`); the app
+includes it. Which surfaces exist, and from which settings, is surfaces/registry.py.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+from service.core.access import ClientSlots
+from service.core.control import Control
+from service.core.hub import StreamHub
+from service.core.loop import SimLoop
+from service.core.metrics import Metrics
+from service.core.settings import Settings
+
+
+@dataclass(frozen=True, eq=False)  # eq=False: hashed by identity (one per service)
+class SurfaceContext:
+    """What a surface may use, nothing more (see the module docstring)."""
+
+    loop: SimLoop
+    control: Control
+    hub: StreamHub | None  # None where nothing streams to sockets (`armfleet replay`)
+    settings: Settings
+    slots: ClientSlots
+    metrics: Metrics
+
+
+@runtime_checkable
+class Surface(Protocol):
+    """An optional way in or out of the service, started with the loop and stopped before it."""
+
+    name: str
+
+    def start(self, ctx: SurfaceContext) -> None:
+        """Hook into the loop and control; may block briefly (it runs off the event loop)."""
+        ...
+
+    def stop(self) -> None:
+        """Unhook and release what it holds; called once, also when `start` never ran."""
+        ...
+
+
+@runtime_checkable
+class Routed(Protocol):
+    """A surface that also serves routes on the service's port (e.g. rosbridge)."""
+
+    router: Any  # a fastapi.APIRouter, included by the app at creation
+
+
+@runtime_checkable
+class Finishing(Protocol):
+    """A surface that writes files: after `stop`, what it could not finish (the exit status)."""
+
+    def unfinished(self) -> list[str]: ...

@@ -1,0 +1,39 @@
+"""The engine the settings ask for: the one place that maps settings to a `Batch`.
+
+Each engine is imported only when chosen, so that the native engine never loads Warp and Ray is
+imported only for `--ray`.
+"""
+
+from __future__ import annotations
+
+from service.core.batch import Batch
+from service.core.settings import Settings
+
+
+def build_batch(s: Settings) -> Batch:
+    """Native MuJoCo on every core (`--engine mujoco`), or MuJoCo Warp: on Ray actors
+    (`--ray`), split over CPU worker processes when it pays, or one batch."""
+    if s.engine == "mujoco":
+        from service.engines.native import NativeBatch
+
+        return NativeBatch(
+            s.worlds,
+            control_hz=s.control_hz,
+            physics_dt=s.physics_dt,
+            nthread=s.shards,
+            device=s.device,
+        )
+    from service.engines.shards import ShardedBatch, auto_shards
+    from service.engines.warp import WorldBatch
+
+    shards = s.shards or auto_shards(s.worlds, s.device)
+    kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
+    if s.ray:
+        from service.engines import ray_local
+        from service.engines.ray_shards import RayBatch  # imports Ray only when asked for
+
+        with ray_local.starting():  # what Ray starts leaves stopping to us (core/stopping)
+            return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
+    if shards > 1:
+        return ShardedBatch(s.worlds, shards, **kwargs)
+    return WorldBatch(s.worlds, **kwargs)

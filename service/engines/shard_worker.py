@@ -1,0 +1,67 @@
+"""A process shard's worker: the process that holds one block of worlds for ShardedBatch.
+
+It builds a WorldBatch of its worlds, says ready (or why not), then serves the parent's
+requests over a pipe until told to stop or the parent goes. shards.py is the parent's side.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+from multiprocessing.connection import Connection
+from typing import Any
+
+from service.core.stopping import start_worker
+from service.engines.sharding import apply_and_step, apply_rows
+from service.engines.warp import WorldBatch
+
+
+def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
+    """A shard's process: build the batch, then serve step/snapshot/reset/targets requests."""
+    try:
+        batch = WorldBatch(nworld, **kwargs)
+    except Exception as exc:  # report instead of leaving the parent waiting
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        return
+    conn.send(("ready", batch.compile_s, batch.capture_s, batch.capture_error))
+    while True:
+        try:
+            op, *args = conn.recv()
+        except EOFError:  # parent gone
+            return
+        if op == "step":
+            conn.send(apply_and_step(batch, *args))
+        elif op == "get_state":
+            resets, dirty, rows = args  # staged commands are part of the state
+            batch.reset(resets)
+            apply_rows(batch, dirty, rows)
+            conn.send(batch.get_state())
+        elif op == "set_state":
+            try:
+                batch.set_state(args[0])
+                conn.send(None)
+            except ValueError as exc:
+                conn.send(str(exc))
+        elif op == "snapshot":
+            conn.send(batch.snapshot())
+        elif op == "write_qpos":
+            batch.write_qpos(*args)
+        elif op == "qpos":
+            conn.send((batch.qpos(), batch.qvel()))
+        elif op == "stop":
+            return
+
+
+def spawn(nworld: int, kwargs: dict[str, Any]) -> tuple[Any, Connection]:
+    """Start a worker process building `nworld` worlds; its first message says ready or not."""
+    ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
+    parent, child = ctx.Pipe()
+    proc = start_worker(ctx, worker, (child, nworld, kwargs))  # stopping is ours: core/stopping
+    child.close()  # so that a dead worker shows up as EOFError, not a hang
+    return proc, parent
+
+
+def ready_reply(conn: Connection) -> tuple[Any, ...]:
+    try:
+        return conn.recv()
+    except (EOFError, OSError):
+        return ("error", "worker exited while building its shard")

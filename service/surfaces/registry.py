@@ -1,0 +1,111 @@
+"""Which surfaces a service has, and the settings that ask for each: the one list to extend.
+
+Adding a surface is one module (a class with `name`, `start(ctx)` and `stop()`, see
+core/surface.py) plus one entry in `REGISTRY` below, and its options as fields of
+core/settings.py (each an `ARMFLEET_*` variable; an `armfleet serve` option is one `_opt` line
+in cli.py). The registry builds them in order, each builder
+seeing the surfaces built before it (rosbridge reports the DDS bridge's topics); the runtime
+starts them in that order once the loop runs and stops them in reverse. A builder imports its
+surface only when the settings ask for it, so an unused surface costs nothing (no DDS, no
+Foxglove SDK).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import Any, TypeVar
+
+from service.core.settings import Settings
+from service.core.surface import Routed, Surface, SurfaceContext
+
+log = logging.getLogger("armfleet")
+S = TypeVar("S")
+
+Builder = Callable[[Settings, Mapping[str, Surface]], Surface | None]
+
+
+def _recordings(s: Settings, built: Mapping[str, Surface]) -> Surface:
+    from service.surfaces.recordings import Recordings
+
+    return Recordings(s)  # always: `--record` and POST /v1/recordings both go through it
+
+
+def _foxglove(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
+    if not s.foxglove:
+        return None
+    from service.surfaces.foxglove_live import FoxgloveLive
+
+    # Foxglove's protocol cannot carry the token: where writes need one, it is a viewer only.
+    writes = s.token is None
+    return FoxgloveLive(
+        s.host, s.foxglove_port, s.foxglove_worlds, s.foxglove_rate, commands=writes
+    )
+
+
+def _ros2(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
+    if not s.ros2:
+        return None
+    from service.surfaces.ros.dds import DdsBridge
+
+    return DdsBridge(s.ros2_rate, s.ros2_worlds, s.ros2_network)
+
+
+def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
+    from service.surfaces.ros.dds import DdsBridge
+    from service.surfaces.ros.rosbridge_surface import RosbridgeSurface
+
+    dds = built.get("ros2")
+    return RosbridgeSurface(s, dds if isinstance(dds, DdsBridge) else None)  # always on
+
+
+# (name, builder), in start order. The names are the surfaces' `name`s.
+REGISTRY: tuple[tuple[str, Builder], ...] = (
+    ("recordings", _recordings),
+    ("foxglove", _foxglove),
+    ("ros2", _ros2),
+    ("rosbridge", _rosbridge),
+)
+
+
+class SurfaceSet:
+    """The surfaces of one service, in start order."""
+
+    def __init__(self, surfaces: Sequence[Surface]) -> None:
+        self._all = tuple(surfaces)
+
+    def __iter__(self) -> Iterator[Surface]:
+        return iter(self._all)
+
+    def of(self, kind: type[S]) -> S:
+        """The surface of that class (routes of the HTTP API reach theirs this way)."""
+        for surface in self._all:
+            if isinstance(surface, kind):
+                return surface
+        raise LookupError(f"no {kind.__name__} surface in this service")
+
+    def routers(self) -> list[Any]:
+        """The routers of the surfaces that serve routes on the service's port."""
+        return [s.router for s in self._all if isinstance(s, Routed)]
+
+    def start(self, ctx: SurfaceContext) -> None:
+        for surface in self._all:
+            surface.start(ctx)
+
+    def stop(self) -> None:
+        """Stop every surface, last started first; one failing does not keep the rest up."""
+        for surface in reversed(self._all):
+            try:
+                surface.stop()
+            except Exception:
+                log.exception("surface %s failed to stop", surface.name)
+
+
+def build_surfaces(settings: Settings) -> SurfaceSet:
+    """The surfaces the settings ask for (ValueError where their options are invalid)."""
+    built: dict[str, Surface] = {}
+    for name, build in REGISTRY:
+        surface = build(settings, built)
+        if surface is not None:
+            built[name] = surface
+    return SurfaceSet(list(built.values()))

@@ -1,0 +1,103 @@
+"""rosbridge as a surface: its socket on the service's port (`/` and `/rosbridge`) and
+`GET /v1/ros`, the ROS status of both ROS surfaces (DDS and rosbridge).
+
+The protocol itself (one client's ops, services and outbox) is rosbridge.py; this module owns
+what one service shares: the topic map from the settings, the counters, and the read loop that
+feeds a session until its client goes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from typing import TYPE_CHECKING, Any
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+
+from service.core import access
+from service.core.settings import Settings
+from service.core.surface import SurfaceContext
+from service.core.worlds import world_list
+from service.surfaces.ros.rosbridge import RosbridgeServer, Session
+from service.surfaces.ros.topics import TopicMap
+
+if TYPE_CHECKING:
+    from service.surfaces.ros.dds import DdsBridge
+
+_MAX_QUEUED_REPLIES = 256
+_STATUS_DOC = "ROS 2 over DDS and rosbridge: topics, accepted commands, rejected messages by kind."
+
+
+class RosbridgeSurface:
+    """rosbridge v2 for ROS web and script clients, always on; `dds` is the DDS bridge, if any,
+    whose status `GET /v1/ros` reports beside rosbridge's."""
+
+    name = "rosbridge"
+
+    def __init__(self, settings: Settings, dds: DdsBridge | None = None) -> None:
+        worlds = world_list(settings.ros2_worlds, settings.worlds, "ros2_worlds")
+        self.server = RosbridgeServer(TopicMap(worlds), settings.ros2_rate)
+        self.settings = settings
+        self.dds = dds
+        self.ctx: SurfaceContext | None = None
+        self.router = self._routes()
+
+    def start(self, ctx: SurfaceContext) -> None:
+        self.ctx = ctx
+
+    def stop(self) -> None:
+        """Nothing to release: each session ends with its socket."""
+
+    def _routes(self) -> APIRouter:
+        router = APIRouter()
+
+        @router.websocket("/")
+        @router.websocket("/rosbridge")
+        async def rosbridge_socket(ws: WebSocket) -> None:
+            """rosbridge v2 clients (roslibpy, roslib.js): JSON ops in text frames."""
+            await self._serve(ws)
+
+        @router.get("/v1/ros", tags=["ros"], description=_STATUS_DOC)
+        async def ros_status() -> dict[str, Any]:
+            return {
+                "dds": self.dds.status() if self.dds is not None else {"enabled": False},
+                "rosbridge": self.server.status(),
+            }
+
+        return router
+
+    async def _serve(self, ws: WebSocket) -> None:
+        await ws.accept(subprotocol=access.check_websocket(self.settings, ws).subprotocol)
+        ctx = self.ctx
+        if ctx is None or ctx.hub is None:
+            await ws.close(code=1013, reason="simulation is starting")
+            return
+        server = self.server
+        session = Session(ws, server, ctx)
+        server.clients += 1
+        writer = asyncio.create_task(session.write())
+        try:
+            while True:
+                message = await ws.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                while len(session.replies) > _MAX_QUEUED_REPLIES and not writer.done():
+                    await asyncio.sleep(0.005)
+                text = message.get("text")
+                if text is None:
+                    server.bad.report("binary_frame", "(socket)", "a binary frame was sent")
+                    session.status("error", "send JSON as text frames (binary frames are not read)")
+                else:
+                    session.handle_text(text)
+                    if session.over_rate:
+                        await asyncio.sleep(0.2)  # let the writer send the refusal first
+                        await ws.close(code=access.CLOSE_POLICY, reason="over the command rate")
+                        break
+        except (WebSocketDisconnect, RuntimeError):
+            pass
+        finally:
+            server.clients -= 1
+            session.close()
+            writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await writer

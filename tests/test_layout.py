@@ -1,0 +1,102 @@
+"""The code's shape: layers without cycles, small modules, surfaces as plug-ins (issue 16).
+
+The import graph is drawn from the source text (scripts/import_graph.py), TYPE_CHECKING and
+function-level imports included, so an import that runs only on some path still counts.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from service.core.batch import Batch, Restorable, Supervised
+from service.core.settings import Settings
+from service.core.surface import Routed, Surface
+from service.surfaces.registry import REGISTRY, build_surfaces
+
+ROOT = Path(__file__).resolve().parents[1]
+MAX_LINES = 400
+
+
+def _import_graph():
+    spec = importlib.util.spec_from_file_location("import_graph", ROOT / "scripts/import_graph.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_import_graph_has_no_cycles_and_no_upward_imports() -> None:
+    ig = _import_graph()
+    graph = ig.graph()
+    assert "service.core.loop" in graph and "service.surfaces.registry" in graph
+    assert ig.cycles(graph) == []
+    assert ig.upward(graph) == []
+
+
+def test_the_checker_sees_a_cycle_and_an_upward_import() -> None:
+    """The check above could fail: a made-up graph with both faults is caught."""
+    ig = _import_graph()
+    bad = {
+        "service.core.a": {"service.core.b"},
+        "service.core.b": {"service.core.a", "service.surfaces.x"},
+        "service.surfaces.x": set(),
+    }
+    assert ig.cycles(bad) == [["service.core.a", "service.core.b"]]
+    assert ig.upward(bad) == [("service.core.b", "service.surfaces.x")]
+
+
+def test_no_module_over_the_line_limit() -> None:
+    long = {
+        str(p.relative_to(ROOT)): n
+        for folder in ("service", "clients")
+        for p in (ROOT / folder).rglob("*.py")
+        if (n := len(p.read_text().splitlines())) > MAX_LINES
+    }
+    assert long == {}
+
+
+def test_importing_the_contract_and_building_the_app_compile_no_model() -> None:
+    code = (
+        "import service.core.schemas, service.app, service.core.robot as r;"
+        "service.app.create_app();"
+        "print(r.default_spec.cache_info().currsize)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "0"
+
+
+def test_the_registry_builds_what_the_settings_ask_for() -> None:
+    plain = build_surfaces(Settings(worlds=4))
+    assert [s.name for s in plain] == ["recordings", "rosbridge"]  # always there
+    full = build_surfaces(Settings(worlds=4, foxglove=True, ros2=True, ros2_worlds="0-1"))
+    assert [s.name for s in full] == [name for name, _ in REGISTRY]
+    for surface in full:
+        assert isinstance(surface, Surface)
+    # Routes come from the surfaces that have them: rosbridge's socket and GET /v1/ros.
+    assert [s.name for s in full if isinstance(s, Routed)] == ["rosbridge"]
+    assert len(full.routers()) == 1
+
+
+def test_a_bad_world_list_is_refused_before_anything_is_built() -> None:
+    with pytest.raises(ValueError, match="ros2_worlds"):
+        build_surfaces(Settings.model_construct(worlds=4, ros2_worlds="9", ros2_rate=60.0))
+
+
+def test_engines_declare_their_capabilities() -> None:
+    """Optional capabilities are protocols the engine classes take on, checked by isinstance."""
+    from service.engines.native import NativeBatch
+    from service.engines.ray_shards import RayBatch
+    from service.engines.shards import ShardedBatch
+    from service.engines.warp import WorldBatch
+
+    for engine in (WorldBatch, NativeBatch, ShardedBatch, RayBatch):
+        assert Batch in engine.__mro__ and Restorable in engine.__mro__
+    assert Supervised in ShardedBatch.__mro__
+    assert Supervised not in WorldBatch.__mro__
