@@ -21,6 +21,7 @@ from rosbags.typesys import Stores, get_typestore
 from websockets.sync.client import connect
 
 from service.persistence.replay import read_recording, replay_recording
+from service.persistence.replay_check import Tolerance
 
 NWORLD = 8
 TICKS = 600
@@ -123,6 +124,10 @@ def test_replay_reproduces_every_recorded_state_bit_for_bit(recorded, tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
     assert "identical" in r.stdout and f"{recorded['stepped']} ticks" in r.stdout, r.stdout
     assert "1 restores" in r.stdout
+    assert "compared bit for bit (replayed on cpu)" in r.stdout, r.stdout
+    table = r.stdout.split("max |Δposition| rad")[1].splitlines()[1:]
+    assert table[0].split()[:2] == ["1-60", str(60 * NWORLD)], r.stdout  # ticks, states
+    assert {float(x) for row in table if "-" in row for x in row.split()[2:]} == {0.0}
 
     def states(path: Path) -> dict[tuple[str, int], bytes]:
         with open(path, "rb") as f:
@@ -154,6 +159,15 @@ def test_a_changed_command_is_named_at_the_first_tick_world_and_joint_it_changes
     assert (d.tick, d.world) == (tick, world), str(d)  # the first tick stepped with it
     assert d.joint in rec.names and d.recorded != d.replayed
     assert f"tick {tick}, world {world}, joint {d.joint} ({d.quantity})" in str(d)
+    assert report.tolerance is None  # recorded and replayed on the CPU: bit for bit
+
+    # Within a stated tolerance (as off the CPU) the same milliradian passes, and the table shows
+    # where it went: nothing before that tick, the largest deviation in the world it moved.
+    loose = replay_recording(rec, tolerance=Tolerance(position=0.05, velocity=1.0, effort=50.0))
+    assert loose.divergence is None and loose.tolerance is not None
+    first = next(r for r in loose.deviations if r.first <= tick <= r.last)
+    assert all(r.largest["position"] == 0.0 for r in loose.deviations if r.last < tick)
+    assert 0 < first.largest["position"] < 0.05 and first.where[1] == world
 
 
 def test_bad_recording_requests(paused):

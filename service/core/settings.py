@@ -80,7 +80,11 @@ class Settings(BaseSettings):
     save_on_exit: bool = Field(
         True, description="save snapshot `latest` on a clean stop (SIGTERM, Ctrl-C)"
     )
-    record: Path | None = Field(None, description="record to this MCAP file from the start")
+    record: Path | None = Field(
+        None,
+        description="record to this MCAP file from the start (`armfleet replay` reproduces it "
+        "bit for bit on the CPU; on CUDA within a stated tolerance, see its --help)",
+    )
     record_worlds: str | None = Field(
         None, description="worlds whose states are recorded, e.g. 0-7,12 (default: first 8)"
     )

@@ -5,7 +5,8 @@ accepted command with its effective tick, every restore with the restored state,
 some worlds at some ticks. Replay builds a batch of the same model and size, restores the
 starting state into a paused loop, and then, tick by tick, stages the recorded commands through
 the control layer (source `replay`) exactly where they took effect and steps; at every recorded
-tick it compares position, velocity and effort of every recorded world with `==` on float64.
+tick it compares position, velocity and effort of every recorded world: with `==` on float64
+where the replay can be bit-exact, within a stated tolerance elsewhere (`replay_check`).
 The first difference names the tick, world, joint and quantity. Going through the same loop and
 control code as the live service means the same staging rules (resets before targets, the last
 target of a tick wins) apply, instead of a second implementation of them.
@@ -19,7 +20,7 @@ import time
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from mcap.records import Attachment, Channel, Message, Metadata
@@ -43,33 +44,24 @@ from service.persistence.mcap_log import (
 )
 from service.persistence.provenance import batch_header, mismatch
 from service.persistence.recorder import Recorder
+from service.persistence.replay_check import (
+    TOLERANCE,
+    Comparison,
+    DeviationRange,
+    Divergence,
+    Tolerance,
+    bit_exact,
+    table_span,
+)
 from service.persistence.snapshots import decode_state
 
 log = logging.getLogger("armfleet.replay")
 
-_QUANTITIES = ("position", "velocity", "effort")
+__all__ = ["Divergence", "ReplayError", "ReplayReport", "read_recording", "replay"]
 
 
 class ReplayError(RuntimeError):
     """The recording cannot be replayed (unreadable, no metadata, another model, ...)."""
-
-
-@dataclass(frozen=True)
-class Divergence:
-    """The first recorded number the replay did not reproduce exactly."""
-
-    tick: int
-    world: int
-    joint: str
-    quantity: str
-    recorded: float
-    replayed: float
-
-    def __str__(self) -> str:
-        return (
-            f"diverged at tick {self.tick}, world {self.world}, joint {self.joint} "
-            f"({self.quantity}): recorded {self.recorded!r}, replayed {self.replayed!r}"
-        )
 
 
 @dataclass
@@ -111,6 +103,9 @@ class ReplayReport:
     out: str | None
     recorded_on: str = ""
     replayed_on: str = ""
+    tolerance: Tolerance | None = None  # None: compared bit for bit
+    deviations: list[DeviationRange] = field(default_factory=list)  # largest per tick range
+    largest: dict[str, float] = field(default_factory=dict)  # largest over the whole replay
 
     @property
     def ticks_per_s(self) -> float:
@@ -169,17 +164,29 @@ def read_recording(path: Path | str) -> Recording:
     return Recording(str(path), header, segments, names, worlds, rate, truncated)
 
 
+Judgement = Tolerance | Literal["auto", "exact"]
+
+
 def replay(
     path: Path | str,
     out: Path | str | None = None,
     device: str | None = None,
+    tolerance: Judgement = "auto",
 ) -> ReplayReport:
-    """Replay `path` (see the module doc); `out` also writes the replayed run as a recording."""
-    return replay_recording(read_recording(path), out, device)
+    """Replay `path` (see the module doc); `out` also writes the replayed run as a recording.
+
+    tolerance: "auto" compares bit for bit where the replay can be bit-exact (recorded and
+    replayed on the CPU) and within `replay_check.TOLERANCE` elsewhere; "exact" always bit for
+    bit; a Tolerance, within it.
+    """
+    return replay_recording(read_recording(path), out, device, tolerance)
 
 
 def replay_recording(
-    rec: Recording, out: Path | str | None = None, device: str | None = None
+    rec: Recording,
+    out: Path | str | None = None,
+    device: str | None = None,
+    tolerance: Judgement = "auto",
 ) -> ReplayReport:
     """Replay a parsed recording (tests change one on purpose to see divergence named)."""
     from service.engines.warp import WorldBatch
@@ -195,6 +202,16 @@ def replay_recording(
     if why := mismatch(h, batch_header(batch)):
         batch.close()
         raise ReplayError(f"{path}: cannot replay here: {why}")
+    if tolerance == "auto":
+        same = str(h.get("device", "")) == batch.device_name
+        tolerance = "exact" if same and bit_exact(batch.device_name) else TOLERANCE
+    ticks = [t for seg in rec.segments for t in seg.states]
+    first = rec.segments[0].start.tick
+    compare = Comparison(
+        rec.names,
+        None if tolerance == "exact" else tolerance,
+        table_span(first, max(ticks, default=first)),
+    )
     loop = SimLoop(batch, Mode.PAUSED)
     control = Control(loop)
     loop.start()
@@ -206,13 +223,10 @@ def replay_recording(
             recorder = Recorder(out, rec.worlds, rec.rate, block=True)
             recorder.start(_context(loop, control))
         counts = {"ticks": 0, "states": 0, "commands": 0}
-        divergence = None
         for i, seg in enumerate(rec.segments):
             if i:
                 loop.restore(seg.start, "restore").result()
-            divergence = _replay_segment(loop, control, seg, rec, counts)
-            if divergence is not None:
-                break
+            _replay_segment(loop, control, seg, compare, counts)
         wall = time.perf_counter() - t0
     finally:
         if recorder is not None:
@@ -227,11 +241,14 @@ def replay_recording(
         commands=counts["commands"],
         restores=len(rec.segments) - 1,
         wall_s=wall,
-        divergence=divergence,
+        divergence=compare.divergence,
         truncated=rec.truncated,
         out=None if out is None else str(out),
         recorded_on=str(h.get("device", "")),
         replayed_on=batch.device_name,
+        tolerance=compare.tolerance,
+        deviations=compare.rows(),
+        largest=compare.largest(),
     )
 
 
@@ -243,8 +260,10 @@ def _context(loop: SimLoop, control: Control) -> SurfaceContext:
 
 
 def _replay_segment(
-    loop: SimLoop, control: Control, seg: Segment, rec: Recording, counts: dict[str, int]
-) -> Divergence | None:
+    loop: SimLoop, control: Control, seg: Segment, compare: Comparison, counts: dict[str, int]
+) -> None:
+    """Step one segment with its commands, comparing every recorded state (all of them, also
+    after a divergence: the deviation table shows how differences develop)."""
     tick = seg.start.tick
     last = seg.end_tick if seg.end_tick is not None else max([tick, *seg.states, *seg.commands])
     while tick < last:
@@ -259,15 +278,8 @@ def _replay_segment(
             assert snap.tick == tick
             for world, values in sorted(recorded.items()):
                 counts["states"] += 1
-                for quantity, want in zip(_QUANTITIES, values, strict=True):
-                    got = np.asarray(getattr(snap, quantity)[world], dtype=np.float64)
-                    bad = np.flatnonzero(got != want)
-                    if bad.size:
-                        j = int(bad[0])
-                        return Divergence(
-                            tick, world, rec.names[j], quantity, float(want[j]), float(got[j])
-                        )
-    return None
+                got = (snap.position[world], snap.velocity[world], snap.effort[world])
+                compare.check(tick, world, values, got)
 
 
 def _apply(control: Control, cmd: dict[str, Any]) -> None:
