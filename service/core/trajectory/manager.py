@@ -84,11 +84,19 @@ class TrajectoryManager:
 
     # -- the API (any thread) ---------------------------------------------------------------
 
-    def start(self, worlds: Sequence[int], spec: JointTrajectorySpec, source: str) -> list[Started]:
+    def start(
+        self,
+        worlds: Sequence[int],
+        spec: JointTrajectorySpec,
+        source: str,
+        dispatch: bool = True,
+    ) -> list[Started]:
         """Run `spec` on every world of `worlds` (valid ids) from the same tick.
 
         Each starts from its world's current target (and velocity feed-forward, when a running
-        trajectory is preempted, which is then aborted with reason `preempted`).
+        trajectory is preempted, which is then aborted with reason `preempted`). `dispatch`:
+        tell the preempted ones' listeners now (False: the caller calls `dispatch` later,
+        e.g. after releasing a lock of its own).
         """
         ids = np.asarray(worlds, dtype=np.int64)
         out: list[Started] = []
@@ -101,15 +109,17 @@ class TrajectoryManager:
                 self._runs[traj_id] = _Run(traj_id, w, spec, source, st.tick, end, status)
                 self._by_world[w] = traj_id
                 out.append(Started(traj_id, w, st.tick, end))
-        self.dispatch()
+        if dispatch:
+            self.dispatch()
         return out
 
-    def cancel(self, worlds: Sequence[int]) -> list[TrajectoryStatus]:
+    def cancel(self, worlds: Sequence[int], dispatch: bool = True) -> list[TrajectoryStatus]:
         """Stop the running trajectories of `worlds` and hold; the statuses of those stopped."""
         ids = np.asarray(worlds, dtype=np.int64)
         with self.loop.staging(ids) as st:
             stopped = self._abort(st, ids, AbortReason.CANCELLED, "cancelled by request")
-        self.dispatch()
+        if dispatch:
+            self.dispatch()
         return [r.status for r in stopped]
 
     def status(self, world: int) -> TrajectoryStatus | None:
