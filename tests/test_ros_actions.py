@@ -290,7 +290,13 @@ def test_gripper_closes_on_the_cube_stalled_and_opens(ur_server: Server, ur_peer
             action, GRIPPER, "get_result", {"goal_id": {"uuid": goal_id}}, timeout=30
         )
 
+    feedback = f"{action}/_action/feedback"
+    ur_peer.ask(op="all", topic=feedback, type=f"{GRIPPER}_FeedbackMessage")
     closed = close(0.7)
+    moving = ur_peer.ask(op="all", topic=feedback, type=f"{GRIPPER}_FeedbackMessage")
+    positions = [m["feedback"]["position"] for m in moving]
+    assert len(positions) >= 3 and positions[0] < positions[-1]  # closing, fed back at 20 Hz
+    assert abs(positions[-1] - closed["result"]["position"]) < 0.01
     assert closed["status"] == SUCCEEDED
     assert closed["result"]["stalled"] is True and closed["result"]["reached_goal"] is False
     assert 0.40 < closed["result"]["position"] < 0.50  # stopped by the 5 cm cube (0.449 rad)
