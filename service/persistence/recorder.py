@@ -42,6 +42,7 @@ from service.persistence.storage import GuardedWriter, cannot_write, describe, o
 if TYPE_CHECKING:
     from service.core.control import Accepted
     from service.core.surface import SurfaceContext
+    from service.core.trajectory.status import Resumable
 
 log = logging.getLogger("armfleet.recorder")
 
@@ -129,12 +130,14 @@ class Recorder:
         control.add_listener(self._on_command)
         loop.add_restore_listener(self._on_restore)
         try:
-            state = loop.request_state().result(timeout=60)
+            # The state and the trajectories running in it, at one tick boundary.
+            taken = loop.call(lambda b: (b.get_state(), control.trajectories.running()))
+            state, running = taken.result(timeout=60)
         except BaseException:
             self._give_up()
             raise
         try:
-            out = self._begin(state)
+            out = self._begin(state, running)
         except Exception as exc:
             error = cannot_write("recording", self.path, exc)
             self._fail(error.detail)
@@ -266,8 +269,9 @@ class Recorder:
         finally:
             self._close()
 
-    def _begin(self, state: BatchState) -> McapLog:
-        """The file's header, metadata and starting state, written through to the file now."""
+    def _begin(self, state: BatchState, running: list[Resumable]) -> McapLog:
+        """The file's header, metadata, starting state and the trajectories running in it
+        (replay puts them back before its first tick), written through to the file now."""
         assert self._worlds is not None and self._file is not None
         out = McapLog(self._file, self._header, self._names)
         attachment = out.attach_state(state.tick, encode_state(state, self._header, "start"))
@@ -283,6 +287,10 @@ class Recorder:
             }
         )
         out.json(STATUS, time.time_ns(), {"event": "start", "tick": state.tick})
+        for run in running:
+            resume = {"source": "recording", "kind": "trajectory_resume", "worlds": [run.world]}
+            resume |= {"targets": [run.target], "tick": state.tick + 1, "mode": None}
+            out.json(COMMANDS, time.time_ns(), {**resume, "trajectory": run.as_json()})
         self._file.flush()
         return out
 

@@ -33,7 +33,14 @@ import numpy as np
 from service.core.loop import SimLoop
 from service.core.staging import Override, Staging
 from service.core.trajectory.spec import JointTrajectorySpec
-from service.core.trajectory.status import AbortReason, Started, TrajectoryState, TrajectoryStatus
+from service.core.trajectory.status import (
+    AbortReason,
+    Resumable,
+    Started,
+    TrajectoryState,
+    TrajectoryStatus,
+    tolerance_detail,
+)
 from service.core.trajectory.table import TrajectoryTable
 from service.core.types import Snapshot
 
@@ -99,18 +106,53 @@ class TrajectoryManager:
         e.g. after releasing a lock of its own).
         """
         ids = np.asarray(worlds, dtype=np.int64)
-        out: list[Started] = []
         with self.loop.staging(ids) as st:
-            self._abort(st, ids, AbortReason.PREEMPTED, "a newer trajectory replaced it")
-            traj_ids = np.array([next(self._ids) for _ in range(len(ids))], dtype=np.int64)
-            end = self.table.add(traj_ids, ids, spec, st.tick, st.pending[ids], st.velocity[ids])
-            for traj_id, w in zip(traj_ids.tolist(), ids.tolist(), strict=True):
-                status = self._initial_status(traj_id, w, spec, source, st.tick, end)
-                self._runs[traj_id] = _Run(traj_id, w, spec, source, st.tick, end, status)
-                self._by_world[w] = traj_id
-                out.append(Started(traj_id, w, st.tick, end))
+            out = self._install(st, ids, spec, source, st.tick, st.pending[ids], st.velocity[ids])
         if dispatch:
             self.dispatch()
+        return out
+
+    def resume(self, run: Resumable, source: str) -> tuple[Started, int]:
+        """Put back a trajectory that was running when a state was saved (recordings: the
+        replay installs what ran at its start tick), sampled exactly as it was from then on.
+        Returns it and the tick it is sampled again from."""
+        world = np.array([run.world], dtype=np.int64)
+        with self.loop.staging(world) as st:
+            pos, vel = np.array([run.target]), np.array([run.velocity])
+            (started,) = self._install(st, world, run.spec, source, run.start_tick, pos, vel)
+        return started, st.tick  # a preempted one is told at the next `dispatch`
+
+    def running(self) -> list[Resumable]:
+        """What `resume` needs to put back every running trajectory (take it at a boundary)."""
+        with self.loop.staging() as _:
+            t = self.table
+            return [
+                Resumable(int(w), self._runs[i].spec, int(s), p.tolist(), v.tolist())
+                for w, i, s, p, v in zip(
+                    t.worlds, t.ids.tolist(), t.start_tick, *t.start_rows(), strict=True
+                )
+            ]
+
+    def _install(
+        self,
+        st: Staging,
+        ids: np.ndarray,
+        spec: JointTrajectorySpec,
+        source: str,
+        start_tick: int,
+        start_pos: np.ndarray,
+        start_vel: np.ndarray,
+    ) -> list[Started]:
+        """Preempt what runs on `ids`, then add one slot each (lock held)."""
+        self._abort(st, ids, AbortReason.PREEMPTED, "a newer trajectory replaced it")
+        traj_ids = np.array([next(self._ids) for _ in range(len(ids))], dtype=np.int64)
+        end = self.table.add(traj_ids, ids, spec, start_tick, start_pos, start_vel)
+        out = []
+        for traj_id, w in zip(traj_ids.tolist(), ids.tolist(), strict=True):
+            status = TrajectoryStatus.started(traj_id, w, spec, source, start_tick, end)
+            self._runs[traj_id] = _Run(traj_id, w, spec, source, start_tick, end, status)
+            self._by_world[w] = traj_id
+            out.append(Started(traj_id, w, start_tick, end))
         return out
 
     def cancel(self, worlds: Sequence[int], dispatch: bool = True) -> list[TrajectoryStatus]:
@@ -165,9 +207,6 @@ class TrajectoryManager:
                 elif (run := self._finished.get(self._by_world[w])) is not None:
                     out[str(w)] = run.status.brief()
         return out
-
-    def running_worlds(self) -> np.ndarray:
-        return self.table.worlds.copy()
 
     def wait(self, traj_id: int) -> concurrent.futures.Future[TrajectoryStatus]:
         """A future that gets the trajectory's final status (at once if it has finished)."""
@@ -249,7 +288,7 @@ class TrajectoryManager:
         path = AbortReason.PATH_TOLERANCE, path_tol, "path"
         goal = AbortReason.GOAL_TOLERANCE, goal_tol, "goal"
         aborts = [
-            (int(worlds[i]), why, _detail(names, i, err, tol, kind))
+            (int(worlds[i]), why, tolerance_detail(names, err[i], tol[i], kind))
             for bad, (why, tol, kind) in ((path_bad.any(axis=(1, 2)), path), (late, goal))
             for i in np.flatnonzero(bad)
         ]
@@ -277,29 +316,6 @@ class TrajectoryManager:
                         log.exception("trajectory listener %r failed", listener)
 
     # -- internals (lock held) --------------------------------------------------------------
-
-    def _initial_status(
-        self, traj_id: int, world: int, spec: JointTrajectorySpec, source: str, start: int, end: int
-    ) -> TrajectoryStatus:
-        return TrajectoryStatus(
-            id=traj_id,
-            world=world,
-            source=str(source),
-            state=TrajectoryState.RUNNING,
-            reason=None,
-            detail="",
-            joint_names=list(spec.joint_names),
-            start_tick=start,
-            end_tick=end,
-            duration=spec.duration,
-            tick=start - 1,
-            progress=0.0,
-            feedback_tick=None,
-            desired=[],
-            actual=[],
-            error=[],
-            finished_tick=None,
-        )
 
     def _progress(self, start_tick: int, duration: float) -> tuple[int, float]:
         """(last tick sampled, elapsed / duration in 0..1) of a run that started then."""
@@ -380,13 +396,3 @@ class TrajectoryManager:
                 del self._by_world[old.world]
         self._done.extend(done)
         return done
-
-
-def _detail(names: list[str], slot: int, err: np.ndarray, tol: np.ndarray, kind: str) -> str:
-    """Which joint broke which tolerance, by how much (the first one found)."""
-    q, j = (int(x) for x in np.argwhere(err[slot] > tol[slot])[0])
-    what, unit = ("position", "rad") if q == 0 else ("velocity", "rad/s")
-    return (
-        f"{names[j]}: {kind} tolerance on {what} exceeded "
-        f"(error {err[slot, q, j]:.4g} {unit}, tolerance {tol[slot, q, j]:g})"
-    )
