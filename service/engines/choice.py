@@ -31,7 +31,9 @@ def build_batch(s: Settings) -> Batch:
     if s.ray:
         from service.engines.ray_shards import RayBatch  # imports Ray only when asked for
 
-        return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
+        return RayBatch(
+            s.worlds, s.shards, address=s.ray, checkpoint_s=s.ray_checkpoint_s, **kwargs
+        )
     if shards > 1:
         return ShardedBatch(s.worlds, shards, **kwargs)
     return WorldBatch(s.worlds, **kwargs)
