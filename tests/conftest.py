@@ -113,8 +113,9 @@ def ur_domain() -> int:
 
 @pytest.fixture(scope="module")
 def ur_server(tmp_path_factory: pytest.TempPathFactory, ur_domain: int) -> Iterator[Server]:
-    """`serve --ros2` with 2 worlds, world 1 also under /world_1."""
-    extra = ("--ros2", "--ros2-worlds", "1", "--ros2-rate", "30")
+    """`serve --ros2` with 2 worlds, world 1 also under /world_1. The native MuJoCo engine:
+    the ROS layer is the same on both, and it starts in seconds (Warp's kernels take ~15 s)."""
+    extra = ("--ros2", "--ros2-worlds", "1", "--ros2-rate", "30", "--engine", "mujoco")
     env = {"ROS_DOMAIN_ID": str(ur_domain)}
     with serve(worlds=2, extra_args=extra, env=env, log_dir=tmp_path_factory.mktemp("ur")) as s:
         yield s

@@ -27,8 +27,10 @@ GRIPPER = "control_msgs/action/GripperCommand"
 SCALED = "/world_1/scaled_joint_trajectory_controller/follow_joint_trajectory"
 ARM = JOINTS[:6]
 HOME_ARM = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
-# pinch point (between the pads) at the cube's centre, tool pointing down (IK of the model)
-AT_CUBE = [-0.0003, -1.5092, 1.8715, -1.9323, -1.57, -0.0003]
+# the pinch point (between the pads) 10 cm above the cube's centre and 1.5 cm above it (the
+# pads then clear the table), tool pointing down (IK of the model)
+ABOVE_CUBE = [-0.0003, -1.5543, 1.7367, -1.7524, -1.57, -0.0003]
+AT_CUBE = [-0.0003, -1.5179, 1.8529, -1.905, -1.57, -0.0003]
 SUCCEEDED, CANCELED, ABORTED = 4, 5, 6
 
 
@@ -194,6 +196,8 @@ def test_follow_joint_trajectory_goal_feedback_result_status(
     )
     mine = [s for s in status["status_list"] if s["goal_info"]["goal_id"]["uuid"] == goal_id]
     assert [s["status"] for s in mine] == [SUCCEEDED]
+    actions = httpx.get(f"{ur_server.url}/v1/ros").json()["dds"]["actions"]
+    assert actions[SCALED] == FJT and len(actions) == 6  # 3 actions × (root, /world_1)
 
 
 @pytest.mark.parametrize(
@@ -267,10 +271,14 @@ def test_gripper_closes_on_the_cube_stalled_and_opens(ur_server: Server, ur_peer
     httpx.post(f"{ur_server.url}/v1/worlds/0/reset").raise_for_status()
     arm = "/scaled_joint_trajectory_controller/follow_joint_trajectory"
     down = _uuid()
-    ur_peer.call(
-        arm, FJT, "send_goal", {"goal_id": {"uuid": down}, "goal": _goal([(1.5, AT_CUBE)])}
-    )
-    assert ur_peer.call(arm, FJT, "get_result", {"goal_id": {"uuid": down}})["status"] == SUCCEEDED
+    # with goal tolerances SUCCEEDED means the arm is there, not only that the trajectory ended
+    # (the servos lag it by a few hundredths of a second)
+    at_cube = _goal([(1.5, ABOVE_CUBE), (2.5, AT_CUBE)])  # down from above: the cube stays put
+    at_cube["goal_tolerance"] = [{"name": n, "position": 0.002, "velocity": 0.01} for n in ARM]
+    at_cube["goal_time_tolerance"] = {"sec": 3, "nanosec": 0}
+    ur_peer.call(arm, FJT, "send_goal", {"goal_id": {"uuid": down}, "goal": at_cube})
+    result = ur_peer.call(arm, FJT, "get_result", {"goal_id": {"uuid": down}})
+    assert result["status"] == SUCCEEDED, result
 
     def close(position: float) -> dict[str, Any]:
         goal_id = _uuid()
@@ -282,10 +290,16 @@ def test_gripper_closes_on_the_cube_stalled_and_opens(ur_server: Server, ur_peer
             action, GRIPPER, "get_result", {"goal_id": {"uuid": goal_id}}, timeout=30
         )
 
+    feedback = f"{action}/_action/feedback"
+    ur_peer.ask(op="all", topic=feedback, type=f"{GRIPPER}_FeedbackMessage")
     closed = close(0.7)
+    moving = ur_peer.ask(op="all", topic=feedback, type=f"{GRIPPER}_FeedbackMessage")
+    positions = [m["feedback"]["position"] for m in moving]
+    assert len(positions) >= 3 and positions[0] < positions[-1]  # closing, fed back at 20 Hz
+    assert abs(positions[-1] - closed["result"]["position"]) < 0.01
     assert closed["status"] == SUCCEEDED
     assert closed["result"]["stalled"] is True and closed["result"]["reached_goal"] is False
-    assert 0.1 < closed["result"]["position"] < 0.65  # stopped by the cube
+    assert 0.40 < closed["result"]["position"] < 0.50  # stopped by the 5 cm cube (0.449 rad)
     opened = close(0.0)
     assert opened["status"] == SUCCEEDED
     assert opened["result"]["reached_goal"] is True and opened["result"]["stalled"] is False

@@ -28,7 +28,8 @@ ARM = JOINTS[:6]
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     log_dir = tmp_path_factory.mktemp("rosbridge_actions")
-    with serve(worlds=2, extra_args=("--ros2-worlds", "1"), log_dir=log_dir) as srv:
+    extra = ("--ros2-worlds", "1", "--engine", "mujoco")  # starts in seconds
+    with serve(worlds=2, extra_args=extra, log_dir=log_dir) as srv:
         yield srv
 
 

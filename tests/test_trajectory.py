@@ -263,10 +263,12 @@ def test_a_2s_three_point_trajectory_tracks_within_0_05_rad_and_settles(sim):
 
 def test_manual_command_stops_the_trajectory_and_holds(sim):
     loop, control = sim
-    control.start_trajectory([0], three_points(), Source.HTTP)
+    started = control.start_trajectory([0], three_points(), Source.HTTP)[0]
     stepped(30, loop)
+    outcome = control.trajectories.wait(started.id)
     held = loop.pending_targets(0)
     result = control.increment(0, {"elbow_joint": 0.1}, Source.BROWSER)
+    assert outcome.done()  # told at once, though no tick has run since (paused)
     status = control.trajectories.status(0)
     assert status.state is TrajectoryState.ABORTED
     assert status.reason is AbortReason.MANUAL_OVERRIDE

@@ -9,10 +9,11 @@ the recorder) with its source, kind, worlds, resulting targets and effective tic
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import logging
 import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -105,6 +106,14 @@ class Control:
     def remove_listener(self, listener: Listener) -> None:
         self._listeners = tuple(x for x in self._listeners if x is not listener)
 
+    @contextlib.contextmanager
+    def _ordered(self) -> Iterator[None]:
+        """Stage and announce under the order lock; then, with no lock held, tell trajectory
+        listeners and waiters about trajectories the command stopped (override, reset, ...)."""
+        with self._order:
+            yield
+        self.trajectories.dispatch()
+
     def _announce(self, accepted: Accepted) -> None:
         for listener in self._listeners:
             try:
@@ -144,7 +153,7 @@ class Control:
         """Add to the named joints' latest targets (the seed's Up/Down), clamped to range."""
         world = self.world(world)
         values = resolve_joints(self.spec, deltas, field)
-        with self._order:
+        with self._ordered():
             result = self.loop.increment(world, values)
             self._announce_result("increment", source, result)
         return result
@@ -167,7 +176,7 @@ class Control:
         if len(set(name)) != len(name):
             raise BadCommand("name", "a joint may be named only once")
         values = resolve_joints(self.spec, dict(zip(name, position, strict=True)), "name")
-        with self._order:
+        with self._ordered():
             result = self.loop.stage_targets(world, values)
             self._announce_result("set_targets", source, result)
         return result
@@ -193,7 +202,7 @@ class Control:
             )
         if not np.isfinite(rows).all():
             raise BadCommand("position", "values must be finite (no NaN or Inf)")
-        with self._order:
+        with self._ordered():
             results = self.loop.set_many(ids, rows)
             if results:
                 self._announce(
@@ -211,7 +220,7 @@ class Control:
         """Send worlds (all when None) back to `home`, state and targets."""
         ids = list(range(self.nworld)) if worlds is None else self.worlds(worlds)
         targets = np.tile(self.loop.batch.home_target, (len(ids), 1))
-        with self._order:
+        with self._ordered():
             tick = self.loop.reset(ids)
             self._announce(Accepted(source, "reset", np.array(ids, dtype=np.int64), targets, tick))
         return ResetResult(ids, tick, targets)
@@ -230,8 +239,8 @@ class Control:
     ) -> list[Started]:
         """Run a validated trajectory on every world of `worlds` from one tick (see trajectory)."""
         ids = self.worlds(worlds)
-        with self._order:
-            started = self.trajectories.start(ids, spec, source)
+        with self._ordered():
+            started = self.trajectories.start(ids, spec, source, dispatch=False)
             if started and self._listeners:
                 rows = self.loop.pending_targets(np.array(ids))
                 tick = started[0].start_tick
@@ -242,8 +251,8 @@ class Control:
     def cancel_trajectory(self, worlds: Sequence[int], source: Source) -> list[TrajectoryStatus]:
         """Stop the worlds' running trajectories; they hold where they were. Those stopped."""
         ids = self.worlds(worlds)
-        with self._order:
-            stopped = self.trajectories.cancel(ids)
+        with self._ordered():
+            stopped = self.trajectories.cancel(ids, dispatch=False)
             if stopped and self._listeners:
                 w = np.array([s.world for s in stopped], dtype=np.int64)
                 tick = int(stopped[0].finished_tick or 0) + 1  # the hold starts here

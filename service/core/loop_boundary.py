@@ -105,6 +105,8 @@ class TickBoundary:
                 listener(tick_before, state, name)
             except Exception:
                 log.exception("restore listener %r failed", listener)
+        if self._traj is not None:  # the trajectories the restore stopped, told now
+            self._traj.dispatch()
         self._publish(time.monotonic())
         with self._lock:  # readers waiting for a tick of the old timeline get the restored state
             readers, self._snapshot_waiters = self._snapshot_waiters, []

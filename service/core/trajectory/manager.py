@@ -84,11 +84,19 @@ class TrajectoryManager:
 
     # -- the API (any thread) ---------------------------------------------------------------
 
-    def start(self, worlds: Sequence[int], spec: JointTrajectorySpec, source: str) -> list[Started]:
+    def start(
+        self,
+        worlds: Sequence[int],
+        spec: JointTrajectorySpec,
+        source: str,
+        dispatch: bool = True,
+    ) -> list[Started]:
         """Run `spec` on every world of `worlds` (valid ids) from the same tick.
 
         Each starts from its world's current target (and velocity feed-forward, when a running
-        trajectory is preempted, which is then aborted with reason `preempted`).
+        trajectory is preempted, which is then aborted with reason `preempted`). `dispatch`:
+        tell the preempted ones' listeners now (False: the caller calls `dispatch` later,
+        e.g. after releasing a lock of its own).
         """
         ids = np.asarray(worlds, dtype=np.int64)
         out: list[Started] = []
@@ -101,15 +109,17 @@ class TrajectoryManager:
                 self._runs[traj_id] = _Run(traj_id, w, spec, source, st.tick, end, status)
                 self._by_world[w] = traj_id
                 out.append(Started(traj_id, w, st.tick, end))
-        self.dispatch()
+        if dispatch:
+            self.dispatch()
         return out
 
-    def cancel(self, worlds: Sequence[int]) -> list[TrajectoryStatus]:
+    def cancel(self, worlds: Sequence[int], dispatch: bool = True) -> list[TrajectoryStatus]:
         """Stop the running trajectories of `worlds` and hold; the statuses of those stopped."""
         ids = np.asarray(worlds, dtype=np.int64)
         with self.loop.staging(ids) as st:
             stopped = self._abort(st, ids, AbortReason.CANCELLED, "cancelled by request")
-        self.dispatch()
+        if dispatch:
+            self.dispatch()
         return [r.status for r in stopped]
 
     def status(self, world: int) -> TrajectoryStatus | None:
@@ -217,27 +227,33 @@ class TrajectoryManager:
         return bool(t.has_path.any() or (tick >= t.end_tick).any())
 
     def observe(self, snap: Snapshot, st: Staging) -> None:
-        """Feedback and tolerance checks against the snapshot of the tick last sampled."""
-        t = self.table
-        if not len(t) or snap.tick != self._last_tick or len(self._last) != len(t):
+        """Feedback and tolerance checks against the snapshot of the tick last sampled.
+
+        Only the slots that tick sampled are judged (the first len(_last): slots are appended
+        at the end and removed from both), so a trajectory started meanwhile never shifts
+        the check by a tick: the outcome is the same live and in a replay."""
+        t, n = self.table, len(self._last)
+        if not n or snap.tick != self._last_tick:
             return
-        actual, vel = snap.position[t.worlds], snap.velocity[t.worlds]
+        worlds, ids = t.worlds[:n], t.ids[:n]
+        path_tol, goal_tol = t.path_tol[:n], t.goal_tol[:n]
+        actual, vel = snap.position[worlds], snap.velocity[worlds]
         err = np.abs(np.stack([actual - self._last, vel - self._last_vel], axis=1))
-        self._feedback = (snap.tick, t.ids.copy(), self._last.copy(), actual.astype(np.float64))
-        running = snap.tick < t.end_tick
-        path_bad = running[:, None, None] & (err > t.path_tol)
-        goal_in = (err <= t.goal_tol).all(axis=(1, 2))  # all true without a goal tolerance
+        self._feedback = (snap.tick, ids.copy(), self._last.copy(), actual.astype(np.float64))
+        running = snap.tick < t.end_tick[:n]
+        path_bad = running[:, None, None] & (err > path_tol)
+        goal_in = (err <= goal_tol).all(axis=(1, 2))  # all true without a goal tolerance
         settling = ~running
-        late = settling & t.has_goal & ~goal_in & (snap.tick >= t.goal_deadline)
+        late = settling & t.has_goal[:n] & ~goal_in & (snap.tick >= t.goal_deadline[:n])
         names = self.spec.names
-        path = AbortReason.PATH_TOLERANCE, t.path_tol, "path"
-        goal = AbortReason.GOAL_TOLERANCE, t.goal_tol, "goal"
+        path = AbortReason.PATH_TOLERANCE, path_tol, "path"
+        goal = AbortReason.GOAL_TOLERANCE, goal_tol, "goal"
         aborts = [
-            (int(t.worlds[i]), why, _detail(names, i, err, tol, kind))
+            (int(worlds[i]), why, _detail(names, i, err, tol, kind))
             for bad, (why, tol, kind) in ((path_bad.any(axis=(1, 2)), path), (late, goal))
             for i in np.flatnonzero(bad)
         ]
-        self._succeed(st, t.worlds[settling & goal_in], snap.tick)
+        self._succeed(st, worlds[settling & goal_in], snap.tick)
         for world, reason, detail in aborts:
             self._abort(st, np.array([world]), reason, detail)
 
@@ -355,8 +371,8 @@ class TrajectoryManager:
             done.append(run)
         keep = np.ones(len(self.table), dtype=bool)
         keep[slots] = False
-        if len(self._last) == len(keep):
-            self._last, self._last_vel = self._last[keep], self._last_vel[keep]
+        n = len(self._last)  # the slots the last sample covered: the first n (see observe)
+        self._last, self._last_vel = self._last[keep[:n]], self._last_vel[keep[:n]]
         self.table.remove(slots)
         while len(self._finished) > _KEEP_FINISHED:
             old_id, old = self._finished.popitem(last=False)
