@@ -85,8 +85,12 @@ def test_a_signal_to_the_process_group_saves_latest_and_finishes_the_recording(
         assert served["tick"] == state.tick and served["target"][ELBOW] == TARGET
 
 
-def test_a_second_signal_quits_at_once(tmp_path):
-    """Stopping waits for a recording whose FIFO nobody drains; the second Ctrl-C does not."""
+def test_a_stuck_fifo_fails_the_recording_not_the_loop_and_a_second_signal_quits_at_once(
+    tmp_path,
+):
+    """A recording to a FIFO whose reader stopped reading: the write that finds no room fails
+    it within 5 s, with the reason, while the loop goes on; stopping then waits for the writer
+    to give up on its last writes, and the second Ctrl-C does not wait."""
     data = tmp_path / "data"
     fifo = data / "recordings" / "stuck.mcap"
     fifo.parent.mkdir(parents=True)
@@ -95,8 +99,10 @@ def test_a_second_signal_quits_at_once(tmp_path):
     try:
         args = (*CONFIGS["native"], "--data-dir", str(data))
         with serve(worlds=4, extra_args=args, log_dir=tmp_path, own_group=True) as srv:
-            rec = {"name": "stuck", "rate": 60}
-            assert httpx.post(f"{srv.url}/v1/recordings", json=rec).status_code == 201
+            http = httpx.Client(base_url=srv.url, timeout=30)
+            assert (
+                http.post("/v1/recordings", json={"name": "stuck", "rate": 60}).status_code == 201
+            )
 
             def queued() -> int:
                 buf = bytearray(4)
@@ -105,6 +111,15 @@ def test_a_second_signal_quits_at_once(tmp_path):
 
             # The first chunk (256 KB) fills the pipe (64 KB) and the writer waits for room.
             wait_for(lambda: queued() >= 60000, "the FIFO to fill up", timeout=60)
+
+            def failed() -> dict | None:
+                status = http.get("/v1/recordings/current").json()
+                return status if status["error"] else None
+
+            status = wait_for(failed, "the recording to give up", timeout=60)
+            assert not status["active"] and "no data could be written for 5 s" in status["error"]
+            tick = http.get("/v1/worlds/0/state").json()["tick"]
+            wait_for(lambda: http.get("/v1/worlds/0/state").json()["tick"] > tick + 30, "ticks")
             os.killpg(srv.process.pid, signal.SIGINT)
             wait_for(lambda: "SIGINT: stopping" in srv.log(), "the first SIGINT to be taken")
             time.sleep(0.2)  # it is now waiting for the stuck writer (up to 5 s per write)
