@@ -69,6 +69,7 @@ def serve(
     mode: Annotated[Mode | None, _opt("mode")] = None,
     shards: Annotated[int | None, _opt("shards")] = None,
     ray: Annotated[str | None, _opt("ray")] = None,
+    ray_checkpoint_s: Annotated[float | None, _opt("ray_checkpoint_s")] = None,
     control_hz: Annotated[float | None, _opt("control_hz")] = None,
     physics_dt: Annotated[float | None, _opt("physics_dt")] = None,
     log_level: Annotated[str | None, _opt("log_level")] = None,

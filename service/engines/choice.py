@@ -33,7 +33,9 @@ def build_batch(s: Settings) -> Batch:
         from service.engines.ray_shards import RayBatch  # imports Ray only when asked for
 
         with ray_local.starting():  # what Ray starts leaves stopping to us (core/stopping)
-            return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
+            return RayBatch(
+                s.worlds, s.shards, address=s.ray, checkpoint_s=s.ray_checkpoint_s, **kwargs
+            )
     if shards > 1:
         return ShardedBatch(s.worlds, shards, **kwargs)
     return WorldBatch(s.worlds, **kwargs)
