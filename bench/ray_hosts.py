@@ -6,7 +6,7 @@ veth address, token authentication on, a temp dir of its own), and runs `armflee
 HEAD:6379` on the head host. Its HTTP API is reached from a thread that has entered the head's
 namespace (`setns`), so nothing listens outside the namespaces. `kill_host` SIGKILLs every
 process of a host, as losing the machine would. Every process it stops is one it started
-(found by namespace, never by name). Needs root and `ip` (iproute2).
+(found by namespace, never by name). Needs root, `ip` and `ss` (iproute2).
 
 `measure()` (section 22 of `armfleet bench`, or `python -m bench.ray_hosts`): how long until the
 worlds of a lost host step again, rebuilt on the head from their last state copy, and how the
@@ -52,8 +52,8 @@ def why_not() -> str | None:
     """Why two hosts cannot be made here (None: they can)."""
     if os.geteuid() != 0:
         return "two hosts need root to make network namespaces"
-    if not shutil.which("ip"):
-        return "two hosts need `ip` (iproute2)"
+    if not (shutil.which("ip") and shutil.which("ss")):
+        return "two hosts need `ip` and `ss` (iproute2)"
     if not shutil.which(
         "ray", path=os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")])
     ):

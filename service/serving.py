@@ -26,12 +26,17 @@ GOING_AWAY_S = 1.0  # how long closing the streams may hold up the stop
 class _Server(uvicorn.Server):
     """uvicorn.Server whose signals are StopSignals' (see the module's docstring)."""
 
-    def __init__(self, config: uvicorn.Config, before_exit: Callable[[], Awaitable[None]]):
+    def __init__(
+        self,
+        config: uvicorn.Config,
+        before_exit: Callable[[], Awaitable[None]],
+        on_quit: Callable[[], None] | None,
+    ):
         super().__init__(config)
         self._before_exit = before_exit
         self._aio: asyncio.AbstractEventLoop | None = None
         self._going: asyncio.Future[None] | None = None
-        self.signals = StopSignals(self._first_signal)
+        self.signals = StopSignals(self._first_signal, on_quit)
 
     @contextlib.contextmanager
     def capture_signals(self) -> Iterator[None]:
@@ -70,9 +75,11 @@ def serve_until_stopped(app: object, runtime: Runtime, settings: Settings) -> li
         ws_per_message_deflate=settings.ws_compression,
         timeout_graceful_shutdown=3,
     )
-    _Server(config, runtime.going_away).run()
-    if settings.ray == "local":  # a private instance, already saved from: it goes with us
-        from service.engines.ray_local import stop_local_instance
+    if settings.ray == "local":  # a private instance: it goes with us, even on a second signal
+        from service.engines import ray_local
 
-        stop_local_instance()
+        _Server(config, runtime.going_away, ray_local.kill_local_instance).run()
+        ray_local.stop_local_instance()  # the state is saved from it by now
+    else:
+        _Server(config, runtime.going_away, None).run()
     return list(runtime.stop_problems)

@@ -11,6 +11,7 @@ recording that was running is complete and replays bit for bit. A second signal 
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import signal
@@ -18,6 +19,7 @@ import termios
 import time
 
 import httpx
+import psutil
 import pytest
 from conftest import ELBOW, serve, wait_for
 
@@ -41,14 +43,33 @@ CASES = [
 ]
 
 
+def _sessions(pid: int) -> set[int]:
+    """The sessions of a process and all its descendants (Ray puts its own in new ones)."""
+    procs = [psutil.Process(pid), *psutil.Process(pid).children(recursive=True)]
+    return {os.getsid(p.pid) for p in procs} - {os.getsid(0)}
+
+
+def _left_in(sessions: set[int]) -> list[str]:
+    """Live processes still in those sessions (zombies are dead, waiting to be reaped)."""
+    left = []
+    for proc in psutil.process_iter(["name", "status"]):
+        with contextlib.suppress(OSError, psutil.Error):
+            if os.getsid(proc.pid) in sessions and proc.info["status"] != psutil.STATUS_ZOMBIE:
+                left.append(f"{proc.pid} {proc.info['name']}")
+    return left
+
+
 def _clean_exit(srv, sig: int, timeout: float = 120) -> str:
-    """Signal the server's whole group; its log once it exited 0 with nothing lost said."""
+    """Signal the server's whole group; its log once it exited 0 with nothing lost said and
+    none of its processes (shard workers, Ray's) left behind."""
+    sessions = _sessions(srv.process.pid)
     os.killpg(srv.process.pid, sig)
     code = srv.process.wait(timeout=timeout)
     log = srv.log()
     assert code == 0, log[-3000:]
     for word in ("lost", "rebuil", "Traceback", "SIGTERM received"):
         assert word not in log, log[-3000:]
+    wait_for(lambda: not _left_in(sessions), "the service's processes to be gone", timeout=30)
     return log
 
 

@@ -78,11 +78,15 @@ class StopSignals:
 
     `on_first(sig)` is called (in the main thread, between bytecodes) for the first signal and
     should only ask for the stop; a second signal, while stopping takes its time (saving,
-    finishing a recording), writes one line to stderr and ends the process with 128 + signal.
+    finishing a recording), writes one line to stderr, runs `on_quit` (kill what would outlive
+    this process) and ends the process with 128 + signal.
     """
 
-    def __init__(self, on_first: Callable[[int], None]) -> None:
+    def __init__(
+        self, on_first: Callable[[int], None], on_quit: Callable[[], None] | None = None
+    ) -> None:
         self._on_first = on_first
+        self._on_quit = on_quit  # what must not outlive us even then (a private Ray instance)
         self.received: int | None = None
         self._previous: dict[int, object] = {}
 
@@ -112,6 +116,9 @@ class StopSignals:
             self._on_first(sig)
             return
         os.write(2, f"armfleet: second {name}: quitting at once, nothing more is saved\n".encode())
+        if self._on_quit is not None:
+            with contextlib.suppress(Exception):
+                self._on_quit()
         os._exit(128 + sig)
 
 

@@ -73,10 +73,23 @@ def _kill_sessions(sessions: set[int]) -> None:
                 proc.kill()
 
 
+def _own_node() -> Any:
+    """The node of the local instance this process started, or None (none, or not ours)."""
+    node = getattr(ray._private.worker, "_global_node", None)
+    return node if node is not None and node.is_head() else None
+
+
+def kill_local_instance() -> None:
+    """Kill the local instance's processes now, without disconnecting (a second Ctrl-C)."""
+    node = _own_node()
+    if node is not None:
+        _kill_sessions(_sessions(node))
+
+
 def stop_local_instance() -> None:
     """Disconnect from, and kill, the local instance this process started (if it did)."""
-    node = getattr(ray._private.worker, "_global_node", None)
-    if node is None or not node.is_head():
+    node = _own_node()
+    if node is None:
         return  # no instance, or a cluster someone else runs: not ours to stop
     sessions = _sessions(node)
     kill_all = node.kill_all_processes
