@@ -109,7 +109,7 @@ def run_once(batch: Any, start: Any, targets: np.ndarray) -> tuple[np.ndarray, i
     out = np.empty((len(targets), batch.nworld, 21), dtype=np.float32)
     rows = 0
     for t, tgt in enumerate(targets):
-        batch.set_targets(worlds, tgt)
+        batch.apply_targets(worlds, tgt)
         batch.step(1)
         s = batch.snapshot()
         out[t] = np.concatenate([s.position, s.velocity, s.effort], axis=1)

@@ -121,6 +121,7 @@ def serve(
     log_dir: str | os.PathLike[str] | None = None,
     ready_timeout: float = READY_TIMEOUT,
     stop_timeout: float = STOP_TIMEOUT,
+    own_group: bool = False,
 ) -> Iterator[Server]:
     """Start `armfleet serve` on 127.0.0.1, yield it once /readyz answers 200, stop it after.
 
@@ -130,6 +131,9 @@ def serve(
     env: variables added to this process's environment for the server (ARMFLEET_* settings)
     log_dir: where `server-PORT.log` goes (appended to), and `data-PORT/` (the server's
         ARMFLEET_DATA_DIR unless set); None: a temporary folder, removed when it stops
+    own_group: start it in a session and process group of its own, as a shell starts a
+        foreground job: `os.killpg(server.process.pid, signal.SIGINT)` is then what a
+        terminal's Ctrl-C does (every process of the service gets it, workers included)
 
     Raises ServerFailed (with the log) when the server exits or is not ready in time.
     """
@@ -143,7 +147,11 @@ def serve(
         cmd += ["--host", "127.0.0.1", "--port", str(port), "--mode", str(mode), *extra_args]
         with open(log_path, "ab") as log:
             process = subprocess.Popen(
-                cmd, stdout=log, stderr=subprocess.STDOUT, env=_child_env(env, data_dir)
+                cmd,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=_child_env(env, data_dir),
+                start_new_session=own_group,
             )
         stack.callback(stop, process, stop_timeout)
         url = f"http://127.0.0.1:{port}"

@@ -41,6 +41,8 @@ TEST_DEBS = {
     "fastddsgen": "fastddsgen",
     "g++": "g++",
     "/usr/include/fastdds/dds/domain/DomainParticipant.hpp": "libfastrtps-dev",
+    # urdfdom, the C++ URDF parser RViz and robot_state_publisher use (tests/test_ros_ur.py)
+    "check_urdf": "liburdfdom-tools",
 }
 
 

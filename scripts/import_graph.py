@@ -27,11 +27,9 @@ LAYERS: tuple[tuple[str, int], ...] = (
     ("service.engines", 1),
     ("service.persistence", 2),
     ("service.surfaces", 3),
-    # the app: HTTP routes, the runtime that composes everything, the command line
-    ("service.api", 4),
-    ("service.app", 4),
-    ("service.runtime", 4),
-    ("service.cli", 4),
+    # the app: everything else under service/ (api/, app, runtime, serving, cli), so that a
+    # module added at the top is above every layer, never below one
+    ("service", 4),
 )
 
 

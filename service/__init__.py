@@ -7,5 +7,6 @@ never above (scripts/import_graph.py checks it, tests/test_layout.py runs it):
 - engines/      the `Batch` implementations (Warp, native MuJoCo, process shards, Ray)
 - persistence/  snapshots, MCAP recordings, replay
 - surfaces/     ROS 2 over DDS, rosbridge, Foxglove, recordings: plug-ins on core/surface.py
-- api/, app.py, runtime.py, cli.py   the app: HTTP routes, composition, the `armfleet` command
+- api/, app.py, runtime.py, serving.py, cli.py   the app: HTTP routes, composition, the server,
+  the `armfleet` command
 """

@@ -139,7 +139,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         starting = asyncio.create_task(runtime.start())
-        runtime.install_stop_signal()
         yield
         with contextlib.suppress(BaseException):
             await asyncio.wait_for(starting, timeout=120)

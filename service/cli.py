@@ -69,6 +69,7 @@ def serve(
     mode: Annotated[Mode | None, _opt("mode")] = None,
     shards: Annotated[int | None, _opt("shards")] = None,
     ray: Annotated[str | None, _opt("ray")] = None,
+    ray_checkpoint_s: Annotated[float | None, _opt("ray_checkpoint_s")] = None,
     control_hz: Annotated[float | None, _opt("control_hz")] = None,
     physics_dt: Annotated[float | None, _opt("physics_dt")] = None,
     log_level: Annotated[str | None, _opt("log_level")] = None,
@@ -101,31 +102,24 @@ def serve(
     Bound to anything but loopback it needs --token (or ARMFLEET_TOKEN) unless --insecure.
     """
     given = {name: value for name, value in locals().items() if value is not None}
-    import uvicorn
-
     from service.app import create_app
+    from service.core.errors import ArmfleetError
     from service.core.settings import Settings
+    from service.serving import serve_until_stopped
 
     settings = Settings(**given)
     _check_port_free(settings.host, settings.port)
-    level = settings.log_level
-    logging.basicConfig(level=level.upper(), format="%(asctime)s %(name)s %(message)s")
+    logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:
         service = create_app(settings)
-    except ValueError as exc:  # an unsafe bind (service/core/access.py)
+    except (ValueError, ArmfleetError) as exc:  # an unsafe bind, a --record file not writable
         typer.echo(f"armfleet serve: {exc}", err=True)
         raise typer.Exit(2) from None
-    uvicorn.run(
-        service,
-        host=settings.host,
-        port=settings.port,
-        log_level=level,
-        ws_max_size=1 << 20,
-        # Browsers offer permessage-deflate on every socket; deflating binary frames for each
-        # viewer was the largest server cost of many viewers (bench section 9).
-        ws_per_message_deflate=settings.ws_compression,
-        timeout_graceful_shutdown=3,
-    )
+    problems = serve_until_stopped(service, service.state.runtime, settings)
+    for problem in problems:
+        typer.echo(f"armfleet serve: stopped, but {problem}", err=True)
+    if problems:
+        raise typer.Exit(1)
 
 
 @app.command()
@@ -152,6 +146,7 @@ def replay(
     deviation per tick range is printed either way.
     """
     logging.basicConfig(level="WARNING", format="%(asctime)s %(name)s %(message)s")
+    from service.core.errors import ArmfleetError
     from service.persistence.replay import ReplayError
     from service.persistence.replay import replay as run_replay
     from service.persistence.replay_check import Tolerance, format_table
@@ -159,7 +154,7 @@ def replay(
     try:
         judge = tolerance if tolerance in ("auto", "exact") else Tolerance.parse(tolerance)
         report = run_replay(recording, out, device, judge)  # type: ignore[arg-type]
-    except (ReplayError, ValueError) as exc:
+    except (ReplayError, ValueError, ArmfleetError) as exc:  # ArmfleetError: --out unwritable
         typer.echo(f"armfleet replay: {exc}", err=True)
         raise typer.Exit(2) from None
     if report.recorded_on != report.replayed_on:

@@ -9,9 +9,7 @@ Surfaces (ROS 2 bridge, rosbridge, Foxglove server, recordings: surfaces/registr
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
-import signal
 from typing import Any
 
 import orjson
@@ -19,12 +17,13 @@ import orjson
 from service.core.access import ClientSlots
 from service.core.batch import Batch, Supervised
 from service.core.control import Accepted, Control
-from service.core.errors import Conflict, NotFound
+from service.core.errors import ArmfleetError, Conflict, NotFound
 from service.core.hub import StreamHub
 from service.core.loop import SimLoop
 from service.core.metrics import Metrics
 from service.core.settings import Settings
-from service.core.surface import SurfaceContext
+from service.core.stopping import reclaim_stop_signals
+from service.core.surface import Finishing, SurfaceContext
 from service.engines.choice import build_batch
 from service.persistence import provenance
 from service.persistence.snapshots import LATEST, SnapshotStore, check_state_support
@@ -45,7 +44,7 @@ class Runtime:
         self.slots = ClientSlots(settings.max_clients)  # shared by HTTP and every socket surface
         self._problems: list[str] = []
         self._watchdog: asyncio.Task[None] | None = None
-        self._stopping: asyncio.Task[None] | None = None
+        self.stop_problems: list[str] = []  # what `stop` could not save (the exit status)
         self._register_levels()
         self.snapshots = SnapshotStore(settings.data_dir)
         self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
@@ -142,6 +141,7 @@ class Runtime:
             self.error = f"{type(exc).__name__}: {exc}"
             log.exception("engine failed to start")
             return
+        reclaim_stop_signals()  # building may have loaded a library that took them (Ray)
         self.header = provenance.batch_header(batch)
         if s.restore and not await asyncio.to_thread(self._restore_at_start, batch, s.restore):
             batch.close()
@@ -175,29 +175,11 @@ class Runtime:
             "" if batch.captured else f" (NOT captured: {batch.capture_error})",
         )
 
-    def install_stop_signal(self) -> None:
-        """SIGTERM: close every stream with 1001 (going away) first, then stop as usual.
-
-        The server's own handler would close sockets with 1012; ours runs first and then hands
-        over to it, so that clients learn the service is going away rather than restarting.
-        """
-        aio = asyncio.get_running_loop()
-        previous = signal.getsignal(signal.SIGTERM)
-
-        async def going_away() -> None:
-            if self.hub is not None:
-                with contextlib.suppress(Exception):
-                    await asyncio.wait_for(self.hub.close_all(1001, "service stopping"), 1.0)
-            if callable(previous):
-                previous(signal.SIGTERM, None)
-            else:
-                signal.raise_signal(signal.SIGINT)
-
-        def on_term() -> None:
-            self._stopping = aio.create_task(going_away())
-
-        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
-            aio.add_signal_handler(signal.SIGTERM, on_term)
+    async def going_away(self) -> None:
+        """Close every stream with 1001 (going away) before the server stops: clients learn
+        that the service is stopping rather than restarting (uvicorn's own close says 1012)."""
+        if self.hub is not None:
+            await self.hub.close_all(1001, "service stopping")
 
     def _restore_at_start(self, batch: Batch, name: str) -> bool:
         """`--restore NAME` before the loop starts; False (and `error` set) if it cannot be.
@@ -222,9 +204,17 @@ class Runtime:
         return False
 
     def stop(self) -> None:
+        """Stop surfaces (recordings are finished), the loop, save `latest`, close the engine.
+
+        What could not be saved is logged and kept in `stop_problems`, never raised: the
+        engine is closed whatever happened.
+        """
         if self._watchdog is not None:
             self._watchdog.cancel()
         self.surfaces.stop()
+        for surface in self.surfaces:
+            if isinstance(surface, Finishing):
+                self.stop_problems += surface.unfinished()
         if self.loop is not None:
             self.loop.stop()
             if self.hub is not None:
@@ -243,10 +233,16 @@ class Runtime:
         return True
 
     def _save_latest(self) -> None:
-        """Snapshot `latest` of the stopped batch; a failure is logged, never raised at exit."""
+        """Snapshot `latest` of the stopped batch; a failure is logged and kept, never raised."""
         assert self.loop is not None
         try:
             info = self.snapshots.save(LATEST, self.loop.batch.get_state(), self.header)
             log.info("saved snapshot 'latest' at tick %d (%d bytes)", info.tick, info.size_bytes)
-        except Exception:
-            log.exception("could not save snapshot 'latest' in %s", self.snapshots.dir)
+            return
+        except ArmfleetError as exc:  # CannotWrite: the cause is in the message
+            why = str(exc)
+        except Exception as exc:
+            log.exception("could not save snapshot 'latest'")
+            why = f"{type(exc).__name__}: {exc}"
+        log.error("could not save snapshot 'latest' in %s: %s", self.snapshots.dir, why)
+        self.stop_problems.append(f"snapshot 'latest' not saved: {why}")

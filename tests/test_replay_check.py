@@ -27,17 +27,22 @@ from service.persistence.replay_check import (
 NAMES = [f"j{i}" for i in range(7)]
 
 
-def state(value: float) -> tuple[np.ndarray, ...]:
-    return tuple(np.full(7, value, dtype=np.float64) for _ in range(3))
+def state(value: float) -> np.ndarray:
+    """One world's (position, velocity, effort) rows, all `value`."""
+    return np.full((3, 7), value, dtype=np.float64)
+
+
+def check(c: Comparison, tick: int, world: int, recorded: np.ndarray, replayed: np.ndarray):
+    c.check(tick, np.array([world]), recorded[None], replayed[None])
 
 
 def test_bit_for_bit_names_the_first_difference_and_keeps_counting():
     c = Comparison(NAMES, None, span=10)
-    c.check(1, 0, state(0.5), state(0.5))
+    check(c, 1, 0, state(0.5), state(0.5))
     got = state(0.5)
     got[1][3] = np.nextafter(0.5, 1.0)  # one ulp of velocity
-    c.check(12, 2, state(0.5), got)
-    c.check(25, 2, state(0.5), state(0.75))
+    check(c, 12, 2, state(0.5), got)
+    check(c, 25, 2, state(0.5), state(0.75))
     d = c.divergence
     assert (d.tick, d.world, d.joint, d.quantity) == (12, 2, "j3", "velocity")
     rows = c.rows()
@@ -55,17 +60,25 @@ def test_within_tolerance_accepts_small_deviations_and_names_the_first_larger_on
     small = state(0.5)
     small[0][:] += 5e-4
     small[2][:] -= 0.9
-    c.check(3, 1, state(0.5), small)
+    check(c, 3, 1, state(0.5), small)
     assert c.divergence is None
     assert c.rows()[0].largest["position"] == pytest.approx(5e-4)
     big = state(0.5)
     big[0][6] += 2e-3
-    c.check(70, 4, state(0.5), big)
+    check(c, 70, 4, state(0.5), big)
     assert (c.divergence.tick, c.divergence.world, c.divergence.joint) == (70, 4, "j6")
+    many = Comparison(NAMES, tol, span=60)  # several worlds at once: the first in world order
+    a, b = state(0.5), state(0.5)
+    a[2][5] += 2.0  # world 1: effort
+    b[0][0] += 0.5  # world 3: position (larger, but a later world)
+    many.check(5, np.array([1, 3]), np.stack([state(0.5)] * 2), np.stack([a, b]))
+    d = many.divergence
+    assert (d.world, d.quantity, d.joint) == (1, "effort", "j5"), d
+    assert many.rows()[0].where == (5, 3, "j0") and many.rows()[0].states == 2
     nan = state(0.5)
     nan[1][0] = np.nan  # NaN is never within any tolerance
     c2 = Comparison(NAMES, Tolerance(1.0, 1.0, 1.0), span=60)
-    c2.check(1, 0, state(0.5), nan)
+    check(c2, 1, 0, state(0.5), nan)
     assert c2.divergence is not None and c2.divergence.quantity == "velocity"
 
 

@@ -264,6 +264,14 @@ def test_a_newer_goal_preempts_and_joint_trajectory_topic_moves(
     wait_for(
         lambda: np.allclose(_state(ur_server, 1)["target"][:6], HOME_ARM), "home via the topic"
     )
+    # a newer goal of the same action preempts too (and its answer is not held up by it)
+    again, newer = _uuid(), _uuid()
+    for goal_id, goal in ((again, slow), (newer, _goal([(0.3, HOME_ARM)]))):
+        reply = ur_peer.call(SCALED, FJT, "send_goal", {"goal_id": _id(goal_id), "goal": goal})
+        assert reply["accepted"]
+    result = ur_peer.call(SCALED, FJT, "get_result", {"goal_id": _id(again)})
+    assert result["status"] == ABORTED and "preempted" in result["result"]["error_string"]
+    assert ur_peer.call(SCALED, FJT, "get_result", {"goal_id": _id(newer)})["status"] == SUCCEEDED
 
 
 def test_gripper_closes_on_the_cube_stalled_and_opens(ur_server: Server, ur_peer: UrPeer) -> None:
@@ -290,7 +298,13 @@ def test_gripper_closes_on_the_cube_stalled_and_opens(ur_server: Server, ur_peer
             action, GRIPPER, "get_result", {"goal_id": {"uuid": goal_id}}, timeout=30
         )
 
+    feedback = f"{action}/_action/feedback"
+    ur_peer.ask(op="all", topic=feedback, type=f"{GRIPPER}_FeedbackMessage")
     closed = close(0.7)
+    moving = ur_peer.ask(op="all", topic=feedback, type=f"{GRIPPER}_FeedbackMessage")
+    positions = [m["feedback"]["position"] for m in moving]
+    assert len(positions) >= 3 and positions[0] < positions[-1]  # closing, fed back at 20 Hz
+    assert abs(positions[-1] - closed["result"]["position"]) < 0.01
     assert closed["status"] == SUCCEEDED
     assert closed["result"]["stalled"] is True and closed["result"]["reached_goal"] is False
     assert 0.40 < closed["result"]["position"] < 0.50  # stopped by the 5 cm cube (0.449 rad)

@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import math
 import random
+import shutil
+import subprocess
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -134,6 +137,22 @@ def test_urdf_declares_joints_limits_mimics_and_visuals() -> None:
     shapes = {type(v.geometry).__name__ for link in robot.links for v in link.visuals}
     assert shapes == {"Box", "Cylinder", "Sphere"}  # capsules as a cylinder and two spheres
     assert links["upper_arm_link"].inertial.mass == pytest.approx(13.051)
+
+
+def test_urdfdom_parses_the_urdf(tmp_path: Path) -> None:
+    """urdfdom (the C++ parser behind RViz's RobotModel and robot_state_publisher) reads it
+    and finds the same tree: root `world`, every link once."""
+    if shutil.which("check_urdf") is None:
+        pytest.skip("check_urdf missing (apt-get install liburdfdom-tools; scripts/dev.py does)")
+    path = tmp_path / "armfleet.urdf"
+    path.write_text(urdf.generate(ROBOT.mjm, ROBOT.spec))
+    out = subprocess.run(["check_urdf", str(path)], capture_output=True, text=True, timeout=30)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "Successfully Parsed XML" in out.stdout and "root Link: world" in out.stdout
+    robot = URDF.from_xml_string(path.read_text())
+    lines = [line.strip() for line in out.stdout.splitlines()]
+    named = [line.split(":  ")[-1] for line in lines if line.startswith("child(")]
+    assert sorted(named) == sorted(link.name for link in robot.links if link.name != "world")
 
 
 def test_frame_tree_gives_mujoco_body_poses_back() -> None:

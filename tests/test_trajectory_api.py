@@ -173,10 +173,12 @@ def _state(ws, pred) -> dict:
 def test_trajectories_are_recorded_and_replayed_bit_exactly(arm, paused):
     srv, data = paused
     http = httpx.Client(base_url=srv.url, timeout=60)
+    arm.start_trajectory(1, ARM, POINTS)  # already running when the recording starts
+    arm.step(10)
     r = http.post("/v1/recordings", json={"name": "traj", "worlds": "0-3", "rate": 60})
     assert r.status_code == 201, r.text
     tight = [tolerance("elbow_joint", position=2e-3)]
-    arm.start_trajectories([0, 1], ARM, POINTS)
+    arm.start_trajectories([0], ARM, POINTS)
     arm.start_trajectory(2, ARM, POINTS, path_tolerance=tight)
     arm.step(15)
     arm.increment(0, "wrist_1_joint", -0.1)  # takes over world 0
@@ -188,5 +190,6 @@ def test_trajectories_are_recorded_and_replayed_bit_exactly(arm, paused):
     rec = read_recording(data / "recordings" / "traj.mcap")
     kinds = [c["kind"] for seg in rec.segments for cs in seg.commands.values() for c in cs]
     assert kinds.count("trajectory") == 3 and kinds.count("trajectory_cancel") == 1
+    assert kinds.count("trajectory_resume") == 1
     report = replay_recording(rec)
     assert report.divergence is None and report.ticks == 75 and report.states_compared >= 300

@@ -7,13 +7,14 @@ them to status codes in one place.
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, Path, Request
 
 from service.core.control import Control
 from service.core.errors import Unavailable, UnknownWorld
 from service.core.loop import SimLoop
+from service.core.schemas import ErrorReply
 from service.runtime import Runtime
 
 
@@ -46,3 +47,12 @@ async def world_id(loop: Loop, world: Annotated[int, Path(description="world ind
 
 
 World = Annotated[int, Depends(world_id)]
+
+# `responses=` of routes that write a file (snapshots, recordings): the domain error CannotWrite.
+CANNOT_WRITE: dict[int | str, dict[str, Any]] = {
+    507: {
+        "model": ErrorReply,
+        "description": "the file cannot be written (disk full, read-only folder, a FIFO nobody "
+        "reads): the detail names the path and the cause; nothing was replaced",
+    }
+}

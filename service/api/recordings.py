@@ -8,7 +8,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends
 
-from service.api.deps import Loop, get_runtime
+from service.api.deps import CANNOT_WRITE, Loop, get_runtime
 from service.core.errors import NotFound
 from service.core.schemas import RecordingRequest, RecordingStatus
 from service.persistence.recorder import Recorder
@@ -29,12 +29,15 @@ def _status(recorder: Recorder) -> RecordingStatus:
     response_model=RecordingStatus,
     status_code=201,
     summary="Start recording to <data-dir>/recordings/<name>.mcap",
-    responses={409: {"description": "a recording is already running"}},
+    responses={**CANNOT_WRITE, 409: {"description": "a recording is already running"}},
 )
 async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
     check_state_support(loop.batch)  # a recording starts from the full state
     path = runtime.snapshots.dir.parent / "recordings" / f"{body.name}.mcap"
-    recorder = Recorder(path, body.worlds, body.rate, runtime.settings.record_queue)
+    # Opening and starting write the file's beginning before answering: a file that cannot be
+    # written is a 507 naming the cause, never an "active" recording that is not.
+    queue_items = runtime.settings.record_queue
+    recorder = await asyncio.to_thread(Recorder, path, body.worlds, body.rate, queue_items)
     # Conflict while one runs; waits for a tick boundary (off the event loop).
     await asyncio.to_thread(runtime.surfaces.of(Recordings).begin, recorder)
     return _status(recorder)
@@ -57,6 +60,8 @@ async def current(runtime: Rt) -> RecordingStatus:
 async def stop(runtime: Rt) -> RecordingStatus:
     recorder = runtime.surfaces.of(Recordings).current
     if recorder is None or not recorder.status.active:
-        raise NotFound("no recording is running")
+        last = recorder.status if recorder is not None else None
+        why = f"; the last one ({last.path}) stopped early: {last.error}" if last else ""
+        raise NotFound(f"no recording is running{why if last and last.error else ''}")
     await asyncio.to_thread(recorder.stop)
     return _status(recorder)

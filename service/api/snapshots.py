@@ -8,7 +8,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Path
 
-from service.api.deps import Loop, get_runtime
+from service.api.deps import CANNOT_WRITE, Loop, get_runtime
 from service.core.errors import Conflict
 from service.core.schemas import RestoreReply, SnapshotInfo, SnapshotName, SnapshotRequest
 from service.persistence.snapshots import check_state_support
@@ -23,7 +23,10 @@ Rt = Annotated[Runtime, Depends(get_runtime)]
     response_model=SnapshotInfo,
     status_code=201,
     summary="Save the full state of every world as snapshot `name` (replaces one of that name)",
-    responses={422: {"description": "bad name (separators, empty, over 64 characters)"}},
+    responses={
+        **CANNOT_WRITE,
+        422: {"description": "bad name (separators, empty, over 64 characters)"},
+    },
 )
 async def save(runtime: Rt, loop: Loop, body: SnapshotRequest) -> SnapshotInfo:
     check_state_support(loop.batch)

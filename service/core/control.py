@@ -28,6 +28,7 @@ from service.core.schemas import IncrementRequest, JointTargets
 from service.core.trajectory import JointTrajectorySpec, Started, TrajectoryStatus
 from service.core.trajectory import ops as trajectory_ops
 from service.core.trajectory.manager import TrajectoryManager
+from service.core.trajectory.status import Resumable
 from service.core.types import Mode, RobotSpec
 
 log = logging.getLogger("armfleet.control")
@@ -260,6 +261,16 @@ class Control:
                     Accepted(source, "trajectory_cancel", w, self.loop.pending_targets(w), tick)
                 )
         return stopped
+
+    def resume_trajectory(self, run: Resumable, source: Source) -> Started:
+        """Put back a trajectory that ran when a recording started (replay; see Resumable)."""
+        world = np.array([self.world(run.world)], dtype=np.int64)
+        with self._ordered():
+            started, tick = self.trajectories.resume(run, source)
+            target = np.array([run.target])
+            kind = "trajectory_resume"
+            self._announce(Accepted(source, kind, world, target, tick, None, run.as_json()))
+        return started
 
     def _announce_result(self, kind: str, source: Source, result: CommandResult) -> None:
         if self._listeners:

@@ -69,3 +69,10 @@ class Unavailable(ArmfleetError):
     """The engine is starting, failed or is being rebuilt: 503 (retry later)."""
 
     status = 503
+
+
+class CannotWrite(ArmfleetError):
+    """A file the request asked for (recording, snapshot) cannot be written: the disk is full,
+    the folder read-only, a FIFO has no reader; the detail names the path and cause: 507."""
+
+    status = 507

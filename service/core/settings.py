@@ -40,6 +40,12 @@ class Settings(BaseSettings):
         "local (a private instance on 127.0.0.1) or HOST:PORT of a head node; "
         "unset = in-process shards",
     )
+    ray_checkpoint_s: float = Field(
+        10.0,
+        gt=0,
+        description="--ray: seconds between copies of each shard's state into this process; a "
+        "shard whose node is lost is rebuilt elsewhere from its last copy",
+    )
     mode: Mode = Field(Mode.REALTIME, description="how time advances: realtime, fast or paused")
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
     physics_dt: float = Field(

@@ -56,3 +56,10 @@ class Routed(Protocol):
     """A surface that also serves routes on the service's port (e.g. rosbridge)."""
 
     router: Any  # a fastapi.APIRouter, included by the app at creation
+
+
+@runtime_checkable
+class Finishing(Protocol):
+    """A surface that writes files: after `stop`, what it could not finish (the exit status)."""
+
+    def unfinished(self) -> list[str]: ...

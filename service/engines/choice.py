@@ -29,9 +29,13 @@ def build_batch(s: Settings) -> Batch:
     shards = s.shards or auto_shards(s.worlds, s.device)
     kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
     if s.ray:
+        from service.engines import ray_local
         from service.engines.ray_shards import RayBatch  # imports Ray only when asked for
 
-        return RayBatch(s.worlds, s.shards, address=s.ray, **kwargs)
+        with ray_local.starting():  # what Ray starts leaves stopping to us (core/stopping)
+            return RayBatch(
+                s.worlds, s.shards, address=s.ray, checkpoint_s=s.ray_checkpoint_s, **kwargs
+            )
     if shards > 1:
         return ShardedBatch(s.worlds, shards, **kwargs)
     return WorldBatch(s.worlds, **kwargs)

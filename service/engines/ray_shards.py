@@ -79,7 +79,9 @@ class RayBatch(HostMirror, Batch, Restorable):
         self._plan = ShardPlan(nworld, shards)
         # On a GPU actor Ray exposes only its own GPU (CUDA_VISIBLE_DEVICES), so it is "cuda".
         self._kwargs = {"device": "cuda" if self.gpu else device, **kwargs}
+        # SPREAD: shards on different nodes where there are several (a lost node costs fewest)
         self._options: dict[str, Any] = {"num_cpus": 1, "max_restarts": 0}
+        self._options["scheduling_strategy"] = "SPREAD"
         if self.gpu:
             self._options["num_gpus"] = 1
         self._shards = [Shard(actor=self._spawn(i)) for i in range(shards)]

@@ -10,6 +10,7 @@ import multiprocessing as mp
 from multiprocessing.connection import Connection
 from typing import Any
 
+from service.core.stopping import start_worker
 from service.engines.sharding import apply_and_step, apply_rows
 from service.engines.warp import WorldBatch
 
@@ -54,8 +55,7 @@ def spawn(nworld: int, kwargs: dict[str, Any]) -> tuple[Any, Connection]:
     """Start a worker process building `nworld` worlds; its first message says ready or not."""
     ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
     parent, child = ctx.Pipe()
-    proc = ctx.Process(target=worker, args=(child, nworld, kwargs), daemon=True)
-    proc.start()
+    proc = start_worker(ctx, worker, (child, nworld, kwargs))  # stopping is ours: core/stopping
     child.close()  # so that a dead worker shows up as EOFError, not a hang
     return proc, parent
 

@@ -3,7 +3,8 @@
 Lives here: snapshot files (`snapshots`) and the batch header a state must match
 (`provenance`), MCAP recordings (`recorder` writes one off the sim thread, `mcap_log` is the
 layout) and `armfleet replay` (`replay`, which gives its recorder the same `SurfaceContext` a
-service would).
+service would), and files opened for writing so that failures name their cause and a stuck
+reader cannot hang a writer (`storage`).
 
 May import: `service.core` and `service.engines`; never surfaces, api or the app.
 """

@@ -92,6 +92,7 @@ _COMMAND_SCHEMA = {
                 "mode",
                 "trajectory",
                 "trajectory_cancel",
+                "trajectory_resume",
             ],
         },
         "worlds": {"type": "array", "items": {"type": "integer"}},

@@ -9,6 +9,14 @@ closed with what was written, and the simulation goes on untouched.
 
 A recording starts from the full batch state at a tick boundary (taken through the loop and
 embedded in the file), so `armfleet replay` can rebuild exactly what followed.
+
+Failures reach whoever started the recording: the file is opened when the recorder is made
+(`serve --record` to a path that cannot be written stops before anything is built) and `start`
+writes and flushes the file's header and starting state before it returns, so a disk that is
+full or read-only, a FIFO without a reader or a writer that cannot work (its compression library
+missing) raise `CannotWrite` naming the cause instead of answering "active". Later failures stop
+the recording with the reason in its status (`service.persistence.storage` keeps a stuck reader from
+hanging the writer).
 """
 
 from __future__ import annotations
@@ -29,10 +37,12 @@ from service.core.worlds import pick_worlds
 from service.persistence.mcap_log import COMMANDS, RESTORES, STATUS, McapLog
 from service.persistence.provenance import batch_header
 from service.persistence.snapshots import encode_state
+from service.persistence.storage import GuardedWriter, cannot_write, describe, open_for_writing
 
 if TYPE_CHECKING:
     from service.core.control import Accepted
     from service.core.surface import SurfaceContext
+    from service.core.trajectory.status import Resumable
 
 log = logging.getLogger("armfleet.recorder")
 
@@ -80,6 +90,10 @@ class Recorder:
         """`worlds`: ids, a spec like "0-7,12", or None for the first 8; `block` (replay only)
         waits for the disk instead of failing, since nothing live is slowed by it there."""
         self.path = Path(path).expanduser()
+        try:
+            self._file: GuardedWriter | None = open_for_writing(self.path)
+        except OSError as exc:
+            raise cannot_write("recording", self.path, exc) from None
         self._worlds_arg = worlds
         self._worlds: np.ndarray | None = None
         self._rate = float(rate)
@@ -110,21 +124,28 @@ class Recorder:
         self._every = every_ticks(self._rate, batch.control_hz)
         self._header = batch_header(batch)
         self._names = list(batch.spec.names)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self._active = True
         # Listen first: a command accepted while the state is being taken is then either in the
         # state (applied before it) or in the queue (tick after it); the writer sorts them out.
         control.add_listener(self._on_command)
         loop.add_restore_listener(self._on_restore)
         try:
-            state = loop.request_state().result(timeout=60)
+            # The state and the trajectories running in it, at one tick boundary.
+            taken = loop.call(lambda b: (b.get_state(), control.trajectories.running()))
+            state, running = taken.result(timeout=60)
         except BaseException:
-            self._detach()
-            self._active = False
+            self._give_up()
             raise
+        try:
+            out = self._begin(state, running)
+        except Exception as exc:
+            error = cannot_write("recording", self.path, exc)
+            self._fail(error.detail)
+            self._give_up()
+            raise error from None
         self._start_tick = state.tick
         self._thread = threading.Thread(
-            target=self._run, args=(state,), name="armfleet-recorder", daemon=True
+            target=self._run, args=(out,), name="armfleet-recorder", daemon=True
         )
         self._thread.start()
         loop.add_sink(self)
@@ -138,18 +159,35 @@ class Recorder:
 
     def stop(self) -> None:
         """Stop listening, write what is queued, close the file (waits for the writer)."""
-        if self._ctx is None:
+        if self._ctx is None or self._thread is None:  # never started: nothing to finish
+            self._close()
             return
         was_active = self._active
         self._detach()
         self._active = False
-        if was_active and self._thread is not None:
-            self._queue.put(_STOP)  # blocking: the writer is draining
-        if self._thread is not None:
-            wait = 30.0 if was_active else 5.0  # after a failure the disk may be stuck
-            self._thread.join(timeout=wait)
-            if self._thread.is_alive():
-                log.error("recorder thread did not finish writing %s in %.0f s", self.path, wait)
+        while was_active and self._thread.is_alive():
+            try:  # the writer drains the queue, or gives up (a stuck write fails in STALL_S)
+                self._queue.put(_STOP, timeout=0.5)
+                break
+            except queue.Full:
+                continue
+        wait = 30.0 if was_active else 5.0
+        self._thread.join(timeout=wait)
+        if self._thread.is_alive():
+            self._fail(f"the writer did not finish {self.path} in {wait:.0f} s")
+
+    def _give_up(self) -> None:
+        self._detach()
+        self._active = False
+        self._close()
+
+    def _close(self) -> None:
+        if self._file is not None:
+            file, self._file = self._file, None
+            try:
+                file.close()
+            except OSError as exc:
+                self._fail(f"closing {self.path} failed: {describe(exc)}")
 
     def _detach(self) -> None:
         ctx = self._ctx
@@ -214,24 +252,28 @@ class Recorder:
 
     # -- the writer thread -----------------------------------------------------------------
 
-    def _run(self, state: BatchState) -> None:
+    def _run(self, out: McapLog) -> None:
+        assert self._file is not None
         try:
-            with open(self.path, "wb") as f:
-                out = McapLog(f, self._header, self._names)
-                self._begin(out, state)
-                while True:
-                    item = self._queue.get()
-                    if item is _STOP or self._error is not None:
-                        break
-                    self._write(out, item)
-                    self._written += 1
-                out.json(STATUS, time.time_ns(), {"event": "stop", "detail": self._error})
-                out.finish()
+            while True:
+                item = self._queue.get()
+                if item is _STOP or self._error is not None:
+                    break
+                self._write(out, item)
+                self._written += 1
+            out.json(STATUS, time.time_ns(), {"event": "stop", "detail": self._error})
+            out.finish()
+            self._file.sync()
         except Exception as exc:
-            self._fail(f"writing {self.path} failed: {type(exc).__name__}: {exc}")
+            self._fail(f"writing {self.path} failed: {describe(exc)}")
+        finally:
+            self._close()
 
-    def _begin(self, out: McapLog, state: BatchState) -> None:
-        assert self._worlds is not None
+    def _begin(self, state: BatchState, running: list[Resumable]) -> McapLog:
+        """The file's header, metadata, starting state and the trajectories running in it
+        (replay puts them back before its first tick), written through to the file now."""
+        assert self._worlds is not None and self._file is not None
+        out = McapLog(self._file, self._header, self._names)
         attachment = out.attach_state(state.tick, encode_state(state, self._header, "start"))
         out.metadata(
             {
@@ -245,6 +287,12 @@ class Recorder:
             }
         )
         out.json(STATUS, time.time_ns(), {"event": "start", "tick": state.tick})
+        for run in running:
+            resume = {"source": "recording", "kind": "trajectory_resume", "worlds": [run.world]}
+            resume |= {"targets": [run.target], "tick": state.tick + 1, "mode": None}
+            out.json(COMMANDS, time.time_ns(), {**resume, "trajectory": run.as_json()})
+        self._file.flush()
+        return out
 
     def _write(self, out: McapLog, item: tuple[Any, ...]) -> None:
         kind, wall_ns = item[0], item[1]

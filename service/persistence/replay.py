@@ -33,6 +33,7 @@ from service.core.metrics import Metrics
 from service.core.settings import Settings
 from service.core.surface import SurfaceContext
 from service.core.trajectory import parse as parse_trajectory
+from service.core.trajectory.status import Resumable
 from service.core.types import BatchState, Mode
 from service.persistence.mcap_log import (
     COMMANDS,
@@ -276,10 +277,11 @@ def _replay_segment(
         if recorded:
             snap = loop.latest
             assert snap.tick == tick
-            for world, values in sorted(recorded.items()):
-                counts["states"] += 1
-                got = (snap.position[world], snap.velocity[world], snap.effort[world])
-                compare.check(tick, world, values, got)
+            worlds = np.array(sorted(recorded))
+            want = np.array([recorded[w] for w in worlds], dtype=np.float64)  # (k, 3, 7)
+            got = np.stack([snap.position[worlds], snap.velocity[worlds], snap.effort[worlds]], 1)
+            counts["states"] += len(worlds)
+            compare.check(tick, worlds, want, got.astype(np.float64))
 
 
 def _apply(control: Control, cmd: dict[str, Any]) -> None:
@@ -291,5 +293,10 @@ def _apply(control: Control, cmd: dict[str, Any]) -> None:
         control.start_trajectory(worlds, spec, Source.REPLAY)
     elif cmd["kind"] == "trajectory_cancel":
         control.cancel_trajectory(worlds, Source.REPLAY)
+    elif cmd["kind"] == "trajectory_resume":  # running when the recording started
+        body = cmd["trajectory"]
+        spec, start = parse_trajectory(control.spec, body), body["resume_from"]
+        run = Resumable(worlds[0], spec, start["start_tick"], start["target"], start["velocity"])
+        control.resume_trajectory(run, Source.REPLAY)
     else:  # increment or set_targets: the recorded rows are the targets after the command
         control.set_many(worlds, np.asarray(cmd["targets"], dtype=np.float64), Source.REPLAY)

@@ -127,38 +127,43 @@ class Comparison:
         return self.tolerance is None
 
     def check(
-        self,
-        tick: int,
-        world: int,
-        recorded: tuple[np.ndarray, ...],
-        replayed: tuple[np.ndarray, ...],
+        self, tick: int, worlds: np.ndarray, recorded: np.ndarray, replayed: np.ndarray
     ) -> None:
-        """Compare one world's state at one tick; remembers the first divergence."""
+        """Compare the recorded worlds' states at one tick, all at once (k worlds: `recorded`
+        and `replayed` are (k, 3, njoint): position, velocity, effort); remembers the first
+        divergence (in world, quantity, joint order)."""
         key = (tick - 1) // self.span
         row = self.ranges.get(key)
         if row is None:
             row = self.ranges[key] = DeviationRange(key * self.span + 1, tick)
         row.last = max(row.last, tick)
-        row.states += 1
-        for quantity, want, got in zip(QUANTITIES, recorded, replayed, strict=True):
-            got = np.asarray(got, dtype=np.float64)
-            dev = np.abs(got - want)
-            dev[np.isnan(dev)] = np.inf  # NaN on one side only is as far off as it gets
-            dev[(got == want)] = 0.0  # equal infinities (and equal NaN payloads never occur)
-            j = int(np.argmax(dev))
-            if dev[j] > row.largest[quantity]:
-                row.largest[quantity] = float(dev[j])
+        row.states += len(worlds)
+        dev = np.abs(replayed - recorded)
+        dev[np.isnan(dev)] = np.inf  # NaN on one side only is as far off as it gets
+        dev[replayed == recorded] = 0.0  # equal infinities
+        for q, quantity in enumerate(QUANTITIES):
+            k, j = np.unravel_index(int(np.argmax(dev[:, q])), dev[:, q].shape)
+            if dev[k, q, j] > row.largest[quantity]:
+                row.largest[quantity] = float(dev[k, q, j])
                 if quantity == "position":
-                    row.where = (tick, world, self.names[j])
-            if self.divergence is None:
-                bad = np.flatnonzero(
-                    got != want if self.exact else dev > self.tolerance.of(quantity)
-                )
-                if bad.size:
-                    k = int(bad[0])
-                    self.divergence = Divergence(
-                        tick, world, self.names[k], quantity, float(want[k]), float(got[k])
-                    )
+                    row.where = (tick, int(worlds[k]), self.names[j])
+        if self.divergence is not None:
+            return
+        if self.tolerance is None:
+            bad = np.argwhere(replayed != recorded)
+        else:
+            limits = np.array([self.tolerance.of(q) for q in QUANTITIES])
+            bad = np.argwhere(dev > limits[None, :, None])
+        if bad.size:
+            k, q, j = (int(x) for x in bad[0])
+            self.divergence = Divergence(
+                tick,
+                int(worlds[k]),
+                self.names[j],
+                QUANTITIES[q],
+                float(recorded[k, q, j]),
+                float(replayed[k, q, j]),
+            )
 
     def rows(self) -> list[DeviationRange]:
         """The deviation table, in tick order (only ranges with recorded states)."""

@@ -18,6 +18,7 @@ import io
 import json
 import os
 import re
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,10 +26,11 @@ from typing import Any
 import numpy as np
 
 from service.core.batch import Batch, Restorable
-from service.core.errors import BadCommand, Conflict, NotFound
+from service.core.errors import BadCommand, CannotWrite, Conflict, NotFound
 from service.core.schemas import SNAPSHOT_NAME
 from service.core.types import PHYSICS_FIELDS, BatchState
 from service.persistence.provenance import mismatch
+from service.persistence.storage import describe
 
 FORMAT = "armfleet-snapshot/1"
 SUFFIX = ".npz"
@@ -147,7 +149,8 @@ def decode_state(data: bytes, current: dict[str, Any] | None = None) -> BatchSta
 def write_atomically(path: Path, data: bytes) -> None:
     """Temp file in the same directory, fsync, rename, fsync the directory."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    # Unique per thread: two saves of one name at once (a request, the stop) must not share it.
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     try:
         with open(tmp, "wb") as f:
             f.write(data)
@@ -174,9 +177,14 @@ class SnapshotStore:
         return self.dir / f"{check_name(name)}{SUFFIX}"
 
     def save(self, name: str, state: BatchState, header: dict[str, Any]) -> SnapshotInfo:
+        """Write snapshot `name`; CannotWrite (507) naming the cause, the old file kept."""
         data = encode_state(state, header, name)
         path = self.path(name)
-        write_atomically(path, data)
+        try:
+            write_atomically(path, data)
+        except OSError as exc:
+            why = f"cannot write snapshot {name!r} to {path}: {describe(exc)}"
+            raise CannotWrite(f"{why}; any earlier {name!r} is kept", "name") from None
         return self._info(name, path, read_header(data))
 
     def load_bytes(self, name: str) -> bytes:

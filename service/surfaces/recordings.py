@@ -8,12 +8,15 @@ The recording itself (what is written, off the sim thread) is persistence/record
 
 from __future__ import annotations
 
+import logging
 import threading
 
-from service.core.errors import Conflict, Unavailable
+from service.core.errors import ArmfleetError, Conflict, Unavailable
 from service.core.settings import Settings
 from service.core.surface import SurfaceContext
 from service.persistence.recorder import Recorder
+
+log = logging.getLogger("armfleet.recorder")
 
 
 class Recordings:
@@ -26,12 +29,25 @@ class Recordings:
         self._ctx: SurfaceContext | None = None
         self._lock = threading.Lock()  # one start at a time: two must not both see none running
         self.current: Recorder | None = None  # the running or last recording
+        # `--record`'s file is opened now, so that one that cannot be written stops the start
+        # before anything is built (CannotWrite, raised by create_app).
+        s = settings
+        self._asked = (
+            None
+            if s.record is None
+            else Recorder(s.record, s.record_worlds, s.record_rate, s.record_queue)
+        )
 
     def start(self, ctx: SurfaceContext) -> None:
         self._ctx = ctx
-        s = self._settings
-        if s.record is not None:
-            self.begin(Recorder(s.record, s.record_worlds, s.record_rate, s.record_queue))
+        recorder, self._asked = self._asked, None
+        if recorder is None:
+            return
+        try:
+            self.begin(recorder)
+        except ArmfleetError as exc:  # e.g. the disk filled meanwhile: its status says why
+            self.current = recorder
+            log.error("--record did not start: %s", exc)
 
     def begin(self, recorder: Recorder) -> None:
         """Start `recorder` (waits for a tick boundary); Conflict while another one runs."""
@@ -47,5 +63,14 @@ class Recordings:
             self.current = recorder
 
     def stop(self) -> None:
+        if self._asked is not None:  # never started (the engine failed): close its file
+            self._asked.stop()
         if self.current is not None:
             self.current.stop()
+
+    def unfinished(self) -> list[str]:
+        """The recording, if it stopped early or could not be finished (after `stop`)."""
+        last = self.current
+        if last is None or not last.status.error:
+            return []
+        return [f"recording {last.path} is incomplete: {last.status.error}"]

@@ -10,9 +10,10 @@ The API every surface codes against (HTTP, WebSocket, ROS 2 actions, rosbridge):
   end_tick): every world starts at the same tick, from its current target; a running trajectory
   on a world is preempted. Recorded in MCAP and replayed like every command.
 - `Control.cancel_trajectory(worlds, source) -> list[TrajectoryStatus]`: stop and hold.
-- `manager.TrajectoryManager` (the runtime's `runtime.trajectories`): `status(world)`,
+- `manager.TrajectoryManager` (`control.trajectories`, one per loop): `status(world)`,
   `get(id)`, `wait(id) -> Future[TrajectoryStatus]`, `add_listener(fn)` (called once per
-  trajectory when it finishes: succeeded, or aborted with an `AbortReason`).
+  trajectory when it finishes: succeeded, or aborted with an `AbortReason`), `running()`
+  (what a recording stores; `Control.resume_trajectory` puts one back in a replay).
 
 Feedback (desired, actual, error per joint) is in `TrajectoryStatus`, as of the last snapshot.
 Manual target commands and resets stop a world's trajectory (reason manual_override / reset)

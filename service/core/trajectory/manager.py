@@ -33,7 +33,14 @@ import numpy as np
 from service.core.loop import SimLoop
 from service.core.staging import Override, Staging
 from service.core.trajectory.spec import JointTrajectorySpec
-from service.core.trajectory.status import AbortReason, Started, TrajectoryState, TrajectoryStatus
+from service.core.trajectory.status import (
+    AbortReason,
+    Resumable,
+    Started,
+    TrajectoryState,
+    TrajectoryStatus,
+    tolerance_detail,
+)
 from service.core.trajectory.table import TrajectoryTable
 from service.core.types import Snapshot
 
@@ -99,18 +106,53 @@ class TrajectoryManager:
         e.g. after releasing a lock of its own).
         """
         ids = np.asarray(worlds, dtype=np.int64)
-        out: list[Started] = []
         with self.loop.staging(ids) as st:
-            self._abort(st, ids, AbortReason.PREEMPTED, "a newer trajectory replaced it")
-            traj_ids = np.array([next(self._ids) for _ in range(len(ids))], dtype=np.int64)
-            end = self.table.add(traj_ids, ids, spec, st.tick, st.pending[ids], st.velocity[ids])
-            for traj_id, w in zip(traj_ids.tolist(), ids.tolist(), strict=True):
-                status = self._initial_status(traj_id, w, spec, source, st.tick, end)
-                self._runs[traj_id] = _Run(traj_id, w, spec, source, st.tick, end, status)
-                self._by_world[w] = traj_id
-                out.append(Started(traj_id, w, st.tick, end))
+            out = self._install(st, ids, spec, source, st.tick, st.pending[ids], st.velocity[ids])
         if dispatch:
             self.dispatch()
+        return out
+
+    def resume(self, run: Resumable, source: str) -> tuple[Started, int]:
+        """Put back a trajectory that was running when a state was saved (recordings: the
+        replay installs what ran at its start tick), sampled exactly as it was from then on.
+        Returns it and the tick it is sampled again from."""
+        world = np.array([run.world], dtype=np.int64)
+        with self.loop.staging(world) as st:
+            pos, vel = np.array([run.target]), np.array([run.velocity])
+            (started,) = self._install(st, world, run.spec, source, run.start_tick, pos, vel)
+        return started, st.tick  # a preempted one is told at the next `dispatch`
+
+    def running(self) -> list[Resumable]:
+        """What `resume` needs to put back every running trajectory (take it at a boundary)."""
+        with self.loop.staging() as _:
+            t = self.table
+            return [
+                Resumable(int(w), self._runs[i].spec, int(s), p.tolist(), v.tolist())
+                for w, i, s, p, v in zip(
+                    t.worlds, t.ids.tolist(), t.start_tick, *t.start_rows(), strict=True
+                )
+            ]
+
+    def _install(
+        self,
+        st: Staging,
+        ids: np.ndarray,
+        spec: JointTrajectorySpec,
+        source: str,
+        start_tick: int,
+        start_pos: np.ndarray,
+        start_vel: np.ndarray,
+    ) -> list[Started]:
+        """Preempt what runs on `ids`, then add one slot each (lock held)."""
+        self._abort(st, ids, AbortReason.PREEMPTED, "a newer trajectory replaced it")
+        traj_ids = np.array([next(self._ids) for _ in range(len(ids))], dtype=np.int64)
+        end = self.table.add(traj_ids, ids, spec, start_tick, start_pos, start_vel)
+        out = []
+        for traj_id, w in zip(traj_ids.tolist(), ids.tolist(), strict=True):
+            status = TrajectoryStatus.started(traj_id, w, spec, source, start_tick, end)
+            self._runs[traj_id] = _Run(traj_id, w, spec, source, start_tick, end, status)
+            self._by_world[w] = traj_id
+            out.append(Started(traj_id, w, start_tick, end))
         return out
 
     def cancel(self, worlds: Sequence[int], dispatch: bool = True) -> list[TrajectoryStatus]:
@@ -165,9 +207,6 @@ class TrajectoryManager:
                 elif (run := self._finished.get(self._by_world[w])) is not None:
                     out[str(w)] = run.status.brief()
         return out
-
-    def running_worlds(self) -> np.ndarray:
-        return self.table.worlds.copy()
 
     def wait(self, traj_id: int) -> concurrent.futures.Future[TrajectoryStatus]:
         """A future that gets the trajectory's final status (at once if it has finished)."""
@@ -227,27 +266,33 @@ class TrajectoryManager:
         return bool(t.has_path.any() or (tick >= t.end_tick).any())
 
     def observe(self, snap: Snapshot, st: Staging) -> None:
-        """Feedback and tolerance checks against the snapshot of the tick last sampled."""
-        t = self.table
-        if not len(t) or snap.tick != self._last_tick or len(self._last) != len(t):
+        """Feedback and tolerance checks against the snapshot of the tick last sampled.
+
+        Only the slots that tick sampled are judged (the first len(_last): slots are appended
+        at the end and removed from both), so a trajectory started meanwhile never shifts
+        the check by a tick: the outcome is the same live and in a replay."""
+        t, n = self.table, len(self._last)
+        if not n or snap.tick != self._last_tick:
             return
-        actual, vel = snap.position[t.worlds], snap.velocity[t.worlds]
+        worlds, ids = t.worlds[:n], t.ids[:n]
+        path_tol, goal_tol = t.path_tol[:n], t.goal_tol[:n]
+        actual, vel = snap.position[worlds], snap.velocity[worlds]
         err = np.abs(np.stack([actual - self._last, vel - self._last_vel], axis=1))
-        self._feedback = (snap.tick, t.ids.copy(), self._last.copy(), actual.astype(np.float64))
-        running = snap.tick < t.end_tick
-        path_bad = running[:, None, None] & (err > t.path_tol)
-        goal_in = (err <= t.goal_tol).all(axis=(1, 2))  # all true without a goal tolerance
+        self._feedback = (snap.tick, ids.copy(), self._last.copy(), actual.astype(np.float64))
+        running = snap.tick < t.end_tick[:n]
+        path_bad = running[:, None, None] & (err > path_tol)
+        goal_in = (err <= goal_tol).all(axis=(1, 2))  # all true without a goal tolerance
         settling = ~running
-        late = settling & t.has_goal & ~goal_in & (snap.tick >= t.goal_deadline)
+        late = settling & t.has_goal[:n] & ~goal_in & (snap.tick >= t.goal_deadline[:n])
         names = self.spec.names
-        path = AbortReason.PATH_TOLERANCE, t.path_tol, "path"
-        goal = AbortReason.GOAL_TOLERANCE, t.goal_tol, "goal"
+        path = AbortReason.PATH_TOLERANCE, path_tol, "path"
+        goal = AbortReason.GOAL_TOLERANCE, goal_tol, "goal"
         aborts = [
-            (int(t.worlds[i]), why, _detail(names, i, err, tol, kind))
+            (int(worlds[i]), why, tolerance_detail(names, err[i], tol[i], kind))
             for bad, (why, tol, kind) in ((path_bad.any(axis=(1, 2)), path), (late, goal))
             for i in np.flatnonzero(bad)
         ]
-        self._succeed(st, t.worlds[settling & goal_in], snap.tick)
+        self._succeed(st, worlds[settling & goal_in], snap.tick)
         for world, reason, detail in aborts:
             self._abort(st, np.array([world]), reason, detail)
 
@@ -271,29 +316,6 @@ class TrajectoryManager:
                         log.exception("trajectory listener %r failed", listener)
 
     # -- internals (lock held) --------------------------------------------------------------
-
-    def _initial_status(
-        self, traj_id: int, world: int, spec: JointTrajectorySpec, source: str, start: int, end: int
-    ) -> TrajectoryStatus:
-        return TrajectoryStatus(
-            id=traj_id,
-            world=world,
-            source=str(source),
-            state=TrajectoryState.RUNNING,
-            reason=None,
-            detail="",
-            joint_names=list(spec.joint_names),
-            start_tick=start,
-            end_tick=end,
-            duration=spec.duration,
-            tick=start - 1,
-            progress=0.0,
-            feedback_tick=None,
-            desired=[],
-            actual=[],
-            error=[],
-            finished_tick=None,
-        )
 
     def _progress(self, start_tick: int, duration: float) -> tuple[int, float]:
         """(last tick sampled, elapsed / duration in 0..1) of a run that started then."""
@@ -365,8 +387,8 @@ class TrajectoryManager:
             done.append(run)
         keep = np.ones(len(self.table), dtype=bool)
         keep[slots] = False
-        if len(self._last) == len(keep):
-            self._last, self._last_vel = self._last[keep], self._last_vel[keep]
+        n = len(self._last)  # the slots the last sample covered: the first n (see observe)
+        self._last, self._last_vel = self._last[keep[:n]], self._last_vel[keep[:n]]
         self.table.remove(slots)
         while len(self._finished) > _KEEP_FINISHED:
             old_id, old = self._finished.popitem(last=False)
@@ -374,13 +396,3 @@ class TrajectoryManager:
                 del self._by_world[old.world]
         self._done.extend(done)
         return done
-
-
-def _detail(names: list[str], slot: int, err: np.ndarray, tol: np.ndarray, kind: str) -> str:
-    """Which joint broke which tolerance, by how much (the first one found)."""
-    q, j = (int(x) for x in np.argwhere(err[slot] > tol[slot])[0])
-    what, unit = ("position", "rad") if q == 0 else ("velocity", "rad/s")
-    return (
-        f"{names[j]}: {kind} tolerance on {what} exceeded "
-        f"(error {err[slot, q, j]:.4g} {unit}, tolerance {tol[slot, q, j]:g})"
-    )

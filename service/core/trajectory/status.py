@@ -8,7 +8,12 @@ from __future__ import annotations
 
 import enum
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from service.core.trajectory.spec import JointTrajectorySpec
 
 
 class TrajectoryState(enum.StrEnum):
@@ -78,6 +83,31 @@ class TrajectoryStatus:
     error: list[float]
     finished_tick: int | None
 
+    @classmethod
+    def started(
+        cls, traj_id: int, world: int, spec: JointTrajectorySpec, source: str, start: int, end: int
+    ) -> TrajectoryStatus:
+        """A trajectory's status when it is accepted: running, nothing sampled yet."""
+        return cls(
+            id=traj_id,
+            world=world,
+            source=str(source),
+            state=TrajectoryState.RUNNING,
+            reason=None,
+            detail="",
+            joint_names=list(spec.joint_names),
+            start_tick=start,
+            end_tick=end,
+            duration=spec.duration,
+            tick=start - 1,
+            progress=0.0,
+            feedback_tick=None,
+            desired=[],
+            actual=[],
+            error=[],
+            finished_tick=None,
+        )
+
     @property
     def done(self) -> bool:
         return self.state is not TrajectoryState.RUNNING
@@ -96,3 +126,38 @@ class TrajectoryStatus:
             "reason": None if self.reason is None else self.reason.value,
             "progress": self.progress,
         }
+
+
+@dataclass(frozen=True)
+class Resumable:
+    """A running trajectory as a recording stores it: enough to sample it on exactly as before.
+
+    target, velocity: the world's target and feed-forward it started from (7 each)."""
+
+    world: int
+    spec: JointTrajectorySpec
+    start_tick: int
+    target: list[float]
+    velocity: list[float]
+
+    def as_json(self) -> dict[str, Any]:
+        """`resume_from` beside the trajectory's own JSON (what replay reads back)."""
+        return {
+            **self.spec.to_json(),
+            "resume_from": {
+                "start_tick": self.start_tick,
+                "target": self.target,
+                "velocity": self.velocity,
+            },
+        }
+
+
+def tolerance_detail(names: list[str], err: np.ndarray, tol: np.ndarray, kind: str) -> str:
+    """Which joint broke which tolerance, by how much (the first found); err, tol: (2, 7)
+    position and velocity rows of one trajectory."""
+    q, j = (int(x) for x in np.argwhere(err > tol)[0])
+    what, unit = ("position", "rad") if q == 0 else ("velocity", "rad/s")
+    return (
+        f"{names[j]}: {kind} tolerance on {what} exceeded "
+        f"(error {err[q, j]:.4g} {unit}, tolerance {tol[q, j]:g})"
+    )

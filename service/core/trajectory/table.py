@@ -176,6 +176,10 @@ class TrajectoryTable:
         for name in ("_order", "_mask", "_start", "_seg", "_coef", "_ta", "_len", "_coef_seg"):
             setattr(self, name, getattr(self, name)[keep])
 
+    def start_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each slot's start target and velocity feed-forward (S, 7): what `add` was given."""
+        return self._start[:, 0].copy(), self._start[:, 1].copy()
+
     def slots_of(self, worlds: np.ndarray) -> np.ndarray:
         """Slot indices of those of `worlds` that have an active trajectory."""
         return np.flatnonzero(np.isin(self.worlds, worlds))

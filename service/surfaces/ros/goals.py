@@ -29,6 +29,7 @@ import queue
 import threading
 import time
 import weakref
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -56,6 +57,7 @@ from service.surfaces.ros.goal_msgs import (
 )
 
 log = logging.getLogger("armfleet.ros")
+_KEEP_EARLY = 4096
 
 
 @dataclass
@@ -89,11 +91,13 @@ class GoalRunner:
         self.finger = self.spec.index("finger_joint")
         self.tick_dt = self.loop.batch.tick_dt
         self._lock = threading.Lock()
-        self._wake = threading.Condition(self._lock)
+        self._kick = threading.Event()  # a goal or an outcome arrived: the thread wakes
         self._active: list[Goal] = []
         self._by_traj: dict[int, Goal] = {}
         self._outcomes: queue.SimpleQueue[TrajectoryStatus] = queue.SimpleQueue()
-        self._early: dict[int, TrajectoryStatus] = {}
+        # outcomes of trajectories not (yet) known as goals: ours that ended before `submit`
+        # stored their id, and other surfaces' (bounded: those are never asked for)
+        self._early: OrderedDict[int, TrajectoryStatus] = OrderedDict()
         self.control.trajectories.add_listener(self._outcome)
         self._running = True
         self._thread = threading.Thread(target=self._run, name="armfleet-ros-goals", daemon=True)
@@ -120,8 +124,9 @@ class GoalRunner:
         g = Goal(action, kind, world, self.now(), on_feedback, on_done)
         if kind == FJT_TYPE:
             spec = trajectory_spec(self.spec, self.arm, goal)
+            # no lock of ours held: a preempted trajectory's listener runs in this thread
+            (started,) = self.control.start_trajectory([world], spec, source)
             with self._lock:
-                (started,) = self.control.start_trajectory([world], spec, source)
                 g.traj_id = started.id
                 self._by_traj[started.id] = g
                 early = self._early.pop(started.id, None)
@@ -140,7 +145,7 @@ class GoalRunner:
                 if old.kind == GRIPPER_TYPE == kind and old.world == world
             ]
             self._active.append(g)
-            self._wake.notify()
+        self._kick.set()
         for old in replaced:  # a newer gripper goal replaces the running one
             self._finish(old, Status.ABORTED, self._gripper_state(old, stalled=False))
         return g
@@ -170,16 +175,17 @@ class GoalRunner:
         return [g for g in running if self.cancel(g, source)]
 
     def _outcome(self, status: TrajectoryStatus) -> None:
-        """The manager's listener (any thread, its locks held): queue and wake the thread."""
+        """The manager's listener (any thread, maybe one inside `submit`): queue, wake."""
         self._outcomes.put(status)
-        with self._lock:
-            self._wake.notify()
+        self._kick.set()
 
     def _trajectory_done(self, status: TrajectoryStatus) -> None:
         with self._lock:
             g = self._by_traj.pop(status.id, None)
             if g is None:
-                self._early[status.id] = status  # finished before submit stored its id
+                self._early[status.id] = status
+                while len(self._early) > _KEEP_EARLY:
+                    self._early.popitem(last=False)
                 return
         if status.reason is None:
             self._finish(g, Status.SUCCEEDED, {"error_code": SUCCESSFUL, "error_string": ""})
@@ -209,8 +215,10 @@ class GoalRunner:
         period = 1.0 / FEEDBACK_HZ
         while self._running:
             with self._lock:
-                while self._running and not self._active and self._outcomes.empty():
-                    self._wake.wait()
+                idle = not self._active
+            if idle and self._outcomes.empty():
+                self._kick.wait()  # nothing to feed back: sleep until a goal or an outcome
+            self._kick.clear()
             started = time.monotonic()
             while not self._outcomes.empty():
                 self._trajectory_done(self._outcomes.get())
@@ -221,8 +229,7 @@ class GoalRunner:
                     self._tend(g)
                 except Exception:
                     log.exception("action goal on %s failed", g.action)
-            with self._lock:
-                self._wake.wait(max(0.0, started + period - time.monotonic()))
+            self._kick.wait(max(0.0, started + period - time.monotonic()))
 
     def _tend(self, g: Goal) -> None:
         if g.kind == FJT_TYPE:
@@ -265,9 +272,8 @@ class GoalRunner:
 
     def stop(self) -> None:
         self.control.trajectories.remove_listener(self._outcome)
-        with self._lock:
-            self._running = False
-            self._wake.notify()
+        self._running = False
+        self._kick.set()
         self._thread.join(timeout=5)
 
 
