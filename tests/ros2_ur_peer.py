@@ -16,14 +16,10 @@ Protocol: one JSON request per stdin line, one JSON reply per stdout line.
    "request": {...}, "timeout": 10}                 the decoded reply
 """
 
-import os
-import threading
 import time
 import uuid
 
 from cyclonedds._clayer import ddspy_take, ddspy_write
-from cyclonedds.core import InstanceState, SampleState, ViewState
-from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.qos import Policy, Qos
 from cyclonedds.sub import DataReader
@@ -31,8 +27,7 @@ from cyclonedds.topic import Topic
 
 from tests import ros2_types
 from tests.peer_stdio import serve_lines
-
-ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+from tests.ros2_participant import ANY, Participant
 
 
 def qos(latched: bool, user_data: bytes = b"") -> Qos:
@@ -46,17 +41,14 @@ def qos(latched: bool, user_data: bytes = b"") -> Qos:
     return Qos(*policies)
 
 
-class Peer:
+class Peer(Participant):
     def __init__(self) -> None:
-        self.dp = DomainParticipant(int(os.environ.get("ROS_DOMAIN_ID", "0")))
         self.topics: dict[tuple[str, str, bool], Topic] = {}
         self.writers: dict[str, DataWriter] = {}
-        self.readers: dict[str, tuple[DataReader, str]] = {}
         self.samples: dict[str, list] = {}
-        self.lock = threading.Lock()
         self.clients: dict[str, tuple] = {}
         self.seq = 0
-        threading.Thread(target=self._poll, daemon=True).start()
+        super().__init__()
 
     def _topic(self, dds_name: str, ros_type: str, header: bool = False) -> Topic:
         key = (dds_name, ros_type, header)
@@ -77,16 +69,8 @@ class Peer:
                 self.readers[topic] = (DataReader(self.dp, t, qos=qos(latched)), ros_type)
             return self.readers[topic][0]
 
-    def _poll(self) -> None:
-        while True:
-            with self.lock:
-                readers = list(self.readers.items())
-            for name, (reader, ros_type) in readers:
-                for data, info in ddspy_take(reader._ref, ANY, 64):
-                    if info.valid_data:
-                        msg = ros2_types.deserialize(ros_type, bytes(data))
-                        self.samples.setdefault(name, []).append(msg)
-            time.sleep(0.005)
+    def received(self, topic: str, ros_type: str, raw: bytes) -> None:
+        self.samples.setdefault(topic, []).append(ros2_types.deserialize(ros_type, raw))
 
     def client(self, service: str, ros_type: str) -> tuple:
         """rq/...Request writer and rr/...Reply reader, as rmw_cyclonedds creates a client."""

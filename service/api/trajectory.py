@@ -29,7 +29,8 @@ from service.core.trajectory.schemas import (
 )
 from service.core.worlds import parse_worlds
 
-router = APIRouter(prefix="/v1", tags=["trajectories"])
+# Every route here names worlds, so each can answer 404 for an unknown one.
+router = APIRouter(prefix="/v1", tags=["trajectories"], responses=errors(404))
 MAX_WAIT_S = 60.0
 
 
@@ -41,7 +42,6 @@ def _json(payload: object) -> Response:
     "/worlds/{world}/trajectory",
     response_model=StartedReply,
     summary="Follow a JointTrajectory (replaces a running one); answers its id and ticks",
-    responses=errors(404),
 )
 async def start(control: Ctl, world: World, body: TrajectoryBody) -> Response:
     spec = parse(control.spec, body.as_json())
@@ -64,7 +64,6 @@ Wait = Annotated[
     "/worlds/{world}/trajectory",
     response_model=TrajectoryStatusReply,
     summary="Status, progress and feedback of the world's running (else last) trajectory",
-    responses=errors(404),
 )
 async def status(control: Ctl, world: World, wait: Wait = 0.0) -> Response:
     missing = NotFound(f"world {world} has not run a trajectory", "world")
@@ -75,7 +74,6 @@ async def status(control: Ctl, world: World, wait: Wait = 0.0) -> Response:
     "/trajectories/{trajectory_id}",
     response_model=TrajectoryStatusReply,
     summary="One trajectory by id (also after a newer one replaced it on its world)",
-    responses=errors(404),
 )
 async def by_id(control: Ctl, trajectory_id: int, wait: Wait = 0.0) -> Response:
     missing = NotFound(f"no trajectory {trajectory_id} (unknown, or long forgotten)", "id")
@@ -106,7 +104,7 @@ async def _outcome(control: Control, current: TrajectoryStatus, wait: float) -> 
     "/worlds/{world}/trajectory",
     response_model=TrajectoryStatusReply,
     summary="Cancel the world's running trajectory; the world holds where it was",
-    responses=errors(404, 409),
+    responses=errors(409),
 )
 async def cancel(control: Ctl, world: World) -> Response:
     stopped = control.cancel_trajectory([world], Source.HTTP)
@@ -119,7 +117,6 @@ async def cancel(control: Ctl, world: World) -> Response:
     "/trajectories",
     response_model=BatchStartedReply,
     summary="Start one trajectory on many worlds, all at the same tick",
-    responses=errors(404),
 )
 async def start_many(control: Ctl, body: BatchTrajectoryBody) -> Response:
     worlds = _worlds(control, body.worlds)

@@ -33,7 +33,8 @@ from service.core.schemas import (
 from service.core.types import Mode, Snapshot
 from service.core.worlds import WORLDS_PATTERN, parse_worlds
 
-router = APIRouter(prefix="/v1", tags=["worlds"])
+# Every route here names worlds, so each can answer 404 for an unknown one.
+router = APIRouter(prefix="/v1", tags=["worlds"], responses=errors(404))
 
 
 def _json(payload: Any) -> Response:
@@ -66,7 +67,6 @@ async def _read(
     "/worlds/state",
     response_model=WorldStates,
     summary="State of several worlds (default: all), including every command accepted before",
-    responses=errors(404),
 )
 async def get_states(
     loop: Loop,
@@ -91,7 +91,6 @@ async def get_states(
     response_model=WorldState,
     summary="One world's JointState, target and flange pose, including every command accepted "
     "before",
-    responses=errors(404),
 )
 async def get_state(loop: Loop, world: World) -> Response:
     snap, pending = await _read(loop, [world])
@@ -104,7 +103,6 @@ async def get_state(loop: Loop, world: World) -> Response:
     "/worlds/{world}/increments",
     response_model=CommandReply,
     summary="Add to joint targets (the seed's Up/Down buttons); clamps to the joint range",
-    responses=errors(404),
 )
 async def increment(control: Ctl, world: World, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
@@ -116,7 +114,6 @@ async def increment(control: Ctl, world: World, body: IncrementRequest) -> Respo
     "/worlds/{world}/targets",
     response_model=CommandReply,
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
-    responses=errors(404),
 )
 async def put_targets(control: Ctl, world: World, body: JointTargets) -> Response:
     result = control.command_targets(world, body.name, body.position, Source.HTTP)
@@ -127,7 +124,6 @@ async def put_targets(control: Ctl, world: World, body: JointTargets) -> Respons
     "/targets",
     response_model=BatchCommandReply,
     summary="Full 7-joint targets for many worlds, applied together at one tick boundary",
-    responses=errors(404),
 )
 async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     results = control.set_many(body.worlds, body.position, Source.HTTP)
@@ -138,7 +134,6 @@ async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     "/worlds/{world}/reset",
     response_model=ResetReply,
     summary="Reset one world to home",
-    responses=errors(404),
 )
 async def reset_world(control: Ctl, world: World) -> ResetReply:
     done = control.reset([world], Source.HTTP)
@@ -149,7 +144,6 @@ async def reset_world(control: Ctl, world: World) -> ResetReply:
     "/reset",
     response_model=ResetReply,
     summary="Reset listed worlds (default: all) to home",
-    responses=errors(404),
 )
 async def reset_many(
     control: Ctl, body: Annotated[ResetRequest | None, Body()] = None

@@ -11,6 +11,7 @@ real-time factor, subscribers, clients, readiness) are read when scraped.
 from __future__ import annotations
 
 import collections
+import functools
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -42,35 +43,32 @@ class Metrics:
 
     def __init__(self) -> None:
         self.registry = CollectorRegistry(auto_describe=True)
-        r = self.registry
-        self.ticks = Counter("armfleet_ticks", "control ticks stepped", registry=r)
-        self.tick_seconds = Histogram(
+        # every series lives in this service's own registry
+        counter = functools.partial(Counter, registry=self.registry)
+        histogram = functools.partial(Histogram, registry=self.registry)
+        self.ticks = counter("armfleet_ticks", "control ticks stepped")
+        self.tick_seconds = histogram(
             "armfleet_tick_duration_seconds",
             "wall time of one control tick (commands in, physics, snapshot)",
             buckets=_TICK_BUCKETS,
-            registry=r,
         )
-        self.commands = Counter(
+        self.commands = counter(
             "armfleet_commands",
             "commands by surface, kind and result (accepted, rejected: invalid, "
             "refused: token/origin/rate)",
             ["source", "kind", "result"],
-            registry=r,
         )
-        self.effect_seconds = Histogram(
+        self.effect_seconds = histogram(
             "armfleet_command_effect_latency_seconds",
             "from a command's acceptance to the end of the first tick stepped with it",
             buckets=_EFFECT_BUCKETS,
-            registry=r,
         )
-        self.faults = Counter(
-            "armfleet_world_faults", "worlds reset for NaN or contact overflow", registry=r
-        )
-        self.engine_faults = Counter(
-            "armfleet_engine_faults", "ticks that failed with an engine exception", registry=r
+        self.faults = counter("armfleet_world_faults", "worlds reset for NaN or contact overflow")
+        self.engine_faults = counter(
+            "armfleet_engine_faults", "ticks that failed with an engine exception"
         )
         self._levels = _Levels()
-        r.register(self._levels)
+        self.registry.register(self._levels)
         # (effective tick, accepted at) of commands not yet in effect; appended from any thread,
         # drained on the sim thread. deque appends and pops are atomic.
         self._waiting: collections.deque[tuple[int, float]] = collections.deque(maxlen=_MAX_WAITING)

@@ -9,9 +9,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Annotated, Any
+from typing import Annotated, Any, ClassVar, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, Field, PlainValidator, WithJsonSchema
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    WithJsonSchema,
+    model_validator,
+)
 
 from service.core.robot import default_spec
 from service.core.types import NJOINT
@@ -42,6 +49,30 @@ def paired(keys_name: str, keys: list, values_name: str, values: list) -> None:
 
 class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
+
+
+class Paired(Strict):
+    """A request of two parallel lists, `PAIR` = (keys, values): checked with `paired`, and
+    stated in the schema by `paired_config`."""
+
+    PAIR: ClassVar[tuple[str, str]]
+
+    @model_validator(mode="after")
+    def _same_length(self) -> Self:
+        keys, values = self.PAIR
+        paired(keys, getattr(self, keys), values, getattr(self, values))
+        return self
+
+
+def paired_config(
+    pair: tuple[str, str],
+    most: int,
+    example: dict[str, Any],
+    extra: Literal["allow", "forbid"] = "forbid",
+) -> ConfigDict:
+    """A `Paired` model's config: its example, and equal lengths (1..`most`) in its schema."""
+    lengths = equal_lengths(*pair, range(1, most + 1))
+    return ConfigDict(extra=extra, json_schema_extra={"examples": [example], "oneOf": lengths})
 
 
 # The joint names come from the model (service/core/robot.py), read when a request is first

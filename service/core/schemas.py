@@ -20,12 +20,13 @@ from service.core.schema_fields import (
     FiniteFloat,
     JointKey,
     JointRef,
+    Paired,
     Strict,
     WorldId,
     equal_lengths,
     json_int,
     non_null,
-    paired,
+    paired_config,
 )
 from service.core.types import NJOINT, JointSpec, Mode
 
@@ -205,31 +206,28 @@ class IncrementRequest(Strict):
         return {self.joint: self.delta}
 
 
-class JointTargets(Strict):
+class JointTargets(Paired):
     """sensor_msgs/JointState-shaped: a subset of names is allowed; others keep their targets."""
 
+    PAIR = ("name", "position")
     name: list[JointKey] = Field(
         min_length=1, max_length=NJOINT, json_schema_extra={"uniqueItems": True}
     )
     position: list[FiniteFloat] = Field(min_length=1, max_length=NJOINT)
 
-    model_config = ConfigDict(
-        extra="allow",  # JointState also carries header/velocity/effort; they are ignored
-        json_schema_extra={
-            "examples": [{"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]}],
-            "oneOf": equal_lengths("name", "position", range(1, NJOINT + 1)),
-        },
+    # JointState also carries header/velocity/effort: allowed, and ignored
+    model_config = paired_config(
+        PAIR,
+        NJOINT,
+        {"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]},
+        extra="allow",
     )
 
-    @model_validator(mode="after")
-    def _same_length(self) -> JointTargets:
-        paired("name", self.name, "position", self.position)
-        return self
 
-
-class BatchTargets(Strict):
+class BatchTargets(Paired):
     """Full 7-joint targets for many worlds in one request, applied at one tick boundary."""
 
+    PAIR = ("worlds", "position")
     worlds: list[WorldId] = Field(
         min_length=1,
         max_length=MAX_BATCH_WORLDS,
@@ -240,20 +238,11 @@ class BatchTargets(Strict):
         min_length=1, max_length=MAX_BATCH_WORLDS, description="one row of 7 targets per world"
     )
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2}
-            ],
-            "oneOf": equal_lengths("worlds", "position", range(1, MAX_BATCH_WORLDS + 1)),
-        },
+    model_config = paired_config(
+        PAIR,
+        MAX_BATCH_WORLDS,
+        {"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2},
     )
-
-    @model_validator(mode="after")
-    def _same_length(self) -> BatchTargets:
-        paired("worlds", self.worlds, "position", self.position)
-        return self
 
 
 class ResetRequest(Strict):

@@ -239,13 +239,7 @@ class UrDriverDds:
             values = arm_command(self._arm, list(msg.data))
             self._control.command_targets(world, self._arm, values, Source.ROS2)
 
-        def serve_one() -> bool:
-            kind = self._tf.Float64MultiArray
-            taken, accepted = topics.take_commands(reader, kind, topic, self._bad, apply)
-            self.received += accepted
-            return taken
-
-        return serve_one
+        return self._serving(reader, self._tf.Float64MultiArray, topic, apply)
 
     def _trajectory_input(self, reader: Any, topic: str, world: int) -> Callable[[], bool]:
         """`~/joint_trajectory`: start it (preempting any running one); no points: stop and hold."""
@@ -261,8 +255,15 @@ class UrDriverDds:
                 raise topics.BadMessage("rejected", str(exc)) from None
             self._control.start_trajectory([world], spec, Source.ROS2)
 
+        return self._serving(reader, self._traj.JointTrajectory, topic, apply)
+
+    def _serving(
+        self, reader: Any, kind: type, topic: str, apply: Callable[[Any], None]
+    ) -> Callable[[], bool]:
+        """An input's server: take what `reader` holds and `apply` each message (bad ones are
+        counted by `topics.take_commands`), count the accepted; True while any was taken."""
+
         def serve_one() -> bool:
-            kind = self._traj.JointTrajectory
             taken, accepted = topics.take_commands(reader, kind, topic, self._bad, apply)
             self.received += accepted
             return taken
