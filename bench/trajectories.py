@@ -66,17 +66,12 @@ def tracking(engine: str) -> dict[str, Any]:
     """Largest path error and the error 0.5 s after the end, stepping a paused loop."""
     from service.core.control import Control, Source
     from service.core.loop import SimLoop
+    from service.core.settings import Settings
     from service.core.trajectory import parse
     from service.core.types import Mode
+    from service.engines.choice import build_batch
 
-    if engine == "warp":
-        from service.engines.warp import WorldBatch
-
-        batch = WorldBatch(2)
-    else:
-        from service.engines.native import NativeBatch
-
-        batch = NativeBatch(2, nthread=1)
+    batch = build_batch(Settings(engine=engine, worlds=2, shards=1))  # one process, one thread
     loop = SimLoop(batch, Mode.PAUSED)
     control = Control(loop)
     loop.start()

@@ -9,7 +9,10 @@ that compares what the service publishes with them checks the service, not a cop
 from __future__ import annotations
 
 import contextlib
+import json
 import random
+import shutil
+import subprocess
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -129,3 +132,27 @@ def ur_peer(ur_server: Server, ur_domain: int) -> Iterator[UrPeer]:
         yield p
     finally:
         p.close()
+
+
+# -- roslib.js (tests/js: Node scripts that drive the rosbridge endpoint) ---------------------
+
+JS_DIR = Path(__file__).with_name("js")
+
+
+@pytest.fixture(scope="session")
+def roslibjs() -> Callable[..., tuple[dict[str, Any], str]]:
+    """Runs a tests/js script with roslib.js installed (else the test is skipped): what it
+    printed last, as JSON, and its stderr (for the assertion message)."""
+    node, npm = shutil.which("node"), shutil.which("npm")
+    if node is None or npm is None:
+        pytest.skip("node/npm not installed")
+    if not (JS_DIR / "node_modules" / "roslib").exists():
+        subprocess.run([npm, "ci", "--no-audit", "--no-fund"], cwd=JS_DIR, check=True)
+
+    def run(script: str, *args: str) -> tuple[dict[str, Any], str]:
+        out = subprocess.run(
+            [node, script, *args], cwd=JS_DIR, capture_output=True, text=True, timeout=60
+        )
+        return json.loads(out.stdout.strip().splitlines()[-1]), out.stderr
+
+    return run

@@ -8,11 +8,8 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
-import subprocess
 import threading
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
@@ -23,8 +20,6 @@ import roslibpy.ros2
 from websockets.sync.client import connect
 
 from tests.conftest import ELBOW, FINGER, JOINTS, Server, serve, wait_for
-
-JS_DIR = Path(__file__).with_name("js")
 
 
 @pytest.fixture(scope="module")
@@ -136,28 +131,11 @@ def test_roslibpy_clock(ros: roslibpy.Ros) -> None:
 # -- roslib.js -----------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def node_modules() -> Path:
-    node, npm = shutil.which("node"), shutil.which("npm")
-    if node is None or npm is None:
-        pytest.skip("node/npm not installed")
-    if not (JS_DIR / "node_modules" / "roslib").exists():
-        subprocess.run([npm, "ci", "--no-audit", "--no-fund"], cwd=JS_DIR, check=True)
-    return JS_DIR / "node_modules"
-
-
 @pytest.mark.parametrize("prefix", ["", "/world_1"])
-def test_roslibjs_publishes_and_subscribes(server: Server, node_modules: Path, prefix: str) -> None:
+def test_roslibjs_publishes_and_subscribes(server: Server, roslibjs: Any, prefix: str) -> None:
     url = server.ws_url + "/rosbridge"
-    out = subprocess.run(
-        ["node", "rosbridge_check.mjs", url, prefix.lstrip("/") and prefix],
-        cwd=JS_DIR,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    result = json.loads(out.stdout.strip().splitlines()[-1])
-    assert result["ok"], (result, out.stderr)
+    result, stderr = roslibjs("rosbridge_check.mjs", url, prefix.lstrip("/") and prefix)
+    assert result["ok"], (result, stderr)
     assert f"{prefix}/joint_states" in result["topics"]["topics"]
     assert result["type"] == "sensor_msgs/msg/JointState"
     assert result["msg"]["name"] == JOINTS and result["msg"]["position"][FINGER] > 0.5

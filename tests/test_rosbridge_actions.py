@@ -6,11 +6,8 @@ lists the actions.
 
 from __future__ import annotations
 
-import json
-import subprocess
 import threading
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
@@ -19,7 +16,6 @@ import pytest
 import roslibpy
 
 from tests.conftest import JOINTS, Server, serve, wait_for
-from tests.test_rosbridge import JS_DIR, node_modules  # noqa: F401  (the fixture)
 
 FJT = "control_msgs/action/FollowJointTrajectory"
 ARM = JOINTS[:6]
@@ -143,17 +139,10 @@ def test_roslibpy_bad_goals_fail_and_change_nothing(
     assert httpx.get(f"{server.url}/v1/worlds/0/state").json()["target"] == before
 
 
-def test_roslibjs_action(server: Server, node_modules: Path) -> None:  # noqa: F811
+def test_roslibjs_action(server: Server, roslibjs: Any) -> None:
     name = "/world_1/joint_trajectory_controller/follow_joint_trajectory"
-    out = subprocess.run(
-        ["node", "rosbridge_actions_check.mjs", server.ws_url + "/rosbridge", name],
-        cwd=JS_DIR,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    seen = json.loads(out.stdout.strip().splitlines()[-1])
-    assert seen["ok"], (seen, out.stderr)
+    seen, stderr = roslibjs("rosbridge_actions_check.mjs", server.ws_url + "/rosbridge", name)
+    assert seen["ok"], (seen, stderr)
     assert seen["result"] == {"error_code": 0, "error_string": ""}
     assert seen["feedback"] >= 3 and seen["lastFeedback"]["joint_names"] == ARM
     assert "points[0].positions" in seen["bad"]  # the validator's message, status 0

@@ -14,6 +14,7 @@ import pytest
 from service.core.control import Control, Source
 from service.core.errors import BadCommand
 from service.core.loop import SimLoop
+from service.core.settings import Settings
 from service.core.trajectory import (
     MAX_DURATION_S,
     MAX_POINTS,
@@ -26,7 +27,7 @@ from service.core.trajectory import (
 )
 from service.core.trajectory.table import TrajectoryTable
 from service.core.types import Mode
-from service.engines.native import NativeBatch
+from service.engines.choice import build_batch
 from tests.conftest import HOME, JOINTS, SPEC
 
 ARM = JOINTS[:6]
@@ -57,12 +58,8 @@ def stepped(ticks: int, loop: SimLoop) -> None:
 
 @pytest.fixture(scope="module", params=["warp", "mujoco"])
 def engine(request: pytest.FixtureRequest) -> Iterator[tuple[SimLoop, Control]]:
-    if request.param == "warp":
-        from service.engines.warp import WorldBatch
-
-        batch = WorldBatch(4)
-    else:
-        batch = NativeBatch(4, nthread=1)
+    # the engine `serve --engine X --shards 1` runs: one process, one thread
+    batch = build_batch(Settings(engine=request.param, worlds=4, shards=1))
     loop = SimLoop(batch, Mode.PAUSED)
     control = Control(loop)
     loop.start()
