@@ -152,7 +152,9 @@ def test_a_changed_command_is_named_at_the_first_tick_world_and_joint_it_changes
     tick = min(seg.commands)
     cmd = seg.commands[tick][0]
     world = cmd["worlds"][0]
-    cmd["targets"][0][2] += 1e-3  # elbow target off by a milliradian
+    joint = cmd.get("joints", [2])[0]  # a joint it names (only those are replayed)
+    row = cmd["targets"][0]
+    row[joint] += 1e-3 if row[joint] <= 0 else -1e-3  # off by a milliradian, inward
     report = replay_recording(rec)
     d = report.divergence
     assert d is not None

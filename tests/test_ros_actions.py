@@ -315,3 +315,28 @@ def test_gripper_closes_on_the_cube_stalled_and_opens(ur_server: Server, ur_peer
     assert not ur_peer.call(
         action, GRIPPER, "send_goal", {"goal_id": {"uuid": _uuid()}, "goal": bad}
     )["accepted"]
+
+
+def test_a_gripper_goal_during_an_arm_goal_leaves_the_arm_goal_running(
+    ur_server: Server, ur_peer: UrPeer
+) -> None:
+    """Separate controllers, as on a UR with a Robotiq: both goals on world 1 succeed."""
+    httpx.post(f"{ur_server.url}/v1/worlds/1/reset").raise_for_status()
+    gripper = "/world_1/robotiq_gripper_controller/gripper_cmd"
+    wanted = [0.3, -1.3, 1.6, -1.8, -1.4, 0.4]
+    arm_id, grip_id = _uuid(), _uuid()
+    goal = _goal([(2.0, wanted)])
+    assert ur_peer.call(SCALED, FJT, "send_goal", {"goal_id": _id(arm_id), "goal": goal})[
+        "accepted"
+    ]
+    wait_for(lambda: _state(ur_server, 1)["target"][0] > 0.01, "the arm goal to move world 1")
+    close = {"command": {"position": 0.3, "max_effort": 10.0}}
+    assert ur_peer.call(gripper, GRIPPER, "send_goal", {"goal_id": _id(grip_id), "goal": close})[
+        "accepted"
+    ]
+    grip = ur_peer.call(gripper, GRIPPER, "get_result", {"goal_id": _id(grip_id)}, timeout=30)
+    assert grip["status"] == SUCCEEDED and grip["result"]["reached_goal"] is True, grip
+    result = ur_peer.call(SCALED, FJT, "get_result", {"goal_id": _id(arm_id)}, timeout=30)
+    assert result["status"] == SUCCEEDED, result
+    target = _state(ur_server, 1)["target"]
+    np.testing.assert_allclose(target, [*wanted, 0.3], atol=1e-9)

@@ -276,6 +276,40 @@ def test_manual_command_stops_the_trajectory_and_holds(sim):
     np.testing.assert_allclose(loop.latest.target[0], want)  # not moved on by the trajectory
 
 
+def test_takeover_is_joint_scoped_a_gripper_command_leaves_the_arm_running(sim):
+    """The arm and the gripper are separate controllers, as on a UR with a Robotiq: a finger
+    command (even staged between the same two ticks as a trajectory sample) moves the finger
+    and the arm trajectory goes on; a target on one of the trajectory's joints takes over."""
+    loop, control = sim
+    arm = control.start_trajectory([0], three_points(), Source.HTTP)[0]
+    elbow = JointTrajectorySpec.build(SPEC, ["elbow_joint"], [TrajectoryPoint([1.0], 0.5)])
+    part = control.start_trajectory([1], elbow, Source.HTTP)[0]
+    stepped(10, loop)
+    finger = control.command_targets(0, ["finger_joint"], [0.5], Source.ROS2)
+    pan = control.increment(1, {"shoulder_pan_joint": 0.2}, Source.BROWSER)
+    assert control.trajectories.status(0).state is TrajectoryState.RUNNING
+    assert control.trajectories.status(1).state is TrajectoryState.RUNNING
+    stepped(1, loop)
+    assert loop.latest.target[0, 6] == finger.target[6] == 0.5  # not written over by the sample
+    assert loop.latest.target[1, 0] == pan.target[0]
+    assert loop.latest.target[1, 2] != pan.target[2]  # the elbow follows its trajectory
+    stepped(arm.end_tick - loop.tick, loop)
+    assert control.trajectories.get(arm.id).state is TrajectoryState.SUCCEEDED
+    assert control.trajectories.get(part.id).state is TrajectoryState.SUCCEEDED
+    snap = loop.latest
+    np.testing.assert_array_equal(snap.target[0, :6], WAYPOINTS[-1][1])
+    assert snap.target[0, 6] == 0.5 and snap.position[0, 6] > 0.3  # the finger closed
+    # A target on one of the trajectory's joints (and a batch row: every joint) takes over.
+    for command in (
+        lambda: control.command_targets(2, ["finger_joint", "wrist_3_joint"], [0, 0], Source.WS),
+        lambda: control.set_many([2], [HOME], Source.HTTP),
+    ):
+        control.start_trajectory([2], three_points(), Source.HTTP)
+        stepped(5, loop)
+        command()
+        assert control.trajectories.status(2).reason is AbortReason.MANUAL_OVERRIDE
+
+
 def test_a_newer_trajectory_preempts_and_starts_where_the_old_one_was(sim):
     loop, control = sim
     first = control.start_trajectory([0], three_points(), Source.HTTP)[0]

@@ -86,6 +86,22 @@ def test_cancel_holds_and_a_button_press_takes_over(arm):
     assert arm.trajectory(2).reason == "manual_override"
 
 
+def test_a_gripper_command_during_an_arm_trajectory_moves_the_finger_only(arm):
+    started = arm.start_trajectory(1, ARM, POINTS)
+    arm.step(10)
+    arm.set_targets(1, {"finger_joint": 0.4})  # the gripper: not one of the trajectory's joints
+    arm.step(started.end_tick - arm.state(1).tick)
+    done = arm.trajectory(1)
+    assert done.succeeded and done.finished_tick == started.end_tick
+    state = arm.state(1)
+    np.testing.assert_array_equal(state.target, [*GOAL, 0.4])
+    assert state.position[6] > 0.2  # the finger closed meanwhile
+    arm.start_trajectory(1, ARM, POINTS)
+    arm.step(5)
+    arm.set_targets(1, {"wrist_2_joint": -1.0})  # one of its joints: takes over
+    assert arm.trajectory(1).reason == "manual_override"
+
+
 @pytest.mark.parametrize(
     ("points", "field", "limit"),
     [
@@ -182,6 +198,7 @@ def test_trajectories_are_recorded_and_replayed_bit_exactly(arm, paused):
     arm.start_trajectory(2, ARM, POINTS, path_tolerance=tight)
     arm.step(15)
     arm.increment(0, "wrist_1_joint", -0.1)  # takes over world 0
+    arm.set_targets(1, {"finger_joint": 0.3})  # world 1's trajectory goes on
     arm.start_trajectory(3, ARM, POINTS)
     arm.step(10)
     arm.cancel_trajectory(3)
@@ -191,5 +208,7 @@ def test_trajectories_are_recorded_and_replayed_bit_exactly(arm, paused):
     kinds = [c["kind"] for seg in rec.segments for cs in seg.commands.values() for c in cs]
     assert kinds.count("trajectory") == 3 and kinds.count("trajectory_cancel") == 1
     assert kinds.count("trajectory_resume") == 1
+    named = [c.get("joints") for seg in rec.segments for cs in seg.commands.values() for c in cs]
+    assert [6] in named  # the finger command names finger_joint (6) alone, and so does the replay
     report = replay_recording(rec)
     assert report.divergence is None and report.ticks == 75 and report.states_compared >= 300

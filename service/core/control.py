@@ -58,6 +58,8 @@ class Accepted:
     tick: the first tick stepped with it
     mode: the new mode (kind "mode" only)
     trajectory: the trajectory as JSON (`JointTrajectorySpec.to_json`, kind "trajectory" only)
+    joints: the joint indices a target command named (None: all): a trajectory stops only if
+        it drives one of them, so a replay must name the same ones
     """
 
     source: Source
@@ -67,6 +69,7 @@ class Accepted:
     tick: int
     mode: Mode | None = None
     trajectory: dict[str, Any] | None = None
+    joints: tuple[int, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -156,7 +159,7 @@ class Control:
         values = resolve_joints(self.spec, deltas, field)
         with self._ordered():
             result = self.loop.increment(world, values)
-            self._announce_result("increment", source, result)
+            self._announce_result("increment", source, result, tuple(values))
         return result
 
     def command_targets(
@@ -179,7 +182,7 @@ class Control:
         values = resolve_joints(self.spec, dict(zip(name, position, strict=True)), "name")
         with self._ordered():
             result = self.loop.stage_targets(world, values)
-            self._announce_result("set_targets", source, result)
+            self._announce_result("set_targets", source, result, tuple(values))
         return result
 
     def set_many(
@@ -187,8 +190,10 @@ class Control:
         worlds: Sequence[int],
         positions: Sequence[Sequence[float]] | np.ndarray,
         source: Source,
+        joints: Sequence[int] | None = None,
     ) -> list[CommandResult]:
-        """Full 7-joint targets for many worlds, staged together for one tick boundary."""
+        """Full 7-joint targets for many worlds, staged together for one tick boundary; with
+        `joints` (indices, a replay's) only those joints of each row change."""
         ids = self.worlds(worlds)
         njoint = len(self.spec.joints)
         try:
@@ -204,7 +209,8 @@ class Control:
         if not np.isfinite(rows).all():
             raise BadCommand("position", "values must be finite (no NaN or Inf)")
         with self._ordered():
-            results = self.loop.set_many(ids, rows)
+            named = None if joints is None else tuple(int(j) for j in joints)
+            results = self.loop.set_many(ids, rows, None if named is None else list(named))
             if results:
                 self._announce(
                     Accepted(
@@ -213,6 +219,7 @@ class Control:
                         np.array(ids, dtype=np.int64),
                         np.stack([r.target for r in results]),
                         results[0].tick,
+                        joints=named,
                     )
                 )
         return results
@@ -272,10 +279,13 @@ class Control:
             self._announce(Accepted(source, kind, world, target, tick, None, run.as_json()))
         return started
 
-    def _announce_result(self, kind: str, source: Source, result: CommandResult) -> None:
+    def _announce_result(
+        self, kind: str, source: Source, result: CommandResult, joints: tuple[int, ...]
+    ) -> None:
         if self._listeners:
             worlds = np.array([result.world], dtype=np.int64)
-            self._announce(Accepted(source, kind, worlds, result.target[None, :], result.tick))
+            row = result.target[None, :]
+            self._announce(Accepted(source, kind, worlds, row, result.tick, joints=joints))
 
     # -- the JSON op protocol of the WebSocket surfaces ------------------------------------
 

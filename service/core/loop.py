@@ -123,37 +123,38 @@ class SimLoop(TickBoundary):
         self._check_world(world)
         with self._lock:
             update = commands.increment(self.spec, self._pending[world], deltas)
-            return self._stage(world, update)
+            return self._stage(world, update, list(deltas))
 
     def stage_targets(self, world: int, values: Mapping[int, float]) -> CommandResult:
         """Set the named joints' targets (others keep theirs), clamped."""
         self._check_world(world)
         with self._lock:
             update = commands.replace_targets(self.spec, self._pending[world], values)
-            return self._stage(world, update)
+            return self._stage(world, update, list(values))
 
-    def set_many(self, worlds: list[int], positions: np.ndarray) -> list[CommandResult]:
-        """Full 7-joint targets for many worlds, all applied at the same tick boundary."""
+    def set_many(
+        self, worlds: list[int], positions: np.ndarray, joints: list[int] | None = None
+    ) -> list[CommandResult]:
+        """Targets of many worlds for one tick boundary: every joint of each row, or only
+        `joints` (indices; the others keep their targets)."""
         for w in worlds:
             self._check_world(w)
-        every = dict.fromkeys(range(len(self.spec.joints)), 0.0)
+        named = list(range(len(self.spec.joints))) if joints is None else list(joints)
+        rows = [dict(zip(named, row[named], strict=True)) for row in positions]
         with self._lock:
-            updates = [
-                commands.replace_targets(
-                    self.spec, self._pending[w], dict(zip(every, row, strict=True))
-                )
-                for w, row in zip(worlds, positions, strict=True)
+            return [
+                self._stage(w, commands.replace_targets(self.spec, self._pending[w], v), named)
+                for w, v in zip(worlds, rows, strict=True)
             ]
-            return [self._stage(w, u) for w, u in zip(worlds, updates, strict=True)]
 
-    def _stage(self, world: int, update: commands.TargetUpdate) -> CommandResult:
+    def _stage(self, world: int, update: commands.TargetUpdate, joints: list[int]) -> CommandResult:
+        """Stage a world's new row; a trajectory stops only if it drives one of `joints`."""
         self._pending[world] = update.target
-        self._velocity[world] = 0.0
+        self._velocity[world] = 0.0  # a trajectory that goes on writes its own next tick
         self._dirty[world] = True
         if self._traj is not None:
-            self._traj.overridden(np.array([world]), Override.MANUAL)
-        tick = self._accept_tick()
-        self._effective[world] = tick
+            self._traj.overridden(np.array([world]), Override.MANUAL, np.asarray(joints))
+        self._effective[world] = tick = self._accept_tick()
         return CommandResult(world, update.target.copy(), update.clamped, tick)
 
     def reset(self, worlds: list[int] | None = None) -> int:

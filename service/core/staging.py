@@ -41,8 +41,10 @@ class Override(enum.StrEnum):
 class TrajectoryHook(Protocol):
     """Called by the loop with its command lock held (except `dispatch`)."""
 
-    def overridden(self, worlds: np.ndarray, reason: Override) -> None:
-        """A target command or reset was staged for `worlds`."""
+    def overridden(
+        self, worlds: np.ndarray, reason: Override, joints: np.ndarray | None = None
+    ) -> None:
+        """A target command (naming `joints`, indices) or a reset (None: all) was staged."""
 
     def sample(self, tick: int, st: Staging) -> None:
         """Stage the desired targets of tick `tick` (just before it is stepped)."""

@@ -11,7 +11,8 @@
   tick. Log time is the wall clock when the state was taken (so playback runs as it happened).
 - `/armfleet/commands` (JSON schema): every accepted command: seq, source, kind (increment,
   set_targets, reset, mode), worlds, targets (the worlds' rows after it) [rad], tick (the first
-  tick stepped with it), mode.
+  tick stepped with it), mode, joints (the joint indices a target command named; only those
+  change in a replay, and only a trajectory driving one of them stops).
 - `/armfleet/restores` (JSON schema): tick_before, tick (after), name, attachment.
 - `/armfleet/status` (JSON schema): start, stop and the error that ended a recording early.
 """
@@ -103,6 +104,12 @@ _COMMAND_SCHEMA = {
         },
         "tick": {"type": "integer", "description": "first tick stepped with the command"},
         "mode": {"type": ["string", "null"], "description": "new mode (kind mode)"},
+        "joints": {
+            "type": "array",
+            "items": {"type": "integer"},
+            "description": "joint indices a target command named (absent: all); only these "
+            "change and only a trajectory driving one of them stops",
+        },
         "trajectory": {
             "type": "object",
             "description": "kind trajectory: joint_names, points, tolerances (as POSTed)",

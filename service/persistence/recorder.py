@@ -315,6 +315,7 @@ class Recorder:
                     "tick": a.tick,
                     "mode": None if a.mode is None else str(a.mode),
                     **({} if a.trajectory is None else {"trajectory": a.trajectory}),
+                    **({} if a.joints is None else {"joints": list(a.joints)}),
                 },
             )
         elif kind == "restore":

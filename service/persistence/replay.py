@@ -299,4 +299,5 @@ def _apply(control: Control, cmd: dict[str, Any]) -> None:
         run = Resumable(worlds[0], spec, start["start_tick"], start["target"], start["velocity"])
         control.resume_trajectory(run, Source.REPLAY)
     else:  # increment or set_targets: the recorded rows are the targets after the command
-        control.set_many(worlds, np.asarray(cmd["targets"], dtype=np.float64), Source.REPLAY)
+        rows = np.asarray(cmd["targets"], dtype=np.float64)
+        control.set_many(worlds, rows, Source.REPLAY, cmd.get("joints"))  # named joints only

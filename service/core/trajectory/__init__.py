@@ -16,8 +16,9 @@ The API every surface codes against (HTTP, WebSocket, ROS 2 actions, rosbridge):
   (what a recording stores; `Control.resume_trajectory` puts one back in a replay).
 
 Feedback (desired, actual, error per joint) is in `TrajectoryStatus`, as of the last snapshot.
-Manual target commands and resets stop a world's trajectory (reason manual_override / reset)
-and the world holds where it was; a fault aborts it (reason fault, the world is at home).
+A manual target command on one of a trajectory's joints and a reset stop it (reason
+manual_override / reset) and the world holds where it was; commands on other joints (the
+gripper's during an arm trajectory) leave it running. A fault aborts it (the world goes home).
 """
 
 from service.core.trajectory.spec import (

@@ -13,7 +13,8 @@ feedback, checks tolerances and finishes what reached its end. Outcomes are hand
 and futures by `dispatch`, outside the lock.
 
 An aborted or cancelled trajectory holds: the world keeps the last desired position as its
-target, with zero velocity feed-forward. Manual commands and resets abort; so does a restore.
+target, with zero velocity feed-forward. A manual command on one of its joints aborts it (one
+on other joints, e.g. the gripper's, does not); so do a reset and a restore.
 Everything is a function of ticks and simulated state, so a recording replays it exactly.
 """
 
@@ -192,13 +193,8 @@ class TrajectoryManager:
             t = self.table
             elapsed = (max(self._last_tick, 0) - t.start_tick + 1) * t.tick_dt
             progress = np.clip(elapsed / np.maximum(t.duration, 1e-9), 0.0, 1.0)
-            running = dict(
-                zip(
-                    t.worlds.tolist(),
-                    zip(t.ids.tolist(), progress.tolist(), strict=True),
-                    strict=True,
-                )
-            )
+            pairs = zip(t.ids.tolist(), progress.tolist(), strict=True)
+            running = dict(zip(t.worlds.tolist(), pairs, strict=True))
             known = np.intersect1d(np.fromiter(self._by_world, dtype=np.int64), worlds)
             for w in known.tolist():
                 if w in running:
@@ -232,11 +228,16 @@ class TrajectoryManager:
 
     # -- the loop's hook (lock held) --------------------------------------------------------
 
-    def overridden(self, worlds: np.ndarray, reason: Override) -> None:
-        """A manual command or reset was staged for `worlds`: their trajectories stop."""
+    def overridden(
+        self, worlds: np.ndarray, reason: Override, joints: np.ndarray | None = None
+    ) -> None:
+        """A command naming `joints` (None: a reset) was staged: trajectories driving one
+        stop; others go on (a gripper command leaves an arm trajectory running, as on a UR)."""
         if len(self.table):
             why = "a reset" if reason is Override.RESET else "a manual target command"
             worlds = np.asarray(worlds, dtype=np.int64)
+            if joints is not None:
+                worlds = self.table.worlds[self.table.slots_driving(worlds, joints)]
             self._abort(None, worlds, AbortReason(reason.value), f"stopped by {why}")
 
     def sample(self, tick: int, st: Staging) -> None:
@@ -244,9 +245,10 @@ class TrajectoryManager:
         if not len(self.table):
             return
         s = self.table.sample(tick)
-        w = self.table.worlds
-        st.pending[w] = s.positions
-        st.velocity[w] = s.velocities
+        w, driven = self.table.worlds, self.table.driven()
+        # Only the driven joints: others keep their staged targets (this tick's included).
+        st.pending[w] = np.where(driven, s.positions, st.pending[w])
+        st.velocity[w] = np.where(driven, s.velocities, st.velocity[w])
         st.dirty[w] = True
         self._last, self._last_vel, self._last_tick = s.positions, s.velocities, tick
 

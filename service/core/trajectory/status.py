@@ -30,7 +30,7 @@ class AbortReason(enum.StrEnum):
     PATH_TOLERANCE = "path_tolerance"  # |actual - desired| exceeded a path tolerance
     GOAL_TOLERANCE = "goal_tolerance"  # not within the goal tolerance by the goal time
     PREEMPTED = "preempted"  # a newer trajectory on the same world replaced it
-    MANUAL_OVERRIDE = "manual_override"  # a target command (button, set targets) took over
+    MANUAL_OVERRIDE = "manual_override"  # a target command on one of its joints took over
     RESET = "reset"  # the world was reset to home (or the whole batch was restored)
     FAULT = "fault"  # the world's physics failed and it was reset to home
     CANCELLED = "cancelled"  # cancelled by request (DELETE, action cancel)

@@ -46,7 +46,8 @@ class Sample(NamedTuple):
     """One tick's desired state of every slot (rows in slot order, all seven joints).
 
     positions [rad], velocities [rad/s] (the feed-forward), accelerations [rad/s²]: (S, 7);
-    joints not in a slot's trajectory hold the start row's position with zero velocity.
+    joints not in a slot's trajectory hold the start row's position with zero velocity (the
+    manager writes only the driven joints: see `driven`).
     ended: the slot's last point is reached at or before this tick                    (S,)
     """
 
@@ -183,6 +184,15 @@ class TrajectoryTable:
     def slots_of(self, worlds: np.ndarray) -> np.ndarray:
         """Slot indices of those of `worlds` that have an active trajectory."""
         return np.flatnonzero(np.isin(self.worlds, worlds))
+
+    def slots_driving(self, worlds: np.ndarray, joints: np.ndarray) -> np.ndarray:
+        """Slot indices of those of `worlds` whose trajectory drives one of `joints` (indices)."""
+        slots = self.slots_of(worlds)
+        return slots[self._mask[slots][:, joints].any(axis=1)]
+
+    def driven(self) -> np.ndarray:
+        """Which joints each slot's trajectory drives (S, 7) bool (a view: do not modify)."""
+        return self._mask
 
     def elapsed(self, tick: int) -> np.ndarray:
         """Sample time of every slot at `tick` [s] (negative before its start)."""
