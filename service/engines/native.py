@@ -22,6 +22,7 @@ import logging
 import time
 from pathlib import Path
 
+import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
@@ -33,7 +34,7 @@ from service.core.robot import LoadedRobot, load_robot
 from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
-from service.engines.native_kinematics import Kinematics
+from service.engines.native_kinematics import Kinematics, chain_to
 
 log = logging.getLogger("armfleet.native")
 
@@ -112,6 +113,15 @@ class NativeBatch(HostMirror, Batch, Restorable):
         # The batch copies the model: options are set above, before it is built.
         self._b = mjbatch.Batch(mjm, nworld, nthread=self.nthread)
         self._kin = Kinematics(mjm, nworld, self.nthread)
+        self._arm: Kinematics | None = None  # the flange alone, for frames (from the MJCF)
+        if robot is None:
+            chain, cols = chain_to(mujoco.MjSpec.from_file(str(model_path)), mjm, self._flange_body)
+            self._arm = Kinematics(chain, nworld, self.nthread, cols)
+            self._arm_flange = mujoco.mj_name2id(
+                chain,
+                mujoco.mjtObj.mjOBJ_SITE,
+                mujoco.mj_id2name(mjm, mujoco.mjtObj.mjOBJ_SITE, self._flange),
+            )
         self._qpos = self._b.bind("qpos")  # live views of the state rows
         self._qvel = self._b.bind("qvel")
         self._ctrl = self._b.bind("ctrl")
@@ -220,11 +230,18 @@ class NativeBatch(HostMirror, Batch, Restorable):
     def pack_rows(self, ids: np.ndarray) -> PackedRows:
         """The frame rows (service.wire.BINARY_COLUMNS) of worlds `ids` at the last tick, as
         `snapshot` reports them: kinematics only for those worlds unless all are current."""
-        if self._kin_tick != self._tick:
-            every = len(ids) == self.nworld
+        every = len(ids) == self.nworld  # ids are sorted and unique
+        if self._kin_tick != self._tick and self._arm is None:
             self._kin.update(self._qpos, None if every else ids)
-            self._kin_tick = self._tick if every else -1  # ids are sorted and unique
-        flange_pos, flange_quat = self._flange_pose(ids)
+            self._kin_tick = self._tick if every else -1
+        if self._kin_tick == self._tick or self._arm is None:
+            flange_pos, flange_quat = self._flange_pose(ids)
+        else:  # the arm's chain alone: the same flange pose, bit for bit, for less
+            arm = self._arm
+            arm.update(self._qpos, None if every else ids)
+            body_quat = arm.xquat[ids, -1]  # the chain ends with the flange's body
+            flange_pos = arm.site_xpos[ids, self._arm_flange]
+            flange_quat = _quat_mul(body_quat, self._flange_local_quat)
         q = self._qpos[ids]
         v = self._qvel[ids]
         cols = (
