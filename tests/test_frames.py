@@ -189,7 +189,8 @@ def test_the_frame_thread_and_its_helper_process_deliver_the_same_bytes(monkeypa
         data = frames.pack(batch, IDS, json=True)
         assert data is not None
         sender.submit(frames.Job(data, ["binary", "json"], None, names))
-        out = got.get(timeout=60)
+        out = got.get(timeout=60)  # each format is delivered when it is ready
+        out.update(got.get(timeout=60))
     finally:
         sender.stop()
     snap = batch.snapshot()

@@ -35,6 +35,7 @@ log = logging.getLogger("armfleet.frames")
 # From this many worlds a JSON frame is serialised in a helper process (spawned at the first
 # one): tens of ms of orjson per frame would otherwise hold the GIL against the sim thread.
 BIG_JSON_ROWS = 4096
+JSON_PROCESSES = 2  # helpers, so that one frame is serialised while the next is
 JSON_SLICE = 2048  # rows serialised per GIL hold in a JSON frame (~3 ms of orjson on a GPU host)
 # While frames are serialised, a thread waiting for the GIL asks for it after this long (Python's
 # default is 5 ms): the sim thread gets it back between two slices instead of a few slices later.
@@ -229,18 +230,33 @@ class FrameSender:
         self._running = True
         self.replaced = 0  # jobs dropped for a newer one of the same selection (metrics)
         self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+        self._json_in_flight = 0  # big JSON frames in the helpers (this thread and callbacks)
         self._thread = threading.Thread(target=self._run, name="armfleet-frames", daemon=True)
         self._thread.start()
 
-    def _encode(self, fmt: str, data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
-        if fmt != "json" or len(data.ids) < BIG_JSON_ROWS:
-            return ENCODERS[fmt](data, rows, names)
+    def _in_process(self, job: Job, rows: np.ndarray) -> bool:
+        """Hand a big JSON frame to the helper processes (several frames in flight, delivered
+        when done, in order of completion); False when it is serialised here instead."""
+        if "json" not in job.formats or len(job.data.ids) < BIG_JSON_ROWS:
+            return False
         if self._pool is None:
             ctx = multiprocessing.get_context("spawn")  # never fork a process holding CUDA
-            self._pool = concurrent.futures.ProcessPoolExecutor(1, mp_context=ctx)
-        d = data
-        args = (d.tick, names, d.ids, d.sim_time, rows, d.target, d.faults, False, d.extra)
-        return self._pool.submit(json_bytes, *args).result()  # rows pickled before this returns
+            self._pool = concurrent.futures.ProcessPoolExecutor(JSON_PROCESSES, mp_context=ctx)
+        if self._json_in_flight >= JSON_PROCESSES:
+            self.replaced += 1  # all helpers busy: this frame is dropped (the next one is newer)
+            return True
+        d = job.data
+        rows = np.array(rows)  # a copy: the pinned buffer goes back to the engine at once
+        args = (d.tick, job.names, d.ids, d.sim_time, rows, d.target, d.faults, False, d.extra)
+        self._json_in_flight += 1
+        fut = self._pool.submit(json_bytes, *args)
+        fut.add_done_callback(lambda f: self._json_done(job, f))
+        return True
+
+    def _json_done(self, job: Job, fut: concurrent.futures.Future[bytes]) -> None:
+        self._json_in_flight -= 1
+        if not fut.cancelled() and fut.exception() is None:
+            self._deliver(job, {"json": fut.result()})
 
     def submit(self, job: Job) -> None:
         key = job.data.ids.tobytes()
@@ -270,10 +286,13 @@ class FrameSender:
                 _, job = self._jobs.popitem()
             try:
                 rows = job.data.packed.wait()
-                out = {f: self._encode(f, job.data, rows, job.names) for f in job.formats}
+                big = self._in_process(job, rows)
+                formats = [f for f in job.formats if not (big and f == "json")]
+                out = {f: ENCODERS[f](job.data, rows, job.names) for f in formats}
             except Exception:
                 log.exception("a frame could not be serialised")
                 continue
             finally:
                 job.data.packed.release()
-            self._deliver(job, out)
+            if out:
+                self._deliver(job, out)
