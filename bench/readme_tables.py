@@ -108,7 +108,19 @@ def gpu() -> str:
             ]
         )
     head = list(GPU_HEAD)
-    return _table(head, rows) + f"\n\n({_machine(tp)}; world-steps/s, 30 Hz asked)"
+    note = f"\n\n({_machine(tp)}; world-steps/s, 30 Hz asked)"
+    tried = _load("warp_baseline_cuda.json").get("largest") or []
+    fits = [t for t in tried if t.get("fits")]
+    if fits:
+        big = fits[0]
+        failed = ", ".join(f"{t['nworld']:,}" for t in tried if not t.get("fits"))
+        note += (
+            f"\n\nLargest batch tried that fits on this GPU: **{big['nworld']:,} worlds** "
+            f"({big['bytes_per_world'] / 1e3:.0f} kB of device memory per world, "
+            f"{min(big['ms_per_tick']):.0f} ms a tick fresh from home; "
+            f"{failed} failed to allocate)."
+        )
+    return _table(head, rows) + note
 
 
 def profile() -> str:
