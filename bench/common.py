@@ -175,6 +175,7 @@ class Timing:
 
     reps: int
     elapsed: float
+    warmup: int = 0  # calls made before the timed ones
 
     @property
     def per_call(self) -> float:
@@ -212,7 +213,7 @@ def time_calls(
         if sync:
             sync()
         elapsed = time.perf_counter() - t0
-    return Timing(reps, elapsed)
+    return Timing(reps, elapsed, n)
 
 
 # -- the service as a subprocess (clients.testing.serve) ----------------------------------------

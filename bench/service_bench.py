@@ -103,6 +103,19 @@ async def _info(client: httpx.AsyncClient, url: str) -> tuple[float, dict[str, A
 
 # -- section 2: fast mode ------------------------------------------------------------------------
 
+SETTLE_TICKS = 240  # as bench.throughput: windows start once the worlds have settled
+MAX_SETTLE_S = 30.0
+
+
+async def _settle(client: httpx.AsyncClient, url: str) -> None:
+    """Wait (at most MAX_SETTLE_S) until the service has run SETTLE_TICKS ticks from home."""
+    deadline = time.perf_counter() + MAX_SETTLE_S
+    while time.perf_counter() < deadline:
+        _, info = await _info(client, url)
+        if info["tick"] >= SETTLE_TICKS:
+            return
+        await asyncio.sleep(0.2)
+
 
 async def _measure_fast(
     server: common.Served, duration: float, warmup: float, fmt: str = "json"
@@ -112,6 +125,7 @@ async def _measure_fast(
     try:
         async with httpx.AsyncClient(timeout=60) as client:
             await asyncio.sleep(warmup)
+            await _settle(client, server.url)
             counter.reset()
             t0, info0 = await _info(client, server.url)
             # Slow ticks (thousands of worlds on a CPU) get a window of >= MIN_TICKS ticks, so

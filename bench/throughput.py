@@ -8,7 +8,11 @@ world-steps/s = worlds x physics steps per second. Every engine steps the same m
 * ``engine``: ``WorldBatch.step(1)``, the service's captured control tick (`substeps` physics
   steps + kinematics + gather + the fault read-back);
 * ``warp_captured``: `substeps` ``mjw.step`` calls captured once with ``wp.ScopedCapture`` and
-  replayed with ``wp.capture_launch`` (what the engine's tick costs without its extras);
+  replayed with ``wp.capture_launch`` (what the engine's tick costs without its extras), from
+  `home` over exactly the engine's warm-up and timed ticks: a tick's cost changes as the worlds
+  settle (more solver iterations for the slowest world), so only the same simulated window
+  compares like with like (issue 20: timing it after the engine and after a second of
+  uncaptured steps made the engine look 1.67x faster at 65,536 worlds);
 * ``warp_python``: plain ``mjw.step`` from Python, uncaptured;
 * ``rollout_1t`` / ``rollout_<n>t``: native MuJoCo, ``mujoco.rollout.Rollout`` on the calling
   thread and on a pool of all usable cores (on the CPU also when --device cuda).
@@ -45,7 +49,8 @@ ENGINES = (ENGINE, ENGINE_CORES, WARP_CAPTURED, WARP_PYTHON, ROLLOUT_1T, ROLLOUT
 DESCRIPTIONS = {
     ENGINE: "armfleet WorldBatch.step (captured tick: substeps + kinematics + gather + fault read)",
     ENGINE_CORES: "armfleet ShardedBatch: the worlds split over all cores, as the service runs",
-    WARP_CAPTURED: "raw MuJoCo Warp, `substeps` mjw.step captured (wp.ScopedCapture) and replayed",
+    WARP_CAPTURED: "raw MuJoCo Warp, `substeps` mjw.step captured (wp.ScopedCapture) and "
+    "replayed from home over the engine's simulated window (same warm-up and timed ticks)",
     WARP_PYTHON: "raw MuJoCo Warp, mjw.step called from Python (uncaptured)",
     ROLLOUT_1T: "native MuJoCo, mujoco.rollout.Rollout(nthread=0): the calling thread",
     ROLLOUT_ALL: "native MuJoCo, mujoco.rollout.Rollout(nthread=usable cores)",
@@ -75,13 +80,20 @@ def _result(timing: common.Timing, steps_per_call: int, nworld: int, **extra: An
     }
 
 
+# On a GPU the engine and raw captured MuJoCo Warp are timed after this many ticks from home
+# (4 simulated seconds): a tick costs ~2.5x more once the worlds have settled than right after
+# home (section 17), and the service runs settled; both are timed over the same ticks.
+SETTLE_TICKS = 240
+
+
 def bench_engine(nworld: int, device: str, min_time: float, warmup_time: float) -> dict:
     from service.engines.warp import WorldBatch
 
     t0 = time.perf_counter()
     batch = WorldBatch(nworld, device=device)
     build_s = time.perf_counter() - t0
-    timing = common.time_calls(lambda: batch.step(1), min_time, warmup_time)
+    settle = SETTLE_TICKS if device.startswith("cuda") else 1
+    timing = common.time_calls(lambda: batch.step(1), min_time, warmup_time, warmup_reps=settle)
     out = _result(
         timing,
         batch.substeps,
@@ -89,6 +101,7 @@ def bench_engine(nworld: int, device: str, min_time: float, warmup_time: float) 
         build_s=build_s,
         captured=batch.captured,
         faults=int(batch.snapshot().faults.sum()),
+        warmup_calls=timing.warmup,
     )
     return out
 
@@ -111,17 +124,21 @@ def bench_engine_cores(nworld: int, device: str, min_time: float, warmup_time: f
     return _result(timing, batch.substeps, nworld, build_s=build_s, shards=shards, faults=faults)
 
 
-def engine_model():
+def engine_model(device: str = "cpu"):
     """(MjModel, home key id) configured exactly as the engine configures its own.
 
-    WorldBatch sets model options (timestep, and whatever else it tunes, e.g. the solver) on
-    the MjModel it loads; building a one-world batch without capture and taking its model keeps
-    the baselines on the same physics whatever the engine changes. A fresh model each call.
+    Both engines load the robot and set their options with `service.core.physics.configure` at
+    the default step: doing the same here keeps the baselines on the same physics whatever the
+    engine changes, without building (and on a GPU run compiling CPU kernels for) a batch.
+    `device` is accepted for the callers' symmetry; the model is host data. A fresh model each
+    call.
     """
-    from service.engines.warp import WorldBatch
+    from service.core.physics import configure
+    from service.core.robot import load_robot
 
-    batch = WorldBatch(1, capture=False)
-    return batch.robot.mjm, batch.robot.home_key
+    robot = load_robot()
+    configure(robot.mjm, physics_dt()[1])
+    return robot.mjm, robot.home_key
 
 
 def model_options(mjm) -> dict[str, Any]:
@@ -150,7 +167,7 @@ def _raw_warp(nworld: int, device: str, substeps: int, dt: float):
 
     from service.engines.warp import NCONMAX, NJMAX
 
-    mjm, home_key = engine_model()
+    mjm, home_key = engine_model(device)
     assert abs(mjm.opt.timestep - dt) < 1e-12, (mjm.opt.timestep, dt)
     mjd = mujoco.MjData(mjm)
     mujoco.mj_resetDataKeyframe(mjm, mjd, home_key)
@@ -162,46 +179,89 @@ def _raw_warp(nworld: int, device: str, substeps: int, dt: float):
 
 
 def bench_warp(
-    nworld: int, device: str, min_time: float, warmup_time: float, which: Sequence[str]
+    nworld: int,
+    device: str,
+    min_time: float,
+    warmup_time: float,
+    which: Sequence[str],
+    ticks: tuple[int, int] | None = None,
 ) -> dict[str, dict]:
-    """Raw MuJoCo Warp on one model/data pair: uncaptured steps, then a captured tick."""
+    """Raw MuJoCo Warp: uncaptured steps on one model/data pair, a captured tick on another.
+
+    A tick's cost depends on the state (the solver iterates until the slowest world converges,
+    and that changes as the worlds settle: measured for issue 20), so the captured tick is
+    compared with the engine over the same simulated window: from `home` (the engine also
+    starts there), `ticks` = (warm-up, timed) ticks as the engine ran them; else by time.
+    """
     import mujoco_warp as mjw
+    import numpy as np
     import warp as wp
 
     substeps, dt = physics_dt()
     out: dict[str, dict] = {}
-    t0 = time.perf_counter()
-    m, d = _raw_warp(nworld, device, substeps, dt)
-    build_s = time.perf_counter() - t0
     dev = wp.get_device(device)
 
     def sync() -> None:
         wp.synchronize_device(dev)
 
     with wp.ScopedDevice(dev):
-        # Plain steps first: the first one loads every kernel, which capture needs.
-        mjw.step(m, d)
-        sync()
         if WARP_PYTHON in which:
+            t0 = time.perf_counter()
+            m, d = _raw_warp(nworld, device, substeps, dt)
+            build_s = time.perf_counter() - t0
+            mjw.step(m, d)  # the first step loads every kernel
+            sync()
             timing = common.time_calls(lambda: mjw.step(m, d), min_time, warmup_time, sync=sync)
-            out[WARP_PYTHON] = _result(timing, 1, nworld, build_s=build_s)
+            out[WARP_PYTHON] = _result(timing, 1, nworld, build_s=build_s, finite=_finite(d))
+            del m, d
         if WARP_CAPTURED in which:
+            t0 = time.perf_counter()
+            m, d = _raw_warp(nworld, device, substeps, dt)
+            build_s = time.perf_counter() - t0
+            mjw.step(m, d)  # loads every kernel (capture needs them), then back to home
+            mjw.reset_data_keyframe(m, d, wp.array(np.full(nworld, _home_key()), dtype=int))
             t1 = time.perf_counter()
             with wp.ScopedCapture(device=dev) as cap:
                 for _ in range(substeps):
                     mjw.step(m, d)
             graph = cap.graph
             capture_s = time.perf_counter() - t1
-            timing = common.time_calls(
-                lambda: wp.capture_launch(graph), min_time, warmup_time, sync=sync
-            )
+            if ticks is None:
+                timing = common.time_calls(
+                    lambda: wp.capture_launch(graph), min_time, warmup_time, sync=sync
+                )
+            else:
+                warm, timed = ticks
+                timing = common.time_calls(
+                    lambda: wp.capture_launch(graph),
+                    0.0,
+                    0.0,
+                    min_reps=timed,
+                    warmup_reps=warm,
+                    sync=sync,
+                    max_reps=timed,
+                )
             out[WARP_CAPTURED] = _result(
-                timing, substeps, nworld, build_s=build_s, capture_s=capture_s
+                timing,
+                substeps,
+                nworld,
+                build_s=build_s,
+                capture_s=capture_s,
+                warmup_calls=timing.warmup,
+                same_window_as_engine=ticks is not None,
+                finite=_finite(d),
             )
-        qpos = d.qpos.numpy()
-        for res in out.values():
-            res["finite"] = bool(np.isfinite(qpos).all())
     return out
+
+
+def _home_key() -> int:
+    return engine_model()[1]
+
+
+def _finite(d: Any) -> bool:
+    import numpy as np
+
+    return bool(np.isfinite(d.qpos.numpy()).all())
 
 
 def bench_rollout(
@@ -285,7 +345,9 @@ def measure_size(
         plan.append((ROLLOUT_ALL, _one(ROLLOUT_ALL, bench_rollout), (n, nthread)))
     for label, fn, args in plan:
         t0 = time.perf_counter()
-        extra = (warp_which,) if fn is bench_warp else ()
+        engine = row.get(ENGINE, {})
+        window = (engine["warmup_calls"], engine["calls"]) if "warmup_calls" in engine else None
+        extra = (warp_which, window) if fn is bench_warp else ()
         try:
             got = fn(*args, min_time, warmup_time, *extra)
         except Exception as exc:  # one engine failing must not lose the others
@@ -362,7 +424,7 @@ def throughput(ctx: Context) -> Result:
     }
     engines = [e for e in ENGINES if e != ENGINE_CORES or not ctx.cuda]
     data = {
-        "model": model_options(engine_model()[0]),
+        "model": model_options(engine_model(ctx.device)[0]),
         "rollout_device": "cpu",
         "rollout_threads": nthread,
         "substeps": substeps,

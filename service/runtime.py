@@ -146,8 +146,9 @@ class Runtime:
         if s.restore and not await asyncio.to_thread(self._restore_at_start, batch, s.restore):
             batch.close()
             return
-        self.hub = StreamHub(asyncio.get_running_loop())
-        loop = SimLoop(batch, s.mode, (self.hub,))
+        self.hub = hub = StreamHub(asyncio.get_running_loop())
+        loop = SimLoop(batch, s.mode, (hub,))
+        loop.add_restore_listener(lambda _tick, _state, _name: hub.restored())
         self.control = Control(loop)
         self.control.add_listener(self._count_accepted)
         loop.add_tick_listener(self.metrics.on_tick)
@@ -216,6 +217,8 @@ class Runtime:
                 self.stop_problems += surface.unfinished()
         if self.loop is not None:
             self.loop.stop()
+            if self.hub is not None:
+                self.hub.stop()
             if self.settings.save_on_exit and self._can_save():
                 self._save_latest()
             self.loop.batch.close()

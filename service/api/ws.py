@@ -78,15 +78,19 @@ async def batch_socket(
     except ArmfleetError as exc:
         return await _refuse(ws, _CLOSE_POLICY, str(exc))
     names = loop.spec.names
+    # Packed: the sim thread gathers these worlds' rows and a thread of the hub serialises them
+    # (service.core.frames); the renderers make the first frame, from the latest snapshot.
     if format == "binary":
+        render = wire.batch_frame_binary
         sub = Subscription(
-            ids, rate, lambda s: wire.batch_frame_binary(s, ids, names), "binary", binary=True
+            ids, rate, lambda s: render(s, ids, names), "binary", True, "binary", names
         )
     else:
         briefs = control.trajectories.briefs
         sub = Subscription(
-            ids, rate, lambda s: wire.batch_frame(s, ids, names, briefs(ids)), "batch"
+            ids, rate, lambda s: wire.batch_frame(s, ids, names, briefs(ids)), "batch", False
         )
+        sub.packed, sub.names, sub.extra = "json", names, lambda: {"trajectories": briefs(ids)}
     await _serve(ws, loop, control, hub, sub, default_world=None)
 
 
@@ -259,10 +263,12 @@ async def _write(ws: WebSocket, hub: StreamHub, sub: Subscription) -> None:
         sub.ready.clear()
         while sub.acks:
             await ws.send_text(sub.acks.popleft().decode())
+        frame, sub.frame = sub.frame, None  # packed and serialised off the loop
         snap, sub.latest = sub.latest, None
-        if snap is None or (sub.skip is not None and sub.skip(snap)):
-            continue
-        frame = hub.frame(sub, snap)
+        if frame is None:
+            if snap is None or (sub.skip is not None and sub.skip(snap)):
+                continue
+            frame = hub.frame(sub, snap)
         if sub.binary:
             await ws.send_bytes(frame)
         else:

@@ -1,8 +1,14 @@
-"""StreamHub: fans snapshots out to WebSocket subscribers with latest-state delivery.
+"""StreamHub: fans state out to WebSocket subscribers with latest-state delivery.
 
-Each subscription holds at most one undelivered snapshot (a newer one replaces it) plus its
-queue of command acks, which are never dropped. A slow reader therefore costs one snapshot of
-memory and delays nobody else; a fast one gets every frame it asked for, at most one per tick.
+Each subscription holds at most one undelivered frame (a newer one replaces it) plus its queue
+of command acks, which are never dropped. A slow reader therefore costs one frame of memory and
+delays nobody else; a fast one gets every frame it asked for, at most one per tick.
+
+Batch subscriptions (`packed`: many worlds, binary or JSON) never need a snapshot: on the sim
+thread, after each tick, the hub asks the engine for the rows of the worlds they watch (once
+per selection, however many sockets share it) and its FrameSender thread serialises them
+(service.frames); the event loop only sends. The other subscriptions (one world, the page's
+pose frames) are rendered from snapshots, as is every subscription's first frame.
 """
 
 from __future__ import annotations
@@ -12,9 +18,12 @@ import threading
 import time
 from collections import deque
 from collections.abc import Awaitable, Callable
+from typing import Any
 
 import numpy as np
 
+from service.core import frames
+from service.core.batch import Batch
 from service.core.loop import SnapshotSink
 from service.core.types import Snapshot
 
@@ -29,9 +38,20 @@ class Subscription:
         render: Callable[[Snapshot], bytes],
         kind: str,
         binary: bool = False,
+        packed: str | None = None,
+        names: list[str] | None = None,
     ):
         self.worlds = worlds
         self.binary = binary  # frames go out as binary WebSocket messages
+        # "binary" / "json": frames come packed from the sim thread (service.frames), not
+        # rendered from snapshots; `names` are the joint names they carry.
+        self.packed = packed
+        self.names = names or []
+        self.frame: bytes | None = None  # the newest packed frame not yet sent
+        # JSON frames' fields after the state columns, taken when a frame is packed
+        # (the trajectories of the worlds); None: frames.DEFAULT_EXTRA.
+        self.extra: Callable[[], dict[str, Any]] | None = None
+        self._owed_lock = threading.Lock()  # owed_tick is read on the sim thread too
         # Sockets with the same kind of frame over the same worlds share one serialisation.
         self.key = (kind, worlds.tobytes())
         self.period = 1.0 / rate if rate else 0.0  # 0: every tick
@@ -54,22 +74,49 @@ class Subscription:
     def owe(self, tick: int) -> None:
         """A command from this socket takes effect at `tick`: send the first frame that carries
         it whatever the cadence (called on the event loop when the command is acked)."""
-        self.owed_tick = tick if self.owed_tick is None else min(self.owed_tick, tick)
+        with self._owed_lock:
+            self.owed_tick = tick if self.owed_tick is None else min(self.owed_tick, tick)
 
-    def wants(self, snap: Snapshot, now: float) -> bool:
-        return self.due(now) or (self.owed_tick is not None and snap.tick >= self.owed_tick)
+    def _pay(self, tick: int) -> bool:
+        """Whether a frame of `tick` is owed; if so the debt is settled."""
+        with self._owed_lock:
+            if self.owed_tick is not None and tick >= self.owed_tick:
+                self.owed_tick = None
+                return True
+            return False
 
-    def offer(self, snap: Snapshot, now: float) -> None:
-        self.latest = snap  # replaces one the reader has not taken yet
-        if self.owed_tick is not None and snap.tick >= self.owed_tick:
-            self.owed_tick = None
+    def _keep_cadence(self, now: float) -> None:
         if self.period and self.due(now):
             # Keep the cadence; after a stall start afresh instead of sending a burst. A frame
             # sent early because a command was owed does not move the cadence.
             self.next_due += self.period
             if self.next_due < now:
                 self.next_due = now + self.period
+
+    def claim(self, tick: int, now: float) -> bool:
+        """Packed subscriptions, on the sim thread: is a frame of `tick` wanted? (If so, the
+        cadence moves on as `offer` moves it.)"""
+        owed = self._pay(tick)
+        if not (owed or self.due(now)):
+            return False
+        self._keep_cadence(now)
+        return True
+
+    def wants(self, snap: Snapshot, now: float) -> bool:
+        return self.due(now) or (self.owed_tick is not None and snap.tick >= self.owed_tick)
+
+    def offer(self, snap: Snapshot, now: float) -> None:
+        self.latest = snap  # replaces one the reader has not taken yet
+        self._pay(snap.tick)
+        self._keep_cadence(now)
         self.ready.set()
+
+    def offer_frame(self, frame: bytes) -> bool:
+        """A packed frame (event loop); True if it replaced one the reader had not taken."""
+        replaced = self.frame is not None or self.latest is not None
+        self.frame, self.latest = frame, None
+        self.ready.set()
+        return replaced
 
     def push_ack(self, message: bytes) -> None:
         self.acks.append(message)
@@ -87,9 +134,18 @@ class StreamHub(SnapshotSink):
         self._scheduled = False
         self._frame_cache: dict[tuple[int, tuple[str, bytes]], bytes] = {}
         self.frames_skipped = 0  # frames replaced before a slow reader took them (metrics)
+        self._sender: frames.FrameSender | None = None  # started with the first packed socket
+        self._resync = False  # after a restore, packed sockets get the restored snapshot too
 
     def add(self, sub: Subscription) -> None:
+        if sub.packed and self._sender is None:
+            self._sender = frames.FrameSender(self._frames_ready)
         self._subs = (*self._subs, sub)
+
+    def stop(self) -> None:
+        """Stop the frame thread (the service is stopping)."""
+        if self._sender is not None:
+            self._sender.stop()
 
     def remove(self, sub: Subscription) -> None:
         self._subs = tuple(s for s in self._subs if s is not sub)
@@ -101,7 +157,28 @@ class StreamHub(SnapshotSink):
     # -- sim thread -------------------------------------------------------------------------
 
     def wants_snapshot(self, now: float) -> bool:
-        return any(s.due(now) or s.owed_tick is not None for s in self._subs)
+        return any(s.due(now) or s.owed_tick is not None for s in self._subs if not s.packed)
+
+    def on_tick(self, batch: Batch, now: float) -> None:
+        """Pack the frames packed subscriptions want of this tick, one per world selection."""
+        groups: dict[bytes, list[Subscription]] = {}
+        for sub in self._subs:
+            if sub.packed and sub.claim(batch.tick, now):
+                groups.setdefault(sub.key[1], []).append(sub)
+        for group in groups.values():
+            formats = sorted({s.packed for s in group if s.packed})
+            data = frames.pack(batch, group[0].worlds, "json" in formats)
+            if data is None or self._sender is None:
+                self.frames_skipped += len(group)
+                continue
+            extra = next((s.extra for s in group if s.packed == "json" and s.extra), None)
+            if extra is not None:
+                data.extra = extra()
+            self._sender.submit(frames.Job(data, formats, group, group[0].names))
+
+    def restored(self) -> None:
+        """The batch was restored: the next snapshot goes to packed subscriptions as well."""
+        self._resync = True
 
     def publish(self, snapshot: Snapshot) -> None:
         if not self._subs:
@@ -122,11 +199,24 @@ class StreamHub(SnapshotSink):
         if snap is None:
             return
         now = time.monotonic()
+        resync, self._resync = self._resync, False
         for sub in self._subs:
-            if sub.wants(snap, now):
+            if sub.packed and not resync:
+                continue
+            if sub.wants(snap, now) or (sub.packed and resync):
                 if sub.latest is not None:
                     self.frames_skipped += 1
                 sub.offer(snap, now)
+
+    def _frames_ready(self, job: frames.Job, out: dict[str, bytes]) -> None:
+        """FrameSender thread: hand the bytes to the event loop."""
+        self._aio.call_soon_threadsafe(self._deliver_frames, job, out)
+
+    def _deliver_frames(self, job: frames.Job, out: dict[str, bytes]) -> None:
+        live = set(map(id, self._subs))
+        for sub in job.targets:
+            if id(sub) in live and sub.packed in out and sub.offer_frame(out[sub.packed]):
+                self.frames_skipped += 1
 
     def broadcast(self, message: bytes) -> None:
         """Queue a message (a status frame) for every subscriber, in order with its acks."""

@@ -37,8 +37,8 @@ from service.core.types import Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
 
-# In fast mode with nobody streaming, a snapshot is still taken this often so that reads are
-# never older than this; readers that need the current tick ask for one explicitly.
+# Snapshots are taken when a sink wants one, a reader waits for one, or at least this often so
+# that `latest` is never older than this; readers that need the current tick ask for one.
 _IDLE_SNAPSHOT_PERIOD = 0.1
 _STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
 
@@ -105,9 +105,7 @@ class SimLoop(TickBoundary):
         if self._thread is not None:
             self._thread.join(timeout=10)
         self._serve_requests()  # the thread is gone: requests that raced the stop are served here
-        for _, fut in self._step_waiters:
-            fut.cancel()
-        for _, fut in self._snapshot_waiters:
+        for _, fut in (*self._step_waiters, *self._snapshot_waiters):
             fut.cancel()
 
     # -- commands (any thread) --------------------------------------------------------------
@@ -305,6 +303,9 @@ class SimLoop(TickBoundary):
         now = time.monotonic()
         if self._finish_tick(faulted, mode, now):
             self._publish(now)
+        for sink in self._sinks:  # sinks need not subclass SnapshotSink: on_tick is optional
+            if (on_tick := getattr(sink, "on_tick", None)) is not None:
+                on_tick(self.batch, now)
         self._release_step_waiters()
         self._update_stats(now)
         seconds = time.perf_counter() - t0
@@ -360,7 +361,6 @@ class SimLoop(TickBoundary):
             )
             return (
                 traj
-                or mode is Mode.REALTIME
                 or (mode is Mode.PAUSED and self._tick >= self._step_goal)
                 or bool(self._snapshot_waiters)
                 or now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
@@ -394,7 +394,6 @@ class SimLoop(TickBoundary):
         t0, tick0 = self._window
         if now - t0 < _STATS_WINDOW:
             return
-        ticks = self._tick - tick0
-        rate = ticks / (now - t0)
+        rate = (self._tick - tick0) / (now - t0)
         self._stats = LoopStats(self._tick, self._mode, rate, rate * self.batch.tick_dt)
         self._window = (now, self._tick)

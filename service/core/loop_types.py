@@ -44,15 +44,17 @@ class LoopStats:
 class SnapshotSink:
     """Where snapshots go (the stream hub, the ROS 2 bridge, the recorder, ...).
 
-    Both methods run on the sim thread between ticks: they must be quick and hand any real work
-    (serialising, sending, writing) to a thread or event loop of their own.
+    Every method runs on the sim thread between ticks (`on_tick` after every tick, for sinks
+    that take what they need from the batch themselves): they must be quick and hand any real
+    work (serialising, sending, writing) to a thread or event loop of their own.
     """
 
     def wants_snapshot(self, now: float) -> bool:
         return False
 
-    def publish(self, snapshot: Snapshot) -> None:  # called on the loop thread
-        pass
+    def publish(self, snapshot: Snapshot) -> None: ...
+
+    def on_tick(self, batch: Batch, now: float) -> None: ...
 
 
 def resolve(fut: concurrent.futures.Future[Snapshot], snap: Snapshot) -> None:

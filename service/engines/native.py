@@ -22,17 +22,18 @@ import logging
 import time
 from pathlib import Path
 
-import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
 from mjcf import SCENE_XML
 from service.core.batch import Batch, Restorable
+from service.core.frames import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
 from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
+from service.engines.native_kinematics import Kinematics
 
 log = logging.getLogger("armfleet.native")
 
@@ -110,21 +111,17 @@ class NativeBatch(HostMirror, Batch, Restorable):
 
         # The batch copies the model: options are set above, before it is built.
         self._b = mjbatch.Batch(mjm, nworld, nthread=self.nthread)
+        self._kin = Kinematics(mjm, nworld, self.nthread)
         self._qpos = self._b.bind("qpos")  # live views of the state rows
         self._qvel = self._b.bind("qvel")
         self._ctrl = self._b.bind("ctrl")
         self._qfrc_actuator = self._b.bind("qfrc_actuator")  # outputs, refreshed per call
-        self._site_xpos = self._b.bind("site_xpos")
-        self._xquat = self._b.bind("xquat")
-        self._xpos = self._b.bind("xpos")
 
         self._init_mirror(nworld)
         self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
         self._effort = np.zeros((nworld, 7))
-        self._flange_pos = np.zeros((nworld, 3))
-        self._flange_quat = np.zeros((nworld, 4))
         self._warnings_seen = np.zeros(nworld, dtype=np.int64)
-        self._kinematics_stale = False
+        self._kin_tick = -1  # the tick whose kinematics self._kin holds for every world
         self.reset(np.arange(nworld))
         self.compile_s = time.perf_counter() - t0  # nothing compiles: this is the build time
 
@@ -149,7 +146,6 @@ class NativeBatch(HostMirror, Batch, Restorable):
         bad |= warnings != self._warnings_seen
         bad[raised] = True
         self._effort[:] = self._qfrc_actuator[:, self._dof]
-        self._kinematics_stale = True
         return np.flatnonzero(bad)
 
     def step(self, ticks: int = 1) -> np.ndarray:
@@ -179,21 +175,21 @@ class NativeBatch(HostMirror, Batch, Restorable):
         self._home(worlds)
         self._warnings_seen[worlds] = self._warnings()[worlds]
         self._effort[worlds] = self._qfrc_actuator[worlds][:, self._dof]
-        self._read_flange(worlds)
+        self._kin_tick = -1
 
     # -- reading ----------------------------------------------------------------------------
 
-    def _read_flange(self, worlds: np.ndarray | slice) -> None:
-        self._flange_pos[worlds] = self._site_xpos[worlds, self._flange]
-        body_quat = self._xquat[worlds, self._flange_body]
-        self._flange_quat[worlds] = _quat_mul(body_quat, self._flange_local_quat)
+    def _flange_pose(self, ids: np.ndarray | slice) -> tuple[np.ndarray, np.ndarray]:
+        """Flange position and quaternion (w x y z) of `ids` from the kinematics' last pass."""
+        body_quat = self._kin.xquat[ids, self._flange_body]
+        return self._kin.site_xpos[ids, self._flange], _quat_mul(body_quat, self._flange_local_quat)
 
     def _refresh_kinematics(self) -> None:
-        """Site poses at the current state (after mj_step they describe the last substep's)."""
-        if self._kinematics_stale:
-            self._b.forward(stage=mujoco.mjtStage.mjSTAGE_POS)
-            self._read_flange(slice(None))
-            self._kinematics_stale = False
+        """Every world's body and site poses at the current state (after mj_step the batch's
+        own describe the last substep's), once per tick whoever asks."""
+        if self._kin_tick != self._tick:
+            self._kin.update(self._qpos)
+            self._kin_tick = self._tick
 
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, copied.
@@ -203,6 +199,7 @@ class NativeBatch(HostMirror, Batch, Restorable):
         most on besides physics); targets stay float64, as commanded.
         """
         self._refresh_kinematics()
+        flange_pos, flange_quat = self._flange_pose(slice(None))
         f32 = np.float32
         return Snapshot(
             tick=self._tick,
@@ -213,12 +210,34 @@ class NativeBatch(HostMirror, Batch, Restorable):
             velocity=np.ascontiguousarray(self._qvel[:, self._dof], dtype=f32),
             effort=self._effort.astype(f32, order="C"),
             target=self._targets.copy(),
-            flange_pos=self._flange_pos.astype(f32, order="C"),
-            flange_quat=self._flange_quat.astype(f32, order="C"),
+            flange_pos=flange_pos.astype(f32, order="C"),
+            flange_quat=flange_quat.astype(f32, order="C"),
             faults=self._faults.copy(),
-            body_pos=self._xpos.astype(np.float32),  # astype copies
-            body_quat=self._xquat.astype(np.float32),
+            body_pos=self._kin.xpos.astype(np.float32),  # astype copies
+            body_quat=self._kin.xquat.astype(np.float32),
         )
+
+    def pack_rows(self, ids: np.ndarray) -> PackedRows:
+        """The frame rows (service.wire.BINARY_COLUMNS) of worlds `ids` at the last tick, as
+        `snapshot` reports them: kinematics only for those worlds unless all are current."""
+        if self._kin_tick != self._tick:
+            every = len(ids) == self.nworld
+            self._kin.update(self._qpos, None if every else ids)
+            self._kin_tick = self._tick if every else -1  # ids are sorted and unique
+        flange_pos, flange_quat = self._flange_pose(ids)
+        q = self._qpos[ids]
+        v = self._qvel[ids]
+        cols = (
+            (self._world_ticks[ids] * self.tick_dt)[:, None],
+            q[:, self._qpos_adr],
+            v[:, self._dof],
+            self._effort[ids],
+            self._targets[ids],
+            flange_pos,
+            flange_quat,
+            self._faults[ids, None],
+        )
+        return PackedRows(self._tick, ids, np.concatenate(cols, axis=1, dtype="<f4"))
 
     # -- state ------------------------------------------------------------------------------
 
@@ -246,7 +265,7 @@ class NativeBatch(HostMirror, Batch, Restorable):
         self._restore_mirror(state)
         self._effort[:] = state.physics["qfrc_actuator"][:, self._dof]
         self._warnings_seen[:] = self._warnings()
-        self._kinematics_stale = True
+        self._kin_tick = -1
 
     # -- test and diagnostics hooks ---------------------------------------------------------
 
@@ -260,6 +279,7 @@ class NativeBatch(HostMirror, Batch, Restorable):
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos (used to inject faults on purpose in tests)."""
         self._qpos[world] = qpos
+        self._kin_tick = -1
 
     def capacity_usage(self) -> tuple[int, int]:
         """(contacts in all worlds together, largest constraint count of any world) as of the

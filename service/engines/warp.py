@@ -22,10 +22,13 @@ import warp as wp
 
 from mjcf import SCENE_XML
 from service.core.batch import Batch, Restorable
+from service.core.frames import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
 from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
+from service.engines import warp_frames as frames
 from service.engines.mirror import HostMirror
+from service.engines.warp_kernels import gather_bodies, gather_state
 
 log = logging.getLogger("armfleet.engine")
 
@@ -50,8 +53,6 @@ CAPACITY_OVERFLOWS = int(
     | mjw.OverflowType.NARROWPHASE
     | mjw.OverflowType.CCD
 )
-# A joint spinning faster than this [rad/s or m/s] has blown up even if it is still finite.
-_DIVERGED_QVEL = wp.constant(1.0e4)
 
 # Per-world contact and constraint capacity. Measured on the grasp (pads on the cube, cube on
 # the table, arm near the table): see tests/test_engine.py::test_grasp_never_overflows_capacity.
@@ -59,73 +60,11 @@ NCONMAX = 32
 NJMAX = 128
 
 
-@wp.kernel(enable_backward=False)
-def _gather_state(
-    qpos: wp.array2d(dtype=float),
-    qvel: wp.array2d(dtype=float),
-    qfrc_actuator: wp.array2d(dtype=float),
-    site_xpos: wp.array2d(dtype=wp.vec3),
-    site_xmat: wp.array2d(dtype=wp.mat33),
-    overflow: wp.array(dtype=int),
-    qpos_adr: wp.array(dtype=int),
-    dof_adr: wp.array(dtype=int),
-    flange: int,
-    overflow_mask: int,
-    state_out: wp.array2d(dtype=float),
-    fault_out: wp.array(dtype=int),
-    nfault_out: wp.array(dtype=int),
-):
-    w = wp.tid()
-    bad = (overflow[w] & overflow_mask) != 0
-    for i in range(qpos.shape[1]):
-        if not wp.isfinite(qpos[w, i]):
-            bad = True
-    for i in range(qvel.shape[1]):
-        v = qvel[w, i]
-        if not wp.isfinite(v) or wp.abs(v) > _DIVERGED_QVEL:
-            bad = True
-    for j in range(7):
-        state_out[w, j] = qpos[w, qpos_adr[j]]
-        state_out[w, 7 + j] = qvel[w, dof_adr[j]]
-        state_out[w, 14 + j] = qfrc_actuator[w, dof_adr[j]]
-    p = site_xpos[w, flange]
-    q = wp.quat_from_matrix(site_xmat[w, flange])  # warp quats are x, y, z, w
-    state_out[w, 21] = p[0]
-    state_out[w, 22] = p[1]
-    state_out[w, 23] = p[2]
-    state_out[w, 24] = q[3]
-    state_out[w, 25] = q[0]
-    state_out[w, 26] = q[1]
-    state_out[w, 27] = q[2]
-    if bad:
-        fault_out[w] = 1
-        wp.atomic_add(nfault_out, 0, 1)
-    else:
-        fault_out[w] = 0
-
-
 def _host_layout(arr: wp.array) -> tuple[tuple[int, ...], type]:
     """(shape, numpy dtype) of `arr.numpy()` without copying a device array to find out."""
     scalar = getattr(arr.dtype, "_wp_scalar_type_", arr.dtype)
     inner = tuple(getattr(arr.dtype, "_shape_", ()))
     return (*arr.shape, *inner), wp.dtype_to_numpy(scalar)
-
-
-@wp.kernel(enable_backward=False)
-def _gather_bodies(
-    xpos: wp.array2d(dtype=wp.vec3),
-    xquat: wp.array2d(dtype=wp.quat),
-    out: wp.array3d(dtype=float),
-):
-    # Every body's world pose, for viewers: position, then the quaternion as MuJoCo stores it
-    # (w, x, y, z; mujoco_warp keeps MuJoCo's component order in its quat arrays).
-    w, b = wp.tid()
-    p = xpos[w, b]
-    q = xquat[w, b]
-    for i in range(3):
-        out[w, b, i] = p[i]
-    for i in range(4):
-        out[w, b, 3 + i] = q[i]
 
 
 class SnapshotArrays(NamedTuple):
@@ -218,6 +157,13 @@ class WorldBatch(HostMirror, Batch, Restorable):
             self._bodies = wp.zeros((nworld, mjm.nbody, 7), dtype=float)
             self._fault = wp.zeros(nworld, dtype=int)
             self._nfault = wp.zeros(1, dtype=int)
+            # Device mirrors of the targets (ctrl also holds a velocity feed-forward), the world
+            # tick counters and the fault counts, for packed frames.
+            self._targets_dev = wp.zeros((nworld, 7), dtype=float)
+            self._wticks = wp.zeros(nworld, dtype=wp.int64)
+            self._faults_dev = wp.zeros(nworld, dtype=wp.int32)
+            self._packer = frames.DevicePacker(self.device, self.tick_dt)
+            self._pinned = frames.PinnedPool()
             # One uncaptured tick compiles (or loads from cache) every kernel the tick uses;
             # capture needs them loaded. Then every world goes back to home.
             self._run_tick_ops()
@@ -235,6 +181,7 @@ class WorldBatch(HostMirror, Batch, Restorable):
         """The work of one tick: substeps, then gather + fault check."""
         for _ in range(self.substeps):
             mjw.step(self._m, self._d)
+        wp.launch(frames.count_tick, dim=self.nworld, inputs=[self._wticks])
         self._gather()
 
     def _gather(self) -> None:
@@ -244,7 +191,7 @@ class WorldBatch(HostMirror, Batch, Restorable):
         self._nfault.zero_()
         d = self._d
         wp.launch(
-            _gather_state,
+            gather_state,
             dim=self.nworld,
             inputs=[
                 d.qpos,
@@ -262,7 +209,7 @@ class WorldBatch(HostMirror, Batch, Restorable):
         )
         # One more launch per tick (~nbody x 7 floats per world) so viewers get every body.
         wp.launch(
-            _gather_bodies,
+            gather_bodies,
             dim=(self.nworld, self._bodies.shape[1]),
             inputs=[d.xpos, d.xquat],
             outputs=[self._bodies],
@@ -319,6 +266,13 @@ class WorldBatch(HostMirror, Batch, Restorable):
             self._d.ctrl.numpy()[:] = ctrl  # a view of the same memory
         else:
             self._d.ctrl.assign(ctrl.astype(np.float32))
+        self._mirror_targets()
+
+    def _mirror_targets(self) -> None:
+        if self.device.is_cpu:
+            self._targets_dev.numpy()[:] = self._targets
+        else:
+            self._targets_dev.assign(self._targets.astype(np.float32))
 
     def reset(self, worlds: np.ndarray) -> None:
         """Reset `worlds` to `home`, state and targets; every other world stays bit-identical."""
@@ -328,8 +282,12 @@ class WorldBatch(HostMirror, Batch, Restorable):
         key = np.full(self.nworld, -1, dtype=np.int32)
         key[worlds] = self.robot.home_key
         with wp.ScopedDevice(self.device):
-            mjw.reset_data_keyframe(self._m, self._d, wp.array(key, dtype=int))
+            key = wp.array(key, dtype=int)
+            mjw.reset_data_keyframe(self._m, self._d, key)
+            wp.launch(frames.zero_reset_ticks, dim=self.nworld, inputs=[key, self._wticks])
         self._home(worlds)
+        self._mirror_targets()  # and the fault counts: a fault is counted just before its reset
+        self._faults_dev.assign(self._faults.astype(np.int32))
 
     # -- reading ----------------------------------------------------------------------------
 
@@ -338,14 +296,24 @@ class WorldBatch(HostMirror, Batch, Restorable):
         return snapshot_from(self.snapshot_arrays(), self._targets.copy())
 
     def snapshot_arrays(self) -> SnapshotArrays:
-        """The snapshot as the few contiguous host arrays it is made of (cheap to ship: Ray)."""
-        state = self._state.numpy()
-        bodies = self._bodies.numpy()
-        if self.device.is_cpu:
-            # On the CPU .numpy() is a view the next tick overwrites.
-            state, bodies = state.copy(), bodies.copy()
+        """The snapshot as the few contiguous host arrays it is made of (cheap to ship: Ray).
+
+        On a GPU they are views of pinned buffers, reused once no reader holds them: one copy
+        and no allocation per snapshot. On the CPU .numpy() is a view the next tick overwrites.
+        """
+        if self.device.is_cuda:
+            state, bodies = self._pinned.copy_out((self._state, self._bodies), self.device)
+        else:
+            state, bodies = self._state.numpy().copy(), self._bodies.numpy().copy()
         return SnapshotArrays(
             self._tick, self._world_ticks * self.tick_dt, state, bodies, self._faults.copy()
+        )
+
+    def pack_rows(self, ids: np.ndarray) -> PackedRows | None:
+        """The frame rows of worlds `ids` at the last tick, gathered and copied on the device
+        (service.device_frames); None when that selection's buffers are all in flight."""
+        return self._packer.pack(
+            self._tick, ids, self._state, self._targets_dev, self._wticks, self._faults_dev
         )
 
     # -- state -----------------------------------------------------------------------------
@@ -375,6 +343,9 @@ class WorldBatch(HostMirror, Batch, Restorable):
             # capacity overflow (it would have been reset), so the restored batch starts clean.
             self._d.overflow.zero_()
             self._restore_mirror(state)
+            self._wticks.assign(self._world_ticks)
+            self._faults_dev.assign(self._faults.astype(np.int32))
+            self._mirror_targets()
             self._gather()  # the snapshot shows the restored state at once
 
     # -- test and diagnostics hooks ---------------------------------------------------------

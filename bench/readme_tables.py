@@ -1,0 +1,201 @@
+"""The README's performance tables, regenerated from bench/results/*.json (issue 20).
+
+Each table sits in README.md between ``<!-- bench:NAME -->`` and ``<!-- /bench:NAME -->``;
+``python -m bench.readme_tables`` rewrites what is between them from the results files, so the
+figures in the README are always those of a recorded run. ``--check`` only says whether the
+README is up to date (exit 1 if not).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from bench import common
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+GPU_HEAD = (
+    "worlds",
+    "engine",
+    "raw MJWarp captured",
+    "engine / raw",
+    "served, binary (frames/s)",
+    "binary / engine",
+    "served, JSON (frames/s)",
+    "JSON / engine",
+)
+
+PROFILE_HEAD = (
+    "worlds",
+    "path / frames",
+    "engine ms",
+    "served ms",
+    "served / engine",
+    "frames/s",
+    "snapshot s/s",
+    "pack s/s",
+    "serialise s/s",
+)
+
+BASELINE_HEAD = (
+    "worlds",
+    "variant",
+    "ms/tick (settled)",
+    "ms/tick by quarter from home",
+    "variant / engine",
+)
+
+CAPACITY_HEAD = (
+    "engine",
+    "worlds at RTF ≥ 0.99",
+    "rollout limit (worlds)",
+    "capacity / limit",
+)
+
+
+def _m(x: float | None) -> str:
+    """World-steps/s as 4.73M / 812k."""
+    if x is None:
+        return "–"
+    return f"{x / 1e6:.2f}M" if x >= 1e6 else f"{x / 1e3:.0f}k"
+
+
+def _r(x: float | None) -> str:
+    return "–" if x is None else f"{x:.2f}×"
+
+
+def _load(name: str) -> dict[str, Any]:
+    return common.read_json(name, common.RESULTS_DIR) or {}
+
+
+def _table(head: list[str], rows: list[list[str]]) -> str:
+    align = ["---"] + ["---:"] * (len(head) - 1)
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(align) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _machine(payload: dict[str, Any]) -> str:
+    m = payload.get("machine", {})
+    return f"{m.get('gpu') or m.get('cpu_model')}, {payload.get('started', '?')}"
+
+
+def gpu() -> str:
+    """Sections 1, 7 and 2 on CUDA: engine, raw graph, the service with binary and JSON frames."""
+    tp, binary, js = (
+        _load(f"{n}_cuda.json") for n in ("throughput", "service_fast_binary", "service_fast")
+    )
+    rows = []
+    for n, entry in tp.get("results", {}).items():
+        eng = entry["engines"].get("engine", {}).get("world_steps_per_s")
+        raw = entry["engines"].get("warp_captured", {}).get("world_steps_per_s")
+        b = binary.get("results", {}).get(n, {})
+        j = js.get("results", {}).get(n, {})
+        rows.append(
+            [
+                f"{int(n):,}",
+                _m(eng),
+                _m(raw),
+                _r(eng / raw if eng and raw else None),
+                f"{_m(b.get('world_steps_per_s'))} ({b.get('frames_per_s', 0):.1f}/s)",
+                _r(b.get("ratio_to_engine")),
+                f"{_m(j.get('world_steps_per_s'))} ({j.get('frames_per_s', 0):.1f}/s)",
+                _r(j.get("ratio_to_engine")),
+            ]
+        )
+    head = list(GPU_HEAD)
+    return _table(head, rows) + f"\n\n({_machine(tp)}; world-steps/s, 30 Hz asked)"
+
+
+def profile() -> str:
+    """Section 18 on CUDA: the served tick before (snapshot path) and after (packed path)."""
+    tp = _load("tick_profile_cuda.json")
+    rows = []
+    for key, res in tp.get("results", {}).items():
+        for n, r in res.items():
+            s = r["seconds_per_s"]
+            host = s.get("render") if "snapshot/" in key else s.get("encode")
+            rows.append(
+                [
+                    f"{int(n):,}",
+                    key,
+                    f"{r['engine_ms_per_tick']:.1f}",
+                    f"{r['served_ms_per_tick']:.1f}",
+                    _r(r["served_vs_engine"]),
+                    f"{r['frames_per_s']:.1f}",
+                    f"{s.get('snapshot', 0):.3f}",
+                    f"{s.get('frames', 0):.3f}",
+                    f"{host or 0:.2f}",
+                ]
+            )
+    head = list(PROFILE_HEAD)
+    return _table(head, rows) + f"\n\n({_machine(tp)})"
+
+
+def baseline() -> str:
+    """Section 17: engine vs raw captured, tick by tick from home."""
+    bl = _load("warp_baseline_cuda.json")
+    rows = []
+    for n, r in bl.get("results", {}).items():
+        for k, ms in r["mean_ms_after_first_quarter"].items():
+            quarters = " → ".join(f"{x:.1f}" for x in r["window_mean_ms"][k])
+            rows.append([f"{int(n):,}", k, f"{ms:.2f}", quarters, _r(r["engine_vs"].get(k, 1.0))])
+    head = list(BASELINE_HEAD)
+    return _table(head, rows) + f"\n\n({_machine(bl)})"
+
+
+def capacity() -> str:
+    """Section 11 on the CPU: real-time capacity per engine and its share of the rollout limit."""
+    cap = _load("capacity_engines.json")
+    limit = cap.get("limit_worlds")
+    rows = []
+    for engine in ("mujoco", "warp"):
+        e = cap.get(engine, {})
+        best = e.get("capacity_worlds")
+        rows.append(
+            [
+                engine,
+                f"{best}" if best else "–",
+                f"{limit:.0f}" if limit else "–",
+                _r(best / limit if best and limit else None),
+            ]
+        )
+    head = list(CAPACITY_HEAD)
+    load = cap.get("machine", {}).get("loadavg_at_start")
+    return _table(head, rows) + f"\n\n({_machine(cap)}; load at start {load})"
+
+
+TABLES: dict[str, Callable[[], str]] = {
+    "gpu": gpu,
+    "profile": profile,
+    "baseline": baseline,
+    "capacity": capacity,
+}
+
+
+def update(text: str) -> str:
+    for name, render in TABLES.items():
+        pattern = re.compile(rf"(<!-- bench:{name} -->\n)(?:.*?\n)?(<!-- /bench:{name} -->)", re.S)
+        if pattern.search(text):
+            text = pattern.sub(lambda m, r=render: m.group(1) + r() + "\n" + m.group(2), text)
+    return text
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(prog="python -m bench.readme_tables", description=__doc__)
+    ap.add_argument("--check", action="store_true", help="exit 1 if the README is out of date")
+    args = ap.parse_args()
+    old = README.read_text()
+    new = update(old)
+    if args.check:
+        return int(new != old)
+    README.write_text(new)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,180 @@
+"""What a state frame carries, packed where the worlds live: on the GPU for the warp engine.
+
+A WebSocket batch frame is one float32 row per world (`service.wire.BINARY_COLUMNS`). At tens of
+thousands of worlds, building those rows on the host from a full snapshot (every field of every
+world copied off the device, then cut and concatenated) costs more than the tick itself. Here a
+kernel gathers exactly the rows of the subscribed worlds into a device buffer, right after the
+tick on the tick's stream; one asynchronous copy on a side stream moves them into pinned host
+memory, and whoever serialises the frame waits for that copy, with the GIL released, on its own
+thread. The sim thread only launches: the next tick never waits for a frame beyond the copy.
+
+Snapshots (what HTTP reads and the other sinks get) come through pinned buffers too, handed out
+as views and reused once nothing holds them, so that a snapshot is one copy and no allocation.
+Nothing here is thread-safe on its own: `pack` and `PinnedPool.copy_out` run on the sim thread,
+a `PackedRows` is waited on and released by one consumer (service.core.frames.FrameSender).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import sys
+
+import numpy as np
+import warp as wp
+
+from service.core.frames import PackedRows
+
+NCOL = 37  # sim_time, position 7, velocity 7, effort 7, target 7, flange xyz, flange wxyz, faults
+RING = 3  # frames in flight per world selection (being copied or serialised)
+
+
+@wp.kernel(enable_backward=False)
+def _pack_rows(
+    state: wp.array2d(dtype=float),
+    targets: wp.array2d(dtype=float),
+    world_ticks: wp.array(dtype=wp.int64),
+    faults: wp.array(dtype=wp.int32),
+    ids: wp.array(dtype=wp.int32),
+    tick_dt: wp.float64,
+    out: wp.array2d(dtype=float),
+):
+    # Row i of the frame is world ids[i], columns as service.wire.BINARY_COLUMNS; sim_time is
+    # computed in float64 and rounded once, exactly as the host's ticks * tick_dt -> float32.
+    i = wp.tid()
+    w = ids[i]
+    out[i, 0] = wp.float32(wp.float64(world_ticks[w]) * tick_dt)
+    for j in range(21):
+        out[i, 1 + j] = state[w, j]  # position, velocity, effort
+    for j in range(7):
+        out[i, 22 + j] = targets[w, j]  # float32 of the host's float64 targets
+    for j in range(7):
+        out[i, 29 + j] = state[w, 21 + j]  # flange position, quaternion w x y z
+    out[i, 36] = wp.float32(faults[w])
+
+
+@wp.kernel(enable_backward=False)
+def count_tick(world_ticks: wp.array(dtype=wp.int64)):
+    """Part of the captured tick: every world's tick counter (for sim_time) advances by one."""
+    world_ticks[wp.tid()] += wp.int64(1)
+
+
+@wp.kernel(enable_backward=False)
+def zero_reset_ticks(key: wp.array(dtype=int), world_ticks: wp.array(dtype=wp.int64)):
+    """Worlds being reset (key >= 0) start their sim_time again."""
+    w = wp.tid()
+    if key[w] >= 0:
+        world_ticks[w] = wp.int64(0)
+
+
+class PinnedPool:
+    """Pinned host copies of device arrays, handed out as numpy views and reused once no view
+    of a buffer is alive (a Snapshot's fields keep theirs busy while any reader holds them).
+
+    Every view numpy makes of a buffer refers to its one flat array (numpy collapses view
+    chains to the first array over foreign memory), so that array's reference count says
+    whether anything still reads the buffer.
+    """
+
+    MAX_PER_SHAPE = 12  # beyond this many live snapshots, plain (pageable) copies are made
+
+    def __init__(self) -> None:
+        self._bufs: dict[tuple[int, ...], list[tuple[wp.array, np.ndarray]]] = {}
+
+    def _take(self, src: wp.array, pinned: bool) -> tuple[wp.array, np.ndarray] | None:
+        ring = self._bufs.setdefault(tuple(src.shape), [])
+        for arr, flat in ring:
+            if sys.getrefcount(flat) <= _FREE_REFS:
+                return arr, flat
+        if len(ring) >= self.MAX_PER_SHAPE:
+            return None
+        arr = wp.empty(src.shape, dtype=src.dtype, device="cpu", pinned=pinned)
+        buf = (ctypes.c_byte * (arr.size * 4)).from_address(arr.ptr)
+        ring.append((arr, np.frombuffer(buf, dtype=np.float32)))
+        return ring[-1]
+
+    def copy_out(self, srcs: tuple[wp.array, ...], device: wp.Device) -> list[np.ndarray]:
+        """Host copies of float32 device arrays `srcs` as of now (stream order), in one sync."""
+        outs: list[np.ndarray] = []
+        for src in srcs:
+            got = self._take(src, device.is_cuda)
+            if got is None:
+                outs.append(src.numpy())  # synchronous, a fresh array
+                continue
+            arr, flat = got
+            wp.copy(arr, src)
+            outs.append(flat.reshape(src.shape))
+        if device.is_cuda:
+            wp.synchronize_stream(wp.get_stream(device))  # ctypes: the GIL is released meanwhile
+        return outs
+
+
+# References to a free buffer's flat array inside the loop above: the ring's tuple, the loop
+# variable and getrefcount's argument.
+_FREE_REFS = 3
+
+
+class _Slot:
+    def __init__(self, k: int, device: wp.Device) -> None:
+        self.ids = wp.empty(k, dtype=wp.int32, device=device)
+        self.dev = wp.empty((k, NCOL), dtype=float, device=device)
+        self.host = wp.empty((k, NCOL), dtype=float, device="cpu", pinned=device.is_cuda)
+        self.rows = self.host.numpy()
+        self.copied = wp.Event(device) if device.is_cuda else None
+        self.busy = False
+
+
+class DevicePacker:
+    """Packs frame rows of any world selection on the engine's device (see module doc)."""
+
+    def __init__(self, device: wp.Device, tick_dt: float) -> None:
+        self.device = device
+        self.tick_dt = tick_dt
+        self._slots: dict[bytes, list[_Slot]] = {}
+        self._copy_stream = wp.Stream(device) if device.is_cuda else None
+
+    def pack(
+        self,
+        tick: int,
+        ids: np.ndarray,
+        state: wp.array,
+        targets: wp.array,
+        world_ticks: wp.array,
+        faults: wp.array,
+    ) -> PackedRows | None:
+        """Launch the gather and the copy for `ids` (sorted world ids); None when every slot of
+        this selection is still in flight (the frame is skipped, the tick is not held up)."""
+        ring = self._slots.setdefault(ids.tobytes(), [])
+        slot = next((s for s in ring if not s.busy), None)
+        if slot is None:
+            if len(ring) >= RING:
+                return None
+            slot = _Slot(len(ids), self.device)
+            slot.ids.assign(ids.astype(np.int32))
+            ring.append(slot)
+        slot.busy = True
+        k = len(ids)
+        with wp.ScopedDevice(self.device):
+            wp.launch(
+                _pack_rows,
+                dim=k,
+                inputs=[state, targets, world_ticks, faults, slot.ids, wp.float64(self.tick_dt)],
+                outputs=[slot.dev],
+            )
+            if self._copy_stream is None:
+                wp.copy(slot.host, slot.dev)
+                done = None
+            else:
+                # The side stream copies while the next tick runs on the main stream; the main
+                # stream gathers into this slot again only after the copy (the slot's `busy`).
+                self._copy_stream.wait_event(wp.get_stream(self.device).record_event())
+                wp.copy(slot.host, slot.dev, stream=self._copy_stream)
+                done = self._copy_stream.record_event(slot.copied)
+
+        def release(slot: _Slot = slot) -> None:
+            slot.busy = False
+
+        return PackedRows(tick, ids, slot.rows, done, release)
+
+    def forget(self, ids: np.ndarray) -> None:
+        """Drop the buffers of a selection nobody subscribes to any more."""
+        self._slots.pop(ids.tobytes(), None)
