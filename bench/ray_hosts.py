@@ -98,8 +98,12 @@ class TwoHosts:
         self.ip = {"head": f"10.219.{net}.1", "worker": f"10.219.{net}.2"}
         # Short paths: Ray's unix sockets live under its temp dir (108-byte limit).
         self.tmp = Path(tempfile.mkdtemp(prefix="af19ray"))
+        # A driver that already joined a local Ray in this process (ray_actor.connect) sets
+        # RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0, which makes `ray start` refuse to join a head.
+        skip = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+        inherited = {k: v for k, v in os.environ.items() if k != skip}
         self.env = {
-            **os.environ,
+            **inherited,
             **FAST_HEALTH,
             "RAY_AUTH_MODE": "token",  # every node and the driver present the same token
             "RAY_AUTH_TOKEN": secrets.token_hex(32),

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 import random
-import time
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from typing import Any
@@ -340,8 +339,11 @@ def test_clock_follows_simulated_time(ros_server: Server, peer: Peer) -> None:
     tick_dt = 1.0 / info["control_hz"]
     httpx.post(f"{ros_server.url}/v1/sim/pause").raise_for_status()
     try:
-        time.sleep(0.2)  # a tick under way when the pause arrived completes
-        tick = httpx.get(f"{ros_server.url}/v1/worlds/0/state").json()["tick"]
+        # One step settles the tick: it runs after any tick under way when the pause arrived,
+        # so its reply is the loop's tick with nothing left in flight (a loaded machine can
+        # finish a realtime tick well after the pause's reply).
+        first = httpx.post(f"{ros_server.url}/v1/sim/step", json={"ticks": 1}, timeout=30)
+        tick = first.json()["tick"]
 
         def stamped(topic: str, t: int) -> Any:
             def check() -> bool:

@@ -157,10 +157,7 @@ class Control:
         """Add to the named joints' latest targets (the seed's Up/Down), clamped to range."""
         world = self.world(world)
         values = resolve_joints(self.spec, deltas, field)
-        with self._ordered():
-            result = self.loop.increment(world, values)
-            self._announce_result("increment", source, result, tuple(values))
-        return result
+        return self._stage_one("increment", source, self.loop.increment, world, values)
 
     def command_targets(
         self,
@@ -180,10 +177,7 @@ class Control:
         if len(set(name)) != len(name):
             raise BadCommand("name", "a joint may be named only once")
         values = resolve_joints(self.spec, dict(zip(name, position, strict=True)), "name")
-        with self._ordered():
-            result = self.loop.stage_targets(world, values)
-            self._announce_result("set_targets", source, result, tuple(values))
-        return result
+        return self._stage_one("set_targets", source, self.loop.stage_targets, world, values)
 
     def set_many(
         self,
@@ -279,13 +273,23 @@ class Control:
             self._announce(Accepted(source, kind, world, target, tick, None, run.as_json()))
         return started
 
-    def _announce_result(
-        self, kind: str, source: Source, result: CommandResult, joints: tuple[int, ...]
-    ) -> None:
-        if self._listeners:
-            worlds = np.array([result.world], dtype=np.int64)
-            row = result.target[None, :]
-            self._announce(Accepted(source, kind, worlds, row, result.tick, joints=joints))
+    def _stage_one(
+        self,
+        kind: str,
+        source: Source,
+        stage: Callable[[int, Mapping[int, float]], CommandResult],
+        world: int,
+        values: Mapping[int, float],
+    ) -> CommandResult:
+        """Stage one world's command in order with every other, and tell the listeners which
+        joints it named (a trajectory stops only if it drives one of them)."""
+        with self._ordered():
+            result = stage(world, values)
+            if self._listeners:
+                worlds = np.array([result.world], dtype=np.int64)
+                row, joints = result.target[None, :], tuple(values)
+                self._announce(Accepted(source, kind, worlds, row, result.tick, joints=joints))
+        return result
 
     # -- the JSON op protocol of the WebSocket surfaces ------------------------------------
 

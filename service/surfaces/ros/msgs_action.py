@@ -1,6 +1,6 @@
 """DDS declarations of the UR driver's actions: FollowJointTrajectory and GripperCommand.
 
-Written from the .msg / .action definitions (trajectory_msgs JointTrajectory and
+The .msg / .action fields (trajectory_msgs JointTrajectory and
 MultiDOFJointTrajectory with their points; geometry_msgs Twist; control_msgs JointTolerance,
 JointComponentTolerance, GripperCommand and the two actions, humble branch;
 unique_identifier_msgs UUID; action_msgs GoalInfo, GoalStatus, GoalStatusArray, CancelGoal)
@@ -9,212 +9,123 @@ topic `A_FeedbackMessage`, plus action_msgs' CancelGoal service and GoalStatusAr
 
 Service requests and replies travel the way rmw_cyclonedds_cpp sends them: the client's 64-bit
 guid and the request's sequence number come first in the CDR stream (its
-`cdds_request_header_t`), so each request/response struct here starts with those two fields.
-tests/test_ros_actions.py checks the layouts against rosbags. No postponed annotations:
-cyclonedds reads the field types at class creation.
+`cdds_request_header_t`), so each request/response struct here starts with those two fields
+(`REQUEST_HEADER`). The types are made by service/surfaces/ros/idl.py;
+tests/test_ros_actions.py checks the layouts against rosbags.
 """
 
-import types
-from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import (
-    array,
-    float64,
-    int8,
-    int32,
-    int64,
-    sequence,
-    uint8,
-    uint16,
-    uint32,
-    uint64,
+from service.surfaces.ros.idl import REQUEST_HEADER, message
+
+# declared there, named below (and still importable from here, as before)
+from service.surfaces.ros.msgs import Header, Time  # noqa: F401
+from service.surfaces.ros.msgs_tf import Transform, Vector3  # noqa: F401
+
+Duration = message("builtin_interfaces/msg/Duration", "int32 sec\nuint32 nanosec")
+
+# A goal's id: 16 random bytes chosen by the client.
+UUID = message("unique_identifier_msgs/msg/UUID", "uint8[16] uuid")
+
+Twist = message("geometry_msgs/msg/Twist", "Vector3 linear\nVector3 angular")
+
+JointTrajectoryPoint = message(
+    "trajectory_msgs/msg/JointTrajectoryPoint",
+    """
+    float64[] positions
+    float64[] velocities
+    float64[] accelerations
+    float64[] effort
+    builtin_interfaces/Duration time_from_start
+    """,
+)
+JointTrajectory = message(
+    "trajectory_msgs/msg/JointTrajectory",
+    "std_msgs/Header header\nstring[] joint_names\nJointTrajectoryPoint[] points",
+)
+MultiDOFJointTrajectoryPoint = message(
+    "trajectory_msgs/msg/MultiDOFJointTrajectoryPoint",
+    """
+    geometry_msgs/Transform[] transforms
+    geometry_msgs/Twist[] velocities
+    geometry_msgs/Twist[] accelerations
+    builtin_interfaces/Duration time_from_start
+    """,
+)
+MultiDOFJointTrajectory = message(
+    "trajectory_msgs/msg/MultiDOFJointTrajectory",
+    "std_msgs/Header header\nstring[] joint_names\nMultiDOFJointTrajectoryPoint[] points",
 )
 
-from service.surfaces.ros.msgs import Header, Time
-from service.surfaces.ros.msgs_tf import Transform, Vector3
+JointTolerance = message(
+    "control_msgs/msg/JointTolerance",
+    "string name\nfloat64 position\nfloat64 velocity\nfloat64 acceleration",
+)
+JointComponentTolerance = message(
+    "control_msgs/msg/JointComponentTolerance",
+    """
+    string joint_name
+    uint16 component
+    float64 position
+    float64 velocity
+    float64 acceleration
+    """,
+)
 
+FollowJointTrajectoryGoal = message(
+    "control_msgs/action/FollowJointTrajectory_Goal",
+    """
+    trajectory_msgs/JointTrajectory trajectory
+    trajectory_msgs/MultiDOFJointTrajectory multi_dof_trajectory
+    control_msgs/JointTolerance[] path_tolerance
+    control_msgs/JointComponentTolerance[] component_path_tolerance
+    control_msgs/JointTolerance[] goal_tolerance
+    control_msgs/JointComponentTolerance[] component_goal_tolerance
+    builtin_interfaces/Duration goal_time_tolerance
+    """,
+)
+FollowJointTrajectoryResult = message(
+    "control_msgs/action/FollowJointTrajectory_Result", "int32 error_code\nstring error_string"
+)
+FollowJointTrajectoryFeedback = message(
+    "control_msgs/action/FollowJointTrajectory_Feedback",
+    """
+    std_msgs/Header header
+    string[] joint_names
+    trajectory_msgs/JointTrajectoryPoint desired
+    trajectory_msgs/JointTrajectoryPoint actual
+    trajectory_msgs/JointTrajectoryPoint error
+    string[] multi_dof_joint_names
+    trajectory_msgs/MultiDOFJointTrajectoryPoint multi_dof_desired
+    trajectory_msgs/MultiDOFJointTrajectoryPoint multi_dof_actual
+    trajectory_msgs/MultiDOFJointTrajectoryPoint multi_dof_error
+    """,
+)
 
-@dataclass
-class Duration(IdlStruct, typename="builtin_interfaces::msg::dds_::Duration_"):
-    sec: int32 = 0
-    nanosec: uint32 = 0
-
-
-@dataclass
-class UUID(IdlStruct, typename="unique_identifier_msgs::msg::dds_::UUID_"):
-    """A goal's id: 16 random bytes chosen by the client."""
-
-    uuid: array[uint8, 16] = field(default_factory=lambda: [0] * 16)
-
-
-@dataclass
-class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
-    linear: Vector3 = field(default_factory=Vector3)
-    angular: Vector3 = field(default_factory=Vector3)
-
-
-@dataclass
-class JointTrajectoryPoint(IdlStruct, typename="trajectory_msgs::msg::dds_::JointTrajectoryPoint_"):
-    positions: sequence[float64] = field(default_factory=list)
-    velocities: sequence[float64] = field(default_factory=list)
-    accelerations: sequence[float64] = field(default_factory=list)
-    effort: sequence[float64] = field(default_factory=list)
-    time_from_start: Duration = field(default_factory=Duration)
-
-
-@dataclass
-class JointTrajectory(IdlStruct, typename="trajectory_msgs::msg::dds_::JointTrajectory_"):
-    header: Header = field(default_factory=Header)
-    joint_names: sequence[str] = field(default_factory=list)
-    points: sequence[JointTrajectoryPoint] = field(default_factory=list)
-
-
-@dataclass
-class MultiDOFJointTrajectoryPoint(
-    IdlStruct, typename="trajectory_msgs::msg::dds_::MultiDOFJointTrajectoryPoint_"
-):
-    transforms: sequence[Transform] = field(default_factory=list)
-    velocities: sequence[Twist] = field(default_factory=list)
-    accelerations: sequence[Twist] = field(default_factory=list)
-    time_from_start: Duration = field(default_factory=Duration)
-
-
-@dataclass
-class MultiDOFJointTrajectory(
-    IdlStruct, typename="trajectory_msgs::msg::dds_::MultiDOFJointTrajectory_"
-):
-    header: Header = field(default_factory=Header)
-    joint_names: sequence[str] = field(default_factory=list)
-    points: sequence[MultiDOFJointTrajectoryPoint] = field(default_factory=list)
-
-
-@dataclass
-class JointTolerance(IdlStruct, typename="control_msgs::msg::dds_::JointTolerance_"):
-    name: str = ""
-    position: float64 = 0.0
-    velocity: float64 = 0.0
-    acceleration: float64 = 0.0
-
-
-@dataclass
-class JointComponentTolerance(
-    IdlStruct, typename="control_msgs::msg::dds_::JointComponentTolerance_"
-):
-    joint_name: str = ""
-    component: uint16 = 0
-    position: float64 = 0.0
-    velocity: float64 = 0.0
-    acceleration: float64 = 0.0
-
-
-@dataclass
-class FollowJointTrajectoryGoal(
-    IdlStruct, typename="control_msgs::action::dds_::FollowJointTrajectory_Goal_"
-):
-    trajectory: JointTrajectory = field(default_factory=JointTrajectory)
-    multi_dof_trajectory: MultiDOFJointTrajectory = field(default_factory=MultiDOFJointTrajectory)
-    path_tolerance: sequence[JointTolerance] = field(default_factory=list)
-    component_path_tolerance: sequence[JointComponentTolerance] = field(default_factory=list)
-    goal_tolerance: sequence[JointTolerance] = field(default_factory=list)
-    component_goal_tolerance: sequence[JointComponentTolerance] = field(default_factory=list)
-    goal_time_tolerance: Duration = field(default_factory=Duration)
-
-
-@dataclass
-class FollowJointTrajectoryResult(
-    IdlStruct, typename="control_msgs::action::dds_::FollowJointTrajectory_Result_"
-):
-    error_code: int32 = 0
-    error_string: str = ""
-
-
-@dataclass
-class FollowJointTrajectoryFeedback(
-    IdlStruct, typename="control_msgs::action::dds_::FollowJointTrajectory_Feedback_"
-):
-    header: Header = field(default_factory=Header)
-    joint_names: sequence[str] = field(default_factory=list)
-    desired: JointTrajectoryPoint = field(default_factory=JointTrajectoryPoint)
-    actual: JointTrajectoryPoint = field(default_factory=JointTrajectoryPoint)
-    error: JointTrajectoryPoint = field(default_factory=JointTrajectoryPoint)
-    multi_dof_joint_names: sequence[str] = field(default_factory=list)
-    multi_dof_desired: MultiDOFJointTrajectoryPoint = field(
-        default_factory=MultiDOFJointTrajectoryPoint
-    )
-    multi_dof_actual: MultiDOFJointTrajectoryPoint = field(
-        default_factory=MultiDOFJointTrajectoryPoint
-    )
-    multi_dof_error: MultiDOFJointTrajectoryPoint = field(
-        default_factory=MultiDOFJointTrajectoryPoint
-    )
-
-
-@dataclass
-class GripperCommand(IdlStruct, typename="control_msgs::msg::dds_::GripperCommand_"):
-    position: float64 = 0.0
-    max_effort: float64 = 0.0
-
-
-@dataclass
-class GripperCommandGoal(IdlStruct, typename="control_msgs::action::dds_::GripperCommand_Goal_"):
-    command: GripperCommand = field(default_factory=GripperCommand)
-
-
-@dataclass
-class GripperCommandResult(
-    IdlStruct, typename="control_msgs::action::dds_::GripperCommand_Result_"
-):
-    position: float64 = 0.0
-    effort: float64 = 0.0
-    stalled: bool = False
-    reached_goal: bool = False
-
-
-@dataclass
-class GripperCommandFeedback(
-    IdlStruct, typename="control_msgs::action::dds_::GripperCommand_Feedback_"
-):
-    position: float64 = 0.0
-    effort: float64 = 0.0
-    stalled: bool = False
-    reached_goal: bool = False
-
+GripperCommand = message("control_msgs/msg/GripperCommand", "float64 position\nfloat64 max_effort")
+GripperCommandGoal = message(
+    "control_msgs/action/GripperCommand_Goal", "control_msgs/GripperCommand command"
+)
+# control_msgs gives the result and the feedback the same four fields
+_GRIPPER_STATE = "float64 position\nfloat64 effort\nbool stalled\nbool reached_goal"
+GripperCommandResult = message("control_msgs/action/GripperCommand_Result", _GRIPPER_STATE)
+GripperCommandFeedback = message("control_msgs/action/GripperCommand_Feedback", _GRIPPER_STATE)
 
 # -- action_msgs ---------------------------------------------------------------------------------
 
-
-@dataclass
-class GoalInfo(IdlStruct, typename="action_msgs::msg::dds_::GoalInfo_"):
-    goal_id: UUID = field(default_factory=UUID)
-    stamp: Time = field(default_factory=Time)
-
-
-@dataclass
-class GoalStatus(IdlStruct, typename="action_msgs::msg::dds_::GoalStatus_"):
-    goal_info: GoalInfo = field(default_factory=GoalInfo)
-    status: int8 = 0
-
-
-@dataclass
-class GoalStatusArray(IdlStruct, typename="action_msgs::msg::dds_::GoalStatusArray_"):
-    status_list: sequence[GoalStatus] = field(default_factory=list)
-
-
-@dataclass
-class CancelGoalRequest(IdlStruct, typename="action_msgs::srv::dds_::CancelGoal_Request_"):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    goal_info: GoalInfo = field(default_factory=GoalInfo)
-
-
-@dataclass
-class CancelGoalResponse(IdlStruct, typename="action_msgs::srv::dds_::CancelGoal_Response_"):
-    client_guid: uint64 = 0
-    sequence_number: int64 = 0
-    return_code: int8 = 0
-    goals_canceling: sequence[GoalInfo] = field(default_factory=list)
+GoalInfo = message(
+    "action_msgs/msg/GoalInfo",
+    "unique_identifier_msgs/UUID goal_id\nbuiltin_interfaces/Time stamp",
+)
+GoalStatus = message("action_msgs/msg/GoalStatus", "GoalInfo goal_info\nint8 status")
+GoalStatusArray = message("action_msgs/msg/GoalStatusArray", "GoalStatus[] status_list")
+CancelGoalRequest = message(
+    "action_msgs/srv/CancelGoal_Request", REQUEST_HEADER + "action_msgs/GoalInfo goal_info"
+)
+CancelGoalResponse = message(
+    "action_msgs/srv/CancelGoal_Response",
+    REQUEST_HEADER + "int8 return_code\naction_msgs/GoalInfo[] goals_canceling",
+)
 
 
 # -- the per-action service and feedback types ---------------------------------------------------
@@ -232,30 +143,19 @@ class ActionTypes(NamedTuple):
     result: type
 
 
-def _struct(typename: str, fields_: dict[str, Any], defaults: dict[str, Any]) -> type:
-    """A dataclass IdlStruct built from field annotations (the shapes rosidl generates)."""
-
-    def body(ns: dict[str, Any]) -> None:
-        ns["__annotations__"] = fields_
-        for name in fields_:
-            default = defaults.get(name, 0)
-            ns[name] = field(default_factory=default) if callable(default) else default
-
-    name = typename.rsplit("::", 1)[1].strip("_")
-    return dataclass(types.new_class(name, (IdlStruct,), {"typename": typename}, body))
-
-
 def _action(name: str, goal: type, result: type, feedback: type) -> ActionTypes:
-    base = f"control_msgs::action::dds_::{name}"
-    header = {"client_guid": uint64, "sequence_number": int64}
-    ids = {"goal_id": UUID}
-    made = {"goal_id": UUID, "goal": goal, "result": result, "feedback": feedback, "stamp": Time}
+    """ROS 2's action design: the services and the feedback message around goal/result/feedback."""
+    a = f"control_msgs/action/{name}"
+    goal_id = "unique_identifier_msgs/UUID goal_id\n"
     return ActionTypes(
-        _struct(f"{base}_SendGoal_Request_", {**header, **ids, "goal": goal}, made),
-        _struct(f"{base}_SendGoal_Response_", {**header, "accepted": bool, "stamp": Time}, made),
-        _struct(f"{base}_GetResult_Request_", {**header, **ids}, made),
-        _struct(f"{base}_GetResult_Response_", {**header, "status": int8, "result": result}, made),
-        _struct(f"{base}_FeedbackMessage_", {**ids, "feedback": feedback}, made),
+        message(f"{a}_SendGoal_Request", f"{REQUEST_HEADER}{goal_id}{a}_Goal goal"),
+        message(
+            f"{a}_SendGoal_Response",
+            f"{REQUEST_HEADER}bool accepted\nbuiltin_interfaces/Time stamp",
+        ),
+        message(f"{a}_GetResult_Request", REQUEST_HEADER + goal_id),
+        message(f"{a}_GetResult_Response", f"{REQUEST_HEADER}int8 status\n{a}_Result result"),
+        message(f"{a}_FeedbackMessage", f"{goal_id}{a}_Feedback feedback"),
         feedback,
         result,
     )

@@ -1,87 +1,49 @@
 """DDS declarations of the UR driver's plain topics: `/robot_description`, `/tf`, `/tf_static`
 and `forward_position_controller/commands`.
 
-Written from the .msg definitions (std_msgs String, MultiArrayDimension, MultiArrayLayout,
-Float64MultiArray; geometry_msgs Vector3, Quaternion, Transform, TransformStamped;
-tf2_msgs TFMessage) with the rmw DDS type names; tests/test_ros_ur.py checks their bytes
-against rosbags' Humble typestore. Like service/surfaces/ros/msgs.py, no postponed annotations:
-cyclonedds reads the field types at class creation.
+The .msg fields of std_msgs String, MultiArrayDimension, MultiArrayLayout, Float64MultiArray;
+geometry_msgs Vector3, Quaternion, Transform, TransformStamped; tf2_msgs TFMessage, made into
+DDS types by service/surfaces/ros/idl.py; tests/test_ros_ur.py checks their bytes against
+rosbags' Humble typestore.
 """
 
-from dataclasses import dataclass, field
+from service.surfaces.ros.idl import message
 
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float64, sequence, uint32
+# declared there, named below (and still importable from here, as before)
+from service.surfaces.ros.msgs import Header  # noqa: F401
 
-from service.surfaces.ros.msgs import Header
+# One text (here: the URDF).
+String = message("std_msgs/msg/String", "string data")
 
+# Label, size and stride of one array dimension (informative for us).
+MultiArrayDimension = message(
+    "std_msgs/msg/MultiArrayDimension", "string label\nuint32 size\nuint32 stride"
+)
 
-@dataclass
-class String(IdlStruct, typename="std_msgs::msg::dds_::String_"):
-    """One text (here: the URDF)."""
+# How `data` is laid out; forward_position_controller reads `data` only.
+MultiArrayLayout = message(
+    "std_msgs/msg/MultiArrayLayout", "MultiArrayDimension[] dim\nuint32 data_offset"
+)
 
-    data: str = ""
+# forward_position_controller's command: one position per controller joint [rad].
+Float64MultiArray = message(
+    "std_msgs/msg/Float64MultiArray", "MultiArrayLayout layout\nfloat64[] data"
+)
 
+Vector3 = message("geometry_msgs/msg/Vector3", "float64 x\nfloat64 y\nfloat64 z")
 
-@dataclass
-class MultiArrayDimension(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayDimension_"):
-    """Label, size and stride of one array dimension (informative for us)."""
+# Orientation as x y z w (ROS order; MuJoCo's is w x y z); the identity by default.
+Quaternion = message(
+    "geometry_msgs/msg/Quaternion", "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1"
+)
 
-    label: str = ""
-    size: uint32 = 0
-    stride: uint32 = 0
+Transform = message("geometry_msgs/msg/Transform", "Vector3 translation\nQuaternion rotation")
 
+# The child frame's pose in `header.frame_id` at `header.stamp`.
+TransformStamped = message(
+    "geometry_msgs/msg/TransformStamped",
+    "std_msgs/Header header\nstring child_frame_id\nTransform transform",
+)
 
-@dataclass
-class MultiArrayLayout(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayLayout_"):
-    """How `data` is laid out; forward_position_controller reads `data` only."""
-
-    dim: sequence[MultiArrayDimension] = field(default_factory=list)
-    data_offset: uint32 = 0
-
-
-@dataclass
-class Float64MultiArray(IdlStruct, typename="std_msgs::msg::dds_::Float64MultiArray_"):
-    """forward_position_controller's command: one position per controller joint [rad]."""
-
-    layout: MultiArrayLayout = field(default_factory=MultiArrayLayout)
-    data: sequence[float64] = field(default_factory=list)
-
-
-@dataclass
-class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
-    x: float64 = 0.0
-    y: float64 = 0.0
-    z: float64 = 0.0
-
-
-@dataclass
-class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
-    """Orientation as x y z w (ROS order; MuJoCo's is w x y z)."""
-
-    x: float64 = 0.0
-    y: float64 = 0.0
-    z: float64 = 0.0
-    w: float64 = 1.0
-
-
-@dataclass
-class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
-    translation: Vector3 = field(default_factory=Vector3)
-    rotation: Quaternion = field(default_factory=Quaternion)
-
-
-@dataclass
-class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
-    """The child frame's pose in `header.frame_id` at `header.stamp`."""
-
-    header: Header = field(default_factory=Header)
-    child_frame_id: str = ""
-    transform: Transform = field(default_factory=Transform)
-
-
-@dataclass
-class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
-    """What `/tf` and `/tf_static` carry."""
-
-    transforms: sequence[TransformStamped] = field(default_factory=list)
+# What `/tf` and `/tf_static` carry.
+TFMessage = message("tf2_msgs/msg/TFMessage", "geometry_msgs/TransformStamped[] transforms")
