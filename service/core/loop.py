@@ -3,9 +3,9 @@
 Data flows one way. Commands arrive from any thread and are folded, under one lock, into a
 *pending* target table (validated first, so a rejected command changes nothing). At each tick
 boundary the loop thread moves what is pending into the engine in one write, steps the tick with
-the lock released (the graph replay releases the GIL too), then publishes a snapshot. A command
-therefore takes effect at a tick that is known when it is accepted: that is the `tick` in every
-reply, and the first snapshot whose `tick` is >= it carries the new target.
+the lock released (the graph replay releases the GIL too), then publishes a snapshot if a sink or
+reader wants one. A command takes effect at a tick known when it is accepted: the `tick` in every
+reply; the first snapshot whose `tick` is >= it carries the new target.
 """
 
 from __future__ import annotations
@@ -253,7 +253,8 @@ class SimLoop(TickBoundary):
                 if self._requests:  # arrived while serving: serve before waiting or stepping
                     continue
                 mode = self._mode
-                if mode is Mode.PAUSED and self._tick >= self._step_goal:
+                idle = mode is Mode.PAUSED and self._tick >= self._step_goal
+                if idle and self._latest.tick >= self._tick:
                     self._wake.wait()
                     next_deadline = time.perf_counter()
                     continue
@@ -262,6 +263,9 @@ class SimLoop(TickBoundary):
                     if delay > 0:
                         self._wake.wait(delay)
                         continue
+            if idle:  # paused after a tick that took no snapshot: show where time stopped
+                self._publish(time.monotonic())
+                continue
             try:
                 self._tick_once(mode)
             except Exception as exc:  # never let a bad tick kill the loop, nor flood the log
@@ -272,9 +276,8 @@ class SimLoop(TickBoundary):
                     log.warning("ticks succeed again after: %s", self.failure)
                     self.failure = None
             if mode is Mode.REALTIME:
-                # Keep the cadence. A tick that overran is made up by starting the next one at
-                # once, but never more than one tick of lag is carried: further behind, the time
-                # is given up (the real-time factor shows it) instead of bursting to catch up.
+                # Keep the cadence: an overrun tick is made up at once, but at most one tick of
+                # lag is carried; further behind, time is given up (the RTF shows it).
                 next_deadline += self.batch.tick_dt
                 now = time.perf_counter()
                 if now - next_deadline > self.batch.tick_dt:
@@ -382,13 +385,6 @@ class SimLoop(TickBoundary):
             resolve(fut, snap)
         for sink in self._sinks:
             sink.publish(snap)
-
-    def _release_step_waiters(self) -> None:
-        with self._lock:
-            done = [f for g, f in self._step_waiters if g <= self._tick]
-            self._step_waiters = [(g, f) for g, f in self._step_waiters if g > self._tick]
-        for fut in done:
-            fut.set_result(self._tick)
 
     def _update_stats(self, now: float) -> None:
         t0, tick0 = self._window

@@ -142,11 +142,27 @@ class TickBoundary:
                 fut.set_result(self._latest)
             else:
                 self._snapshot_waiters.append((need, fut))
+                self._wake.notify_all()  # a paused loop wakes to publish the tick it stopped at
         return fut
 
+    def _release_step_waiters(self) -> None:
+        """Resolve the `step` futures whose goal tick has been reached (sim thread)."""
+        with self._lock:
+            done = [f for g, f in self._step_waiters if g <= self._tick]
+            self._step_waiters = [(g, f) for g, f in self._step_waiters if g > self._tick]
+        for fut in done:
+            fut.set_result(self._tick)
+
     def _will_not_advance(self) -> bool:
-        """Paused with no step requested and no tick in progress (lock held)."""
-        return self._mode is Mode.PAUSED and self._tick >= self._step_goal and not self._stepping
+        """Paused with no step requested, no tick in progress, and `latest` showing the last
+        tick (lock held). Realtime does not snapshot every tick, so a pause can find `latest`
+        behind: the sim thread then publishes once more, and readers wait for that."""
+        return (
+            self._mode is Mode.PAUSED
+            and self._tick >= self._step_goal
+            and not self._stepping
+            and self._latest.tick >= self._tick
+        )
 
     def _stranded_waiters(self) -> list[concurrent.futures.Future[Snapshot]]:
         """Readers whose tick will not come because time stands still (lock held)."""
