@@ -97,6 +97,12 @@ class Runtime:
             "control ticks per wall second over the last second",
             lambda: self._loop_attr("stats").ticks_per_s if self.loop else None,
         )
+        m.counter_level(
+            "armfleet_engine_step_seconds",
+            "wall time the engine spent stepping (the rest of armfleet_tick_duration_seconds_sum "
+            "is the loop's own work: commands, snapshots, frames)",
+            lambda: self._loop_attr("engine_seconds"),
+        )
         m.level(
             "armfleet_subscribers",
             "WebSocket stream subscribers",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from service.core.hub import Subscription
-from service.core.types import Snapshot
+from service.core.types import BodyPoses, Snapshot
 
 
 def snap(tick: int) -> Snapshot:
@@ -20,8 +20,7 @@ def snap(tick: int) -> Snapshot:
         flange_pos=np.zeros((1, 3)),
         flange_quat=np.zeros((1, 4)),
         faults=np.zeros(1, dtype=np.int64),
-        body_pos=np.zeros((1, 1, 3), dtype=np.float32),
-        body_quat=np.zeros((1, 1, 4), dtype=np.float32),
+        bodies=BodyPoses(np.zeros((1, 1, 3), np.float32), np.zeros((1, 1, 4), np.float32)),
     )
 
 

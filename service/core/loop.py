@@ -76,6 +76,7 @@ class SimLoop(TickBoundary):
         self._effective = np.zeros(batch.nworld, dtype=np.int64)
         self._tick_listeners: tuple[TickListener, ...] = ()
         self.failure: str | None = None  # why the last tick failed; None while ticks succeed
+        self.engine_seconds = 0.0  # wall time spent in batch.step, all ticks (sim thread)
         self._latest = batch.snapshot()
         self._last_snapshot_wall = 0.0
         self._stats = LoopStats(self._tick, self._mode, 0.0, 0.0)
@@ -302,7 +303,9 @@ class SimLoop(TickBoundary):
         t0 = time.perf_counter()
         resets, dirty, targets, velocity = self._take_commands()
         self._apply(resets, dirty, targets, velocity)
+        t_step = time.perf_counter()
         faulted = self.batch.step(1)
+        self.engine_seconds += time.perf_counter() - t_step  # the rest of a tick is the loop's
         now = time.monotonic()
         if self._finish_tick(faulted, mode, now):
             self._publish(now)

@@ -7,6 +7,8 @@ and the API (which knows JSON) meet on something neither owns.
 from __future__ import annotations
 
 import enum
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -64,6 +66,44 @@ class RobotSpec:
         raise KeyError(f"unknown joint {joint!r}; joints are {self.names}")
 
 
+class BodyPoses:
+    """Every body's pose in a Snapshot: given, or computed once on the first read.
+
+    The native engine's tick does not leave the poses at hand (MuJoCo's derived fields describe
+    the state before the last substep), and computing them for every world costs about a tenth
+    of a tick on the cores that step the physics; most snapshots are never asked for them. It
+    hands `compute` instead, run at most once, by the first reader, under a lock. Pickles as
+    arrays (snapshots cross process boundaries between shards).
+    """
+
+    __slots__ = ("_compute", "_lock", "_pos", "_quat")
+
+    def __init__(
+        self,
+        pos: np.ndarray | None = None,
+        quat: np.ndarray | None = None,
+        compute: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None,
+    ) -> None:
+        if (pos is None or quat is None) == (compute is None):
+            raise ValueError("BodyPoses takes either pos and quat or compute")
+        self._pos, self._quat, self._compute = pos, quat, compute
+        self._lock = threading.Lock()
+
+    def get(self) -> tuple[np.ndarray, np.ndarray]:
+        """(body_pos (nworld, nbody, 3), body_quat (nworld, nbody, 4)), float32."""
+        if self._pos is None:
+            with self._lock:
+                if self._pos is None:
+                    assert self._compute is not None
+                    self._pos, self._quat = self._compute()
+                    self._compute = None
+        assert self._quat is not None
+        return self._pos, self._quat
+
+    def __reduce__(self) -> tuple[type[BodyPoses], tuple[np.ndarray, np.ndarray]]:
+        return (BodyPoses, self.get())
+
+
 @dataclass(frozen=True)
 class Snapshot:
     """One consistent view of every world at the end of one control tick.
@@ -76,8 +116,9 @@ class Snapshot:
     flange_pos: flange site position in the world frame [m]                    (nworld, 3)
     flange_quat: flange site orientation, quaternion w x y z                   (nworld, 4)
     faults: how often each world has been reset for NaN or capacity overflow   (nworld,)
-    body_pos: every body's origin in the world frame [m], float32               (nworld, nbody, 3)
-    body_quat: every body's orientation, quaternion w x y z, float32           (nworld, nbody, 4)
+    bodies: every body's pose (`BodyPoses`), read as body_pos and body_quat:
+      body_pos: every body's origin in the world frame [m], float32             (nworld, nbody, 3)
+      body_quat: every body's orientation, quaternion w x y z, float32         (nworld, nbody, 4)
         (bodies in MjModel order, 0 = world; what viewers draw, see GET /v1/scene)
     """
 
@@ -90,8 +131,15 @@ class Snapshot:
     flange_pos: np.ndarray
     flange_quat: np.ndarray
     faults: np.ndarray
-    body_pos: np.ndarray
-    body_quat: np.ndarray
+    bodies: BodyPoses
+
+    @property
+    def body_pos(self) -> np.ndarray:
+        return self.bodies.get()[0]
+
+    @property
+    def body_quat(self) -> np.ndarray:
+        return self.bodies.get()[1]
 
     @property
     def nworld(self) -> int:

@@ -19,10 +19,10 @@ Not thread-safe: one thread (the loop) owns a NativeBatch.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from pathlib import Path
 
-import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
@@ -31,10 +31,11 @@ from service.core.batch import Batch, Restorable
 from service.core.frames import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
-from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
+from service.core.types import PHYSICS_FIELDS, BatchState, BodyPoses, Snapshot
+from service.engines.chain_pose import ChainPose
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
-from service.engines.native_kinematics import Kinematics, chain_to
+from service.engines.native_kinematics import Kinematics
 
 log = logging.getLogger("armfleet.native")
 
@@ -112,16 +113,12 @@ class NativeBatch(HostMirror, Batch, Restorable):
 
         # The batch copies the model: options are set above, before it is built.
         self._b = mjbatch.Batch(mjm, nworld, nthread=self.nthread)
-        self._kin = Kinematics(mjm, nworld, self.nthread)
-        self._arm: Kinematics | None = None  # the flange alone, for frames (from the MJCF)
-        if robot is None:
-            chain, cols = chain_to(mujoco.MjSpec.from_file(str(model_path)), mjm, self._flange_body)
-            self._arm = Kinematics(chain, nworld, self.nthread, cols)
-            self._arm_flange = mujoco.mj_name2id(
-                chain,
-                mujoco.mjtObj.mjOBJ_SITE,
-                mujoco.mj_id2name(mjm, mujoco.mjtObj.mjOBJ_SITE, self._flange),
-            )
+        self._kin = Kinematics(mjm, nworld, self.nthread)  # body poses, read on demand
+        self._kin_lock = threading.Lock()
+        try:  # the flange alone, for frames and snapshots: numpy on one core
+            self._chain: ChainPose | None = ChainPose(mjm, self._flange)
+        except ValueError:  # not a chain of hinges and slides: MuJoCo's kinematics
+            self._chain = None
         self._qpos = self._b.bind("qpos")  # live views of the state rows
         self._qvel = self._b.bind("qvel")
         self._ctrl = self._b.bind("ctrl")
@@ -131,7 +128,6 @@ class NativeBatch(HostMirror, Batch, Restorable):
         self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
         self._effort = np.zeros((nworld, 7))
         self._warnings_seen = np.zeros(nworld, dtype=np.int64)
-        self._kin_tick = -1  # the tick whose kinematics self._kin holds for every world
         self.reset(np.arange(nworld))
         self.compile_s = time.perf_counter() - t0  # nothing compiles: this is the build time
 
@@ -185,64 +181,67 @@ class NativeBatch(HostMirror, Batch, Restorable):
         self._home(worlds)
         self._warnings_seen[worlds] = self._warnings()[worlds]
         self._effort[worlds] = self._qfrc_actuator[worlds][:, self._dof]
-        self._kin_tick = -1
 
     # -- reading ----------------------------------------------------------------------------
 
-    def _flange_pose(self, ids: np.ndarray | slice) -> tuple[np.ndarray, np.ndarray]:
-        """Flange position and quaternion (w x y z) of `ids` from the kinematics' last pass."""
-        body_quat = self._kin.xquat[ids, self._flange_body]
-        return self._kin.site_xpos[ids, self._flange], _quat_mul(body_quat, self._flange_local_quat)
+    def _flange_pose(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Flange position and quaternion (w x y z) at qpos rows (k, nq), float64.
 
-    def _refresh_kinematics(self) -> None:
-        """Every world's body and site poses at the current state (after mj_step the batch's
-        own describe the last substep's), once per tick whoever asks."""
-        if self._kin_tick != self._tick:
-            self._kin.update(self._qpos)
-            self._kin_tick = self._tick
+        The arm's chain in numpy (`ChainPose`) on the calling thread; a model whose flange is
+        not on a chain of hinges and slides falls back to MuJoCo's kinematics.
+        """
+        if self._chain is not None:
+            return self._chain.pose(qpos)
+        _, xquat, site_xpos = self._kinematics(qpos)
+        body_quat = xquat[:, self._flange_body]
+        return site_xpos[:, self._flange], _quat_mul(body_quat, self._flange_local_quat)
+
+    def _kinematics(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """MuJoCo's body positions, body quaternions and site positions at qpos rows (k, nq),
+        copied; from any thread (the kinematics batch is used under a lock)."""
+        ids = np.arange(len(qpos))
+        with self._kin_lock:
+            full = np.zeros((self.nworld, qpos.shape[1]))
+            full[ids] = qpos
+            self._kin.update(full, None if len(qpos) == self.nworld else ids)
+            return self._kin.xpos[ids], self._kin.xquat[ids], self._kin.site_xpos[ids]
+
+    def _body_poses(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every body's pose at qpos (nworld, nq), float32: what a snapshot's poses read."""
+        xpos, xquat, _ = self._kinematics(qpos)
+        return xpos.astype(np.float32), xquat.astype(np.float32)
 
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, copied.
 
         States are float32 as the warp engine's are: the same frames on the wire (a float64
         JSON number is ~twice as long, and serialising frames is what a CPU service spends
-        most on besides physics); targets stay float64, as commanded.
+        most on besides physics); targets stay float64, as commanded. Body poses are computed
+        when first read, from a copy of this tick's qpos (most snapshots are never asked).
         """
-        self._refresh_kinematics()
-        flange_pos, flange_quat = self._flange_pose(slice(None))
+        qpos = self._qpos.copy()
+        flange_pos, flange_quat = self._flange_pose(qpos)
         f32 = np.float32
         return Snapshot(
             tick=self._tick,
             sim_time=self._world_ticks * self.tick_dt,
             # New C-ordered arrays (the wire serialises rows of them; fancy indexing alone
             # may hand back a column-major array).
-            position=np.ascontiguousarray(self._qpos[:, self._qpos_adr], dtype=f32),
+            position=np.ascontiguousarray(qpos[:, self._qpos_adr], dtype=f32),
             velocity=np.ascontiguousarray(self._qvel[:, self._dof], dtype=f32),
             effort=self._effort.astype(f32, order="C"),
             target=self._targets.copy(),
             flange_pos=flange_pos.astype(f32, order="C"),
             flange_quat=flange_quat.astype(f32, order="C"),
             faults=self._faults.copy(),
-            body_pos=self._kin.xpos.astype(np.float32),  # astype copies
-            body_quat=self._kin.xquat.astype(np.float32),
+            bodies=BodyPoses(compute=lambda: self._body_poses(qpos)),
         )
 
     def pack_rows(self, ids: np.ndarray) -> PackedRows:
         """The frame rows (service.wire.BINARY_COLUMNS) of worlds `ids` at the last tick, as
-        `snapshot` reports them: kinematics only for those worlds unless all are current."""
-        every = len(ids) == self.nworld  # ids are sorted and unique
-        if self._kin_tick != self._tick and self._arm is None:
-            self._kin.update(self._qpos, None if every else ids)
-            self._kin_tick = self._tick if every else -1
-        if self._kin_tick == self._tick or self._arm is None:
-            flange_pos, flange_quat = self._flange_pose(ids)
-        else:  # the arm's chain alone: the same flange pose, bit for bit, for less
-            arm = self._arm
-            arm.update(self._qpos, None if every else ids)
-            body_quat = arm.xquat[ids, -1]  # the chain ends with the flange's body
-            flange_pos = arm.site_xpos[ids, self._arm_flange]
-            flange_quat = _quat_mul(body_quat, self._flange_local_quat)
+        `snapshot` reports them, computed for those worlds only."""
         q = self._qpos[ids]
+        flange_pos, flange_quat = self._flange_pose(q)
         v = self._qvel[ids]
         cols = (
             (self._world_ticks[ids] * self.tick_dt)[:, None],
@@ -282,7 +281,6 @@ class NativeBatch(HostMirror, Batch, Restorable):
         self._restore_mirror(state)
         self._effort[:] = state.physics["qfrc_actuator"][:, self._dof]
         self._warnings_seen[:] = self._warnings()
-        self._kin_tick = -1
 
     # -- test and diagnostics hooks ---------------------------------------------------------
 
@@ -296,7 +294,6 @@ class NativeBatch(HostMirror, Batch, Restorable):
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos (used to inject faults on purpose in tests)."""
         self._qpos[world] = qpos
-        self._kin_tick = -1
 
     def capacity_usage(self) -> tuple[int, int]:
         """(contacts in all worlds together, largest constraint count of any world) as of the

@@ -7,14 +7,12 @@ constraint assembly: a quarter of a 2-substep tick at 1024 worlds (measured for 
 for every snapshot. Here a second batch of the same model, with contacts and constraints
 disabled, runs the position stage on a copy of the qpos rows: the same kinematics (poses are
 bit-identical; they do not depend on those flags) at about a third of the cost, and only for the
-worlds asked for. Frames need only the flange: a third batch of the model cut down to the arm's
-chain (`chain_to`) computes it for about half as much again.
+worlds asked for. Frames need only the flange: service.engines.chain_pose computes it in numpy.
 """
 
 from __future__ import annotations
 
 import copy
-from typing import Any
 
 import mujoco
 import numpy as np
@@ -60,36 +58,3 @@ class Kinematics:
         else:
             self._qpos[ids] = rows
         self._b.forward(ids, stage=mujoco.mjtStage.mjSTAGE_POS)
-
-
-def chain_to(spec: mujoco.MjSpec, mjm: mujoco.MjModel, body: int) -> tuple[mujoco.MjModel, Any]:
-    """The model cut down to `body` and its ancestors (nothing else: no gripper, no cube, no
-    actuators or constraints), and the full model's qpos columns of its joints.
-
-    A body's pose depends only on its ancestors, and MuJoCo computes it the same way in either
-    model: its poses are bit-identical to the full model's (tests/test_frames.py), for a
-    fraction of the work a world.
-    """
-    keep: set[str] = set()
-    while body > 0:
-        keep.add(mujoco.mj_id2name(mjm, mujoco.mjtObj.mjOBJ_BODY, body))
-        body = int(mjm.body_parentid[body])
-    for group in (spec.equalities, spec.actuators, spec.sensors, spec.excludes, spec.pairs):
-        for item in list(group):
-            spec.delete(item)
-    for item in list(spec.tendons) + list(spec.keys):
-        spec.delete(item)
-
-    def prune(parent: Any) -> None:
-        for child in list(parent.bodies):
-            if child.name in keep:
-                prune(child)
-            else:
-                spec.delete(child)
-
-    prune(spec.worldbody)
-    chain = spec.compile()
-    names = [mujoco.mj_id2name(chain, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(chain.njnt)]
-    adr = [mjm.jnt_qposadr[mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_JOINT, n)] for n in names]
-    chain.opt.timestep = mjm.opt.timestep
-    return chain, np.array(adr)

@@ -1,0 +1,82 @@
+"""The flange pose frames and snapshots carry (service.engines.chain_pose) against MuJoCo's."""
+
+from __future__ import annotations
+
+import pickle
+
+import mujoco
+import numpy as np
+import pytest
+
+from service.core.robot import load_robot
+from service.core.types import BodyPoses
+from service.engines.chain_pose import ChainPose
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return load_robot()
+
+
+def _mujoco_site(mjm: mujoco.MjModel, site: int, qpos: np.ndarray) -> tuple[np.ndarray, ...]:
+    data = mujoco.MjData(mjm)
+    pos, quat = [], []
+    for row in qpos:
+        data.qpos[:] = row
+        mujoco.mj_kinematics(mjm, data)
+        pos.append(data.site_xpos[site].copy())
+        q = np.empty(4)
+        mujoco.mju_mat2Quat(q, data.site_xmat[site])
+        quat.append(q * np.sign(q[0]))
+    return np.array(pos), np.array(quat)
+
+
+def test_flange_pose_equals_mujoco_kinematics_anywhere(robot):
+    mjm, site = robot.mjm, robot.flange_site
+    rng = np.random.default_rng(7)
+    qpos = np.tile(mjm.qpos0, (200, 1))
+    for adr in robot.qpos_adr[:6]:
+        qpos[:, adr] = rng.uniform(-2 * np.pi, 2 * np.pi, 200)
+    pos, quat = ChainPose(mjm, site).pose(qpos)
+    ref_pos, ref_quat = _mujoco_site(mjm, site, qpos)
+    np.testing.assert_allclose(pos, ref_pos, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(quat * np.sign(quat[:, :1]), ref_quat, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(quat, axis=1), 1.0, rtol=0, atol=1e-15)
+
+
+def test_a_subset_of_worlds_gets_the_same_bits_as_all_of_them(robot):
+    rng = np.random.default_rng(8)
+    qpos = np.tile(robot.mjm.qpos0, (513, 1))
+    qpos[:, robot.qpos_adr[:6]] = rng.uniform(-3, 3, (513, 6))
+    chain = ChainPose(robot.mjm, robot.flange_site)
+    pos, quat = chain.pose(qpos)
+    for ids in (np.array([5]), np.arange(0, 513, 3), np.array([0, 511, 512])):
+        sub_pos, sub_quat = chain.pose(qpos[ids])
+        assert np.array_equal(sub_pos, pos[ids]) and np.array_equal(sub_quat, quat[ids])
+
+
+def test_a_site_behind_a_free_joint_is_refused():
+    spec = mujoco.MjSpec.from_string(
+        '<mujoco><worldbody><body><freejoint/><geom size=".1"/><site name="s"/></body>'
+        "</worldbody></mujoco>"
+    )
+    mjm = spec.compile()
+    with pytest.raises(ValueError, match="neither a hinge nor a slide"):
+        ChainPose(mjm, 0)
+
+
+def test_body_poses_are_computed_once_on_first_read_and_pickle_as_arrays():
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return np.ones((2, 3, 3), np.float32), np.zeros((2, 3, 4), np.float32)
+
+    poses = BodyPoses(compute=compute)
+    assert calls == []
+    first, again = poses.get(), poses.get()
+    assert calls == [1] and first[0] is again[0]
+    copy = pickle.loads(pickle.dumps(BodyPoses(compute=compute)))
+    assert np.array_equal(copy.get()[0], first[0]) and len(calls) == 2
+    with pytest.raises(ValueError):
+        BodyPoses()
