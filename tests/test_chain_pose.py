@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from service.core.robot import load_robot
-from service.core.types import BodyPoses
+from service.core.types import Poses
 from service.engines.chain_pose import ChainPose
 
 
@@ -72,11 +72,11 @@ def test_body_poses_are_computed_once_on_first_read_and_pickle_as_arrays():
         calls.append(1)
         return np.ones((2, 3, 3), np.float32), np.zeros((2, 3, 4), np.float32)
 
-    poses = BodyPoses(compute=compute)
+    poses = Poses(compute=compute)
     assert calls == []
     first, again = poses.get(), poses.get()
     assert calls == [1] and first[0] is again[0]
-    copy = pickle.loads(pickle.dumps(BodyPoses(compute=compute)))
+    copy = pickle.loads(pickle.dumps(Poses(compute=compute)))
     assert np.array_equal(copy.get()[0], first[0]) and len(calls) == 2
     with pytest.raises(ValueError):
-        BodyPoses()
+        Poses()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from service.core.hub import Subscription
-from service.core.types import BodyPoses, Snapshot
+from service.core.types import Poses, Snapshot
 
 
 def snap(tick: int) -> Snapshot:
@@ -17,10 +17,9 @@ def snap(tick: int) -> Snapshot:
         velocity=z,
         effort=z,
         target=z,
-        flange_pos=np.zeros((1, 3)),
-        flange_quat=np.zeros((1, 4)),
         faults=np.zeros(1, dtype=np.int64),
-        bodies=BodyPoses(np.zeros((1, 1, 3), np.float32), np.zeros((1, 1, 4), np.float32)),
+        flange=Poses(np.zeros((1, 3)), np.zeros((1, 4))),
+        bodies=Poses(np.zeros((1, 1, 3), np.float32), np.zeros((1, 1, 4), np.float32)),
     )
 
 

@@ -66,14 +66,14 @@ class RobotSpec:
         raise KeyError(f"unknown joint {joint!r}; joints are {self.names}")
 
 
-class BodyPoses:
-    """Every body's pose in a Snapshot: given, or computed once on the first read.
+class Poses:
+    """Positions and quaternions in a Snapshot (the flange's, every body's): given, or
+    computed once, by the first reader, under a lock.
 
-    The native engine's tick does not leave the poses at hand (MuJoCo's derived fields describe
-    the state before the last substep), and computing them for every world costs about a tenth
-    of a tick on the cores that step the physics; most snapshots are never asked for them. It
-    hands `compute` instead, run at most once, by the first reader, under a lock. Pickles as
-    arrays (snapshots cross process boundaries between shards).
+    The native engine's tick does not leave them at hand (MuJoCo's derived fields describe
+    the state before the last substep), computing them costs a few percent of a tick on the
+    cores that step the physics, and most snapshots are never asked for them: it hands
+    `compute` instead. Pickles as arrays (snapshots cross process boundaries between shards).
     """
 
     __slots__ = ("_compute", "_lock", "_pos", "_quat")
@@ -85,12 +85,12 @@ class BodyPoses:
         compute: Callable[[], tuple[np.ndarray, np.ndarray]] | None = None,
     ) -> None:
         if (pos is None or quat is None) == (compute is None):
-            raise ValueError("BodyPoses takes either pos and quat or compute")
+            raise ValueError("Poses takes either pos and quat or compute")
         self._pos, self._quat, self._compute = pos, quat, compute
         self._lock = threading.Lock()
 
     def get(self) -> tuple[np.ndarray, np.ndarray]:
-        """(body_pos (nworld, nbody, 3), body_quat (nworld, nbody, 4)), float32."""
+        """(positions (..., 3), quaternions (..., 4) w x y z)."""
         if self._pos is None:
             with self._lock:
                 if self._pos is None:
@@ -100,8 +100,8 @@ class BodyPoses:
         assert self._quat is not None
         return self._pos, self._quat
 
-    def __reduce__(self) -> tuple[type[BodyPoses], tuple[np.ndarray, np.ndarray]]:
-        return (BodyPoses, self.get())
+    def __reduce__(self) -> tuple[type[Poses], tuple[np.ndarray, np.ndarray]]:
+        return (Poses, self.get())
 
 
 @dataclass(frozen=True)
@@ -113,10 +113,11 @@ class Snapshot:
     position, velocity: the commanded joints' qpos [rad] and qvel [rad/s]        (nworld, 7)
     effort: actuator torque on each commanded joint [N·m], gravity comp included (nworld, 7)
     target: position targets in effect during this tick [rad]                  (nworld, 7)
-    flange_pos: flange site position in the world frame [m]                    (nworld, 3)
-    flange_quat: flange site orientation, quaternion w x y z                   (nworld, 4)
+    flange: the flange site's pose (`Poses`), read as flange_pos and flange_quat:
+      flange_pos: position in the world frame [m]                              (nworld, 3)
+      flange_quat: orientation, quaternion w x y z                            (nworld, 4)
     faults: how often each world has been reset for NaN or capacity overflow   (nworld,)
-    bodies: every body's pose (`BodyPoses`), read as body_pos and body_quat:
+    bodies: every body's pose (`Poses`), read as body_pos and body_quat:
       body_pos: every body's origin in the world frame [m], float32             (nworld, nbody, 3)
       body_quat: every body's orientation, quaternion w x y z, float32         (nworld, nbody, 4)
         (bodies in MjModel order, 0 = world; what viewers draw, see GET /v1/scene)
@@ -128,10 +129,17 @@ class Snapshot:
     velocity: np.ndarray
     effort: np.ndarray
     target: np.ndarray
-    flange_pos: np.ndarray
-    flange_quat: np.ndarray
     faults: np.ndarray
-    bodies: BodyPoses
+    flange: Poses
+    bodies: Poses
+
+    @property
+    def flange_pos(self) -> np.ndarray:
+        return self.flange.get()[0]
+
+    @property
+    def flange_quat(self) -> np.ndarray:
+        return self.flange.get()[1]
 
     @property
     def body_pos(self) -> np.ndarray:

@@ -145,6 +145,9 @@ class ChainPose:
                 )
             )
         self._bodies = tuple(bodies)
+        hinges = [j for b in bodies for j in b.joints if isinstance(j.axis, _Turn)]
+        self._hinge_cols = np.array([j.column for j in hinges], dtype=np.int64)
+        self._hinge_q0 = np.array([j.qpos0 for j in hinges])[:, None]
         self._site_pos = _Offset.of(np.array(mjm.site_pos[site], dtype=np.float64))
         self._site_turn = _turn(np.array(mjm.site_quat[site], dtype=np.float64))
 
@@ -154,20 +157,23 @@ class ChainPose:
         pos = np.zeros((3, n))
         quat = np.zeros((4, n))
         quat[0] = 1.0
+        # Every hinge's half angle, cosine and sine in one call each (rows: hinges in order).
+        half = 0.5 * (qpos[:, self._hinge_cols].T - self._hinge_q0)
+        cos, sin = np.cos(half), np.sin(half)
+        hinge = 0
         for body in self._bodies:
             if body.offset is not None:
                 pos += body.offset.rotated(quat)
             if body.turn is not None:
                 quat = body.turn.w * quat + body.turn.apply(quat)
             for joint in body.joints:
-                angle = qpos[:, joint.column] - joint.qpos0
                 if isinstance(joint.axis, _Offset):  # a slide joint
-                    pos += joint.axis.rotated(quat) * angle
+                    pos += joint.axis.rotated(quat) * (qpos[:, joint.column] - joint.qpos0)
                     continue
                 if joint.anchor is not None:
                     anchor = pos + joint.anchor.rotated(quat)
-                half = 0.5 * angle
-                quat = np.cos(half) * quat + joint.axis.apply(quat, np.sin(half))
+                quat = cos[hinge] * quat + joint.axis.apply(quat, sin[hinge])
+                hinge += 1
                 if joint.anchor is not None:
                     pos = anchor - joint.anchor.rotated(quat)
         # Unit again (mj_kinematics normalises every body's; once at the end is enough here).

@@ -31,7 +31,7 @@ from service.core.batch import Batch, Restorable
 from service.core.frames import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
-from service.core.types import PHYSICS_FIELDS, BatchState, BodyPoses, Snapshot
+from service.core.types import PHYSICS_FIELDS, BatchState, Poses, Snapshot
 from service.engines.chain_pose import ChainPose
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
@@ -216,11 +216,11 @@ class NativeBatch(HostMirror, Batch, Restorable):
 
         States are float32 as the warp engine's are: the same frames on the wire (a float64
         JSON number is ~twice as long, and serialising frames is what a CPU service spends
-        most on besides physics); targets stay float64, as commanded. Body poses are computed
-        when first read, from a copy of this tick's qpos (most snapshots are never asked).
+        most on besides physics); targets stay float64, as commanded. Poses (flange, bodies)
+        are computed when first read, from a copy of this tick's qpos: most snapshots are
+        never asked for them.
         """
         qpos = self._qpos.copy()
-        flange_pos, flange_quat = self._flange_pose(qpos)
         f32 = np.float32
         return Snapshot(
             tick=self._tick,
@@ -231,11 +231,15 @@ class NativeBatch(HostMirror, Batch, Restorable):
             velocity=np.ascontiguousarray(self._qvel[:, self._dof], dtype=f32),
             effort=self._effort.astype(f32, order="C"),
             target=self._targets.copy(),
-            flange_pos=flange_pos.astype(f32, order="C"),
-            flange_quat=flange_quat.astype(f32, order="C"),
             faults=self._faults.copy(),
-            bodies=BodyPoses(compute=lambda: self._body_poses(qpos)),
+            flange=Poses(compute=lambda: self._flange_f32(qpos)),
+            bodies=Poses(compute=lambda: self._body_poses(qpos)),
         )
+
+    def _flange_f32(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The flange pose at qpos rows as a snapshot reports it (float32, C order)."""
+        pos, quat = self._flange_pose(qpos)
+        return pos.astype(np.float32, order="C"), quat.astype(np.float32, order="C")
 
     def pack_rows(self, ids: np.ndarray) -> PackedRows:
         """The frame rows (service.wire.BINARY_COLUMNS) of worlds `ids` at the last tick, as

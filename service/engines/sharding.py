@@ -13,7 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from service.core.types import BatchState, BodyPoses, Snapshot
+from service.core.types import BatchState, Poses, Snapshot
 from service.engines.warp import WorldBatch
 
 _EMPTY = np.zeros(0, dtype=np.int64)
@@ -132,12 +132,14 @@ def apply_and_step(
 def join_snapshots(parts: Sequence[Snapshot], tick: int, targets: np.ndarray) -> Snapshot:
     """One Snapshot from the shards' snapshots, in shard order; `targets` is the caller's table."""
     joined = {f: np.concatenate([getattr(p, f) for p in parts]) for f in WORLD_FIELDS}
-    poses = BodyPoses(joined.pop("body_pos"), joined.pop("body_quat"))
+    flange = Poses(joined.pop("flange_pos"), joined.pop("flange_quat"))
+    bodies = Poses(joined.pop("body_pos"), joined.pop("body_quat"))
     return Snapshot(
         tick=tick,
         target=targets.copy(),
         faults=np.concatenate([p.faults for p in parts]),
-        bodies=poses,
+        flange=flange,
+        bodies=bodies,
         **joined,
     )
 

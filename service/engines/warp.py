@@ -25,7 +25,7 @@ from service.core.batch import Batch, Restorable
 from service.core.frames import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
-from service.core.types import PHYSICS_FIELDS, BatchState, BodyPoses, Snapshot
+from service.core.types import PHYSICS_FIELDS, BatchState, Poses, Snapshot
 from service.engines import warp_frames as frames
 from service.engines.mirror import HostMirror
 from service.engines.warp_kernels import gather_bodies, gather_state
@@ -93,10 +93,9 @@ def snapshot_from(a: SnapshotArrays, target: np.ndarray) -> Snapshot:
         velocity=state[:, _VEL],
         effort=state[:, _EFF],
         target=target,
-        flange_pos=state[:, _FPOS],
-        flange_quat=state[:, _FQUAT],
         faults=a.faults,
-        bodies=BodyPoses(bodies[:, :, :3], bodies[:, :, 3:]),
+        flange=Poses(state[:, _FPOS], state[:, _FQUAT]),
+        bodies=Poses(bodies[:, :, :3], bodies[:, :, 3:]),
     )
 
 
