@@ -1,12 +1,11 @@
-"""Sections 10-13: the two engines side by side (issue 13).
+"""Sections 10, 12 and 13: the two engines side by side (issue 13; section 11: capacity.py).
 
 10. ``engines``: native MuJoCo vs MuJoCo Warp vs raw ``mujoco.rollout`` on every core, at the
     same sizes in one run: each engine alone in this process, then ``armfleet serve --mode fast
     --engine mujoco|warp`` with every world streamed at 30 Hz (JSON, one client), in rounds
     with a raw rollout block run while the service is paused. Every figure is the best of its
     rounds (all samples are in the JSON): on a shared machine that compares the code.
-11. ``capacity_engines``: the most worlds each engine holds in real time (RTF >= 0.99 over the
-    window) at 60 Hz with ONE 30 Hz subscriber of every world; doubling, then bisection.
+11. ``capacity_engines``: moved to bench/capacity.py.
 12. ``physics_step``: the gain of the larger physics step: each engine alone at the step used
     before issue 13 (2.083 ms, 8 substeps) and at today's default, ticks/s (best block) and the
     worlds that rate would hold at 60 Hz.
@@ -26,7 +25,7 @@ from typing import Any
 
 from bench import common
 from bench.registry import Context, Result, section
-from bench.service_bench import RTF_GOAL, _measure_fast, _measure_realtime, capacity_search
+from bench.service_bench import _measure_fast
 
 ENGINE_NAMES = ("mujoco", "warp")
 
@@ -264,75 +263,6 @@ def _default_step() -> tuple[int, float]:
     from service.core.physics import tick_timing
 
     return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
-
-
-LIMIT_WORLDS = 1024  # batch size at which section 11 measures the rollout limit
-
-
-@section(11, "capacity_engines", "Real-time capacity per engine, one 30 Hz subscriber")
-def capacity_engines(ctx: Context) -> Result:
-    """Per engine: doubling then bisection over realtime servers, one subscriber of all worlds."""
-    window, warmup, refine = ctx.pick((30.0, 3.0, 2), (10.0, 2.0, 1))
-    starts = {"mujoco": 128, "warp": 64}
-    data: dict[str, Any] = {
-        "rtf_goal": RTF_GOAL,
-        "window_s": window,
-        "stream": "/v1/ws?worlds=0-(n-1)&rate=30, one subscriber",
-    }
-    rows: list[dict[str, Any]] = []
-    notes = []
-    # The limit every capacity is a fraction of: raw rollout on all cores, in this run, as
-    # worlds at 60 Hz (best of a few blocks; the service is not running meanwhile).
-    _, dt = _default_step()
-    rollout = _Rollout(LIMIT_WORLDS, common.usable_cores(), dt)
-    try:
-        limit_rate = max(rollout.block(ctx.pick(1.0, 0.5)) for _ in range(ctx.pick(3, 2)))
-    finally:
-        rollout.close()
-    steps_per_world_s = common.CONTROL_HZ * round(1 / (common.CONTROL_HZ * dt))
-    limit = limit_rate / steps_per_world_s
-    data["rollout_world_steps_per_s"] = limit_rate
-    data["limit_worlds"] = limit
-    ctx.say(f"  limit: raw rollout {limit_rate:,.0f} world-steps/s = {limit:.0f} worlds at 60 Hz")
-    for i, engine in enumerate(ENGINE_NAMES):
-        errors: dict[str, str] = {}
-
-        def measure(n: int, engine: str = engine, errors: dict = errors) -> dict[str, Any]:
-            t0 = time.perf_counter()
-            try:
-                with ctx.serve(n, "realtime", env={"ARMFLEET_ENGINE": engine}) as server:
-                    res = asyncio.run(_measure_realtime(server, window, warmup, per_subscriber=n))
-            except Exception as exc:
-                errors[str(n)] = f"{type(exc).__name__}: {exc}"
-                return {"nworld": n, "realtime_factor": None, "error": errors[str(n)]}
-            ctx.say(
-                f"  {engine:>6} {n:>6} worlds  RTF {res['realtime_factor']:.3f} "
-                f"({time.perf_counter() - t0:.1f} s)"
-            )
-            return res
-
-        # --worlds: where each engine starts, in ENGINE_NAMES order (one value: both).
-        picked = list(ctx.worlds or [])
-        start = picked[min(i, len(picked) - 1)] if picked else starts[engine]
-        best, candidates = capacity_search(measure, start, 4096, refine)
-        data[engine] = {"capacity_worlds": best, "candidates": candidates, "errors": errors}
-        rows += [
-            {
-                "engine": engine,
-                "worlds": r["nworld"],
-                "RTF": r.get("realtime_factor"),
-                "min 1 s RTF": r.get("min_loop_rtf_1s"),
-                "frames/s": r.get("frames_per_s_per_subscriber_mean"),
-                "ok": r.get("passed"),
-                "worlds/limit": r["nworld"] / limit,
-            }
-            for r in candidates
-        ]
-        held = best if best is not None else "none"
-        share = f" = {best / limit:.2f}x the rollout limit" if best else ""
-        notes.append(f"{engine}: {held} worlds at RTF >= {RTF_GOAL}{share} ({limit:.0f} worlds)")
-        data[engine]["capacity_vs_limit"] = best / limit if best else None
-    return Result(rows, data, notes)
 
 
 @section(12, "physics_step", "Physics step: before (2.083 ms) vs today's default, engine alone")

@@ -251,12 +251,14 @@ async def _measure_realtime(
     abort_below: float = 0.95,
     abort_after: float = 5.0,
     per_subscriber: int = WORLDS_PER_SUBSCRIBER,
+    fmt: str = "json",
 ) -> dict[str, Any]:
     n = server.nworld
     groups = [(lo, min(n, lo + per_subscriber) - 1) for lo in range(0, n, per_subscriber)]
     counters = [FrameCounter() for _ in groups]
+    query = "" if fmt == "json" else f"&format={fmt}"
     readers = [
-        asyncio.create_task(c.run(f"{server.ws_url}/v1/ws?worlds={lo}-{hi}&rate=30"))
+        asyncio.create_task(c.run(f"{server.ws_url}/v1/ws?worlds={lo}-{hi}&rate=30{query}"))
         for c, (lo, hi) in zip(counters, groups, strict=True)
     ]
     samples: list[float] = []  # the loop's own 1 s RTF, sampled during the window
@@ -266,6 +268,7 @@ async def _measure_realtime(
             await asyncio.sleep(warmup)
             for c in counters:
                 c.reset()
+            busy0 = await _busy(client, server.url)
             t0, info0 = await _info(client, server.url)
             t1, info1 = t0, info0
             while t1 - t0 < window:
@@ -276,6 +279,7 @@ async def _measure_realtime(
                 if t1 - t0 >= abort_after and so_far < abort_below:
                     aborted = True  # clearly short of real time: no need to wait out the window
                     break
+            busy1 = await _busy(client, server.url)
     finally:
         for r in readers:
             r.cancel()
@@ -296,7 +300,28 @@ async def _measure_realtime(
         "stream_errors": sorted({c.error for c in counters if c.error}),
         "world_steps_per_s": common.world_steps(ticks, n, info1["substeps"]) / wall,
         "ready_s": server.ready_s,
+        "format": fmt,
+        # Shares of the window's wall time on the sim thread: stepping the engine, the loop's
+        # own work in a tick (commands, snapshots, packing frames), and between ticks.
+        **{k: (busy1[k] - busy0[k]) / wall for k in busy0 if busy0[k] is not None},
     }
+
+
+_BUSY = {
+    "engine_share": "armfleet_engine_step_seconds_total",
+    "tick_share": "armfleet_tick_duration_seconds_sum",
+}
+
+
+async def _busy(client: httpx.AsyncClient, url: str) -> dict[str, float | None]:
+    """The sim thread's busy-time counters from /metrics (None: not exported)."""
+    text = (await client.get(f"{url}/metrics")).text
+    values: dict[str, float] = {}
+    for line in text.splitlines():
+        name, _, value = line.partition(" ")
+        if name in _BUSY.values():
+            values[name] = float(value)
+    return {k: values.get(metric) for k, metric in _BUSY.items()}
 
 
 def _round_to(x: float, step: int) -> int:
