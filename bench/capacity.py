@@ -9,10 +9,12 @@ shared machine's speed drifts by several percent within minutes, so a rollout bl
 next to every candidate (before and after, with no server running) and each candidate is put
 against the limit measured beside it; the strict figure divides by the best block of the run.
 
-Native MuJoCo's search starts at 0.9x the limit (issue 20's target) and steps by 5% until a
-candidate passes and one fails, then bisects to 16 worlds; warp's doubles from ``--worlds``
-(or 64), then bisects. Each candidate also reports where the sim thread's time went
-(/metrics): stepping the engine, the loop's own work in ticks, and the time between ticks.
+Native MuJoCo is measured on a ladder of shares of the limit (0.85x to 0.95x): each rung is
+N = that share of the limit measured just before it, run twice, and
+holds when every round keeps RTF >= 0.99; the capacity is the highest rung held with every rung
+below it. Warp, far from the limit, doubles from ``--worlds`` (or 64), then bisects. Each run
+also reports where the sim thread's time went (/metrics): stepping the engine, the loop's own
+work in ticks, and the time between ticks.
 
 Standalone: ``python -m bench.capacity --quick``.
 """
@@ -32,55 +34,33 @@ from bench.service_bench import RTF_GOAL, _measure_realtime, capacity_search
 
 LIMIT_WORLDS = 1024  # batch size at which the rollout limit is measured
 TARGET_SHARE = 0.9  # issue 20: native MuJoCo at >= 0.9x the rollout limit
-STEP = 0.05  # native search: candidates 5% of the limit apart ...
-RESOLUTION = 16  # ... then bisection down to this many worlds
+RUNGS = (0.85, 0.875, 0.9, 0.925, 0.95, 0.975)  # native: shares of the limit tried, in order
 
 
 def _round8(x: float) -> int:
     return max(8, round(x / 8) * 8)
 
 
-def ladder_search(
-    measure: Callable[[int], dict[str, Any]], start: int, step: int, resolution: int
-) -> tuple[int | None, list[dict[str, Any]]]:
-    """Up (or down) from `start` by `step` worlds until one passes and one fails, then bisect
-    until they are `resolution` apart. Returns (largest passing n or None, candidates)."""
-    tried: dict[int, dict[str, Any]] = {}
-
-    def passes(n: int) -> bool:
-        if n not in tried:
-            tried[n] = {**measure(n), "order": len(tried)}
-            tried[n]["passed"] = (tried[n].get("realtime_factor") or 0.0) >= RTF_GOAL
-        return tried[n]["passed"]
-
-    lo: int | None = None
-    hi: int | None = None
-    n = start
-    if passes(n):
-        lo = n
-        for _ in range(6):
-            n += step
-            if not passes(n):
-                hi = n
+def ladder(
+    measure: Callable[[float], dict[str, Any]], rungs: tuple[float, ...], rounds: int
+) -> tuple[float | None, list[dict[str, Any]]]:
+    """Up the rungs (shares of the limit) while every one of a rung's `rounds` runs passes.
+    Returns (the highest share held, every run in order); stops at the first rung that fails."""
+    runs: list[dict[str, Any]] = []
+    held: float | None = None
+    for share in rungs:
+        ok = True
+        for _ in range(rounds):
+            res = {**measure(share), "rung": share, "order": len(runs)}
+            res["passed"] = (res.get("realtime_factor") or 0.0) >= RTF_GOAL
+            runs.append(res)
+            ok = ok and res["passed"]
+            if not ok:
                 break
-            lo = n
-    else:
-        hi = n
-        while n - step >= 8:
-            n -= step
-            if passes(n):
-                lo = n
-                break
-            hi = n
-    while lo is not None and hi is not None and hi - lo > resolution:
-        mid = _round8((lo + hi) / 2)
-        if mid <= lo or mid >= hi:
+        if not ok:
             break
-        if passes(mid):
-            lo = mid
-        else:
-            hi = mid
-    return lo, sorted(tried.values(), key=lambda r: r["order"])
+        held = share
+    return held, runs
 
 
 @section(11, "capacity_engines", "Real-time capacity per engine, one 30 Hz subscriber")
@@ -113,8 +93,7 @@ def capacity_engines(ctx: Context) -> Result:
         for engine, fmt in runs:
             errors: dict[str, str] = {}
 
-            def measure(n: int, engine: str = engine, fmt: str = fmt, errors=errors) -> dict:
-                before = limit_now()
+            def run(n: int, before: float, engine=engine, fmt=fmt, errors=errors) -> dict:
                 t0 = time.perf_counter()
                 try:
                     env = {"ARMFLEET_ENGINE": engine}
@@ -138,17 +117,28 @@ def capacity_engines(ctx: Context) -> Result:
                 return res
 
             if engine == "mujoco":
-                start = _round8(TARGET_SHARE * limit_now())
-                best, candidates = ladder_search(measure, start, _round8(STEP * first), RESOLUTION)
+
+                def at_share(share: float, run=run) -> dict:
+                    before = limit_now()
+                    return run(_round8(share * before), before)
+
+                held, candidates = ladder(at_share, RUNGS, 2)
+                # The held rung's runs, the smallest of them: what held every time.
+                top_runs = [c for c in candidates if c["rung"] == held]
+                top = min(top_runs, key=lambda c: c["nworld"]) if top_runs else None
             else:
                 picked = list(ctx.worlds or [])
                 start = picked[-1] if picked else 64
-                best, candidates = capacity_search(measure, start, 4096, ctx.pick(2, 2))
-            passed = [c for c in candidates if c.get("passed")]
-            top = max(passed, key=lambda c: c["nworld"]) if passed else None
+                best, candidates = capacity_search(
+                    lambda n, run=run: run(n, limit_now()), start, 4096, 2
+                )
+                held = None
+                top = next((c for c in candidates if c["nworld"] == best), None)
+            best = top["nworld"] if top else None
             key = engine if engine == "warp" or fmt == "json" else f"{engine}_{fmt}"
             data[key] = {
                 "format": fmt,
+                "share_held": held,
                 "capacity_worlds": best,
                 "share_of_limit_beside": top["share_of_limit_beside"] if top else None,
                 "candidates": candidates,
@@ -157,6 +147,7 @@ def capacity_engines(ctx: Context) -> Result:
             rows += [
                 {
                     "engine": engine,
+                    "rung": c.get("rung"),
                     "format": fmt,
                     "worlds": c["nworld"],
                     "RTF": c.get("realtime_factor"),
@@ -179,8 +170,9 @@ def capacity_engines(ctx: Context) -> Result:
         best = e["capacity_worlds"]
         e["capacity_vs_limit"] = best / limit if best else None
         beside = e["share_of_limit_beside"]
+        held = f" (rung {e['share_held']}x held)" if e.get("share_held") else ""
         notes.append(
-            f"{key}: {best or 'no'} worlds at RTF >= {RTF_GOAL} = "
+            f"{key}: {best or 'no'} worlds at RTF >= {RTF_GOAL}{held} = "
             + (
                 f"{best / limit:.2f}x the best limit of the run ({limit:.0f} worlds), "
                 f"{beside:.2f}x the limit measured beside it"

@@ -51,9 +51,12 @@ BASELINE_HEAD = (
 
 CAPACITY_HEAD = (
     "engine",
-    "worlds at RTF ≥ 0.99",
-    "rollout limit (worlds)",
-    "capacity / limit",
+    "frames",
+    "held at RTF ≥ 0.99 (worlds)",
+    "× the limit beside it",
+    "× the best limit of the run",
+    "engine share of the wall",
+    "next tried: worlds, RTF, × limit beside",
 )
 
 
@@ -161,24 +164,37 @@ def baseline() -> str:
 
 
 def capacity() -> str:
-    """Section 11 on the CPU: real-time capacity per engine and its share of the rollout limit."""
+    """Section 11 on the CPU: real-time capacity per engine and format, against the limit."""
     cap = _load("capacity_engines.json")
     limit = cap.get("limit_worlds")
     rows = []
-    for engine in ("mujoco", "warp"):
-        e = cap.get(engine, {})
+    for key in ("mujoco", "mujoco_binary", "warp"):
+        e = cap.get(key)
+        if not e:
+            continue
         best = e.get("capacity_worlds")
+        cands = e.get("candidates", [])
+        top = next((c for c in cands if c["nworld"] == best and c.get("passed")), {})
+        above = [c for c in cands if not c.get("passed") and c["nworld"] > (best or 0)]
+        nxt = min(above, key=lambda c: c["nworld"]) if above else None
         rows.append(
             [
-                engine,
-                f"{best}" if best else "–",
-                f"{limit:.0f}" if limit else "–",
+                key.split("_")[0],
+                e.get("format", "json"),
+                f"{best:,}" if best else "–",
+                _r(top.get("share_of_limit_beside")),
                 _r(best / limit if best and limit else None),
+                f"{top['engine_share']:.3f}" if top.get("engine_share") else "–",
+                f"{nxt['nworld']:,}, {nxt['realtime_factor']:.3f}, "
+                f"{_r(nxt.get('share_of_limit_beside'))}"
+                if nxt and nxt.get("realtime_factor")
+                else "–",
             ]
         )
     head = list(CAPACITY_HEAD)
     load = cap.get("machine", {}).get("loadavg_at_start")
-    return _table(head, rows) + f"\n\n({_machine(cap)}; load at start {load})"
+    best = f"best limit of the run {limit:,.0f} worlds" if limit else "no limit"
+    return _table(head, rows) + f"\n\n({_machine(cap)}; {best}; load at start {load})"
 
 
 TABLES: dict[str, Callable[[], str]] = {

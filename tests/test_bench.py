@@ -78,3 +78,22 @@ def test_physics_step_and_kernel_sections_through_the_runner(tmp_path):
     prof = json.loads((tmp_path / "kernels.json").read_text())["results"]["2"]
     assert prof["launches_per_tick"] > 50  # every substep's kernels were seen
     assert math.isclose(sum(k["share"] for k in prof["kernels"]), 1.0)
+
+
+def test_the_capacity_ladder_stops_at_the_first_rung_that_fails_in_any_round():
+    """Section 11's search (bench/capacity.py): a rung holds only when all its rounds pass."""
+    from bench.capacity import ladder
+
+    rtf = iter([1.0, 1.0, 0.995, 0.999, 1.0, 0.97, 1.0])  # rung 0.9 fails in its second round
+    calls = []
+
+    def measure(share: float) -> dict:
+        calls.append(share)
+        return {"nworld": int(share * 1000), "realtime_factor": next(rtf)}
+
+    held, runs = ladder(measure, (0.8, 0.85, 0.9, 0.95), rounds=2)
+    assert held == 0.85
+    assert calls == [0.8, 0.8, 0.85, 0.85, 0.9, 0.9]  # 0.95 never tried
+    assert [r["passed"] for r in runs] == [True, True, True, True, True, False]
+    held, runs = ladder(lambda s: {"nworld": 8, "realtime_factor": 0.5}, (0.8, 0.9), rounds=2)
+    assert held is None and len(runs) == 1
