@@ -97,3 +97,20 @@ def test_the_capacity_ladder_stops_at_the_first_rung_that_fails_in_any_round():
     assert [r["passed"] for r in runs] == [True, True, True, True, True, False]
     held, runs = ladder(lambda s: {"nworld": 8, "realtime_factor": 0.5}, (0.8, 0.9), rounds=2)
     assert held is None and len(runs) == 1
+
+
+def test_a_capacity_run_on_an_unsteady_machine_is_measured_again():
+    from bench.capacity import ladder
+
+    results = iter(
+        [
+            {"nworld": 800, "realtime_factor": 0.9, "steady": False},  # not counted
+            {"nworld": 800, "realtime_factor": 1.0, "steady": True},
+            {"nworld": 800, "realtime_factor": 0.9, "steady": False},
+            {"nworld": 800, "realtime_factor": 0.9, "steady": False},
+            {"nworld": 800, "realtime_factor": 0.95, "steady": False},  # third try counts
+        ]
+    )
+    held, runs = ladder(lambda _s: next(results), (0.8,), rounds=2)
+    assert held is None
+    assert [r["counted"] for r in runs] == [False, True, False, False, True]
