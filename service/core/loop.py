@@ -40,6 +40,7 @@ log = logging.getLogger("armfleet.loop")
 # Snapshots are taken when a sink wants one, a reader waits for one, or at least this often so
 # that `latest` is never older than this; readers that need the current tick ask for one.
 _IDLE_SNAPSHOT_PERIOD = 0.1
+_MAX_LAG_S = 0.1  # real time catches up after hiccups (a shared core paused) up to this far
 _STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
 
 
@@ -76,7 +77,7 @@ class SimLoop(TickBoundary):
         self._effective = np.zeros(batch.nworld, dtype=np.int64)
         self._tick_listeners: tuple[TickListener, ...] = ()
         self.failure: str | None = None  # why the last tick failed; None while ticks succeed
-        self.engine_seconds = 0.0  # wall time spent in batch.step, all ticks (sim thread)
+        self.engine_seconds = 0.0  # wall time in batch.step, all ticks: the rest is the loop's
         self._latest = batch.snapshot()
         self._last_snapshot_wall = 0.0
         self._stats = LoopStats(self._tick, self._mode, 0.0, 0.0)
@@ -277,11 +278,11 @@ class SimLoop(TickBoundary):
                     log.warning("ticks succeed again after: %s", self.failure)
                     self.failure = None
             if mode is Mode.REALTIME:
-                # Keep the cadence: an overrun tick is made up at once, but at most one tick of
-                # lag is carried; further behind, time is given up (the RTF shows it).
+                # Keep the cadence: overrun ticks are made up at once, up to _MAX_LAG_S (or
+                # one tick) behind; further behind, time is given up (the RTF shows it).
                 next_deadline += self.batch.tick_dt
                 now = time.perf_counter()
-                if now - next_deadline > self.batch.tick_dt:
+                if now - next_deadline > max(self.batch.tick_dt, _MAX_LAG_S):
                     next_deadline = now
 
     def _tick_failed(self, exc: Exception) -> None:
@@ -305,7 +306,7 @@ class SimLoop(TickBoundary):
         self._apply(resets, dirty, targets, velocity)
         t_step = time.perf_counter()
         faulted = self.batch.step(1)
-        self.engine_seconds += time.perf_counter() - t_step  # the rest of a tick is the loop's
+        self.engine_seconds += time.perf_counter() - t_step
         now = time.monotonic()
         if self._finish_tick(faulted, mode, now):
             self._publish(now)

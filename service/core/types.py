@@ -157,7 +157,7 @@ class Snapshot:
 class Mode(enum.StrEnum):
     """How the loop advances time."""
 
-    REALTIME = "realtime"  # paced to the wall clock; falls behind honestly (RTF < 1), no bursts
+    REALTIME = "realtime"  # paced to the wall clock; catches up at most 0.1 s, else RTF < 1
     FAST = "fast"  # as fast as the machine allows
     PAUSED = "paused"  # only on an explicit step request
 

@@ -243,21 +243,25 @@ class NativeBatch(HostMirror, Batch, Restorable):
 
     def pack_rows(self, ids: np.ndarray) -> PackedRows:
         """The frame rows (service.wire.BINARY_COLUMNS) of worlds `ids` at the last tick, as
-        `snapshot` reports them, computed for those worlds only."""
+        `snapshot` reports them. Here (the sim thread, between ticks) only copies of those
+        worlds' state are taken; the flange pose and the packing run in `PackedRows.wait`, on
+        the frame thread, while the next tick steps: serial work here leaves a core idle."""
         q = self._qpos[ids]
-        flange_pos, flange_quat = self._flange_pose(q)
-        v = self._qvel[ids]
-        cols = (
+        columns = (
             (self._world_ticks[ids] * self.tick_dt)[:, None],
             q[:, self._qpos_adr],
-            v[:, self._dof],
+            self._qvel[ids][:, self._dof],
             self._effort[ids],
             self._targets[ids],
-            flange_pos,
-            flange_quat,
-            self._faults[ids, None],
         )
-        return PackedRows(self._tick, ids, np.concatenate(cols, axis=1, dtype="<f4"))
+        faults = self._faults[ids, None]
+
+        def build() -> np.ndarray:
+            flange_pos, flange_quat = self._flange_pose(q)
+            cols = (*columns, flange_pos, flange_quat, faults)
+            return np.concatenate(cols, axis=1, dtype="<f4")
+
+        return PackedRows(self._tick, ids, None, compute=build)
 
     # -- state ------------------------------------------------------------------------------
 
