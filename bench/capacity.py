@@ -13,7 +13,8 @@ Native MuJoCo is measured on a ladder of shares of the limit (0.85x to 0.975x): 
 N = that share of the limit measured just before it, run twice, and
 holds when every round keeps RTF >= 0.99 (a run during which the limit moved by more than 5%
 is measured again, up to three times); the capacity is the highest rung held with every rung
-below it. Warp, far from the limit, doubles from ``--worlds`` (or 64), then bisects. Each run
+below it (when 0.85x fails, rungs down to 0.5x are tried until one holds). Warp, far from the
+limit, doubles from ``--worlds`` (or 64), then bisects. Each run
 also reports where the sim thread's time went (/metrics): stepping the engine, the loop's own
 work in ticks, and the time between ticks.
 
@@ -37,6 +38,7 @@ LIMIT_WORLDS = 1024  # batch size at which the rollout limit is measured
 TARGET_SHARE = 0.9  # issue 20: native MuJoCo at >= 0.9x the rollout limit
 UNSTEADY = 0.05  # a run whose limit before and after differ by more is measured again
 RUNGS = (0.85, 0.875, 0.9, 0.925, 0.95, 0.975)  # native: shares of the limit tried, in order
+BELOW = (0.8, 0.75, 0.7, 0.6, 0.5)  # ... and, when the first fails, these until one holds
 
 
 def _round8(x: float) -> int:
@@ -48,17 +50,18 @@ def ladder(
     rungs: tuple[float, ...],
     rounds: int,
     attempts: int = 3,
+    below: tuple[float, ...] = (),
 ) -> tuple[float | None, list[dict[str, Any]]]:
-    """Up the rungs (shares of the limit) while every one of a rung's `rounds` runs passes.
+    """Up the rungs (shares of the limit) while every one of a rung's `rounds` runs passes;
+    when the first rung fails, down the `below` rungs until one holds.
 
     A run whose result says `"steady": False` (the machine's speed changed under it) is kept
     but measured again, up to `attempts` times a round; the last attempt counts either way.
-    Returns (the highest share held, every run in order); stops at the first rung that fails.
+    Returns (the highest share held, every run in order).
     """
     runs: list[dict[str, Any]] = []
-    held: float | None = None
-    for share in rungs:
-        ok = True
+
+    def holds(share: float) -> bool:
         for _ in range(rounds):
             for attempt in range(attempts):
                 res = {**measure(share), "rung": share, "order": len(runs)}
@@ -67,12 +70,17 @@ def ladder(
                 runs.append(res)
                 if res["counted"]:
                     break
-            ok = ok and res["passed"]
-            if not ok:
-                break
-        if not ok:
+            if not res["passed"]:
+                return False
+        return True
+
+    held: float | None = None
+    for share in rungs:
+        if not holds(share):
             break
         held = share
+    if held is None:
+        held = next((share for share in below if holds(share)), None)
     return held, runs
 
 
@@ -137,7 +145,7 @@ def capacity_engines(ctx: Context) -> Result:
                     before = limit_now()
                     return run(_round8(share * before), before)
 
-                held, candidates = ladder(at_share, RUNGS, 2)
+                held, candidates = ladder(at_share, RUNGS, 2, below=BELOW)
                 # The held rung's runs, the smallest of them: what held every time.
                 top_runs = [c for c in candidates if c["rung"] == held and c["counted"]]
                 top = min(top_runs, key=lambda c: c["nworld"]) if top_runs else None

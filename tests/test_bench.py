@@ -114,3 +114,13 @@ def test_a_capacity_run_on_an_unsteady_machine_is_measured_again():
     held, runs = ladder(lambda _s: next(results), (0.8,), rounds=2)
     assert held is None
     assert [r["counted"] for r in runs] == [False, True, False, False, True]
+
+
+def test_the_capacity_ladder_goes_down_when_its_first_rung_fails():
+    from bench.capacity import ladder
+
+    rtf = {0.85: 0.95, 0.8: 0.97, 0.75: 1.0}
+    held, runs = ladder(
+        lambda s: {"nworld": 1, "realtime_factor": rtf[s]}, (0.85, 0.9), rounds=2, below=(0.8, 0.75)
+    )
+    assert held == 0.75 and [r["rung"] for r in runs] == [0.85, 0.8, 0.75, 0.75]
