@@ -146,8 +146,10 @@ def capacity_engines(ctx: Context) -> Result:
                     return run(_round8(share * before), before)
 
                 held, candidates = ladder(at_share, RUNGS, 2, below=BELOW)
-                # The held rung's runs, the smallest of them: what held every time.
+                # The held rung's counted runs, the smallest of them (of the steady ones when
+                # there are any): what held every time.
                 top_runs = [c for c in candidates if c["rung"] == held and c["counted"]]
+                top_runs = [c for c in top_runs if c.get("steady")] or top_runs
                 top = min(top_runs, key=lambda c: c["nworld"]) if top_runs else None
             else:
                 picked = list(ctx.worlds or [])

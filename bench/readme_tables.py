@@ -52,6 +52,7 @@ BASELINE_HEAD = (
 CAPACITY_HEAD = (
     "engine",
     "frames",
+    "share of the limit held",
     "held at RTF ≥ 0.99 (worlds)",
     "× the limit beside it",
     "× the best limit of the run",
@@ -181,6 +182,7 @@ def capacity() -> str:
             [
                 key.split("_")[0],
                 e.get("format", "json"),
+                f"{e['share_held']:g}×" if e.get("share_held") else "–",
                 f"{best:,}" if best else "–",
                 _r(top.get("share_of_limit_beside")),
                 _r(best / limit if best and limit else None),
