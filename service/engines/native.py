@@ -199,11 +199,9 @@ class NativeBatch(HostMirror, Batch, Restorable):
     def _kinematics(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """MuJoCo's body positions, body quaternions and site positions at qpos rows (k, nq),
         copied; from any thread (the kinematics batch is used under a lock)."""
-        ids = np.arange(len(qpos))
+        ids = np.arange(len(qpos))  # the batch's first k rows take the k rows given
         with self._kin_lock:
-            full = np.zeros((self.nworld, qpos.shape[1]))
-            full[ids] = qpos
-            self._kin.update(full, None if len(qpos) == self.nworld else ids)
+            self._kin.update(qpos, None if len(qpos) == self.nworld else ids)
             return self._kin.xpos[ids], self._kin.xquat[ids], self._kin.site_xpos[ids]
 
     def _body_poses(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

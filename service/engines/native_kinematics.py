@@ -27,21 +27,11 @@ _SKIP = (
 
 
 class Kinematics:
-    """Poses of `nworld` worlds of `mjm` at qpos rows handed in (`update`).
+    """Poses of `nworld` worlds of `mjm` at qpos rows handed in (`update`)."""
 
-    `qpos_adr`: which of the full model's qpos columns this model's are (all when None).
-    """
-
-    def __init__(
-        self,
-        mjm: mujoco.MjModel,
-        nworld: int,
-        nthread: int,
-        qpos_adr: np.ndarray | None = None,
-    ) -> None:
+    def __init__(self, mjm: mujoco.MjModel, nworld: int, nthread: int) -> None:
         model = copy.copy(mjm)
         model.opt.disableflags |= int(_SKIP)
-        self._cols = qpos_adr
         self._b = mjbatch.Batch(model, nworld, nthread=nthread)
         self._qpos = self._b.bind("qpos")
         self.xpos = self._b.bind("xpos")  # (nworld, nbody, 3), live views
@@ -51,8 +41,6 @@ class Kinematics:
     def update(self, qpos: np.ndarray, ids: np.ndarray | None = None) -> None:
         """Poses at `qpos` (nworld, nq) for worlds `ids` (all when None)."""
         rows = qpos if ids is None else qpos[ids]
-        if self._cols is not None:
-            rows = rows[:, self._cols]
         if ids is None:
             self._qpos[:] = rows
         else:
