@@ -1,7 +1,8 @@
 """Data structures shared by the engine, the loop and the API (the engine protocol: batch.py).
 
 They are plain frozen dataclasses over numpy arrays so that the engine (which knows MuJoCo Warp)
-and the API (which knows JSON) meet on something neither owns.
+and the API (which knows JSON) meet on something neither owns; a snapshot's poses (`Poses`) may
+be computed when first read.
 """
 
 from __future__ import annotations
