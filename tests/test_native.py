@@ -102,3 +102,25 @@ def test_a_slow_stream_gets_the_frame_carrying_its_command_at_once(native_server
 def _next_ack(ws) -> dict | None:
     msg = json.loads(ws.recv(timeout=5))
     return msg if msg.get("op") == "ack" else None
+
+
+def test_the_whole_batch_check_finds_exactly_the_worlds_the_per_world_check_finds():
+    """After a tick the engine tests whole arrays first and world by world only when that fails:
+    a state past the quick test's bound that is not bad resets nobody, and a bad world among
+    them is still found, alone."""
+    a = NativeBatch(4, nthread=2)
+    cube = a.robot.mjm.joint("cube_joint")
+    q = a.qpos()[2]
+    q[cube.qposadr[0]] = 2.0e4  # the cube 20 km away: absurd, finite, not a fault
+    a.write_qpos(2, q)
+    assert a.step(3).tolist() == []
+    assert a.qpos()[2, cube.qposadr[0]] > 1.0e4  # still there: it was not reset
+    a._qvel[1, 0] = 2.0e4  # shoulder_pan past the divergence bound (MuJoCo's own is 1e10)
+    assert a.step(1).tolist() == [1]
+    assert a.snapshot().faults.tolist() == [0, 1, 0, 0]
+    a.write_qpos(3, np.full(a.qpos().shape[1], np.nan))  # MuJoCo resets it and warns
+    assert a.step(2).tolist() == [3]
+    a.reset(np.array([2]))
+    assert a.step(2).tolist() == []
+    assert a.snapshot().faults.tolist() == [0, 1, 0, 1]
+    a.close()

@@ -54,6 +54,17 @@ def auto_threads(nworld: int) -> int:
     return max(1, min(usable_cores(), nworld // MIN_WORLDS_PER_THREAD))
 
 
+def _adjacent(a: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """One read-only view of row fields `a` then `b` when `b` starts where `a` ends in every
+    row (same row stride), else None."""
+    start = a.__array_interface__["data"][0]
+    follows = b.__array_interface__["data"][0] == start + a.shape[1] * a.itemsize
+    if not follows or a.strides != b.strides or a.dtype != b.dtype or a.strides[1] != a.itemsize:
+        return None
+    shape = (a.shape[0], a.shape[1] + b.shape[1])
+    return np.lib.stride_tricks.as_strided(a, shape=shape, strides=a.strides, writeable=False)
+
+
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of quaternions (w, x, y, z), row-wise: (n, 4) x (4,) -> (n, 4)."""
     aw, ax, ay, az = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
@@ -128,6 +139,10 @@ class NativeBatch(HostMirror, Batch, Restorable):
         self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
         self._effort = np.zeros((nworld, 7))
         self._warnings_seen = np.zeros(nworld, dtype=np.int64)
+        self._pv = _adjacent(self._qpos, self._qvel)  # qpos|qvel rows, for `_all_well`
+        self._pv_buf = None if self._pv is None else np.empty(self._pv.shape)
+        self._warn_last = np.array(self._b.warning)  # every counter as last seen
+        self._warn_buf = np.empty_like(self._warn_last)
         self.reset(np.arange(nworld))
         self.compile_s = time.perf_counter() - t0  # nothing compiles: this is the build time
 
@@ -145,14 +160,33 @@ class NativeBatch(HostMirror, Batch, Restorable):
         except mjbatch.SimulationError as exc:  # those worlds kept their pre-call state
             raised = np.asarray(exc.ids, dtype=np.int64)
             log.warning("MuJoCo raised in worlds %s: %s", raised, exc)
-        qpos, qvel = self._qpos, self._qvel
-        bad = ~np.isfinite(qpos).all(axis=1)
-        bad |= ~(np.abs(qvel) <= DIVERGED_QVEL).all(axis=1)  # NaN compares False: caught too
-        warnings = self._warnings()
-        bad |= warnings != self._warnings_seen
-        bad[raised] = True
         self._effort[:] = self._qfrc_actuator[:, self._dof]
+        if raised.size == 0 and self._all_well():
+            return raised
+        bad = ~np.isfinite(self._qpos).all(axis=1)
+        bad |= ~(np.abs(self._qvel) <= DIVERGED_QVEL).all(axis=1)  # NaN compares False: caught
+        bad |= self._warnings() != self._warnings_seen
+        bad[raised] = True
+        self._warn_last[:] = self._b.warning  # the bad worlds' resets update it again
         return np.flatnonzero(bad)
+
+    def _all_well(self) -> bool:
+        """True when no world can be bad: a sufficient test on whole arrays, cheaper than the
+        per-world one that `_step_tick` runs when it fails.
+
+        The rows were just written by the pool's threads on other cores: reading them costs
+        cache transfers, so each is read once, into a contiguous copy, and tested flat (numpy
+        reduces short rows of a 2-D array slowly). Every |qpos| and |qvel| <= DIVERGED_QVEL
+        (NaN compares False) implies finite qpos and qvel in bounds; warning counters equal to
+        those last seen imply no new warning.
+        """
+        if self._pv is None:  # qpos and qvel not adjacent in the row: the per-world test
+            return False
+        np.copyto(self._pv_buf, self._pv)
+        if not (np.abs(self._pv_buf, out=self._pv_buf) <= DIVERGED_QVEL).all():
+            return False
+        np.copyto(self._warn_buf, self._b.warning)
+        return bool(np.array_equal(self._warn_buf, self._warn_last))
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance every world by `ticks` control ticks; returns the worlds reset for faults."""
@@ -180,6 +214,7 @@ class NativeBatch(HostMirror, Batch, Restorable):
         self._b.reset(worlds, keyframe=self._key)
         self._home(worlds)
         self._warnings_seen[worlds] = self._warnings()[worlds]
+        self._warn_last[:] = self._b.warning
         self._effort[worlds] = self._qfrc_actuator[worlds][:, self._dof]
 
     # -- reading ----------------------------------------------------------------------------
@@ -287,6 +322,7 @@ class NativeBatch(HostMirror, Batch, Restorable):
         self._restore_mirror(state)
         self._effort[:] = state.physics["qfrc_actuator"][:, self._dof]
         self._warnings_seen[:] = self._warnings()
+        self._warn_last[:] = self._b.warning
 
     # -- test and diagnostics hooks ---------------------------------------------------------
 
