@@ -10,7 +10,8 @@ next to every candidate (before and after, with no server running) and each cand
 against the limit measured beside it; the strict figure divides by the best block of the run.
 
 Native MuJoCo is measured on a ladder of shares of the limit (0.85x to 0.975x): each rung is
-N = that share of the limit measured just before it, run twice, and
+N = that share of the limit (the median of the reading just before and the two before that),
+run twice, and
 holds when every round keeps RTF >= 0.99 (a run during which the limit moved by more than 5%
 is measured again, up to three times); the capacity is the highest rung held with every rung
 below it (when 0.85x fails, rungs down to 0.5x are tried until one holds). Warp, far from the
@@ -91,7 +92,7 @@ def capacity_engines(ctx: Context) -> Result:
     _, dt = _default_step()
     steps_per_world_s = common.CONTROL_HZ * round(1 / (common.CONTROL_HZ * dt))
     rollout = _Rollout(LIMIT_WORLDS, common.usable_cores(), dt)
-    blocks: list[float] = []  # every rollout block of the run, world-steps/s
+    blocks: list[float] = []  # every limit reading of the run (best of 2 blocks), world-steps/s
 
     def limit_now() -> float:
         """Worlds at 60 Hz that raw rollout holds right now (best of two short blocks)."""
@@ -143,7 +144,12 @@ def capacity_engines(ctx: Context) -> Result:
 
                 def at_share(share: float, run=run) -> dict:
                     before = limit_now()
-                    return run(_round8(share * before), before)
+                    # N from the median of the last three readings (this one, and the two
+                    # beside the run before): one block caught in a fast or slow moment of
+                    # the machine moves N less. The share reported is against `before`
+                    # and the reading after, as for every run.
+                    recent = statistics.median(blocks[-3:]) / steps_per_world_s
+                    return run(_round8(share * recent), before)
 
                 held, candidates = ladder(at_share, RUNGS, 2, below=BELOW)
                 # The held rung's counted runs, the smallest of them (of the steady ones when
