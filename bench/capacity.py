@@ -132,7 +132,7 @@ def capacity_engines(ctx: Context) -> Result:
                 # The limit moved by more than this across the run: the machine's speed changed.
                 res["steady"] = abs(after - before) <= UNSTEADY * beside
                 ctx.say(
-                    f"  {engine:>6} {fmt:>6} {n:>5} worlds  RTF {res['realtime_factor']:.3f}  "
+                    f"  {engine:>6} {fmt:>6} {n:>5} worlds  RTF {res['realtime_factor']:.4f}  "
                     f"= {n / beside:.2f}x the limit beside it ({beside:.0f}); engine "
                     f"{res.get('engine_share', 0):.3f} of the wall, loop "
                     f"{res.get('tick_share', 0) - res.get('engine_share', 0):.3f}"

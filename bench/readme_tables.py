@@ -9,6 +9,7 @@ README is up to date (exit 1 if not).
 from __future__ import annotations
 
 import argparse
+import math
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -70,6 +71,12 @@ def _m(x: float | None) -> str:
 
 def _r(x: float | None) -> str:
     return "–" if x is None else f"{x:.2f}×"
+
+
+def _rtf(x: float) -> str:
+    """A real-time factor to 3 decimals, rounded down: 0.98997 fails the 0.99 goal and shows
+    0.989, not 0.990."""
+    return f"{math.floor(x * 1000) / 1000:.3f}"
 
 
 def _load(name: str) -> dict[str, Any]:
@@ -187,7 +194,7 @@ def capacity() -> str:
                 _r(top.get("share_of_limit_beside")),
                 _r(best / limit if best and limit else None),
                 f"{top['engine_share']:.3f}" if top.get("engine_share") else "–",
-                f"{nxt['nworld']:,}, {nxt['realtime_factor']:.3f}, "
+                f"{nxt['nworld']:,}, {_rtf(nxt['realtime_factor'])}, "
                 f"{_r(nxt.get('share_of_limit_beside'))}"
                 if nxt and nxt.get("realtime_factor")
                 else "–",
@@ -199,11 +206,54 @@ def capacity() -> str:
     return _table(head, rows) + f"\n\n({_machine(cap)}; {best}; load at start {load})"
 
 
+CAPACITY_RUNS = common.RESULTS_DIR / "issue20" / "capacity"  # every section 11 run kept
+RUNS_HEAD = (
+    "run (UTC, code)",
+    "limit readings (worlds)",
+    "native JSON: rung held (worlds, × beside)",
+    "native binary: rung held (worlds, × beside)",
+    "warp (worlds)",
+)
+
+
+def _held(e: dict[str, Any] | None) -> str:
+    if not e or not e.get("share_held"):
+        return "none"
+    runs = [c for c in e.get("candidates", []) if c.get("rung") == e["share_held"] and c["counted"]]
+    lo, hi = (f"{f(c['share_of_limit_beside'] for c in runs):.2f}" for f in (min, max))
+    beside = lo if lo == hi else f"{lo}-{hi}"
+    return f"{e['share_held']:g}× ({e['capacity_worlds']:,}, {beside}×)"
+
+
+def capacity_runs() -> str:
+    """Every section 11 run kept in bench/results/issue20/capacity/, one row each: the machine
+    drifts, so one run is one sample."""
+    rows = []
+    for path in sorted(CAPACITY_RUNS.glob("*.json")):
+        cap = common.read_json(path.name, CAPACITY_RUNS) or {}
+        stamp, commit = path.stem.split("_")  # 2026-11-24T0252_687b2f2
+        day, hhmm = stamp.split("T")
+        steps = cap["rollout_world_steps_per_s"] / cap["limit_worlds"]  # world-steps per world
+        lo, hi = (f(cap["rollout_blocks"]) / steps for f in (min, max))
+        warp = cap.get("warp", {}).get("capacity_worlds")
+        rows.append(
+            [
+                f"{day} {hhmm[:2]}:{hhmm[2:]}, `{commit}`",
+                f"{lo:,.0f}-{hi:,.0f}",
+                _held(cap.get("mujoco")),
+                _held(cap.get("mujoco_binary")),
+                f"{warp:,}" if warp else "–",
+            ]
+        )
+    return _table(list(RUNS_HEAD), rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "gpu": gpu,
     "profile": profile,
     "baseline": baseline,
     "capacity": capacity,
+    "capacity_runs": capacity_runs,
 }
 
 
