@@ -94,11 +94,13 @@ def test_table_mode_shows_the_joint_rows(server: Server) -> None:
     once it shows a frame ends it cleanly."""
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 160, 0, 0))
-    # The CLI as `python -m service.cli`, with every thread's stack dumped to stderr on SIGUSR1:
-    # if it ever fails to stop on Ctrl-C (seen once in a full suite on a loaded box, never
-    # reproduced in 80 tries), the failure says where it was.
+    # The CLI as `python -m service.cli` in a terminal's foreground job: SIGINT raises
+    # KeyboardInterrupt even when this suite runs as a background job (`cmd &` starts it with
+    # SIGINT ignored, and a child inherits that). Every thread's stack goes to stderr on
+    # SIGUSR1, so a failure to stop says where it was.
     boot = (
         "import faulthandler, runpy, signal, sys; "
+        "signal.signal(signal.SIGINT, signal.default_int_handler); "
         "faulthandler.register(signal.SIGUSR1, all_threads=True); "
         "sys.argv[0] = 'armfleet'; runpy.run_module('service.cli', run_name='__main__')"
     )
@@ -128,11 +130,17 @@ def test_table_mode_shows_the_joint_rows(server: Server) -> None:
                 with contextlib.suppress(OSError):  # EIO once the child has closed the pty
                     os.read(master, 65536)
         if proc.poll() is None:
+            with open(f"/proc/{proc.pid}/status") as f:  # blocked, ignored, pending signals
+                masks = [
+                    line.strip()
+                    for line in f
+                    if line.startswith(("SigPnd", "ShdPnd", "SigBlk", "SigIgn"))
+                ]
             proc.send_signal(signal.SIGUSR1)  # the stacks, then fail with them
             time.sleep(1)
             proc.kill()
             proc.wait()
-            raise AssertionError(f"no exit 20 s after Ctrl-C: {proc.stderr.read()!r}")
+            raise AssertionError(f"no exit 20 s after Ctrl-C: {masks} {proc.stderr.read()!r}")
         assert proc.wait(timeout=5) == 0, proc.stderr.read() if proc.stderr else ""
     finally:
         if proc.poll() is None:
