@@ -138,19 +138,20 @@ class NativeBatch(HostMirror, Batch, Restorable):
         self._init_mirror(nworld)
         self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
         self._effort = np.zeros((nworld, 7))
-        self._warnings_seen = np.zeros(nworld, dtype=np.int64)
         self._pv = _adjacent(self._qpos, self._qvel)  # qpos|qvel rows, for `_all_well`
         self._pv_buf = None if self._pv is None else np.empty(self._pv.shape)
-        self._warn_last = np.array(self._b.warning)  # every counter as last seen
+        self._warn_last = np.array(self._b.warning)  # every world's counters as last seen
         self._warn_buf = np.empty_like(self._warn_last)
         self.reset(np.arange(nworld))
         self.compile_s = time.perf_counter() - t0  # nothing compiles: this is the build time
 
     # -- stepping ---------------------------------------------------------------------------
 
-    def _warnings(self) -> np.ndarray:
-        """Per world, how many warnings MuJoCo has raised in it (all kinds together)."""
-        return self._b.warning[:, :, 1].sum(axis=1, dtype=np.int64)
+    @staticmethod
+    def _warnings(warning: np.ndarray) -> np.ndarray:
+        """Per world, how many warnings MuJoCo has raised in it (all kinds together), from the
+        batch's (nworld, kinds, 2) warning counters."""
+        return warning[:, :, 1].sum(axis=1, dtype=np.int64)
 
     def _step_tick(self) -> np.ndarray:
         """One control tick for every world; returns the worlds that went bad in it."""
@@ -165,7 +166,7 @@ class NativeBatch(HostMirror, Batch, Restorable):
             return raised
         bad = ~np.isfinite(self._qpos).all(axis=1)
         bad |= ~(np.abs(self._qvel) <= DIVERGED_QVEL).all(axis=1)  # NaN compares False: caught
-        bad |= self._warnings() != self._warnings_seen
+        bad |= self._warnings(self._b.warning) != self._warnings(self._warn_last)
         bad[raised] = True
         self._warn_last[:] = self._b.warning  # the bad worlds' resets update it again
         return np.flatnonzero(bad)
@@ -213,8 +214,7 @@ class NativeBatch(HostMirror, Batch, Restorable):
         # mj_resetDataKeyframe + mj_forward per world: ctrl = home, outputs current.
         self._b.reset(worlds, keyframe=self._key)
         self._home(worlds)
-        self._warnings_seen[worlds] = self._warnings()[worlds]
-        self._warn_last[:] = self._b.warning
+        self._warn_last[:] = self._b.warning  # only the reset worlds' counters can have moved
         self._effort[worlds] = self._qfrc_actuator[worlds][:, self._dof]
 
     # -- reading ----------------------------------------------------------------------------
@@ -321,7 +321,6 @@ class NativeBatch(HostMirror, Batch, Restorable):
                 self._state_field(f)[:] = state.physics[f]
         self._restore_mirror(state)
         self._effort[:] = state.physics["qfrc_actuator"][:, self._dof]
-        self._warnings_seen[:] = self._warnings()
         self._warn_last[:] = self._b.warning
 
     # -- test and diagnostics hooks ---------------------------------------------------------
