@@ -161,7 +161,7 @@ def rate(batch: Any, seconds: float = 3.0) -> dict[str, float]:
 
 def record_and_replay(mode: str, nworld: int, path: Path) -> dict[str, Any]:
     """Record `nworld` worlds driven through the control layer, replay on the same GPU."""
-    from service.core.control import Control, Source
+    from service.core.control import Control
     from service.core.loop import SimLoop
     from service.core.types import Mode
     from service.persistence.recorder import Recorder
@@ -181,7 +181,7 @@ def record_and_replay(mode: str, nworld: int, path: Path) -> dict[str, Any]:
     rec.start(_Runtime())
     targets = plan(TICKS, nworld)
     for t in range(TICKS):
-        control.set_many(list(range(nworld)), targets[t], Source.HTTP)
+        control.set_many(list(range(nworld)), targets[t], "http")
         loop.step(1).result()
     rec.stop()
     loop.stop()

@@ -64,7 +64,7 @@ def _long_body(home: np.ndarray, names: list[str], swing: float) -> dict[str, An
 
 def tracking(engine: str) -> dict[str, Any]:
     """Largest path error and the error 0.5 s after the end, stepping a paused loop."""
-    from service.core.control import Control, Source
+    from service.core.control import Control
     from service.core.loop import SimLoop
     from service.core.settings import Settings
     from service.core.trajectory import parse
@@ -78,7 +78,7 @@ def tracking(engine: str) -> dict[str, Any]:
     try:
         names = batch.spec.names[:6]
         body = {"joint_names": names, **_three_point_body(batch.home_target[:6])}
-        started = control.start_trajectory([0], parse(batch.spec, body), Source.HTTP)[0]
+        started = control.start_trajectory([0], parse(batch.spec, body), "http")[0]
         worst = 0.0
         while loop.tick < started.end_tick:
             loop.step(1).result()
@@ -99,7 +99,7 @@ def cpu_ratio(engine: str, ticks: int, rounds: int) -> dict[str, Any]:
     """CPU seconds per tick of 1024 worlds in process, no trajectory vs one holding the pose on
     every world (rounds interleaved): the trajectory work's cost, robust to a loaded machine in
     a way wall-clock rates are not (what other processes take is not counted)."""
-    from service.core.control import Control, Source
+    from service.core.control import Control
     from service.core.loop import SimLoop
     from service.core.trajectory import parse
     from service.core.types import Mode
@@ -123,9 +123,9 @@ def cpu_ratio(engine: str, ticks: int, rounds: int) -> dict[str, Any]:
         loop.step(3).result()  # warm-up
         for _ in range(rounds):
             for kind in cpu:
-                control.reset(None, Source.HTTP)
+                control.reset(None, "http")
                 if kind == "hold":
-                    control.start_trajectory(everyone, spec, Source.HTTP)
+                    control.start_trajectory(everyone, spec, "http")
                 loop.step(1).result()
                 t0 = time.process_time()
                 loop.step(ticks).result()

@@ -129,7 +129,9 @@ class Runtime:
         return None if self.loop is None else getattr(self.loop, name)
 
     def _count_accepted(self, accepted: Accepted) -> None:
-        self.metrics.command_accepted(accepted.source, accepted.kind, accepted.tick)
+        self.metrics.command_accepted(
+            accepted.source, accepted.kind, accepted.tick, len(accepted.worlds)
+        )
 
     async def start(self) -> None:
         """Build the engine and start everything; a failure is kept in `error` (see /readyz)."""

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from service.core import commands
+from service.core.commands import arithmetic as commands
 from service.core.errors import BadCommand
 from service.core.robot import load_robot
 
@@ -37,7 +37,7 @@ def test_increment_touches_only_the_named_joints():
 
 def test_delta_over_a_full_turn_is_refused_before_anything_changes():
     with pytest.raises(BadCommand) as err:
-        commands.increment(SPEC, HOME, {0: 0.1, 1: 2 * math.pi + 0.01})
+        commands.check_deltas(SPEC, {0: 0.1, 1: 2 * math.pi + 0.01})
     assert err.value.field == "delta.shoulder_lift_joint"
 
 

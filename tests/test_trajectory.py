@@ -11,7 +11,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from service.core.control import Control, Source
+from service.core.control import Control
 from service.core.errors import BadCommand
 from service.core.loop import SimLoop
 from service.core.settings import Settings
@@ -71,7 +71,7 @@ def engine(request: pytest.FixtureRequest) -> Iterator[tuple[SimLoop, Control]]:
 @pytest.fixture
 def sim(engine: tuple[SimLoop, Control]) -> tuple[SimLoop, Control]:
     loop, control = engine
-    control.reset(None, Source.HTTP)
+    control.reset(None, "http")
     stepped(1, loop)
     return engine
 
@@ -235,7 +235,7 @@ def test_the_table_passes_through_every_point_with_its_velocity(kind):
 def test_a_2s_three_point_trajectory_tracks_within_0_05_rad_and_settles(sim):
     loop, control = sim
     hz = loop.batch.control_hz
-    started = control.start_trajectory([1], three_points(), Source.HTTP)[0]
+    started = control.start_trajectory([1], three_points(), "http")[0]
     assert started.end_tick - started.start_tick + 1 == round(2.0 * hz)
     worst = 0.0
     while loop.tick < started.end_tick:
@@ -260,11 +260,11 @@ def test_a_2s_three_point_trajectory_tracks_within_0_05_rad_and_settles(sim):
 
 def test_manual_command_stops_the_trajectory_and_holds(sim):
     loop, control = sim
-    started = control.start_trajectory([0], three_points(), Source.HTTP)[0]
+    started = control.start_trajectory([0], three_points(), "http")[0]
     stepped(30, loop)
     outcome = control.trajectories.wait(started.id)
     held = loop.pending_targets(0)
-    result = control.increment(0, {"elbow_joint": 0.1}, Source.BROWSER)
+    result = control.increment(0, {"elbow_joint": 0.1}, "browser")
     assert outcome.done()  # told at once, though no tick has run since (paused)
     status = control.trajectories.status(0)
     assert status.state is TrajectoryState.ABORTED
@@ -281,12 +281,12 @@ def test_takeover_is_joint_scoped_a_gripper_command_leaves_the_arm_running(sim):
     command (even staged between the same two ticks as a trajectory sample) moves the finger
     and the arm trajectory goes on; a target on one of the trajectory's joints takes over."""
     loop, control = sim
-    arm = control.start_trajectory([0], three_points(), Source.HTTP)[0]
+    arm = control.start_trajectory([0], three_points(), "http")[0]
     elbow = JointTrajectorySpec.build(SPEC, ["elbow_joint"], [TrajectoryPoint([1.0], 0.5)])
-    part = control.start_trajectory([1], elbow, Source.HTTP)[0]
+    part = control.start_trajectory([1], elbow, "http")[0]
     stepped(10, loop)
-    finger = control.command_targets(0, ["finger_joint"], [0.5], Source.ROS2)
-    pan = control.increment(1, {"shoulder_pan_joint": 0.2}, Source.BROWSER)
+    finger = control.command_targets(0, ["finger_joint"], [0.5], "ros2")
+    pan = control.increment(1, {"shoulder_pan_joint": 0.2}, "browser")
     assert control.trajectories.status(0).state is TrajectoryState.RUNNING
     assert control.trajectories.status(1).state is TrajectoryState.RUNNING
     stepped(1, loop)
@@ -301,10 +301,10 @@ def test_takeover_is_joint_scoped_a_gripper_command_leaves_the_arm_running(sim):
     assert snap.target[0, 6] == 0.5 and snap.position[0, 6] > 0.3  # the finger closed
     # A target on one of the trajectory's joints (and a batch row: every joint) takes over.
     for command in (
-        lambda: control.command_targets(2, ["finger_joint", "wrist_3_joint"], [0, 0], Source.WS),
-        lambda: control.set_many([2], [HOME], Source.HTTP),
+        lambda: control.command_targets(2, ["finger_joint", "wrist_3_joint"], [0, 0], "ws"),
+        lambda: control.set_many([2], [HOME], "http"),
     ):
-        control.start_trajectory([2], three_points(), Source.HTTP)
+        control.start_trajectory([2], three_points(), "http")
         stepped(5, loop)
         command()
         assert control.trajectories.status(2).reason is AbortReason.MANUAL_OVERRIDE
@@ -312,13 +312,13 @@ def test_takeover_is_joint_scoped_a_gripper_command_leaves_the_arm_running(sim):
 
 def test_a_newer_trajectory_preempts_and_starts_where_the_old_one_was(sim):
     loop, control = sim
-    first = control.start_trajectory([0], three_points(), Source.HTTP)[0]
+    first = control.start_trajectory([0], three_points(), "http")[0]
     stepped(20, loop)
     where = loop.pending_targets(0)
     hold = JointTrajectorySpec.build(
         SPEC, ["elbow_joint"], [TrajectoryPoint([float(where[2])], 0.5)]
     )
-    second = control.start_trajectory([0], hold, Source.WS)[0]
+    second = control.start_trajectory([0], hold, "ws")[0]
     assert control.trajectories.get(first.id).reason is AbortReason.PREEMPTED
     stepped(1, loop)
     # Joints outside the new trajectory keep the target they had; elbow starts from it.
@@ -330,11 +330,11 @@ def test_a_newer_trajectory_preempts_and_starts_where_the_old_one_was(sim):
 
 def test_cancel_reset_and_fault_abort_with_their_reason(sim):
     loop, control = sim
-    control.start_trajectory([0, 1, 2], three_points(), Source.HTTP)
+    control.start_trajectory([0, 1, 2], three_points(), "http")
     stepped(10, loop)
-    stopped = control.cancel_trajectory([0, 3], Source.HTTP)
+    stopped = control.cancel_trajectory([0, 3], "http")
     assert [s.world for s in stopped] == [0]  # world 3 ran none: nothing to cancel
-    control.reset([1], Source.HTTP)
+    control.reset([1], "http")
     qpos = loop.batch.qpos()[2]
     qpos[0] = np.nan
     loop.call(lambda b: b.write_qpos(2, qpos)).result()
@@ -348,7 +348,7 @@ def test_cancel_reset_and_fault_abort_with_their_reason(sim):
 def test_path_tolerance_aborts_naming_the_joint(sim):
     loop, control = sim
     tight = [JointTolerance("shoulder_pan_joint", position=1e-4)]
-    started = control.start_trajectory([3], three_points(path_tolerance=tight), Source.HTTP)[0]
+    started = control.start_trajectory([3], three_points(path_tolerance=tight), "http")[0]
     done = control.trajectories.wait(started.id)
     stepped(30, loop)
     status = done.result(timeout=5)
@@ -360,7 +360,7 @@ def test_goal_tolerance_waits_for_the_goal_then_succeeds(sim):
     loop, control = sim
     goal = [JointTolerance(n, position=0.002) for n in ARM]
     started = control.start_trajectory(
-        [2], three_points(goal_tolerance=goal, goal_time_tolerance=1.0), Source.HTTP
+        [2], three_points(goal_tolerance=goal, goal_time_tolerance=1.0), "http"
     )[0]
     stepped(started.end_tick - loop.tick + round(1.0 * loop.batch.control_hz), loop)
     status = control.trajectories.get(started.id)
@@ -370,7 +370,7 @@ def test_goal_tolerance_waits_for_the_goal_then_succeeds(sim):
 
 def test_many_worlds_start_at_one_tick(sim):
     loop, control = sim
-    started = control.start_trajectory([0, 1, 2, 3], three_points(), Source.HTTP)
+    started = control.start_trajectory([0, 1, 2, 3], three_points(), "http")
     assert len({(s.start_tick, s.end_tick) for s in started}) == 1
     assert len({s.id for s in started}) == 4
     stepped(10, loop)

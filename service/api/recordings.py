@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 from typing import Annotated
 
 from fastapi import APIRouter, Depends
@@ -21,7 +20,7 @@ Rt = Annotated[Runtime, Depends(get_runtime)]
 
 
 def _status(recorder: Recorder) -> RecordingStatus:
-    return RecordingStatus(**dataclasses.asdict(recorder.status))
+    return recorder.status
 
 
 @router.post(

@@ -7,7 +7,7 @@ from fastapi.responses import Response
 
 from service.api.deps import Loop
 from service.core import scene, wire
-from service.core.schemas import Scene
+from service.core.scene_schemas import Scene
 
 router = APIRouter(prefix="/v1", tags=["scene"])
 

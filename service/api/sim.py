@@ -7,7 +7,7 @@ import asyncio
 from fastapi import APIRouter
 
 from service.api.deps import Ctl, Loop
-from service.core.control import Source
+from service.core.commands.base import HTTP
 from service.core.schemas import ModeRequest, SimReply, StepRequest, errors
 from service.core.types import Mode
 
@@ -16,17 +16,17 @@ router = APIRouter(prefix="/v1/sim", tags=["sim"])
 
 @router.post("/pause", response_model=SimReply, summary="Stop advancing time (mode paused)")
 async def pause(control: Ctl) -> SimReply:
-    return SimReply(mode=Mode.PAUSED, tick=control.set_mode(Mode.PAUSED, Source.HTTP))
+    return SimReply(mode=Mode.PAUSED, tick=control.set_mode(Mode.PAUSED, HTTP))
 
 
 @router.post("/resume", response_model=SimReply, summary="Advance in real time again")
 async def resume(control: Ctl) -> SimReply:
-    return SimReply(mode=Mode.REALTIME, tick=control.set_mode(Mode.REALTIME, Source.HTTP))
+    return SimReply(mode=Mode.REALTIME, tick=control.set_mode(Mode.REALTIME, HTTP))
 
 
 @router.post("/mode", response_model=SimReply, summary="Switch to realtime, fast or paused")
 async def set_mode(control: Ctl, body: ModeRequest) -> SimReply:
-    return SimReply(mode=body.mode, tick=control.set_mode(body.mode, Source.HTTP))
+    return SimReply(mode=body.mode, tick=control.set_mode(body.mode, HTTP))
 
 
 @router.post(

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Path
@@ -32,13 +31,13 @@ async def save(runtime: Rt, loop: Loop, body: SnapshotRequest) -> SnapshotInfo:
     check_state_support(loop.batch)
     state = await asyncio.wrap_future(loop.request_state())
     info = await asyncio.to_thread(runtime.snapshots.save, body.name, state, runtime.header)
-    return SnapshotInfo(**dataclasses.asdict(info))
+    return info
 
 
 @router.get("", response_model=list[SnapshotInfo], summary="Saved snapshots, newest first")
 async def listing(runtime: Rt) -> list[SnapshotInfo]:
     infos = await asyncio.to_thread(runtime.snapshots.list)
-    return [SnapshotInfo(**dataclasses.asdict(i)) for i in infos]
+    return infos
 
 
 @router.post(

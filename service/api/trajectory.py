@@ -16,7 +16,8 @@ from fastapi.responses import Response
 
 from service.api.deps import Ctl, World
 from service.core import wire
-from service.core.control import Control, Source
+from service.core.commands.base import HTTP
+from service.core.control import Control
 from service.core.errors import BadCommand, Conflict, NotFound
 from service.core.schemas import errors
 from service.core.trajectory import TrajectoryStatus, parse
@@ -45,7 +46,7 @@ def _json(payload: object) -> Response:
 )
 async def start(control: Ctl, world: World, body: TrajectoryBody) -> Response:
     spec = parse(control.spec, body.as_json())
-    started = control.start_trajectory([world], spec, Source.HTTP)[0]
+    started = control.start_trajectory([world], spec, HTTP)[0]
     return _json(started.as_json())
 
 
@@ -107,7 +108,7 @@ async def _outcome(control: Control, current: TrajectoryStatus, wait: float) -> 
     responses=errors(409),
 )
 async def cancel(control: Ctl, world: World) -> Response:
-    stopped = control.cancel_trajectory([world], Source.HTTP)
+    stopped = control.cancel_trajectory([world], HTTP)
     if not stopped:
         raise Conflict(f"world {world} runs no trajectory", "world")
     return _json(stopped[0].as_json())
@@ -121,7 +122,7 @@ async def cancel(control: Ctl, world: World) -> Response:
 async def start_many(control: Ctl, body: BatchTrajectoryBody) -> Response:
     worlds = _worlds(control, body.worlds)
     spec = parse(control.spec, body.trajectory.as_json())
-    started = control.start_trajectory(worlds, spec, Source.HTTP)
+    started = control.start_trajectory(worlds, spec, HTTP)
     return _json(
         {
             "start_tick": started[0].start_tick,

@@ -15,7 +15,7 @@ from fastapi.responses import Response
 
 from service.api.deps import Ctl, Loop, World
 from service.core import wire
-from service.core.control import Source
+from service.core.commands.base import HTTP
 from service.core.errors import Unavailable
 from service.core.loop import SimLoop
 from service.core.schemas import (
@@ -106,7 +106,7 @@ async def get_state(loop: Loop, world: World) -> Response:
 )
 async def increment(control: Ctl, world: World, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
-    result = control.increment(world, body.as_mapping(), Source.HTTP, field)
+    result = control.increment(world, body.as_mapping(), HTTP, field)
     return _json(wire.command_reply(result))
 
 
@@ -116,7 +116,7 @@ async def increment(control: Ctl, world: World, body: IncrementRequest) -> Respo
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
 )
 async def put_targets(control: Ctl, world: World, body: JointTargets) -> Response:
-    result = control.command_targets(world, body.name, body.position, Source.HTTP)
+    result = control.command_targets(world, body.name, body.position, HTTP)
     return _json(wire.command_reply(result))
 
 
@@ -126,7 +126,7 @@ async def put_targets(control: Ctl, world: World, body: JointTargets) -> Respons
     summary="Full 7-joint targets for many worlds, applied together at one tick boundary",
 )
 async def post_targets(control: Ctl, body: BatchTargets) -> Response:
-    results = control.set_many(body.worlds, body.position, Source.HTTP)
+    results = control.set_many(body.worlds, body.position, HTTP)
     return _json({"tick": results[0].tick, "results": [wire.command_reply(r) for r in results]})
 
 
@@ -136,7 +136,7 @@ async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     summary="Reset one world to home",
 )
 async def reset_world(control: Ctl, world: World) -> ResetReply:
-    done = control.reset([world], Source.HTTP)
+    done = control.reset([world], HTTP)
     return ResetReply(worlds=done.worlds, tick=done.tick)
 
 
@@ -149,5 +149,5 @@ async def reset_many(
     control: Ctl, body: Annotated[ResetRequest | None, Body()] = None
 ) -> ResetReply:
     worlds = body.worlds if body is not None else None
-    done = control.reset(worlds, Source.HTTP)
+    done = control.reset(worlds, HTTP)
     return ResetReply(worlds=done.worlds, tick=done.tick)

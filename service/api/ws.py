@@ -10,14 +10,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 import numpy as np
-import orjson
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
+from service.api import ws_ops
 from service.core import access, wire
-from service.core.control import Control, Source
+from service.core.commands.base import BROWSER, WS
+from service.core.control import Control
 from service.core.errors import ArmfleetError, BadCommand
 from service.core.hub import StreamHub, Subscription
 from service.core.loop import SimLoop
@@ -175,7 +176,7 @@ async def view_socket(
 
     sub = Subscription(ids, rate, render, f"view:{focus}", binary=True)
     sub.skip = StillFilter(ids)
-    await _serve(ws, loop, control, hub, sub, default_world=None, source=Source.BROWSER)
+    await _serve(ws, loop, control, hub, sub, default_world=None, source=BROWSER)
 
 
 def _running(ws: WebSocket) -> tuple[SimLoop, Control, StreamHub] | None:
@@ -201,7 +202,7 @@ async def _serve(
     hub: StreamHub,
     sub: Subscription,
     default_world: int | None,
-    source: Source = Source.WS,
+    source: str = WS,
 ) -> None:
     runtime = ws.app.state.runtime
     grant = _grant(ws)
@@ -234,14 +235,14 @@ async def _serve(
             else:
                 verdict = limiter.take()
                 if verdict == "ok":
-                    reply = _handle(control, text, default_world, source)
+                    reply, kind = ws_ops.handle_text(control, text, default_world, source)
                     if reply.get("op") == "error":
-                        metrics.command_rejected(source, _op(text))
+                        metrics.command_rejected(source, kind)
                     elif reply.get("op") == "ack" and isinstance(reply.get("tick"), int):
                         sub.owe(reply["tick"])  # its first frame goes out whatever the cadence
                 else:
                     reply = wire.error_frame(wire.read_id(text), limiter.detail)
-                    metrics.command_rejected(source, _op(text), "refused")
+                    metrics.command_rejected(source, ws_ops.kind_of(text), "refused")
                     if verdict == "close":
                         sub.push_ack(wire.dumps(reply))
                         await _drain(sub)
@@ -273,29 +274,6 @@ async def _write(ws: WebSocket, hub: StreamHub, sub: Subscription) -> None:
             await ws.send_bytes(frame)
         else:
             await ws.send_text(frame.decode())
-
-
-def _handle(
-    control: Control, text: str, default_world: int | None, source: Source
-) -> dict[str, Any]:
-    """One client text frame → ack or error (the socket stays open either way)."""
-    try:
-        msg = orjson.loads(text)
-    except orjson.JSONDecodeError as exc:
-        # NaN/Infinity are not JSON, but the rest of such a message is readable: parse it
-        # leniently so that the error names the field and echoes the client's id.
-        msg = wire.loads_lenient(text)
-        if msg is None:
-            return wire.error_frame(wire.read_id(text), f"malformed JSON: {exc}")
-    return control.handle(msg, default_world, source)
-
-
-def _op(text: str) -> str:
-    """The `op` of a message for counting (cheap, never raises)."""
-    for op in ("increment", "set_targets", "reset"):
-        if f'"{op}"' in text:
-            return op
-    return "unknown"
 
 
 async def _drain(sub: Subscription, timeout: float = 1.0) -> None:

@@ -15,14 +15,14 @@ import contextlib
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
 
-from service.core import commands
 from service.core.batch import Batch
-from service.core.errors import NotPaused, UnknownWorld
+from service.core.commands.arithmetic import TargetUpdate
+from service.core.errors import NotPaused
 from service.core.loop_boundary import TickBoundary
 from service.core.loop_types import (  # re-exported: the loop's vocabulary
     CommandResult,
@@ -116,54 +116,33 @@ class SimLoop(TickBoundary):
         """The tick whose stepping first uses a command accepted now (lock held)."""
         return self._tick + (2 if self._stepping else 1)
 
-    def _check_world(self, world: int) -> None:
-        if not 0 <= world < self.batch.nworld:
-            raise UnknownWorld(world, self.batch.nworld)
-
-    def increment(self, world: int, deltas: Mapping[int, float]) -> CommandResult:
-        """Add deltas (joint index → rad) to the world's latest target, clamped."""
-        self._check_world(world)
-        with self._lock:
-            update = commands.increment(self.spec, self._pending[world], deltas)
-            return self._stage(world, update, list(deltas))
-
-    def stage_targets(self, world: int, values: Mapping[int, float]) -> CommandResult:
-        """Set the named joints' targets (others keep theirs), clamped."""
-        self._check_world(world)
-        with self._lock:
-            update = commands.replace_targets(self.spec, self._pending[world], values)
-            return self._stage(world, update, list(values))
-
-    def set_many(
-        self, worlds: list[int], positions: np.ndarray, joints: list[int] | None = None
+    def stage_rows(
+        self,
+        worlds: Sequence[int],
+        update: Callable[[int, np.ndarray], TargetUpdate],
+        joints: Iterable[int],
     ) -> list[CommandResult]:
-        """Targets of many worlds for one tick boundary: every joint of each row, or only
-        `joints` (indices; the others keep their targets)."""
-        for w in worlds:
-            self._check_world(w)
-        named = list(range(len(self.spec.joints))) if joints is None else list(joints)
-        rows = [dict(zip(named, row[named], strict=True)) for row in positions]
+        """Stage new target rows for `worlds` (valid ids: commands checked them), each made by
+        `update(world, its latest row)` under the command lock so that commands compose; a
+        trajectory stops only if it drives one of `joints` (indices)."""
+        named = np.fromiter(joints, dtype=np.int64)
         with self._lock:
-            return [
-                self._stage(w, commands.replace_targets(self.spec, self._pending[w], v), named)
-                for w, v in zip(worlds, rows, strict=True)
-            ]
-
-    def _stage(self, world: int, update: commands.TargetUpdate, joints: list[int]) -> CommandResult:
-        """Stage a world's new row; a trajectory stops only if it drives one of `joints`."""
-        self._pending[world] = update.target
-        self._velocity[world] = 0.0  # a trajectory that goes on writes its own next tick
-        self._dirty[world] = True
-        if self._traj is not None:
-            self._traj.overridden(np.array([world]), Override.MANUAL, np.asarray(joints))
-        self._effective[world] = tick = self._accept_tick()
-        return CommandResult(world, update.target.copy(), update.clamped, tick)
+            tick = self._accept_tick()
+            out = []
+            for world in worlds:
+                row = update(world, self._pending[world])
+                self._pending[world] = row.target
+                self._velocity[world] = 0.0  # a trajectory that goes on writes its own next tick
+                self._dirty[world] = True
+                self._effective[world] = tick
+                out.append(CommandResult(world, row.target.copy(), row.clamped, tick))
+            if self._traj is not None and out:
+                self._traj.overridden(np.asarray(worlds), Override.MANUAL, named)
+            return out
 
     def reset(self, worlds: list[int] | None = None) -> int:
         """Reset worlds (all when None) to home, state and targets; returns the effective tick."""
         idx = np.arange(self.batch.nworld) if worlds is None else np.asarray(worlds, dtype=int)
-        for w in idx:
-            self._check_world(int(w))
         with self._lock:
             self._reset[idx] = True
             self._dirty[idx] = False

@@ -28,6 +28,8 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 from prometheus_client.registry import Collector
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from service.core.commands.registry import BY_HTTP
+
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 disable_created_metrics()  # the *_created series only double the output here
 
@@ -76,10 +78,11 @@ class Metrics:
 
     # -- fed by the service -----------------------------------------------------------------
 
-    def command_accepted(self, source: str, kind: str, tick: int) -> None:
-        """A control listener calls this for each accepted command."""
+    def command_accepted(self, source: str, kind: str, tick: int, worlds: int = 1) -> None:
+        """A control listener calls this for each accepted command (`worlds` it changed: one
+        that changes none, a mode switch, has no effect latency)."""
         self.commands.labels(str(source), kind, "accepted").inc()
-        if kind != "mode":
+        if worlds:
             self._waiting.append((tick, time.monotonic()))
 
     def command_rejected(self, source: str, kind: str, result: str = "rejected") -> None:
@@ -150,15 +153,7 @@ def command_kind(path: str) -> str | None:
     if not path.startswith("/v1/"):
         return None
     last = path.rstrip("/").rsplit("/", 1)[-1]
-    return {
-        "increments": "increment",
-        "targets": "set_targets",
-        "reset": "reset",
-        "pause": "mode",
-        "resume": "mode",
-        "mode": "mode",
-        "step": "step",
-    }.get(last, "other")
+    return BY_HTTP.get(last, "other")
 
 
 class CommandCounter:

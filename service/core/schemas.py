@@ -6,7 +6,7 @@ Joint-state fields follow sensor_msgs/JointState (`name`, `position`, `velocity`
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Self
 
 from pydantic import (
     BaseModel,
@@ -26,6 +26,7 @@ from service.core.schema_fields import (
     equal_lengths,
     json_int,
     non_null,
+    paired,
     paired_config,
 )
 from service.core.types import NJOINT, JointSpec, Mode
@@ -206,22 +207,37 @@ class IncrementRequest(Strict):
         return {self.joint: self.delta}
 
 
-class JointTargets(Paired):
-    """sensor_msgs/JointState-shaped: a subset of names is allowed; others keep their targets."""
+class JointTargets(Strict):
+    """sensor_msgs/JointState-shaped: a subset of names is allowed, others keep their targets;
+    with no names (left out or empty), one position per joint in joint order, as the seed's
+    Isaac subscriber read them. The rule is service.core.commands.rules.joint_state."""
 
-    PAIR = ("name", "position")
     name: list[JointKey] = Field(
-        min_length=1, max_length=NJOINT, json_schema_extra={"uniqueItems": True}
+        default_factory=list, max_length=NJOINT, json_schema_extra={"uniqueItems": True}
     )
     position: list[FiniteFloat] = Field(min_length=1, max_length=NJOINT)
 
+    @staticmethod
+    def _schema(schema: dict[str, Any]) -> None:
+        branches = equal_lengths("name", "position", range(1, NJOINT + 1))
+        for branch in branches:
+            branch["required"] = ["name"]
+        nameless = {"minItems": NJOINT, "maxItems": NJOINT}
+        branches.append({"properties": {"name": {"maxItems": 0}, "position": nameless}})
+        schema["oneOf"] = branches
+        schema["examples"] = [
+            {"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]},
+            {"position": [0, -1.57, 1.57, -1.57, -1.57, 0, 0]},
+        ]
+
     # JointState also carries header/velocity/effort: allowed, and ignored
-    model_config = paired_config(
-        PAIR,
-        NJOINT,
-        {"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]},
-        extra="allow",
-    )
+    model_config = ConfigDict(extra="allow", json_schema_extra=_schema)
+
+    @model_validator(mode="after")
+    def _pairs(self) -> Self:
+        if self.name or len(self.position) != NJOINT:
+            paired("name", self.name, "position", self.position)
+        return self
 
 
 class BatchTargets(Paired):
@@ -285,6 +301,11 @@ class SnapshotRequest(Strict):
 
 
 class SnapshotInfo(BaseModel):
+    """One saved snapshot as listed: name, bytes on disk, when, at which tick, of which batch
+    (service/persistence/snapshots.py makes them)."""
+
+    model_config = ConfigDict(frozen=True)
+
     name: str
     size_bytes: int
     created: str = Field(description="UTC, ISO 8601")
@@ -312,6 +333,8 @@ class RecordingRequest(Strict):
 
 
 class RecordingStatus(BaseModel):
+    """What GET /v1/recordings/current shows (service/persistence/recorder.py makes it)."""
+
     path: str
     worlds: list[int]
     every_ticks: int = Field(description="a state every this many ticks")
@@ -319,44 +342,6 @@ class RecordingStatus(BaseModel):
     active: bool = Field(description="still writing")
     written: int = Field(description="items written so far")
     error: str | None = Field(description="why the recording stopped early, if it did")
-
-
-# -- the drawable scene (GET /v1/scene; built by service/core/scene.py) -------------------------
-
-
-class SceneBody(BaseModel):
-    id: int = Field(description="MjModel body index; row of the pose frames' body axis")
-    name: str
-    parent: int = Field(description="parent body id (the world body, 0, is its own parent)")
-
-
-class SceneMesh(BaseModel):
-    vertices: list[float] = Field(description="x y z per vertex, flattened [m], geom frame")
-    faces: list[int] = Field(description="3 vertex indices per triangle, flattened")
-
-
-class SceneGeom(BaseModel):
-    """One visible geom, described in its body's frame as MuJoCo compiled it."""
-
-    id: int = Field(description="MjModel geom index")
-    name: str = Field(description="empty when the MJCF gave none")
-    body: int = Field(description="body the geom is attached to")
-    type: str = Field(description="plane, sphere, capsule, ellipsoid, cylinder, box or mesh")
-    size: list[float] = Field(
-        description="MuJoCo geom_size [m]: box half-extents; sphere radius; capsule/cylinder "
-        "radius and half-length along the local z axis; plane half-sizes (0 = infinite)"
-    )
-    pos: list[float] = Field(description="x y z in the body frame [m]")
-    quat: list[float] = Field(description="orientation in the body frame, w x y z")
-    rgba: list[float] = Field(description="colour, 0..1 (the material's when it has one)")
-    mesh: SceneMesh | None = Field(None, description="mesh geoms only")
-
-
-class Scene(BaseModel):
-    nbody: int = Field(description="bodies per world in the pose frames (world body included)")
-    bodies: list[SceneBody]
-    geoms: list[SceneGeom] = Field(description="geoms of groups 0-2 (MuJoCo's visible groups)")
-    skipped: int = Field(description="visible geoms of types not described (height fields, SDFs)")
 
 
 _ERROR_CONTENT = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorReply"}}}

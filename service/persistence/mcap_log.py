@@ -28,6 +28,8 @@ import numpy as np
 import orjson
 from mcap.writer import Writer
 
+from service.core.commands.registry import KINDS
+
 JOINT_STATE = "sensor_msgs/msg/JointState"
 # The interface definition as ROS 2 publishes it for this type (with its dependencies).
 JOINT_STATE_MSGDEF = """std_msgs/Header header
@@ -86,15 +88,7 @@ _COMMAND_SCHEMA = {
         "source": {"type": "string", "description": "http, ws, browser, ros2, ... replay"},
         "kind": {
             "type": "string",
-            "enum": [
-                "increment",
-                "set_targets",
-                "reset",
-                "mode",
-                "trajectory",
-                "trajectory_cancel",
-                "trajectory_resume",
-            ],
+            "enum": list(KINDS),
         },
         "worlds": {"type": "array", "items": {"type": "integer"}},
         "targets": {

@@ -26,12 +26,14 @@ import queue
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from service.core.commands.registry import BY_KIND
+from service.core.commands.trajectory import ResumeTrajectory
+from service.core.schemas import RecordingStatus
 from service.core.types import BatchState, Snapshot
 from service.core.worlds import pick_worlds
 from service.persistence.mcap_log import COMMANDS, RESTORES, STATUS, McapLog
@@ -40,7 +42,7 @@ from service.persistence.snapshots import encode_state
 from service.persistence.storage import GuardedWriter, cannot_write, describe, open_for_writing
 
 if TYPE_CHECKING:
-    from service.core.control import Accepted
+    from service.core.commands.base import Accepted
     from service.core.surface import SurfaceContext
     from service.core.trajectory.status import Resumable
 
@@ -48,24 +50,6 @@ log = logging.getLogger("armfleet.recorder")
 
 QUEUE_ITEMS = 2048  # items (a command, a restore, or one snapshot of the recorded worlds)
 _STOP = object()
-
-
-@dataclass(frozen=True)
-class RecordingStatus:
-    """What GET /v1/recordings/current shows.
-
-    path: the file; worlds: recorded worlds; every_ticks: a state every this many ticks;
-    start_tick: tick the recording starts from; active: still writing; written: messages
-    written so far; error: why it stopped early (None when it did not).
-    """
-
-    path: str
-    worlds: list[int]
-    every_ticks: int
-    start_tick: int
-    active: bool
-    written: int
-    error: str | None
 
 
 def every_ticks(rate: float, control_hz: float) -> int:
@@ -288,8 +272,8 @@ class Recorder:
         )
         out.json(STATUS, time.time_ns(), {"event": "start", "tick": state.tick})
         for run in running:
-            resume = {"source": "recording", "kind": "trajectory_resume", "worlds": [run.world]}
-            resume |= {"targets": [run.target], "tick": state.tick + 1, "mode": None}
+            resume = {"source": "recording", "kind": ResumeTrajectory.kind, "worlds": [run.world]}
+            resume |= {"targets": [run.target], "tick": state.tick + 1}
             out.json(COMMANDS, time.time_ns(), {**resume, "trajectory": run.as_json()})
         self._file.flush()
         return out
@@ -302,7 +286,7 @@ class Recorder:
             out.joint_states(wall_ns, snap.tick, self._worlds, snap)
         elif kind == "command":
             a: Accepted = item[2]
-            if a.kind != "mode" and a.tick <= self._start_tick:
+            if BY_KIND[a.kind].replayed and a.tick <= self._start_tick:
                 return  # applied before the starting state was taken: already in it
             out.json(
                 COMMANDS,
@@ -313,9 +297,7 @@ class Recorder:
                     "worlds": a.worlds,
                     "targets": a.targets,
                     "tick": a.tick,
-                    "mode": None if a.mode is None else str(a.mode),
-                    **({} if a.trajectory is None else {"trajectory": a.trajectory}),
-                    **({} if a.joints is None else {"joints": list(a.joints)}),
+                    **a.record,
                 },
             )
         elif kind == "restore":

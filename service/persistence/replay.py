@@ -27,13 +27,13 @@ from mcap.records import Attachment, Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 
 from service.core.access import ClientSlots
-from service.core.control import Control, Source
+from service.core.commands.base import REPLAY
+from service.core.commands.registry import BY_KIND
+from service.core.control import Control
 from service.core.loop import SimLoop
 from service.core.metrics import Metrics
 from service.core.settings import Settings
 from service.core.surface import SurfaceContext
-from service.core.trajectory import parse as parse_trajectory
-from service.core.trajectory.status import Resumable
 from service.core.types import BatchState, Mode
 from service.persistence.mcap_log import (
     COMMANDS,
@@ -148,7 +148,7 @@ def read_recording(path: Path | str) -> Recording:
         seg = segments[-1]
         if topic == COMMANDS:
             body = json.loads(msg.data)
-            if body["kind"] != "mode":
+            if BY_KIND[body["kind"]].replayed:
                 seg.commands[int(body["tick"])].append(body)
         elif topic == RESTORES:
             body = json.loads(msg.data)
@@ -285,19 +285,5 @@ def _replay_segment(
 
 
 def _apply(control: Control, cmd: dict[str, Any]) -> None:
-    worlds = [int(w) for w in cmd["worlds"]]
-    if cmd["kind"] == "reset":
-        control.reset(worlds, Source.REPLAY)
-    elif cmd["kind"] == "trajectory":  # re-run from the same tick: sampled exactly as it was
-        spec = parse_trajectory(control.spec, cmd["trajectory"])
-        control.start_trajectory(worlds, spec, Source.REPLAY)
-    elif cmd["kind"] == "trajectory_cancel":
-        control.cancel_trajectory(worlds, Source.REPLAY)
-    elif cmd["kind"] == "trajectory_resume":  # running when the recording started
-        body = cmd["trajectory"]
-        spec, start = parse_trajectory(control.spec, body), body["resume_from"]
-        run = Resumable(worlds[0], spec, start["start_tick"], start["target"], start["velocity"])
-        control.resume_trajectory(run, Source.REPLAY)
-    else:  # increment or set_targets: the recorded rows are the targets after the command
-        rows = np.asarray(cmd["targets"], dtype=np.float64)
-        control.set_many(worlds, rows, Source.REPLAY, cmd.get("joints"))  # named joints only
+    """Re-apply one recorded command as its class says (service.core.commands.registry)."""
+    control.run(BY_KIND[cmd["kind"]].from_record(control.door, cmd), REPLAY)

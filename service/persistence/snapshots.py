@@ -19,7 +19,6 @@ import json
 import os
 import re
 import threading
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +26,7 @@ import numpy as np
 
 from service.core.batch import Batch, Restorable
 from service.core.errors import BadCommand, CannotWrite, Conflict, NotFound
-from service.core.schemas import SNAPSHOT_NAME
+from service.core.schemas import SNAPSHOT_NAME, SnapshotInfo
 from service.core.types import PHYSICS_FIELDS, BatchState
 from service.persistence.provenance import mismatch
 from service.persistence.storage import describe
@@ -37,18 +36,6 @@ SUFFIX = ".npz"
 NAME_PATTERN = SNAPSHOT_NAME  # names become file names: no separators, no hidden files
 LATEST = "latest"  # what a clean shutdown saves and `--restore latest` reads
 _SCALARS = ("world_ticks", "faults", "targets")
-
-
-@dataclass(frozen=True)
-class SnapshotInfo:
-    """One saved snapshot as listed: name, bytes on disk, when, at which tick, of which batch."""
-
-    name: str
-    size_bytes: int
-    created: str
-    tick: int
-    nworld: int
-    model_hash: str
 
 
 def check_state_support(batch: Batch) -> None:

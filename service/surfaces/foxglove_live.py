@@ -49,7 +49,6 @@ from foxglove.messages import (
     Vector3,
 )
 
-from service.core.control import Source
 from service.core.errors import ArmfleetError
 from service.core.robot import load_robot
 from service.core.worlds import pick_worlds
@@ -60,6 +59,7 @@ if TYPE_CHECKING:
     from service.core.surface import SurfaceContext
     from service.core.types import Snapshot
 
+FOXGLOVE = "foxglove"  # the label of commands that came from a Foxglove client
 log = logging.getLogger("armfleet.foxglove")
 
 SPACING = 2.5  # m between neighbouring worlds in the shared `world` frame
@@ -352,10 +352,8 @@ class FoxgloveLive:
             msg = json.loads(data)
             if not isinstance(msg, dict):
                 raise ValueError("a JointState message must be a JSON object")
-            name, position = msg.get("name"), msg.get("position")
-            if not isinstance(name, list) or not isinstance(position, list):
-                raise ValueError("a JointState needs `name` and `position` lists")
-            self._control.command_targets(world, name, position, Source.FOXGLOVE)
+            name, position = msg.get("name", []), msg.get("position", [])
+            self._control.command_targets(world, name, position, FOXGLOVE)
         except (ArmfleetError, ValueError) as exc:
             log.warning("Foxglove command on %s refused: %s", topic, exc)
             self._server.publish_status(f"{topic}: {exc}", StatusLevel.Warning)

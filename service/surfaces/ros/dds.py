@@ -22,13 +22,12 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from service.core.control import Source
 from service.core.types import Snapshot
 from service.core.worlds import world_list
 from service.surfaces.ros import topics
 from service.surfaces.ros.discovery import LOOPBACK_CONFIG, DdsConfig, choose_config
 from service.surfaces.ros.qos import rclpy_default as _qos
-from service.surfaces.ros.topics import BadMessageCounter, TopicMap
+from service.surfaces.ros.topics import ROS2, BadMessageCounter, TopicMap
 from service.surfaces.ros.ur_dds import ur_actions, ur_topics
 
 if TYPE_CHECKING:
@@ -250,8 +249,7 @@ class DdsBridge:
         """Take up to a batch of commands and apply each in order; False when none were left."""
 
         def apply(msg: Any) -> None:
-            names, values = topics.command_from_joint_state(self._joints, msg.name, msg.position)
-            self._control.command_targets(world, names, values, Source.ROS2)
+            self._control.command_targets(world, list(msg.name), list(msg.position), ROS2)
 
         taken, accepted = topics.take_commands(
             reader, self._msgs.JointState, topic, self.bad, apply

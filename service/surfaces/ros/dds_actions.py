@@ -24,12 +24,11 @@ from collections.abc import Callable
 from dataclasses import fields, is_dataclass
 from typing import Any
 
-from service.core.control import Source
 from service.surfaces.ros import msgs_action as m
 from service.surfaces.ros.goal_msgs import FJT_TYPE, GRIPPER_TYPE, GoalRejected, Status
 from service.surfaces.ros.goals import Goal, GoalRunner
 from service.surfaces.ros.msgs import Time
-from service.surfaces.ros.topics import BadMessageCounter, stamp
+from service.surfaces.ros.topics import ROS2, BadMessageCounter, stamp
 
 log = logging.getLogger("armfleet.ros2")
 
@@ -188,7 +187,7 @@ class ActionServerDds:
                     self.kind,
                     self.world,
                     to_plain(req.goal),
-                    Source.ROS2,
+                    ROS2,
                     self._on_feedback,
                     self._on_done,
                 )
@@ -216,7 +215,7 @@ class ActionServerDds:
             for g in goals
             if everything or g.key == key or (before > 0 and g.accepted_at <= before)
         ]
-        canceling = [g for g in chosen if self._runner.cancel(g, Source.ROS2)]
+        canceling = [g for g in chosen if self._runner.cancel(g, ROS2)]
         if canceling:
             code = CANCEL_OK
         elif any(key) and not any(g.key == key for g in goals):

@@ -34,7 +34,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from service.core.control import Source
 from service.core.surface import SurfaceContext
 from service.core.trajectory import AbortReason, TrajectoryStatus
 from service.surfaces.ros import topics
@@ -114,7 +113,7 @@ class GoalRunner:
         kind: str,
         world: int,
         goal: dict[str, Any],
-        source: Source,
+        source: str,
         on_feedback: Callable[[Goal, dict[str, Any]], None],
         on_done: Callable[[Goal], None],
     ) -> Goal:
@@ -150,7 +149,7 @@ class GoalRunner:
             self._finish(old, Status.ABORTED, self._gripper_state(old, stalled=False))
         return g
 
-    def cancel(self, g: Goal, source: Source) -> bool:
+    def cancel(self, g: Goal, source: str) -> bool:
         """Ask a goal to stop (it holds); False if it already finished."""
         with self._lock:
             if g.status.terminal or g.cancel_requested:
@@ -168,7 +167,7 @@ class GoalRunner:
 
     # -- outcomes ----------------------------------------------------------------------------
 
-    def cancel_all(self, action: str, source: Source) -> list[Goal]:
+    def cancel_all(self, action: str, source: str) -> list[Goal]:
         """Cancel every running goal of `action` (a CancelGoal with an empty goal_info)."""
         with self._lock:
             running = [g for g in self._active if g.action == action]

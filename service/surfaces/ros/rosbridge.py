@@ -27,13 +27,13 @@ import orjson
 from fastapi import WebSocket
 
 from service.core import access
-from service.core.control import Source
+from service.core.commands.rules import BadJointState
 from service.core.errors import ArmfleetError
 from service.core.hub import StreamHub, Subscription
 from service.core.surface import SurfaceContext
 from service.core.types import Snapshot
 from service.surfaces.ros import rosapi, rosbridge_actions, topics
-from service.surfaces.ros.rosbridge_base import ProtocolError, same_type, topic_name
+from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, same_type, topic_name
 from service.surfaces.ros.topics import (
     CLOCK_TOPIC,
     CLOCK_TYPE,
@@ -175,13 +175,11 @@ class Session:
         unknown = sorted(set(body) - _JOINT_STATE_FIELDS)
         if unknown:
             raise BadMessage("unknown_field", f"JointState has no field {unknown[0]!r}")
-        name = body.get("name", [])
-        position = body.get("position", [])
-        if not isinstance(name, list) or not isinstance(position, list):
-            raise BadMessage("bad_type", "name and position must be arrays")
-        names, values = topics.command_from_joint_state(self.joints, name, position)
-        try:
-            self.control.command_targets(world, names, values, Source.ROSBRIDGE)
+        name, position = body.get("name", []), body.get("position", [])
+        try:  # the JointState rule of every surface (service.core.commands.rules)
+            self.control.command_targets(world, name, position, ROSBRIDGE)
+        except BadJointState as exc:
+            raise BadMessage(exc.reason, str(exc)) from None
         except ArmfleetError as exc:
             raise BadMessage("rejected", str(exc)) from None
         self.server.accepted += 1

@@ -18,10 +18,9 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from service.core.control import Source
 from service.surfaces.ros.goal_msgs import GoalRejected, Status, action_names
 from service.surfaces.ros.goals import Goal, runner_of
-from service.surfaces.ros.rosbridge_base import ProtocolError, topic_name
+from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, topic_name
 from service.surfaces.ros.topics import stamp
 
 
@@ -104,7 +103,7 @@ def send_action_goal(session: Any, msg: dict[str, Any]) -> None:
             goals.send({**frame, "id": msg_id} if msg_id is not None else frame)
 
         runner = runner_of(session.ctx)
-        goal = runner.submit(name, kind, world, args, Source.ROSBRIDGE, on_feedback, on_done)
+        goal = runner.submit(name, kind, world, args, ROSBRIDGE, on_feedback, on_done)
         goal.key = msg_id
         goals.by_id[msg_id] = goal
     except (GoalRejected, ProtocolError) as exc:
@@ -118,7 +117,7 @@ def cancel_action_goal(session: Any, msg: dict[str, Any]) -> None:
     if goal is None:
         raise ProtocolError(f"id: no goal of this client has id {msg.get('id')!r}")
     if goal.status != Status.CANCELED:
-        runner_of(session.ctx).cancel(goal, Source.ROSBRIDGE)
+        runner_of(session.ctx).cancel(goal, ROSBRIDGE)
 
 
 def cancel_all(session: Any, action: str) -> dict[str, Any]:
@@ -126,7 +125,7 @@ def cancel_all(session: Any, action: str) -> dict[str, Any]:
     goal of the action is cancelled, as a CancelGoal request with an empty goal_info asks."""
     if action not in action_names(session.server.topic_map.namespaces()):
         raise ProtocolError(f"service: no action {action}")
-    canceling = runner_of(session.ctx).cancel_all(action, Source.ROSBRIDGE)
+    canceling = runner_of(session.ctx).cancel_all(action, ROSBRIDGE)
     infos = []
     for goal in canceling:
         key = goal.key if isinstance(goal.key, bytes) else bytes(16)

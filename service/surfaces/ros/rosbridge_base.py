@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+ROSBRIDGE = "rosbridge"  # the label of commands that came over rosbridge
+
 
 class ProtocolError(ValueError):
     """Client input that gets a `status` error frame; nothing changes."""

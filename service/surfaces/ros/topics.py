@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from service.core.commands.rules import BadJointState
 from service.core.errors import ArmfleetError
 from service.core.types import Snapshot
 
@@ -27,6 +28,8 @@ log = logging.getLogger("armfleet.ros")
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 CLOCK_TOPIC = "/clock"
+
+ROS2 = "ros2"  # the label of commands that came over DDS (metrics, recordings)
 
 
 class BadMessage(ValueError):
@@ -88,46 +91,6 @@ def stamp(seconds: float) -> tuple[int, int]:
     """Seconds → (sec, nanosec), rounded to the nanosecond, never negative."""
     ns = max(0, round(seconds * 1e9))
     return ns // 1_000_000_000, ns % 1_000_000_000
-
-
-def command_from_joint_state(
-    joints: Sequence[str], name: Sequence[Any], position: Sequence[Any]
-) -> tuple[list[str], list[float]]:
-    """A JointState command → (joint names, positions) for `control.command_targets`.
-
-    With names, positions pair up with them (a subset moves only those joints). With no names,
-    seven positions in joint order are accepted, as the seed's Isaac subscriber read them.
-    Velocity and effort are ignored. Raises BadMessage before anything changes.
-    """
-    if len(position) == 0:
-        raise BadMessage("empty", "position is empty; nothing to command")
-    if len(name) == 0:
-        if len(position) != len(joints):
-            raise BadMessage(
-                "length_mismatch",
-                f"without names, position needs all {len(joints)} joints (got {len(position)})",
-            )
-        name = joints
-    elif len(name) != len(position):
-        raise BadMessage(
-            "length_mismatch",
-            f"name has {len(name)} entries but position has {len(position)}",
-        )
-    names: list[str] = []
-    for n in name:
-        if not isinstance(n, str) or n not in joints:
-            raise BadMessage("unknown_joint", f"unknown joint {n!r}; joints are {list(joints)}")
-        if n in names:
-            raise BadMessage("duplicate_joint", f"joint {n!r} named twice")
-        names.append(n)
-    values: list[float] = []
-    for n, p in zip(names, position, strict=True):
-        if isinstance(p, bool) or not isinstance(p, int | float):
-            raise BadMessage("bad_type", f"position of {n} must be a number, got {p!r}")
-        if not math.isfinite(p):
-            raise BadMessage("not_finite", f"position of {n} is {p} (must be finite)")
-        values.append(float(p))
-    return names, values
 
 
 def _floats(row: np.ndarray) -> list[float | None]:
@@ -237,6 +200,8 @@ def take_commands(
             apply(msg)
         except BadMessage as exc:
             bad.report(exc.kind, topic, exc.detail)
+        except BadJointState as exc:  # the one JointState rule, classified
+            bad.report(exc.reason, topic, str(exc))
         except ArmfleetError as exc:
             bad.report("rejected", topic, str(exc))
         except Exception:

@@ -20,7 +20,6 @@ import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from service.core.control import Source
 from service.surfaces.ros import dds_actions, topics
 from service.surfaces.ros.goal_msgs import (
     ACTIONS,
@@ -31,7 +30,7 @@ from service.surfaces.ros.goal_msgs import (
 )
 from service.surfaces.ros.goals import runner_of
 from service.surfaces.ros.tf_frames import FrameTree
-from service.surfaces.ros.topics import BadMessageCounter, TopicMap
+from service.surfaces.ros.topics import ROS2, BadMessageCounter, TopicMap
 from service.surfaces.ros.urdf import generate
 
 if TYPE_CHECKING:
@@ -237,7 +236,7 @@ class UrDriverDds:
     def _command_input(self, reader: Any, topic: str, world: int) -> Callable[[], bool]:
         def apply(msg: Any) -> None:
             values = arm_command(self._arm, list(msg.data))
-            self._control.command_targets(world, self._arm, values, Source.ROS2)
+            self._control.command_targets(world, self._arm, values, ROS2)
 
         return self._serving(reader, self._tf.Float64MultiArray, topic, apply)
 
@@ -246,14 +245,14 @@ class UrDriverDds:
 
         def apply(msg: Any) -> None:
             if not msg.points:
-                self._control.cancel_trajectory([world], Source.ROS2)
+                self._control.cancel_trajectory([world], ROS2)
                 return
             body = {"trajectory": dds_actions.to_plain(msg)}
             try:
                 spec = trajectory_spec(self._control.spec, self._arm, body)
             except GoalRejected as exc:
                 raise topics.BadMessage("rejected", str(exc)) from None
-            self._control.start_trajectory([world], spec, Source.ROS2)
+            self._control.start_trajectory([world], spec, ROS2)
 
         return self._serving(reader, self._traj.JointTrajectory, topic, apply)
 

@@ -1,4 +1,5 @@
-"""Joint-target arithmetic: increments and absolute targets, clamped to the joint ranges.
+"""Joint-target arithmetic shared by the target commands: increments and absolute targets,
+clamped to the joint ranges.
 
 Pure functions over one world's target row so that the loop can apply them under its lock and
 the tests can pin the arithmetic without a simulator.
@@ -55,12 +56,16 @@ def _clamp(spec: RobotSpec, row: np.ndarray, touched: list[int]) -> TargetUpdate
     return TargetUpdate(target=np.clip(row, lower, upper), clamped=clamped)
 
 
-def increment(spec: RobotSpec, current: np.ndarray, deltas: Mapping[int, float]) -> TargetUpdate:
-    """Add `deltas` (joint index → rad) to `current` and clamp: the seed's Up/Down buttons."""
+def check_deltas(spec: RobotSpec, deltas: Mapping[int, float]) -> None:
+    """One press may move a target by at most a full turn (checked when a command is made)."""
     for i, delta in deltas.items():
         if abs(delta) > MAX_ABS_DELTA:
             name = spec.joints[i].name
             raise BadCommand(f"delta.{name}", f"|delta| must be <= 2π ({MAX_ABS_DELTA:.6f} rad)")
+
+
+def increment(spec: RobotSpec, current: np.ndarray, deltas: Mapping[int, float]) -> TargetUpdate:
+    """Add `deltas` (joint index → rad, checked by `check_deltas`) to `current` and clamp."""
     row = np.array(current, dtype=np.float64)
     for i, delta in deltas.items():
         row[i] = round(row[i] + delta, _INCREMENT_DECIMALS)

@@ -1,0 +1,102 @@
+"""Whole-world and whole-service commands: `reset` (worlds back to home), `mode` (realtime,
+fast, paused) and `step` (paused only: advance exactly n ticks)."""
+
+from __future__ import annotations
+
+import concurrent.futures
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from service.core.commands import rules
+from service.core.commands.base import (
+    Announcement,
+    Command,
+    Door,
+    no_fields,
+    no_worlds,
+    result_ack,
+)
+from service.core.loop_types import CommandResult
+from service.core.types import Mode
+
+__all__ = ["Reset", "ResetResult", "SetMode", "Step"]
+
+
+@dataclass(frozen=True)
+class ResetResult:
+    """Worlds sent back to `home`, their targets afterwards (k, 7), and the effective tick."""
+
+    worlds: list[int]
+    tick: int
+    targets: np.ndarray = field(repr=False)
+
+
+@dataclass(frozen=True)
+class Reset(Command[ResetResult]):
+    """Send worlds (all when None) back to `home`, state and targets."""
+
+    kind: ClassVar[str] = "reset"
+    op: ClassVar[str | None] = "reset"
+    http: ClassVar[tuple[str, ...]] = ("reset",)
+
+    worlds: list[int] | None
+
+    @classmethod
+    def create(cls, door: Door, worlds: Sequence[object] | None) -> Reset:
+        return cls(None if worlds is None else rules.world_ids(worlds, door.nworld))
+
+    @classmethod
+    def from_wire(cls, door: Door, world: int, body: dict[str, Any]) -> Reset:
+        no_fields(cls.kind, body)
+        return cls([world])
+
+    def stage(self, door: Door, source: str) -> ResetResult:
+        ids = list(range(door.nworld)) if self.worlds is None else self.worlds
+        tick = door.loop.reset(ids)
+        return ResetResult(ids, tick, np.tile(door.loop.batch.home_target, (len(ids), 1)))
+
+    def announce(self, door: Door, result: ResetResult) -> Announcement:
+        return Announcement(np.array(result.worlds, dtype=np.int64), result.targets, result.tick)
+
+    def ack(self, door: Door, msg_id: Any, world: int, result: ResetResult) -> dict[str, Any]:
+        return result_ack(msg_id, CommandResult(world, result.targets[0], [], result.tick))
+
+    @classmethod
+    def from_record(cls, door: Door, rec: dict[str, Any]) -> Reset:
+        return cls.create(door, rec["worlds"])
+
+
+@dataclass(frozen=True)
+class SetMode(Command[int]):
+    """Switch realtime / fast / paused; the tick at which the switch happened."""
+
+    kind: ClassVar[str] = "mode"
+    http: ClassVar[tuple[str, ...]] = ("mode", "pause", "resume")
+    replayed: ClassVar[bool] = False  # replay steps tick by tick whatever the mode was
+
+    mode: Mode
+
+    def stage(self, door: Door, source: str) -> int:
+        door.loop.set_mode(self.mode)
+        return door.loop.tick
+
+    def announce(self, door: Door, result: int) -> Announcement:
+        return no_worlds(result, mode=str(self.mode))
+
+
+@dataclass(frozen=True)
+class Step(Command["concurrent.futures.Future[int]"]):
+    """Paused only: advance exactly `ticks` control ticks; the future resolves with the tick
+    reached (NotPaused, 409, otherwise). Not recorded: a recording holds every tick anyway."""
+
+    kind: ClassVar[str] = "step"
+    http: ClassVar[tuple[str, ...]] = ("step",)
+    replayed: ClassVar[bool] = False
+
+    ticks: int
+
+    def stage(self, door: Door, source: str) -> concurrent.futures.Future[int]:
+        return door.loop.step(self.ticks)
