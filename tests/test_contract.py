@@ -72,7 +72,12 @@ def test_the_schema_states_the_cross_field_rules(server):
     shapes = schemas["IncrementRequest"]["oneOf"]
     assert [sorted(s["required"]) for s in shapes] == [["delta", "joint"], ["deltas"]]
     lengths = schemas["JointTargets"]["oneOf"]
-    assert [b["properties"]["name"]["minItems"] for b in lengths] == list(range(1, 8))
+    named, nameless = lengths[:-1], lengths[-1]
+    assert [b["properties"]["name"]["minItems"] for b in named] == list(range(1, 8))
+    assert all(b["required"] == ["name"] for b in named)
+    # no names: every joint's position, in joint order (the seed's Isaac subscriber's reading)
+    assert nameless["properties"]["name"] == {"maxItems": 0}
+    assert nameless["properties"]["position"] == {"minItems": 7, "maxItems": 7}
     state = spec["paths"]["/v1/worlds/state"]["get"]
     assert state["parameters"][0]["schema"]["anyOf"][0]["pattern"].startswith("^[0-9]+")
     increment = spec["paths"]["/v1/worlds/{world}/increments"]["post"]["responses"]

@@ -1,19 +1,69 @@
 """The engine protocol: what the loop needs of an engine, and what some engines can do besides.
 
-`Batch` is what every engine implements. Optional capabilities are protocols of their own
-(`Restorable`: save and restore the full state; `Supervised`: workers that can be lost and are
-rebuilt), checked with `isinstance`, so that a caller never guesses from attributes or bodies.
+`Batch` is what every engine implements. Commands reach an engine through one door,
+`Batch.write(TickWrites)`, once per tick boundary: whatever a command changes (targets and
+their feed-forward, resets, a slice of a world's qpos/qvel) is a field of `TickWrites`, so a new
+command that writes state the engines already hold needs no change in any engine. Optional
+capabilities are protocols of their own (`Restorable`: save and restore the full state;
+`Supervised`: workers that can be lost and are rebuilt; `PacksFrames`: gathers stream rows on
+its side), checked with `isinstance`, so that a caller never guesses from attributes or bodies.
 Lives in the core with the types it speaks in; imports nothing above the core.
 """
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
 from service.core.robot import LoadedRobot
-from service.core.types import BatchState, RobotSpec, Snapshot
+from service.core.types import NJOINT, BatchState, RobotSpec, Snapshot
+
+if TYPE_CHECKING:
+    from service.core.packed_rows import PackedRows
+
+_NO_WORLDS = np.zeros(0, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class StateWrite:
+    """Values for some addresses of one world's qpos or qvel (a free body's pose or twist).
+
+    field: "qpos" or "qvel"; world: its id; index: addresses in that world's row (m,) int64;
+    values: (m,) float64. Built by a command that validated it (addresses of its entity).
+    """
+
+    field: Literal["qpos", "qvel"]
+    world: int
+    index: np.ndarray
+    values: np.ndarray
+
+    def moved(self, world: int) -> StateWrite:
+        """The same write for world id `world` (a shard's local id)."""
+        return StateWrite(self.field, world, self.index, self.values)
+
+
+@dataclass(frozen=True)
+class TickWrites:
+    """Everything the commands of one tick boundary write into an engine, applied in this
+    order: `resets` (worlds back at home), then `state` (in the order staged), then targets.
+
+    resets: worlds reset to home                                        (r,) int64
+    worlds: worlds whose targets changed                                (k,) int64
+    targets: their targets, already clamped by the command [rad]        (k, 7) float64
+    velocities: their velocity feed-forward [rad/s], None = zero        (k, 7) float64
+    state: qpos/qvel slices, applied after the resets
+    """
+
+    resets: np.ndarray = field(default_factory=lambda: _NO_WORLDS)
+    worlds: np.ndarray = field(default_factory=lambda: _NO_WORLDS)
+    targets: np.ndarray = field(default_factory=lambda: np.zeros((0, NJOINT)))
+    velocities: np.ndarray | None = None
+    state: tuple[StateWrite, ...] = ()
+
+    def __bool__(self) -> bool:
+        return bool(self.resets.size or self.worlds.size or self.state)
 
 
 @runtime_checkable
@@ -56,10 +106,19 @@ class Batch(Protocol):
         """Advance every world by `ticks`; returns the worlds reset for faults (int64)."""
         ...
 
+    def write(self, writes: TickWrites) -> None:
+        """Apply one tick boundary's commands (see `TickWrites`), in effect from the next step."""
+        ...
+
+    def write_state(self, write: StateWrite) -> None:
+        """Overwrite some qpos/qvel addresses of one world now (part of `write`)."""
+        ...
+
     def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
-        """Targets for `worlds` (k,) ← `targets` (k, 7), clamped, in effect from the next step.
+        """Targets for `worlds` (k,) ← `targets` (k, 7) as given (commands clamp them), in effect
+        from the next step (part of `write`).
 
         `velocities` (k, 7) [rad/s]: a velocity feed-forward for the servos (trajectories send
         their desired velocity, so tracking has no kv/kp × speed lag); None sets it to zero,
@@ -120,4 +179,18 @@ class Supervised(Protocol):
 
     def health(self) -> list[str]:
         """What is wrong now (a lost shard, a rebuild under way); empty when all is well."""
+        ...
+
+
+@runtime_checkable
+class PacksFrames(Protocol):
+    """An engine that gathers the stream rows of chosen worlds on its side (a kernel and one
+    pinned copy on a GPU, copies between ticks on the CPU) instead of a full snapshot."""
+
+    def pack_rows(self, ids: np.ndarray) -> PackedRows | None:
+        """The binary rows of worlds `ids` at the last tick (None: no buffer free now)."""
+        ...
+
+    def host_columns(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(sim_time [s] float64, targets (k, 7) float64, faults int64) of `ids`, host copies."""
         ...

@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 
 from service.core import wire
+from service.core.batch import Batch, PacksFrames
+from service.core.packed_rows import PackedRows
 from service.core.types import Snapshot
 
 log = logging.getLogger("armfleet.frames")
@@ -41,34 +43,6 @@ JSON_SLICE = 2048  # rows serialised per GIL hold in a JSON frame (~3 ms of orjs
 # default is 5 ms): the sim thread gets it back between two slices instead of a few slices later.
 SWITCH_INTERVAL_S = 0.0005
 _NOOP: Callable[[], None] = lambda: None  # noqa: E731
-
-
-@dataclass
-class PackedRows:
-    """A frame's float32 rows (`wire.BINARY_COLUMNS`), possibly still on their way to the host.
-
-    `wait()` returns them (k, 37), valid until `release()`; the engine reuses the buffer after.
-    An engine may hand `compute` instead of rows: `wait()` builds them then, on the frame
-    thread, from copies the engine took between ticks (the native engine's flange kinematics
-    then run beside the next tick instead of before it).
-    """
-
-    tick: int
-    ids: np.ndarray
-    rows: np.ndarray | None
-    done: Any = None  # a wp.Event marking the copy's end (None: already on the host)
-    release: Callable[[], None] = _NOOP
-    compute: Callable[[], np.ndarray] | None = None
-
-    def wait(self) -> np.ndarray:
-        if self.rows is None:
-            assert self.compute is not None, "PackedRows without rows or compute"
-            self.rows, self.compute = self.compute(), None
-        if self.done is not None:
-            import warp as wp
-
-            wp.synchronize_event(self.done)  # a ctypes call: the GIL is released meanwhile
-        return self.rows
 
 
 @dataclass
@@ -98,15 +72,14 @@ def rows_of(snap: Snapshot, ids: np.ndarray) -> np.ndarray:
     return np.concatenate((*cols, *rest), axis=1, dtype="<f4")
 
 
-def pack(batch: Any, ids: np.ndarray, json: bool) -> FrameData | None:
+def pack(batch: Batch, ids: np.ndarray, json: bool) -> FrameData | None:
     """Rows of worlds `ids` at the batch's last tick (sim thread, between ticks).
 
-    Engines with `pack_rows` (warp, native) gather on their side; others are cut from a
+    Engines that `PacksFrames` (warp, native) gather on their side; others are cut from a
     snapshot. `json` adds the host columns. None when the engine has no buffer free for this
     selection (its frames are still being sent): the frame is skipped, the tick goes on.
     """
-    packer = getattr(batch, "pack_rows", None)
-    if packer is None:
+    if not isinstance(batch, PacksFrames):
         snap = batch.snapshot()
         data = FrameData(PackedRows(snap.tick, ids, rows_of(snap, ids)))
         if json:
@@ -116,15 +89,12 @@ def pack(batch: Any, ids: np.ndarray, json: bool) -> FrameData | None:
                 snap.faults[ids],
             )
         return data
-    packed = packer(ids)
+    packed = batch.pack_rows(ids)
     if packed is None:
         return None
     data = FrameData(packed)
     if json:
-        # The engines keep these as host mirrors (float64 ticks and targets, int64 faults).
-        data.sim_time = batch._world_ticks[ids] * batch.tick_dt
-        data.target = batch._targets[ids]
-        data.faults = batch._faults[ids]
+        data.sim_time, data.target, data.faults = batch.host_columns(ids)
     return data
 
 

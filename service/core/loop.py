@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from service.core.batch import Batch
+from service.core.batch import Batch, StateWrite, TickWrites
 from service.core.commands.arithmetic import TargetUpdate
 from service.core.errors import NotPaused
 from service.core.loop_boundary import TickBoundary
@@ -32,7 +32,7 @@ from service.core.loop_types import (  # re-exported: the loop's vocabulary
     TickListener,
     resolve,
 )
-from service.core.staging import Override, Staging, TrajectoryHook
+from service.core.staging import CommandTable, Override, Staging, TrajectoryHook
 from service.core.types import Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
@@ -62,19 +62,14 @@ class SimLoop(TickBoundary):
         self._running = False
         self._thread: threading.Thread | None = None
         # Everything below is guarded by _lock.
-        self._pending = batch.targets  # float64 (nworld, 7): targets as of all accepted commands
-        self._velocity = np.zeros_like(self._pending)  # velocity feed-forward staged with them
+        self._table = CommandTable(batch.targets, batch.home_target)  # what commands staged
         self._traj: TrajectoryHook | None = None
-        self._dirty = np.zeros(batch.nworld, dtype=bool)
-        self._reset = np.zeros(batch.nworld, dtype=bool)
         self._stepping = False
         self._tick = batch.tick
         self._step_goal = self._tick  # paused mode: run until the tick counter reaches this
         self._step_waiters: list[tuple[int, concurrent.futures.Future[int]]] = []
         # Readers waiting for a snapshot of at least this tick (read-your-writes).
         self._snapshot_waiters: list[tuple[int, concurrent.futures.Future[Snapshot]]] = []
-        # Per world: the tick from which its latest accepted command is in effect.
-        self._effective = np.zeros(batch.nworld, dtype=np.int64)
         self._tick_listeners: tuple[TickListener, ...] = ()
         self.failure: str | None = None  # why the last tick failed; None while ticks succeed
         self.engine_seconds = 0.0  # wall time in batch.step, all ticks: the rest is the loop's
@@ -127,15 +122,7 @@ class SimLoop(TickBoundary):
         trajectory stops only if it drives one of `joints` (indices)."""
         named = np.fromiter(joints, dtype=np.int64)
         with self._lock:
-            tick = self._accept_tick()
-            out = []
-            for world in worlds:
-                row = update(world, self._pending[world])
-                self._pending[world] = row.target
-                self._velocity[world] = 0.0  # a trajectory that goes on writes its own next tick
-                self._dirty[world] = True
-                self._effective[world] = tick
-                out.append(CommandResult(world, row.target.copy(), row.clamped, tick))
+            out = self._table.stage_rows(worlds, update, self._accept_tick())
             if self._traj is not None and out:
                 self._traj.overridden(np.asarray(worlds), Override.MANUAL, named)
             return out
@@ -144,14 +131,18 @@ class SimLoop(TickBoundary):
         """Reset worlds (all when None) to home, state and targets; returns the effective tick."""
         idx = np.arange(self.batch.nworld) if worlds is None else np.asarray(worlds, dtype=int)
         with self._lock:
-            self._reset[idx] = True
-            self._dirty[idx] = False
-            self._pending[idx] = self.batch.home_target
-            self._velocity[idx] = 0.0
+            tick = self._accept_tick()
+            self._table.stage_reset(idx, tick)
             if self._traj is not None:
                 self._traj.overridden(idx, Override.RESET)
+            return tick
+
+    def stage_state(self, writes: Sequence[StateWrite]) -> int:
+        """Stage qpos/qvel slices (validated by their command) for the next tick boundary,
+        after that boundary's resets; returns the tick they take effect at."""
+        with self._lock:
             tick = self._accept_tick()
-            self._effective[idx] = tick
+            self._table.stage_state(writes, tick)
             return tick
 
     def attach_trajectories(self, hook: TrajectoryHook) -> None:
@@ -162,15 +153,15 @@ class SimLoop(TickBoundary):
     def staging(self, worlds: np.ndarray | None = None) -> Iterator[Staging]:
         """Hold the command lock and lend the pending tables; `worlds` get the effective tick."""
         with self._lock:
-            st = Staging(self._pending, self._velocity, self._dirty, self._accept_tick())
+            st = self._staged()
             yield st
             if worlds is not None:
-                self._effective[worlds] = st.tick
+                self._table.effective[worlds] = st.tick
 
     def pending_targets(self, world: int | np.ndarray) -> np.ndarray:
         """Targets as of every command accepted so far (some may not be in effect yet)."""
         with self._lock:
-            return self._pending[world].copy()
+            return self._table.pending[world].copy()
 
     # -- time control -----------------------------------------------------------------------
 
@@ -281,8 +272,9 @@ class SimLoop(TickBoundary):
     def _tick_once(self, mode: Mode) -> None:
         """One tick as named stages, each holding the lock only for its own bookkeeping."""
         t0 = time.perf_counter()
-        resets, dirty, targets, velocity = self._take_commands()
-        self._apply(resets, dirty, targets, velocity)
+        writes = self._take_commands()
+        if writes:
+            self.batch.write(writes)  # the engines' one door
         t_step = time.perf_counter()
         faulted = self.batch.step(1)
         self.engine_seconds += time.perf_counter() - t_step
@@ -303,35 +295,19 @@ class SimLoop(TickBoundary):
             except Exception:
                 log.exception("tick listener %r failed", listener)
 
-    def _take_commands(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
-        """Take what is pending from under the lock: (resets, dirty worlds, their targets and
-        velocity feed-forward, None when all zero); running trajectories are sampled first."""
+    def _take_commands(self) -> TickWrites:
+        """Take what is pending from under the lock as the engine's `TickWrites` (velocity
+        None when all zero); running trajectories are sampled first."""
         with self._lock:
             if self._traj is not None:
                 self._traj.sample(self._tick + 1, self._staged())
-            resets = np.flatnonzero(self._reset)
-            dirty = np.flatnonzero(self._dirty)
-            targets = self._pending[dirty].copy()
-            velocity = self._velocity[dirty].copy()
-            self._reset[:] = False
-            self._dirty[:] = False
+            writes = self._table.take()
             self._stepping = True
-        return resets, dirty, targets, velocity if velocity.any() else None
+        return writes
 
     def _staged(self) -> Staging:
         """The pending tables for the hook (lock held)."""
-        return Staging(self._pending, self._velocity, self._dirty, self._accept_tick())
-
-    def _apply(
-        self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray, vel: np.ndarray | None
-    ) -> None:
-        """Hand the tick's commands to the engine: resets first, then targets."""
-        self.batch.reset(resets)
-        if dirty.size:
-            if vel is None:  # no feed-forward: the plain call every engine has always had
-                self.batch.apply_targets(dirty, targets)
-            else:
-                self.batch.apply_targets(dirty, targets, vel)
+        return self._table.view(self._accept_tick())
 
     def _finish_tick(self, faulted: np.ndarray, mode: Mode, now: float) -> bool:
         """Count the tick, forget targets of worlds reset for faults; is a snapshot wanted?"""
@@ -339,9 +315,7 @@ class SimLoop(TickBoundary):
             self._tick = self.batch.tick
             self._stepping = False
             if faulted.size:
-                keep = faulted[~self._dirty[faulted]]  # commands that arrived since still apply
-                self._pending[keep] = self.batch.home_target
-                self._velocity[keep] = 0.0
+                self._table.faulted(faulted)
             traj = self._traj is not None and self._traj.after_step(
                 self._tick, faulted, self._staged()
             )

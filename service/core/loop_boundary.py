@@ -19,7 +19,7 @@ import numpy as np
 
 from service.core.batch import Batch
 from service.core.loop_types import RestoreListener, resolve, run_request
-from service.core.staging import TrajectoryHook
+from service.core.staging import CommandTable, TrajectoryHook
 from service.core.types import BatchState, Mode, Snapshot
 
 log = logging.getLogger("armfleet.loop")
@@ -37,12 +37,8 @@ class TickBoundary:
     _tick: int
     _step_goal: int
     _stepping: bool
-    _pending: np.ndarray
-    _velocity: np.ndarray
+    _table: CommandTable
     _traj: TrajectoryHook | None
-    _dirty: np.ndarray
-    _reset: np.ndarray
-    _effective: np.ndarray
     _window: tuple[float, int]
     _latest: Snapshot
     _step_waiters: list[tuple[int, concurrent.futures.Future[int]]]
@@ -91,13 +87,9 @@ class TickBoundary:
         with self._lock:
             self._tick = batch.tick
             self._step_goal = self._tick
-            self._pending = batch.targets
-            self._velocity[:] = 0.0
+            self._table.restored(batch.targets, self._tick)
             if self._traj is not None:
                 self._traj.restored()
-            self._dirty[:] = False
-            self._reset[:] = False
-            self._effective[:] = self._tick  # what was accepted before belongs to the old state
             self._window = (time.monotonic(), self._tick)
             waiting, self._step_waiters = self._step_waiters, []
         for listener in self._restore_listeners:
@@ -135,8 +127,9 @@ class TickBoundary:
         fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
         with self._wake:
             need = self._tick + (1 if self._stepping else 0)
-            if self._effective.size:
-                chosen = self._effective if worlds is None else self._effective[worlds]
+            effective = self._table.effective
+            if effective.size:
+                chosen = effective if worlds is None else effective[worlds]
                 need = max(need, int(chosen.max(initial=0)))
             if self._latest.tick >= need or not self._running or self._will_not_advance():
                 fut.set_result(self._latest)

@@ -6,7 +6,7 @@ Joint-state fields follow sensor_msgs/JointState (`name`, `position`, `velocity`
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Self
+from typing import Annotated, Any
 
 from pydantic import (
     BaseModel,
@@ -14,7 +14,9 @@ from pydantic import (
     Field,
     model_validator,
 )
+from pydantic_core import PydanticCustomError
 
+from service.core.commands.rules import BadJointState, joint_state
 from service.core.schema_fields import (
     Delta,
     FiniteFloat,
@@ -23,10 +25,10 @@ from service.core.schema_fields import (
     Paired,
     Strict,
     WorldId,
+    default_spec,
     equal_lengths,
     json_int,
     non_null,
-    paired,
     paired_config,
 )
 from service.core.types import NJOINT, JointSpec, Mode
@@ -233,11 +235,16 @@ class JointTargets(Strict):
     # JointState also carries header/velocity/effort: allowed, and ignored
     model_config = ConfigDict(extra="allow", json_schema_extra=_schema)
 
-    @model_validator(mode="after")
-    def _pairs(self) -> Self:
-        if self.name or len(self.position) != NJOINT:
-            paired("name", self.name, "position", self.position)
-        return self
+    @model_validator(mode="before")
+    @classmethod
+    def _the_rule(cls, data: Any) -> Any:
+        """The one JointState rule, so that HTTP refuses with the same words as every surface."""
+        if isinstance(data, dict):
+            try:
+                joint_state(default_spec(), data.get("name", []), data.get("position"))
+            except BadJointState as exc:
+                raise PydanticCustomError("joint_state", "{rule}", {"rule": str(exc)}) from None
+        return data
 
 
 class BatchTargets(Paired):

@@ -1,4 +1,5 @@
-"""What the loop lends a trajectory runner: its pending command tables, under its lock.
+"""The loop's command table (`CommandTable`), and what the loop lends a trajectory runner: the
+table's arrays, under the loop's lock.
 
 `SimLoop.staging()` yields a `Staging` with the command lock held; `TrajectoryHook` is what the
 loop calls on the runner at each stage of a tick (service.core.trajectory.TrajectoryManager is the
@@ -9,10 +10,14 @@ internals, and the loop never imports the trajectory package.
 from __future__ import annotations
 
 import enum
+from collections.abc import Callable, Sequence
 from typing import NamedTuple, Protocol
 
 import numpy as np
 
+from service.core.batch import StateWrite, TickWrites
+from service.core.commands.arithmetic import TargetUpdate
+from service.core.loop_types import CommandResult
 from service.core.types import Snapshot
 
 
@@ -60,3 +65,94 @@ class TrajectoryHook(Protocol):
 
     def dispatch(self) -> None:
         """After the tick, no lock held: hand finished trajectories to their listeners."""
+
+
+class CommandTable:
+    """The loop's one command table: what accepted commands staged and the engine has not yet
+    been handed. The loop holds its lock around every method (commands arrive on any thread;
+    `take` runs on the sim thread); the loop owns time, this owns what was staged.
+
+    pending: targets as of all accepted commands [rad]              (nworld, 7) float64
+    velocity: feed-forward staged with them [rad/s]                  (nworld, 7) float64
+    dirty / reset: worlds whose targets / reset go to the engine next      (nworld,) bool
+    state: qpos/qvel slices in the order staged
+    effective: per world, the tick its latest accepted command takes effect at   (nworld,)
+    """
+
+    def __init__(self, targets: np.ndarray, home: np.ndarray) -> None:
+        self.home = home
+        self.pending = np.array(targets, dtype=np.float64)
+        self.velocity = np.zeros_like(self.pending)
+        self.dirty = np.zeros(len(targets), dtype=bool)
+        self.reset = np.zeros(len(targets), dtype=bool)
+        self.state: list[StateWrite] = []
+        self.effective = np.zeros(len(targets), dtype=np.int64)
+
+    def view(self, tick: int) -> Staging:
+        """The tables a trajectory runner edits in place, for commands taking effect at `tick`."""
+        return Staging(self.pending, self.velocity, self.dirty, tick)
+
+    def stage_rows(
+        self,
+        worlds: Sequence[int],
+        update: Callable[[int, np.ndarray], TargetUpdate],
+        tick: int,
+    ) -> list[CommandResult]:
+        """New target rows, each `update(world, its latest row)` so that commands compose."""
+        out = []
+        for world in worlds:
+            row = update(world, self.pending[world])
+            self.pending[world] = row.target
+            self.velocity[world] = 0.0  # a trajectory that goes on writes its own next tick
+            self.dirty[world] = True
+            self.effective[world] = tick
+            out.append(CommandResult(world, row.target.copy(), row.clamped, tick))
+        return out
+
+    def stage_reset(self, worlds: np.ndarray, tick: int) -> None:
+        """Worlds back at home; a reset staged later wins over their earlier target and state
+        writes of the same tick boundary."""
+        self.reset[worlds] = True
+        self.dirty[worlds] = False
+        if self.state:
+            gone = set(worlds.tolist())
+            self.state = [w for w in self.state if w.world not in gone]
+        self.pending[worlds] = self.home
+        self.velocity[worlds] = 0.0
+        self.effective[worlds] = tick
+
+    def stage_state(self, writes: Sequence[StateWrite], tick: int) -> None:
+        self.state.extend(writes)
+        for w in writes:
+            self.effective[w.world] = tick
+
+    def take(self) -> TickWrites:
+        """Everything staged, as the engine's `TickWrites`; the table starts empty again."""
+        dirty = np.flatnonzero(self.dirty)
+        velocity = self.velocity[dirty].copy()
+        writes = TickWrites(
+            resets=np.flatnonzero(self.reset),
+            worlds=dirty,
+            targets=self.pending[dirty].copy(),
+            velocities=velocity if velocity.any() else None,
+            state=tuple(self.state),
+        )
+        self.reset[:] = False
+        self.dirty[:] = False
+        self.state = []
+        return writes
+
+    def faulted(self, worlds: np.ndarray) -> None:
+        """The engine reset `worlds` for a fault: home, unless a command arrived since."""
+        keep = worlds[~self.dirty[worlds]]
+        self.pending[keep] = self.home
+        self.velocity[keep] = 0.0
+
+    def restored(self, targets: np.ndarray, tick: int) -> None:
+        """The batch continues from a saved state: what was staged belonged to the old one."""
+        self.pending = np.array(targets, dtype=np.float64)
+        self.velocity[:] = 0.0
+        self.dirty[:] = False
+        self.reset[:] = False
+        self.state = []
+        self.effective[:] = tick

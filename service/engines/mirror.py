@@ -4,8 +4,9 @@ Whatever steps the worlds (a Warp device, native MuJoCo, worker processes, Ray a
 engine itself remembers in host memory what it was told and what it counted, so that `targets`
 and `tick` answer without a device round trip, a lost shard can be rebuilt with its worlds'
 targets, and a `BatchState` carries them. The rules are the same for every engine and live here
-once: targets are clamped to the joint ranges, a reset (asked for, or for a fault) puts a world
-back at home with zero feed-forward, and faults are counted per world.
+once: the door's order (`write`: resets, then state slices, then targets, as the commands
+staged them, already clamped), a reset (asked for, or for a fault) puts a world back at home
+with zero feed-forward, and faults are counted per world.
 
 An engine mixes `HostMirror` in, calls `_init_mirror` in its constructor and uses the methods
 below where it used to write the arrays itself; its device-side work stays its own.
@@ -18,6 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from service.core.batch import StateWrite, TickWrites
 from service.core.types import NJOINT, BatchState, RobotSpec
 
 
@@ -32,7 +34,10 @@ class HostMirror:
     _tick: int
     _world_ticks: np.ndarray
     _faults: np.ndarray
+    tick_dt: float
     reset: Callable[[np.ndarray], None]  # the engine's own: state and targets back at home
+    write_state: Callable[[StateWrite], None]  # the engine's own: a qpos/qvel slice now
+    apply_targets: Callable[..., None]  # the engine's own: targets (and feed-forward) now
 
     def _init_mirror(self, nworld: int) -> None:
         """Every world at home, nothing counted yet (`spec` and `home_target` set before)."""
@@ -52,13 +57,25 @@ class HostMirror:
         """A copy of the targets in effect, (nworld, 7) [rad]."""
         return self._targets.copy()
 
+    def write(self, writes: TickWrites) -> None:
+        """The engines' one door (service.core.batch): resets, then state, then targets."""
+        self.reset(writes.resets)
+        for state in writes.state:
+            self.write_state(state)
+        if writes.worlds.size:
+            self.apply_targets(writes.worlds, writes.targets, writes.velocities)
+
+    def host_columns(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(sim_time [s], targets (k, 7), faults) of worlds `ids` from the mirror, copies."""
+        return self._world_ticks[ids] * self.tick_dt, self._targets[ids], self._faults[ids]
+
     def _command(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None
     ) -> np.ndarray:
-        """Record targets (clamped to the joint ranges) and feed-forward (None: zero) for
-        `worlds`; returns `worlds` as int64 ids for the engine's own write."""
+        """Record targets (as given: the command clamped them) and feed-forward (None: zero)
+        for `worlds`; returns `worlds` as int64 ids for the engine's own write."""
         worlds = np.asarray(worlds, dtype=np.int64)
-        self._targets[worlds] = np.clip(targets, self.spec.lower, self.spec.upper)
+        self._targets[worlds] = targets
         self._velocity[worlds] = 0.0 if velocities is None else velocities
         return worlds
 

@@ -27,8 +27,8 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from mjcf import SCENE_XML
-from service.core.batch import Batch, Restorable
-from service.core.frames import PackedRows
+from service.core.batch import Batch, Restorable, StateWrite
+from service.core.packed_rows import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
 from service.core.types import PHYSICS_FIELDS, BatchState, Poses, Snapshot
@@ -335,6 +335,11 @@ class NativeBatch(HostMirror, Batch, Restorable):
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos (used to inject faults on purpose in tests)."""
         self._qpos[world] = qpos
+
+    def write_state(self, write: StateWrite) -> None:
+        """A qpos/qvel slice of one world, into its row of the live state."""
+        rows = self._qpos if write.field == "qpos" else self._qvel
+        rows[write.world, write.index] = write.values
 
     def capacity_usage(self) -> tuple[int, int]:
         """(contacts in all worlds together, largest constraint count of any world) as of the

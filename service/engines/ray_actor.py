@@ -17,7 +17,7 @@ import numpy as np
 import ray
 
 from service.core.types import BatchState
-from service.engines.sharding import apply_and_step
+from service.engines.sharding import Shipment, apply_and_step
 from service.engines.shards import MIN_WORLDS_PER_SHARD
 from service.engines.warp import SnapshotArrays, WorldBatch
 
@@ -97,12 +97,10 @@ class ShardActor:
             "node": ray.get_runtime_context().get_node_id(),
         }
 
-    def step(
-        self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray, ticks: int
-    ) -> tuple[np.ndarray, float]:
+    def step(self, shipment: Shipment, ticks: int) -> tuple[np.ndarray, float]:
         """Apply the staged commands, step; (faulted local ids, seconds the shard spent)."""
         t0 = time.perf_counter()
-        faulted = apply_and_step(self._batch, resets, dirty, targets, ticks)
+        faulted = apply_and_step(self._batch, shipment, ticks)
         return faulted, time.perf_counter() - t0
 
     def snapshot(self) -> SnapshotArrays:
@@ -115,9 +113,9 @@ class ShardActor:
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         self._batch.write_qpos(world, qpos)
 
-    def get_state(self, resets: np.ndarray, dirty: np.ndarray, targets: np.ndarray) -> BatchState:
+    def get_state(self, shipment: Shipment) -> BatchState:
         """The shard's state after the commands staged for it (a step of zero ticks)."""
-        apply_and_step(self._batch, resets, dirty, targets, 0)
+        apply_and_step(self._batch, shipment, 0)
         return self._batch.get_state()
 
     def set_state(self, state: BatchState) -> None:

@@ -31,7 +31,7 @@ import ray
 from ray.exceptions import RayActorError
 
 from mjcf import SCENE_XML
-from service.core.batch import Batch, Restorable
+from service.core.batch import Batch, Restorable, StateWrite
 from service.core.errors import Unavailable
 from service.core.physics import configure
 from service.core.robot import load_robot
@@ -39,9 +39,9 @@ from service.core.types import BatchState, Snapshot
 from service.engines.mirror import HostMirror
 from service.engines.ray_actor import NEVER, RemoteShard, Shard, connect, ray_auto_shards
 from service.engines.sharding import (
+    NOTHING,
     ShardPlan,
     StagedCommands,
-    command_rows,
     join_states,
     slice_state,
 )
@@ -159,9 +159,8 @@ class RayBatch(HostMirror, Batch, Restorable):
         for i, s in enumerate(self._shards):
             if s.building is not None:
                 continue  # its staged commands wait; it comes back at home anyway
-            resets, dirty = self._staged.take(i)
-            targets = command_rows(self._targets, self._velocity, dirty + self._plan.starts[i])
-            refs[i] = s.actor.step.remote(resets, dirty, targets, ticks)
+            shipment = self._staged.ship(i, self._targets, self._velocity, self._plan.starts[i])
+            refs[i] = s.actor.step.remote(shipment, ticks)
         after = self._tick + ticks
         if self._snapshot_expected(after):
             # Asked for now, the snapshot follows the step's reply at once (an actor runs its
@@ -202,9 +201,8 @@ class RayBatch(HostMirror, Batch, Restorable):
         if time.monotonic() - self._checkpoint_at < self.checkpoint_s:
             return
         self._checkpoint_at = time.monotonic()
-        none = np.zeros(0, dtype=np.int64)
         refs = {
-            i: s.actor.get_state.remote(none, none, np.zeros((0, 7)))
+            i: s.actor.get_state.remote(NOTHING)
             for i, s in enumerate(self._shards)
             if s.building is None
         }
@@ -347,9 +345,8 @@ class RayBatch(HostMirror, Batch, Restorable):
         self._all_live("get_state")
         refs = []
         for i, s in enumerate(self._shards):
-            resets, dirty = self._staged.take(i)
-            targets = command_rows(self._targets, self._velocity, dirty + self._plan.starts[i])
-            refs.append(s.actor.get_state.remote(resets, dirty, targets))
+            shipment = self._staged.ship(i, self._targets, self._velocity, self._plan.starts[i])
+            refs.append(s.actor.get_state.remote(shipment))
         try:
             parts = ray.get(refs)
         except RayActorError as exc:
@@ -379,16 +376,19 @@ class RayBatch(HostMirror, Batch, Restorable):
         for s, part in zip(self._shards, parts, strict=True):
             s.last = part
 
+    def write_state(self, write: StateWrite) -> None:
+        """Staged for the shard that holds the world, sent with its next step."""
+        shard, local = self._plan.locate(write.world)
+        self._staged.state(shard, write.moved(local))
+
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos now (fault-injection tests), on the shard that holds it."""
-        shard = int(np.searchsorted(self._plan.starts, world, side="right")) - 1
-        local = world - int(self._plan.starts[shard])
+        shard, local = self._plan.locate(world)
         actor = self._shards[shard].actor
         # Commands staged before this call happen before it, as on a WorldBatch: send them
         # with a step of zero ticks first (an actor runs its calls in order).
-        resets, dirty = self._staged.take(shard)
-        targets = command_rows(self._targets, self._velocity, dirty + self._plan.starts[shard])
-        actor.step.remote(resets, dirty, targets, 0)
+        start = self._plan.starts[shard]
+        actor.step.remote(self._staged.ship(shard, self._targets, self._velocity, start), 0)
         ray.get(actor.write_qpos.remote(local, np.asarray(qpos)))
 
     def close(self) -> None:

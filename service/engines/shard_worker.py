@@ -11,7 +11,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from service.core.stopping import start_worker
-from service.engines.sharding import apply_and_step, apply_rows
+from service.engines.sharding import apply_and_step
 from service.engines.warp import WorldBatch
 
 
@@ -31,9 +31,7 @@ def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
         if op == "step":
             conn.send(apply_and_step(batch, *args))
         elif op == "get_state":
-            resets, dirty, rows = args  # staged commands are part of the state
-            batch.reset(resets)
-            apply_rows(batch, dirty, rows)
+            args[0].apply(batch)  # staged commands are part of the state
             conn.send(batch.get_state())
         elif op == "set_state":
             try:

@@ -10,9 +10,11 @@ so the two engines cannot drift apart in the lockstep semantics the tests pin do
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
+from service.core.batch import StateWrite
 from service.core.types import BatchState, Poses, Snapshot
 from service.engines.warp import WorldBatch
 
@@ -55,14 +57,40 @@ class ShardPlan:
             for start, size in zip(self.starts, self.sizes, strict=True)
         ]
 
+    def locate(self, world: int) -> tuple[int, int]:
+        """(the shard holding global world `world`, its local id there)."""
+        shard = int(np.searchsorted(self.starts, world, side="right")) - 1
+        return shard, world - int(self.starts[shard])
+
     def worlds_of(self, shard: int) -> np.ndarray:
         """The global ids of one shard's worlds."""
         start = int(self.starts[shard])
         return np.arange(start, start + int(self.sizes[shard]), dtype=np.int64)
 
 
+class Shipment(NamedTuple):
+    """What one shard's next step carries (local ids): resets, then state slices, then the
+    dirty worlds' command rows (`command_rows`), applied in that order (`apply`)."""
+
+    resets: np.ndarray
+    dirty: np.ndarray
+    rows: np.ndarray
+    state: tuple[StateWrite, ...] = ()
+
+    def apply(self, batch: WorldBatch) -> None:
+        """A shard's side: the loop's order, so a shard behaves like one WorldBatch."""
+        batch.reset(self.resets)
+        for write in self.state:
+            batch.write_state(write)
+        apply_rows(batch, self.dirty, self.rows)
+
+
+NOTHING = Shipment(_EMPTY, _EMPTY, np.zeros((0, 7)))
+
+
 class StagedCommands:
-    """Per shard, the resets and target changes waiting to travel with that shard's next step.
+    """Per shard, the resets, state slices and target changes waiting to travel with that
+    shard's next step.
 
     Targets are not copied here: the caller keeps one target table and reads the dirty rows when
     the step is sent, so a world commanded twice in one tick sends its last target once.
@@ -71,6 +99,7 @@ class StagedCommands:
     def __init__(self, shards: int) -> None:
         self._resets: list[np.ndarray] = [_EMPTY] * shards
         self._dirty: list[np.ndarray] = [_EMPTY] * shards
+        self._state: list[list[StateWrite]] = [[] for _ in range(shards)]
 
     def targets(self, shard: int, local_ids: np.ndarray) -> None:
         if local_ids.size:
@@ -81,6 +110,11 @@ class StagedCommands:
         if local_ids.size:
             self._resets[shard] = np.union1d(self._resets[shard], local_ids)
             self._dirty[shard] = np.setdiff1d(self._dirty[shard], local_ids)
+            self._state[shard] = [w for w in self._state[shard] if w.world not in local_ids]
+
+    def state(self, shard: int, write: StateWrite) -> None:
+        """A state slice (its world a local id), applied after the shard's resets."""
+        self._state[shard].append(write)
 
     def targets_of(self, parts: Sequence[np.ndarray], first: int = 0) -> None:
         """`targets` for each shard's part of a command (`ShardPlan.split`), from shard `first`."""
@@ -97,7 +131,15 @@ class StagedCommands:
         out = self._resets[shard], self._dirty[shard]
         self._resets[shard] = _EMPTY
         self._dirty[shard] = _EMPTY
+        self._state[shard] = []
         return out
+
+    def ship(self, shard: int, targets: np.ndarray, velocity: np.ndarray, start: int) -> Shipment:
+        """The shard's next step's `Shipment` (rows read from the caller's one target table,
+        `start` its first global world); the shard's stage is emptied."""
+        state = tuple(self._state[shard])
+        resets, dirty = self.take(shard)
+        return Shipment(resets, dirty, command_rows(targets, velocity, dirty + start), state)
 
 
 def command_rows(targets: np.ndarray, velocity: np.ndarray, worlds: np.ndarray) -> np.ndarray:
@@ -116,16 +158,10 @@ def apply_rows(batch: WorldBatch, dirty: np.ndarray, rows: np.ndarray) -> None:
             batch.apply_targets(dirty, rows)
 
 
-def apply_and_step(
-    batch: WorldBatch, resets: np.ndarray, dirty: np.ndarray, rows: np.ndarray, ticks: int
-) -> np.ndarray:
-    """A shard's side of one step: staged resets, then staged targets, then the ticks.
-
-    The order is the loop's (resets before targets, both before stepping), so a shard behaves
-    exactly like the same worlds inside one WorldBatch. Returns the shard's faulted local ids.
-    """
-    batch.reset(resets)
-    apply_rows(batch, dirty, rows)
+def apply_and_step(batch: WorldBatch, shipment: Shipment, ticks: int) -> np.ndarray:
+    """A shard's side of one step: what was staged (`Shipment.apply`), then the ticks.
+    Returns the shard's faulted local ids."""
+    shipment.apply(batch)
     return batch.step(ticks)
 
 

@@ -19,15 +19,15 @@ from typing import Any
 
 import numpy as np
 
-from service.core.batch import Batch, Restorable, Supervised
+from service.core.batch import Batch, Restorable, StateWrite, Supervised
 from service.core.types import BatchState, Snapshot
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
 from service.engines.shard_worker import ready_reply, spawn
 from service.engines.sharding import (
+    NOTHING,
     ShardPlan,
     StagedCommands,
-    command_rows,
     join_snapshots,
     join_states,
     slice_state,
@@ -141,10 +141,9 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
         for i, conn in enumerate(self._conns, start=1):
             if not self._alive[i]:
                 continue  # its commands stay staged (and in _targets) for the new worker
-            resets, dirty = self._staged.take(i)
-            targets = command_rows(self._targets, self._velocity, dirty + self._starts[i])
+            shipment = self._staged.ship(i, self._targets, self._velocity, self._starts[i])
             try:
-                conn.send(("step", resets, dirty, targets, ticks))
+                conn.send(("step", shipment, ticks))
             except OSError:
                 self._lost(i, self._exit_reason(i))
                 continue
@@ -196,9 +195,8 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
     def get_state(self) -> BatchState:
         """Every shard's state (staged commands applied first), joined in world order."""
         for i, conn in enumerate(self._conns, start=1):
-            resets, dirty = self._staged.take(i)
-            rows = command_rows(self._targets, self._velocity, dirty + self._starts[i])
-            conn.send(("get_state", resets, dirty, rows))
+            shipment = self._staged.ship(i, self._targets, self._velocity, self._starts[i])
+            conn.send(("get_state", shipment))
         parts = [self._local.get_state()] + [conn.recv() for conn in self._conns]
         return join_states(parts, self._targets)
 
@@ -229,9 +227,16 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
         parts = [(self._local.qpos(), self._local.qvel())] + [c.recv() for c in self._conns]
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
+    def write_state(self, write: StateWrite) -> None:
+        """The local shard's now; a worker's with its next step, after its resets."""
+        shard, local = self._plan.locate(write.world)
+        if shard == 0:
+            self._local.write_state(write.moved(local))
+        else:
+            self._staged.state(shard, write.moved(local))
+
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
-        shard = int(np.searchsorted(self._starts, world, side="right")) - 1
-        local = world - int(self._starts[shard])
+        shard, local = self._plan.locate(world)
         if shard == 0:
             self._local.write_qpos(local, qpos)
         else:
@@ -292,9 +297,8 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
         for i in shards:
             if not self._alive[i] or now - self._copies.get(i, (-1e9, None))[0] < STATE_COPY_PERIOD:
                 continue
-            empty = np.zeros(0, dtype=np.int64)
             try:
-                self._conns[i - 1].send(("get_state", empty, empty, np.zeros((0, 7))))
+                self._conns[i - 1].send(("get_state", NOTHING))
                 self._copies[i] = (now, self._conns[i - 1].recv())
             except (EOFError, OSError):
                 self._lost(i, self._exit_reason(i))

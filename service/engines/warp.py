@@ -21,8 +21,8 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
-from service.core.batch import Batch, Restorable
-from service.core.frames import PackedRows
+from service.core.batch import Batch, Restorable, StateWrite
+from service.core.packed_rows import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
 from service.core.types import PHYSICS_FIELDS, BatchState, Poses, Snapshot
@@ -360,6 +360,18 @@ class WorldBatch(HostMirror, Batch, Restorable):
         full = self._d.qpos.numpy().copy()
         full[world] = qpos
         self._d.qpos.assign(full)
+
+    def write_state(self, write: StateWrite) -> None:
+        """A qpos/qvel slice of one world: in place on the CPU (`.numpy()` is a view there), one
+        row's round trip on a GPU (commands that move bodies are rare next to ticks)."""
+        array = self._d.qpos if write.field == "qpos" else self._d.qvel
+        if self.device.is_cpu:
+            array.numpy()[write.world, write.index] = write.values
+            return
+        row = array[write.world : write.world + 1]
+        host = row.numpy()
+        host[0, write.index] = write.values
+        row.assign(host)
 
     def close(self) -> None:
         """Nothing to release (device memory goes with the object); ShardedBatch stops workers."""

@@ -22,7 +22,7 @@ import sys
 import numpy as np
 import warp as wp
 
-from service.core.frames import PackedRows
+from service.core.packed_rows import PackedRows
 
 NCOL = 37  # sim_time, position 7, velocity 7, effort 7, target 7, flange xyz, flange wxyz, faults
 RING = 3  # frames in flight per world selection (being copied or serialised)

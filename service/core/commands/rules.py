@@ -4,7 +4,9 @@
 - `joint_state`: a sensor_msgs/JointState-shaped command (`name`, `position`): the same answer
   on every surface (HTTP, WebSocket, the page, rosbridge, Foxglove, the ROS node). Names and
   positions pair up (a subset moves only those joints); with no names, one position per joint
-  in joint order, as the seed's Isaac subscriber read them; every name known and given once;
+  in joint order, as the seed's Isaac subscriber read them; every name a joint's name or its
+  index as a digit string, none written twice (a name and the index of the same joint: the
+  later wins, as with duplicate keys of a JSON object; the schema cannot tell them apart);
   every position a finite number.
 - Clamping to the joint ranges happens when a target is staged (`arithmetic`), once; the loop
   and the engines trust what was staged.
@@ -80,6 +82,9 @@ def joint_state(spec: RobotSpec, name: Any, position: Any) -> dict[int, float]:
             f"name and position must have equal lengths ({len(name)} names, "
             f"{len(position)} positions)",
         )
+    if len(set(name)) != len(name):
+        dup = next(n for n in name if name.count(n) > 1)
+        raise BadJointState("duplicate_joint", "name", f"joint {dup!r} named twice")
     out: dict[int, float] = {}
     for n, p in zip(name, position, strict=True):
         if not isinstance(n, str):
@@ -89,8 +94,6 @@ def joint_state(spec: RobotSpec, name: Any, position: Any) -> dict[int, float]:
         except (KeyError, TypeError):
             why = f"unknown joint {n!r}; joints are {joints}"
             raise BadJointState("unknown_joint", "name", why) from None
-        if index in out:
-            raise BadJointState("duplicate_joint", "name", f"joint {n!r} named twice")
         if isinstance(p, bool) or not isinstance(p, int | float):
             raise BadJointState("bad_type", f"position.{n}", f"must be a number, got {p!r}")
         if not math.isfinite(p):
