@@ -248,7 +248,15 @@ def capacity_runs() -> str:
     return _table(list(RUNS_HEAD), rows)
 
 
+def headline() -> str:
+    """How many worlds in real time, CPU and GPU, as bench/figures.py words it."""
+    from bench import figures  # figures builds on this module's helpers
+
+    return figures.headline()
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "headline": headline,
     "gpu": gpu,
     "profile": profile,
     "baseline": baseline,
