@@ -40,7 +40,7 @@ def _int(x: float) -> str:
 def _cores(payload: dict[str, Any]) -> str:
     m = payload.get("machine")
     if not m:
-        return "machine not recorded"
+        return payload.get("gpu") or "machine not recorded"
     gpus = m.get("gpus")
     if m.get("gpu") or gpus:
         return m.get("gpu") or f"{len(gpus)}× {gpus[0]}"
@@ -49,6 +49,8 @@ def _cores(payload: dict[str, Any]) -> str:
 
 def command(payload: dict[str, Any]) -> str:
     """The command line that wrote a result file, as a user would type it."""
+    if payload.get("commands"):  # a run written by hand: its first command, without remarks
+        return payload["commands"][0].split("   ")[0].replace(" --out replay_cuda.json", "")
     argv = list(payload.get("command") or [])
     if not argv:
         if payload.get("number"):
@@ -69,7 +71,7 @@ def command(payload: dict[str, Any]) -> str:
 
 def caption(payload: dict[str, Any]) -> str:
     """Machine, date and command of a result file, one line under its table."""
-    date = str(payload.get("started", "?")).replace("T", " ")[:16]
+    date = str(payload.get("started") or payload.get("date", "?")).replace("T", " ")[:16]
     return f"*{_cores(payload)}, {date} UTC; `{command(payload)}`*"
 
 
@@ -104,6 +106,16 @@ def _largest_fit() -> str:
     return _int(fits[0]["nworld"])
 
 
+def _ray_rt() -> dict[str, Any]:
+    """The Ray round trip per tick at 60 Hz, on the smallest batch (the cost of Ray alone)."""
+    rt = load("ray_cuda.json")["rt"]
+    return rt[min(rt, key=int)]
+
+
+def _replay_rate(mode: str) -> float:
+    return load("replay_cuda.json")["modes"][mode]["rate"]["ticks_per_s"]
+
+
 FIGURES: dict[str, Callable[[], str]] = {
     "cpu.machine": lambda: _cores(load(CPU_CAPACITY)),
     "cpu.date": lambda: load(CPU_CAPACITY)["started"][:10],
@@ -122,6 +134,26 @@ FIGURES: dict[str, Callable[[], str]] = {
     "gpu.binary_65536": _gpu("65536", "ratio_to_engine"),
     "gpu.json_16384": _gpu("16384", "ratio_to_engine", GPU_JSON),
     "gpu.largest_fit": _largest_fit,
+    "ray.steps_two_vs_one": lambda: readme_tables._r(load("ray_cuda.json")["steps_scaling"]),
+    "ray.steps_two_vs_in_process": lambda: readme_tables._r(
+        load("ray_cuda.json")["steps_scaling_vs_in_process"]
+    ),
+    "ray.snapshots_two_vs_one": lambda: readme_tables._r(load("ray_cuda.json")["scaling"]),
+    "ray.snapshots_two_vs_in_process": lambda: readme_tables._r(
+        load("ray_cuda.json")["scaling_vs_in_process"]
+    ),
+    "ray.round_trip_p50_ms": lambda: f"{_ray_rt()['ray_overhead']['p50_ms']:.1f}",
+    "ray.round_trip_p99_ms": lambda: f"{_ray_rt()['ray_overhead']['p99_ms']:.1f}",
+    "ray.gpu_rebuild_s": lambda: f"{load('ray_cuda.json')['loss']['rebuild_s']:.1f}",
+    "ray.host_recover_s": lambda: f"{load('ray_hosts.json')['rows'][0]['recover s']:.1f}",
+    "cuda_replay.default_ticks_per_s": lambda: f"{_replay_rate('default'):.0f}",
+    "cuda_replay.atomics_ticks_per_s": lambda: f"{_replay_rate('atomics'):.0f}",
+    "cuda_replay.atomics_slower": lambda: (
+        f"{_replay_rate('default') / _replay_rate('atomics'):.1f}×"
+    ),
+    "cuda_replay.divergence": lambda: load("replay_cuda.json")["modes"]["default"]["replay"][
+        "divergence"
+    ],
 }
 
 
@@ -178,17 +210,35 @@ def _result_rows(payload: dict[str, Any]) -> list[dict[str, Any]]:
     return rows
 
 
+def _replay_rows(payload: dict[str, Any]) -> list[dict[str, Any]]:
+    """The CUDA determinism probe: two runs of the same commands, compared by tick range."""
+    probe = payload.get("modes", {}).get("default", {}).get("probe", {})
+    return [
+        {
+            "ticks": r["ticks"],
+            "worlds differing": r["worlds_differing"],
+            "largest |Δposition| rad": r["max_abs_position"],
+            "largest |Δvelocity| rad/s": r["max_abs_velocity"],
+            "largest |Δeffort| N·m": r["max_abs_effort"],
+        }
+        for r in probe.get("ranges", [])
+    ]
+
+
 def section_table(name: str) -> str:
     """A result file's ``rows`` as a Markdown table, its notes and its caption."""
     payload = load(name)
-    rows = payload.get("rows") or _http_rows(payload) or _result_rows(payload)
+    rows = (
+        payload.get("rows") or _http_rows(payload) or _result_rows(payload) or _replay_rows(payload)
+    )
     if not rows:
         raise KeyError(f"{name}: no rows to show")
     head: list[str] = []
     for row in rows:
         head += [k for k in row if k not in head]
     body = [[_cell(k, row.get(k)) for k in head] for row in rows]
-    lines = [readme_tables._table(head, body), "", caption(payload)]
+    names = [k.replace("|", "\\|") for k in head]
+    lines = [readme_tables._table(names, body), "", caption(payload)]
     lines += [f"\n{note}" for note in payload.get("notes") or []]
     return "\n".join(lines)
 

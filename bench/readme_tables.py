@@ -1,4 +1,4 @@
-"""The README's performance tables, regenerated from bench/results/*.json (issue 20).
+"""The README's performance tables and headline, regenerated from bench/results/*.json.
 
 Each table sits in README.md between ``<!-- bench:NAME -->`` and ``<!-- /bench:NAME -->``;
 ``python -m bench.readme_tables`` rewrites what is between them from the results files, so the

@@ -12,7 +12,7 @@ import typer
 
 
 def _cell(text: str) -> str:
-    return " ".join(text.split()).replace("|", "\\|")
+    return " ".join(text.split()).replace("|", "\\|").replace("[", "\\[")
 
 
 def render() -> str:
@@ -37,6 +37,7 @@ def render() -> str:
         if records:
             lines += ["| option | what |", "|---|---|"]
             for _, (opts, what) in records:
-                lines.append(f"| `{_cell(opts)}` | {_cell(what)} |")
+                code = opts.replace("|", "\\|")
+                lines.append(f"| `{code}` | {_cell(what)} |")
             lines.append("")
     return "\n".join(lines)

@@ -8,6 +8,7 @@ search treat them like any page) holding a placeholder that is replaced while th
     {{ gen cli }}        the `armfleet` command from its Typer app (cli_md)
     {{ gen settings }}   settings and ARMFLEET_* variables from the Settings model (settings_md)
     {{ gen layers }}     the layers and what each may import (layers_md)
+    {{ gen modules }}    every module with its docstring's summary (layers_md)
     {{ gen headline }}   how many worlds in real time, CPU and GPU (bench/figures.py)
     {{ table NAME }}     a bench table: one of bench/readme_tables.TABLES, or a results file
     {{ fig NAME }}       one measured figure for prose (bench/figures.FIGURES)
@@ -27,9 +28,16 @@ from mkdocs.exceptions import PluginError
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
-for folder in (ROOT, HERE):  # the checkout's service/bench/clients, and the generators here
-    if str(folder) not in sys.path:
+
+
+def _on_path() -> None:
+    """This checkout's service/bench/clients and the generators here come first on the path
+    (MkDocs restores sys.path after loading a hook module, so this runs at build time)."""
+    for folder in (ROOT, HERE):
+        if str(folder) in sys.path:
+            sys.path.remove(str(folder))
         sys.path.insert(0, str(folder))
+
 
 PLACEHOLDER = re.compile(r"\{\{ (gen|table|fig) ([\w./-]+) \}\}")
 
@@ -55,6 +63,7 @@ def _generators() -> dict[str, Callable[[], str]]:
         "cli": cli_md.render,
         "settings": settings_md.render,
         "layers": layers_md.render,
+        "modules": layers_md.modules,
         "headline": figures.headline,
     }
 
@@ -75,6 +84,7 @@ _cache: dict[tuple[str, str], str] = {}
 
 
 def on_pre_build(config: Any) -> None:
+    _on_path()
     _cache.clear()  # `mkdocs serve` rebuilds: read the code and results again
 
 

@@ -50,3 +50,37 @@ def render() -> str:
         )
         lines.append(f"| {rank} | {folder} | {what} | {may} |")
     return "\n".join(lines)
+
+
+# Folders whose modules the architecture page lists, each module with its docstring's summary.
+FOLDERS = (
+    "service",
+    "service/core",
+    "service/core/trajectory",
+    "service/engines",
+    "service/persistence",
+    "service/surfaces",
+    "service/surfaces/ros",
+    "service/api",
+    "clients",
+    "bench",
+)
+
+
+def _summary(path: Path) -> str:
+    """A module's docstring: its first sentence (up to a full stop or a blank line)."""
+    doc = ast.get_docstring(ast.parse(path.read_text())) or ""
+    first = " ".join(doc.split("\n\n")[0].split())
+    found = re.match(r"(.+?\.)(\s|$)", first)
+    return (found.group(1) if found else first).replace("|", "\\|")
+
+
+def modules() -> str:
+    """Every module of the packages above, folder by folder, from its own docstring."""
+    lines: list[str] = []
+    for folder in FOLDERS:
+        paths = sorted(p for p in (ROOT / folder).glob("*.py") if p.name != "__init__.py")
+        lines += [f"### `{folder}/`", "", "| module | what |", "|---|---|"]
+        lines += [f"| `{p.name}` | {_summary(p)} |" for p in paths]
+        lines.append("")
+    return "\n".join(lines)
