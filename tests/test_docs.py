@@ -6,6 +6,7 @@ measured figure comes from bench/results, not from a hand.
 
 from __future__ import annotations
 
+import html
 import os
 import re
 import shutil
@@ -25,9 +26,9 @@ PAGES = sorted(DOCS.rglob("*.md"))
 
 # "issue 20", "issues 13 and 16", "#20 of the tracker"; and the word "session(s)" on its own
 # (class names such as WorldSession are not words of their own and do not match).
-TRACKER = re.compile(r"(?i)\bissues?\s*#?\d+|\bsessions?\b")
+TRACKER = re.compile(r"(?i)\bissues?\s*#?\d+(?![\w/])|\bsessions?\b")
 # A measured ratio typed into prose: "0.94×". Prose takes figures from `{{ fig ... }}`.
-RATIO = re.compile(r"\d\s?×")
+RATIO = re.compile(r"\d×")
 FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
 BENCH_BLOCK = re.compile(r"<!-- bench:(\w+) -->.*?<!-- /bench:\1 -->", re.S)
 
@@ -52,9 +53,14 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def text_of(html: Path) -> str:
-    """The page's words: tags dropped, entities left (enough for the checks here)."""
-    return re.sub(r"<[^>]+>", " ", html.read_text())
+def text_of(page: Path) -> str:
+    """The page's words as a reader sees them: tags dropped, entities decoded, one space."""
+    return " ".join(html.unescape(re.sub(r"<[^>]+>", "", page.read_text())).split())
+
+
+def words(markdown: str) -> str:
+    """Markdown as it reads once rendered (code marks and emphasis dropped, one space)."""
+    return " ".join(markdown.replace("`", "").strip("*").split())
 
 
 def test_the_site_builds_strict_with_every_page_of_the_nav(site: Path) -> None:
@@ -70,7 +76,7 @@ def test_the_site_builds_strict_with_every_page_of_the_nav(site: Path) -> None:
     listed = pages(config["nav"])
     assert sorted(listed) == sorted(str(p.relative_to(DOCS)) for p in PAGES)
     for page in listed:
-        built = site / (page.removesuffix(".md").removesuffix("index") + "/index.html")
+        built = site / page.removesuffix(".md").removesuffix("index") / "index.html"
         assert built.exists(), page
 
 
@@ -109,7 +115,7 @@ def test_the_client_reference_is_generated_from_the_docstrings(site: Path) -> No
     for method in ("increment", "set_targets", "stream", "follow_trajectory"):
         assert f'id="clients.client.ArmfleetClient.{method}"' in page
         summary = (getattr(ArmfleetClient, method).__doc__ or "").split("\n")[0].split("(")[0]
-        assert summary.strip()[:30] in text_of(site / "reference/python-client/index.html")
+        assert words(summary)[:30] in text_of(site / "reference/python-client/index.html")
 
 
 def test_the_figures_shown_are_those_of_bench_results(site: Path) -> None:
@@ -117,7 +123,7 @@ def test_the_figures_shown_are_those_of_bench_results(site: Path) -> None:
     perf = text_of(site / "performance/index.html")
     for name in ("cpu.native_worlds", "gpu.realtime_worlds", "gpu.largest_fit"):
         assert figures.figure(name) in home and figures.figure(name) in perf
-    assert figures.caption(figures.load("latency.json")).strip("*") in perf
+    assert words(figures.caption(figures.load("latency.json"))) in perf
 
 
 @pytest.mark.parametrize(
@@ -203,3 +209,12 @@ def test_the_readme_links_resolve() -> None:
                 for h in re.findall(r"^#+ (.+)$", target.read_text(), re.M)
             }
             assert anchor in slugs, link
+
+
+def test_the_pytest_guide_example_is_the_one_the_suite_runs() -> None:
+    """docs/guides/testing.md's example is tests/test_pytest_plugin.py's first test, word for
+    word, so the page shows a test that passes."""
+    guide = (DOCS / "guides/testing.md").read_text()
+    (example,) = re.findall(r"```python\n(.*?)```", guide, re.S)
+    body = example.split("\n\n\n", 1)[1]  # the test itself, after the imports
+    assert body.strip() in (ROOT / "tests/test_pytest_plugin.py").read_text()
