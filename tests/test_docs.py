@@ -12,6 +12,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -218,3 +219,31 @@ def test_the_pytest_guide_example_is_the_one_the_suite_runs() -> None:
     (example,) = re.findall(r"```python\n(.*?)```", guide, re.S)
     body = example.split("\n\n\n", 1)[1]  # the test itself, after the imports
     assert body.strip() in (ROOT / "tests/test_pytest_plugin.py").read_text()
+
+
+def test_armfleet_docs_serves_the_site_on_loopback() -> None:
+    """`armfleet docs` builds the site and serves it on 127.0.0.1 until stopped."""
+    import httpx
+
+    from clients.testing import free_port, stop
+
+    port = free_port()
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    command = [sys.executable, "-m", "service.cli", "docs", "--port", str(port)]
+    process = subprocess.Popen(
+        command, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            assert process.poll() is None, process.stdout.read().decode()  # type: ignore[union-attr]
+            try:
+                page = httpx.get(f"http://127.0.0.1:{port}/reference/http/", timeout=5)
+                break
+            except httpx.TransportError:
+                assert time.monotonic() < deadline, "armfleet docs did not serve in 120 s"
+                time.sleep(0.5)
+        assert page.status_code == 200
+        assert "POST /v1/worlds/{world}/increments" in html.unescape(page.text)
+    finally:
+        stop(process)
