@@ -8,6 +8,7 @@ and a few dozen lines of Markdown need no JavaScript viewer and nothing from the
 from __future__ import annotations
 
 import json
+import re
 from typing import Any
 
 METHODS = ("get", "put", "post", "delete", "patch")
@@ -158,7 +159,8 @@ def render() -> str:
         f"{info['version']} (what a running server serves at `/openapi.json`, browsable at "
         "`/docs`).",
         "",
-        info.get("description", "").strip(),
+        # a list right under a line of text needs a blank line to be a list in Markdown
+        re.sub(r"(?<=[^\n])\n\* ", "\n\n* ", info.get("description", "").strip()),
         "",
     ]
     return "\n".join(head + operations(doc) + schemas(doc))
