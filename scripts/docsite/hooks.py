@@ -76,6 +76,10 @@ def _table(name: str) -> str:
         source = TABLE_SOURCES.get(name)
         if source:
             text += "\n\n" + figures.caption(figures.load(source))
+        elif name == "capacity_runs":  # one file a run: the machine and command of the latest
+            latest = max(readme_tables.CAPACITY_RUNS.glob("*.json"))
+            folder = latest.relative_to(readme_tables.common.RESULTS_DIR)
+            text += "\n\nLatest: " + figures.caption(figures.load(str(folder)))
         return text
     return figures.section_table(name)
 
