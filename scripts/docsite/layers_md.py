@@ -52,19 +52,17 @@ def render() -> str:
     return "\n".join(lines)
 
 
-# Folders whose modules the architecture page lists, each module with its docstring's summary.
-FOLDERS = (
-    "service",
-    "service/core",
-    "service/core/trajectory",
-    "service/engines",
-    "service/persistence",
-    "service/surfaces",
-    "service/surfaces/ros",
-    "service/api",
-    "clients",
-    "bench",
-)
+# The packages whose modules the architecture page lists (with every package below them, found
+# on disk, so a new package shows up without an edit here).
+TOPS = ("service", "clients", "bench")
+
+
+def folders() -> list[str]:
+    found = []
+    for top in TOPS:
+        for init in sorted((ROOT / top).rglob("__init__.py")):
+            found.append(str(init.parent.relative_to(ROOT)))
+    return found
 
 
 def _summary(path: Path) -> str:
@@ -78,7 +76,7 @@ def _summary(path: Path) -> str:
 def modules() -> str:
     """Every module of the packages above, folder by folder, from its own docstring."""
     lines: list[str] = []
-    for folder in FOLDERS:
+    for folder in folders():
         paths = sorted(p for p in (ROOT / folder).glob("*.py") if p.name != "__init__.py")
         lines += [f"### `{folder}/`", "", "| module | what |", "|---|---|"]
         lines += [f"| `{p.name}` | {_summary(p)} |" for p in paths]
