@@ -1,4 +1,4 @@
-"""Sections 10, 12 and 13: the two engines side by side (issue 13; section 11: capacity.py).
+"""Sections 10, 12 and 13: the two engines side by side (section 11: capacity.py).
 
 10. ``engines``: native MuJoCo vs MuJoCo Warp vs raw ``mujoco.rollout`` on every core, at the
     same sizes in one run: each engine alone in this process, then ``armfleet serve --mode fast

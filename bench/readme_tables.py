@@ -1,4 +1,4 @@
-"""The README's performance tables, regenerated from bench/results/*.json (issue 20).
+"""The README's performance tables and headline, regenerated from bench/results/*.json.
 
 Each table sits in README.md between ``<!-- bench:NAME -->`` and ``<!-- /bench:NAME -->``;
 ``python -m bench.readme_tables`` rewrites what is between them from the results files, so the
@@ -248,7 +248,15 @@ def capacity_runs() -> str:
     return _table(list(RUNS_HEAD), rows)
 
 
+def headline() -> str:
+    """How many worlds in real time, CPU and GPU, as bench/figures.py words it."""
+    from bench import figures  # figures builds on this module's helpers
+
+    return figures.headline()
+
+
 TABLES: dict[str, Callable[[], str]] = {
+    "headline": headline,
     "gpu": gpu,
     "profile": profile,
     "baseline": baseline,

@@ -1,4 +1,4 @@
-"""Section 18: where a served tick's time goes, on the device and on the host (issue 20).
+"""Section 18: where a served tick's time goes, on the device and on the host.
 
 The service is built in this process (engine, SimLoop in fast mode, StreamHub on an event loop
 thread) with one subscriber of every world at 30 Hz, binary or JSON frames, and no socket: what

@@ -1,4 +1,4 @@
-"""Section 17: why the engine's tick measured faster than "raw captured MuJoCo Warp" (issue 20).
+"""Section 17: why the engine's tick measured faster than "raw captured MuJoCo Warp".
 
 Section 1 compared the engine's captured tick with `substeps` raw ``mjw.step`` calls captured
 into one graph; both step the same model with the same per-world buffers, yet at 65,536 worlds

@@ -131,7 +131,7 @@ def serve(
     env: variables added to this process's environment for the server (ARMFLEET_* settings)
     log_dir: where `server-PORT.log` goes (appended to), and `data-PORT/` (the server's
         ARMFLEET_DATA_DIR unless set); None: a temporary folder, removed when it stops
-    own_group: start it in a session and process group of its own, as a shell starts a
+    own_group: start it in a process group of its own (setsid), as a shell starts a
         foreground job: `os.killpg(server.process.pid, signal.SIGINT)` is then what a
         terminal's Ctrl-C does (every process of the service gets it, workers included)
 

@@ -1,4 +1,4 @@
-"""`armfleet` command line: serve, setup (warm the kernel cache), controller, watch, bench.
+"""`armfleet` command line: serve, setup (warm the kernel cache), controller, watch, bench, docs.
 
 Heavy imports (warp, mujoco_warp, tkinter) happen inside each command so `armfleet --help`
 is instant and `setup` can switch Warp's compile log on before Warp is imported.
@@ -257,6 +257,37 @@ def bench(
     report = runner.run(section or None, quick, device, worlds or None, out)
     if report["errors"]:
         raise typer.Exit(1)
+
+
+@app.command()
+def docs(
+    port: Annotated[int, typer.Option(help="port on 127.0.0.1 to serve the site on")] = 8001,
+    build: Annotated[bool, typer.Option("--build", help="only build the site, then exit")] = False,
+    out: Annotated[Path | None, typer.Option(help="with --build: where (default site/)")] = None,
+) -> None:
+    """Build the documentation site (docs/, mkdocs.yml) and serve it on 127.0.0.1 to read
+    locally; its reference pages are generated from this code as it builds."""
+    import importlib.util
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    config = root / "mkdocs.yml"
+    if not config.exists():
+        typer.echo("armfleet docs: the site's sources come with a source checkout", err=True)
+        raise typer.Exit(1)
+    if importlib.util.find_spec("mkdocs") is None:
+        typer.echo("armfleet docs: install the doc tools: pip install -e '.[docs]'", err=True)
+        raise typer.Exit(1)
+    mkdocs = [sys.executable, "-m", "mkdocs"]
+    if build:
+        site = out or root / "site"
+        command = [*mkdocs, "build", "--strict", "-f", str(config), "-d", str(site)]
+    else:
+        typer.echo(f"armfleet docs: http://127.0.0.1:{port}/ (Ctrl-C stops)")
+        command = [*mkdocs, "serve", "-f", str(config), "-a", f"127.0.0.1:{port}"]
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
+    raise typer.Exit(subprocess.run(command, cwd=root, env=env).returncode)
 
 
 if __name__ == "__main__":

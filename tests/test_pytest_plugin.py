@@ -1,5 +1,6 @@
 """The harness we offer users (`clients.testing`, the `armfleet` pytest plugin), used as a
-user would. The first test is the README's example, word for word: keep the two in step."""
+user would. The first test is the example of docs/guides/testing.md, word for word (tests/
+test_docs.py checks that the two are in step)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from clients import pytest_plugin
 from clients.testing import ServerFailed, serve, stop
 
 
-# -- README: "Test your own controller with pytest" ---------------------------------------------
+# -- docs/guides/testing.md: "Testing your controller with pytest" ----------------------------
 def test_elbow_settles_on_an_incremented_target(armfleet_server):
     with armfleet_server.client() as arm:
         info = arm.info()  # joint names, limits and home come from the served model
@@ -32,7 +33,7 @@ def test_elbow_settles_on_an_incremented_target(armfleet_server):
         assert state.position[elbow] == pytest.approx(ack.target[elbow], abs=0.01)
 
 
-# -- end of the README example ------------------------------------------------------------------
+# -- end of the example ------------------------------------------------------------------------
 
 
 def test_factory_serves_a_paused_batch_that_steps_exactly(armfleet_server_factory, tmp_path):

@@ -1,0 +1,249 @@
+"""The documentation site and the README cannot lie: the site builds with `mkdocs build --strict`
+(a broken link, a missing page, a placeholder or reference that no longer resolves fails it),
+its generated references hold what the code holds, no page speaks of tracker items, and a
+measured figure comes from bench/results, not from a hand.
+"""
+
+from __future__ import annotations
+
+import html
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from bench import figures, readme_tables
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+README = ROOT / "README.md"
+PAGES = sorted(DOCS.rglob("*.md"))
+
+# "issue 20", "issues 13 and 16", "#20 of the tracker"; and the word "session(s)" on its own
+# (class names such as WorldSession are not words of their own and do not match).
+TRACKER = re.compile(r"(?i)\bissues?\s*#?\d+(?![\w/])|\bsessions?\b")
+# A measured ratio typed into prose: "0.94×". Prose takes figures from `{{ fig ... }}`.
+RATIO = re.compile(r"\d×")
+FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
+BENCH_BLOCK = re.compile(r"<!-- bench:(\w+) -->.*?<!-- /bench:\1 -->", re.S)
+
+
+def build(config: Path, site: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
+    return subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(config), "-d", str(site)],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("site")
+    done = build(ROOT / "mkdocs.yml", out)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return out
+
+
+def text_of(page: Path) -> str:
+    """The page's words as a reader sees them: tags dropped, entities decoded, one space."""
+    return " ".join(html.unescape(re.sub(r"<[^>]+>", "", page.read_text())).split())
+
+
+def words(markdown: str) -> str:
+    """Markdown as it reads once rendered (code marks and emphasis dropped, one space)."""
+    return " ".join(markdown.replace("`", "").strip("*").split())
+
+
+def test_the_site_builds_strict_with_every_page_of_the_nav(site: Path) -> None:
+    config = yaml.safe_load((ROOT / "mkdocs.yml").read_text())
+
+    def pages(nav: list) -> list[str]:
+        out = []
+        for item in nav:
+            value = next(iter(item.values())) if isinstance(item, dict) else item
+            out += pages(value) if isinstance(value, list) else [value]
+        return out
+
+    listed = pages(config["nav"])
+    assert sorted(listed) == sorted(str(p.relative_to(DOCS)) for p in PAGES)
+    for page in listed:
+        built = site / page.removesuffix(".md").removesuffix("index") / "index.html"
+        assert built.exists(), page
+
+
+def test_the_http_reference_lists_every_route_the_app_serves(site: Path) -> None:
+    from service.app import create_app
+
+    page = text_of(site / "reference/http/index.html")
+    schema = create_app().openapi()
+    for path, ops in schema["paths"].items():
+        for method in ops:
+            assert f"{method.upper()} {path}" in page, (method, path)
+    for name in schema["components"]["schemas"]:
+        assert name in page
+
+
+def test_the_cli_and_settings_references_hold_every_command_and_variable(site: Path) -> None:
+    import typer
+
+    from service.cli import app
+    from service.core.settings import Settings
+
+    cli = text_of(site / "reference/cli/index.html")
+    group = typer.main.get_command(app)
+    for name in group.commands:  # type: ignore[attr-defined]
+        assert f"armfleet {name}" in cli
+    assert "--worlds" in cli and "ARMFLEET_WORLDS" in cli
+    settings = text_of(site / "reference/settings/index.html")
+    for field in Settings.model_fields:
+        assert f"ARMFLEET_{field.upper()}" in settings
+
+
+def test_the_client_reference_is_generated_from_the_docstrings(site: Path) -> None:
+    from clients import ArmfleetClient
+
+    page = (site / "reference/python-client/index.html").read_text()
+    for method in ("increment", "set_targets", "stream", "follow_trajectory"):
+        assert f'id="clients.client.ArmfleetClient.{method}"' in page
+        summary = (getattr(ArmfleetClient, method).__doc__ or "").split("\n")[0].split("(")[0]
+        assert words(summary)[:30] in text_of(site / "reference/python-client/index.html")
+
+
+def test_the_figures_shown_are_those_of_bench_results(site: Path) -> None:
+    home = text_of(site / "index.html")
+    perf = text_of(site / "performance/index.html")
+    for name in ("cpu.native_worlds", "gpu.realtime_worlds", "gpu.largest_fit"):
+        assert figures.figure(name) in home and figures.figure(name) in perf
+    assert words(figures.caption(figures.load("latency.json"))) in perf
+
+
+@pytest.mark.parametrize(
+    ("fault", "said"),
+    [
+        ("[a page that is not there](nowhere.md)", "nowhere.md"),
+        ("[an anchor that is not there](getting-started.md#no-such-part)", "no-such-part"),
+        ("{{ fig cpu.no_such_figure }}", "no_such_figure"),
+        ("::: clients.client.NoSuchClient", "NoSuchClient"),
+    ],
+)
+def test_a_broken_page_fails_the_build(tmp_path: Path, fault: str, said: str) -> None:
+    """The strict build above could fail: the same site with one fault in it does."""
+    docs = tmp_path / "docs"
+    shutil.copytree(DOCS, docs)
+    (docs / "index.md").write_text((DOCS / "index.md").read_text() + f"\n\n{fault}\n")
+    config = yaml.safe_load((ROOT / "mkdocs.yml").read_text())
+    config["docs_dir"] = str(docs)
+    config["hooks"] = [str(ROOT / h) for h in config["hooks"]]
+    python = config["plugins"][1]["mkdocstrings"]["handlers"]["python"]
+    python["paths"] = [str(ROOT)]
+    (tmp_path / "mkdocs.yml").write_text(yaml.safe_dump(config, sort_keys=False))
+    done = build(tmp_path / "mkdocs.yml", tmp_path / "site")
+    assert done.returncode != 0
+    assert said in done.stdout + done.stderr
+
+
+def test_no_page_speaks_of_tracker_items(site: Path) -> None:
+    found = {
+        str(p.relative_to(ROOT)): TRACKER.findall(p.read_text())
+        for p in [README, *PAGES]
+        if TRACKER.search(p.read_text())
+    }
+    built = {
+        str(p.relative_to(site)): TRACKER.findall(text_of(p))
+        for p in site.rglob("*.html")
+        if TRACKER.search(text_of(p))
+    }
+    assert found == {} and built == {}
+
+
+def test_the_checks_see_what_they_look_for() -> None:
+    assert TRACKER.search("as issue 20 asked") and TRACKER.search("in this session")
+    assert not TRACKER.search("AsyncWorldSession and the issues page")
+    assert RATIO.search("binary 0.94× the engine")
+
+
+def prose(text: str) -> str:
+    """Text outside code blocks, placeholders and generated README blocks."""
+    text = FENCE.sub("", BENCH_BLOCK.sub("", text))
+    return re.sub(r"\{\{ .*? \}\}|`[^`]*`", "", text)
+
+
+def test_no_measured_ratio_is_typed_by_hand() -> None:
+    typed = {
+        str(p.relative_to(ROOT)): RATIO.findall(prose(p.read_text()))
+        for p in [README, *PAGES]
+        if RATIO.search(prose(p.read_text()))
+    }
+    assert typed == {}
+
+
+def test_the_readme_figures_are_current() -> None:
+    """The README's generated blocks are what `python -m bench.readme_tables` writes today."""
+    text = README.read_text()
+    assert "<!-- bench:headline -->" in text
+    assert readme_tables.update(text) == text, "run: python -m bench.readme_tables"
+
+
+def test_the_readme_links_resolve() -> None:
+    text = README.read_text()
+    links = re.findall(r"\]\(([^)\s]+)\)", text)
+    assert any(link.startswith("docs/") for link in links)
+    for link in links:
+        if re.match(r"[a-z]+:", link) or link.startswith("#"):
+            continue
+        path, _, anchor = link.partition("#")
+        target = ROOT / path
+        assert target.exists(), link
+        if anchor and target.suffix == ".md":
+            slugs = {
+                re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-")
+                for h in re.findall(r"^#+ (.+)$", target.read_text(), re.M)
+            }
+            assert anchor in slugs, link
+
+
+def test_the_pytest_guide_example_is_the_one_the_suite_runs() -> None:
+    """docs/guides/testing.md's example is tests/test_pytest_plugin.py's first test, word for
+    word, so the page shows a test that passes."""
+    guide = (DOCS / "guides/testing.md").read_text()
+    (example,) = re.findall(r"```python\n(.*?)```", guide, re.S)
+    body = example.split("\n\n\n", 1)[1]  # the test itself, after the imports
+    assert body.strip() in (ROOT / "tests/test_pytest_plugin.py").read_text()
+
+
+def test_armfleet_docs_serves_the_site_on_loopback() -> None:
+    """`armfleet docs` builds the site and serves it on 127.0.0.1 until stopped."""
+    import httpx
+
+    from clients.testing import free_port, stop
+
+    port = free_port()
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    command = [sys.executable, "-m", "service.cli", "docs", "--port", str(port)]
+    process = subprocess.Popen(
+        command, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            assert process.poll() is None, process.stdout.read().decode()  # type: ignore[union-attr]
+            try:
+                page = httpx.get(f"http://127.0.0.1:{port}/reference/http/", timeout=5)
+                break
+            except httpx.TransportError:
+                assert time.monotonic() < deadline, "armfleet docs did not serve in 120 s"
+                time.sleep(0.5)
+        assert page.status_code == 200
+        assert "POST /v1/worlds/{world}/increments" in html.unescape(page.text)
+    finally:
+        stop(process)
