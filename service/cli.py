@@ -6,12 +6,15 @@ is instant and `setup` can switch Warp's compile log on before Warp is imported.
 
 from __future__ import annotations
 
+import inspect
 import logging
 import os
 import socket
 import time
+import types
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import typer
 
@@ -59,49 +62,44 @@ def _check_port_free(host: str, port: int) -> None:
             raise typer.Exit(1) from None
 
 
+def _cli_type(annotation: Any) -> Any:
+    """The type a `serve` option parses to, from a Settings field's annotation: `X | None` is
+    X, a Literal and a Path are typed as text (Settings checks them), the rest as they are."""
+    if get_origin(annotation) in (Union, types.UnionType):
+        return _cli_type(next(a for a in get_args(annotation) if a is not type(None)))
+    if get_origin(annotation) is Literal or annotation is Path:
+        return str
+    return annotation
+
+
+def _serve_signature(fn: Callable[..., None]) -> Callable[..., None]:
+    """Give `serve` one option per Settings field (`--worlds`, `--foxglove-port`, ...): the
+    options are derived from the settings model, never listed again here, so a setting a
+    surface adds is an option and an ARMFLEET_* variable at once."""
+    from service.core.settings import Settings
+
+    fn.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
+        [
+            inspect.Parameter(
+                name,
+                inspect.Parameter.KEYWORD_ONLY,
+                default=None,
+                annotation=Annotated[_cli_type(field.annotation) | None, _opt(name)],
+            )
+            for name, field in Settings.model_fields.items()
+        ]
+    )
+    return fn
+
+
 @app.command()
-def serve(
-    worlds: Annotated[int | None, _opt("worlds")] = None,
-    engine: Annotated[str | None, _opt("engine")] = None,
-    device: Annotated[str | None, _opt("device")] = None,
-    host: Annotated[str | None, _opt("host")] = None,
-    port: Annotated[int | None, _opt("port")] = None,
-    mode: Annotated[Mode | None, _opt("mode")] = None,
-    shards: Annotated[int | None, _opt("shards")] = None,
-    ray: Annotated[str | None, _opt("ray")] = None,
-    ray_checkpoint_s: Annotated[float | None, _opt("ray_checkpoint_s")] = None,
-    control_hz: Annotated[float | None, _opt("control_hz")] = None,
-    physics_dt: Annotated[float | None, _opt("physics_dt")] = None,
-    log_level: Annotated[str | None, _opt("log_level")] = None,
-    token: Annotated[str | None, _opt("token")] = None,
-    insecure: Annotated[bool | None, _opt("insecure")] = None,
-    token_reads: Annotated[bool | None, _opt("token_reads")] = None,
-    allow_origins: Annotated[list[str] | None, _opt("allow_origins")] = None,
-    max_clients: Annotated[int | None, _opt("max_clients")] = None,
-    command_rate: Annotated[float | None, _opt("command_rate")] = None,
-    command_burst: Annotated[int | None, _opt("command_burst")] = None,
-    ws_compression: Annotated[bool | None, _opt("ws_compression")] = None,
-    ros2: Annotated[bool | None, _opt("ros2")] = None,
-    ros2_rate: Annotated[float | None, _opt("ros2_rate")] = None,
-    ros2_worlds: Annotated[str | None, _opt("ros2_worlds")] = None,
-    ros2_network: Annotated[bool | None, _opt("ros2_network")] = None,
-    data_dir: Annotated[str | None, _opt("data_dir")] = None,
-    restore: Annotated[str | None, _opt("restore")] = None,
-    save_on_exit: Annotated[bool | None, _opt("save_on_exit")] = None,
-    record: Annotated[str | None, _opt("record")] = None,
-    record_worlds: Annotated[str | None, _opt("record_worlds")] = None,
-    record_rate: Annotated[float | None, _opt("record_rate")] = None,
-    record_queue: Annotated[int | None, _opt("record_queue")] = None,
-    foxglove: Annotated[bool | None, _opt("foxglove")] = None,
-    foxglove_port: Annotated[int | None, _opt("foxglove_port")] = None,
-    foxglove_worlds: Annotated[str | None, _opt("foxglove_worlds")] = None,
-    foxglove_rate: Annotated[float | None, _opt("foxglove_rate")] = None,
-) -> None:
+@_serve_signature
+def serve(**options: Any) -> None:
     """Start the service: N worlds, a real-time loop, REST + WebSocket on http://HOST:PORT.
 
     Bound to anything but loopback it needs --token (or ARMFLEET_TOKEN) unless --insecure.
     """
-    given = {name: value for name, value in locals().items() if value is not None}
+    given = {name: value for name, value in options.items() if value is not None}
     from service.app import create_app
     from service.core.errors import ArmfleetError
     from service.core.settings import Settings
