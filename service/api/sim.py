@@ -6,8 +6,9 @@ import asyncio
 
 from fastapi import APIRouter
 
-from service.api.deps import Ctl, Loop
+from service.api.deps import Ctl
 from service.core.commands.base import HTTP
+from service.core.commands.world import Step
 from service.core.schemas import ModeRequest, SimReply, StepRequest, errors
 from service.core.types import Mode
 
@@ -35,6 +36,6 @@ async def set_mode(control: Ctl, body: ModeRequest) -> SimReply:
     summary="Paused only: advance exactly `ticks` control ticks; replies once they are done",
     responses=errors(409),
 )
-async def step(loop: Loop, body: StepRequest) -> SimReply:
-    tick = await asyncio.wrap_future(loop.step(body.ticks))  # NotPaused → 409 (app handler)
-    return SimReply(mode=loop.mode, tick=tick)
+async def step(control: Ctl, body: StepRequest) -> SimReply:
+    done = control.run(Step(body.ticks), HTTP)  # NotPaused → 409 (app handler)
+    return SimReply(mode=control.loop.mode, tick=await asyncio.wrap_future(done))

@@ -55,9 +55,9 @@ def handle(
         world = control.world(world)
         if command_class is None:
             raise BadCommand("op", f"unknown op {op!r}; ops are {sorted(BY_OP)}")
-        command = command_class.from_wire(control.door, world, body)
+        command = command_class.from_wire(control, world, body)
         result = control.run(command, source)
-        return command.ack(control.door, msg_id, world, result), kind
+        return command.ack(control, msg_id, world, result), kind
     except ArmfleetError as exc:
         return wire.error_frame(msg_id, exc), kind
 

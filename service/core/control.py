@@ -27,7 +27,7 @@ from service.core.loop import CommandResult, SimLoop
 from service.core.trajectory import JointTrajectorySpec, Started, TrajectoryStatus
 from service.core.trajectory.manager import TrajectoryManager
 from service.core.trajectory.status import Resumable
-from service.core.types import Mode, RobotSpec
+from service.core.types import Mode
 
 log = logging.getLogger("armfleet.control")
 
@@ -37,25 +37,15 @@ Listener = Callable[[Accepted], None]
 __all__ = ["Accepted", "Control", "Listener", "ResetResult"]
 
 
-class Control:
+class Control(Door):
     """Stage and announce commands for a SimLoop; thread-safe like the loop itself."""
 
     def __init__(self, loop: SimLoop) -> None:
-        self.loop = loop
+        super().__init__(loop, TrajectoryManager(loop))
         self._listeners: tuple[Listener, ...] = ()
         # Staging and announcing happen under one lock so that listeners hear commands in the
         # order the loop staged them (a recording replays them in that order).
         self._order = threading.Lock()
-        self.trajectories = TrajectoryManager(loop)
-        self.door = Door(loop, self.trajectories)
-
-    @property
-    def spec(self) -> RobotSpec:
-        return self.loop.spec
-
-    @property
-    def nworld(self) -> int:
-        return self.loop.batch.nworld
 
     def add_listener(self, listener: Listener) -> None:
         """Call `listener(Accepted)` after every accepted command, on the caller's thread."""
@@ -67,9 +57,9 @@ class Control:
     def run(self, command: Command[R], source: str) -> R:
         """Stage `command` in order with every other and tell the listeners; its result."""
         with self._ordered():
-            result = command.stage(self.door, source)
+            result = command.stage(self, source)
             if self._listeners:
-                said = command.announce(self.door, result)
+                said = command.announce(self, result)
                 if said is not None:
                     kind = command.kind
                     self._announce(
@@ -106,11 +96,11 @@ class Control:
         self, world: int, deltas: Mapping[str | int, float], source: str, field: str = "deltas"
     ) -> CommandResult:
         """Add to the named joints' latest targets (the seed's Up/Down), clamped to range."""
-        return self.run(Increment.create(self.door, world, deltas, field), source)
+        return self.run(Increment.create(self, world, deltas, field), source)
 
     def command_targets(self, world: int, name: Any, position: Any, source: str) -> CommandResult:
         """JointState-shaped targets: the named joints move, the others keep their targets."""
-        return self.run(SetTargets.create(self.door, world, name, position), source)
+        return self.run(SetTargets.create(self, world, name, position), source)
 
     def set_many(
         self,
@@ -120,11 +110,11 @@ class Control:
         joints: Sequence[int] | None = None,
     ) -> list[CommandResult]:
         """Full 7-joint targets for many worlds, staged together for one tick boundary."""
-        return self.run(SetMany.create(self.door, worlds, positions, joints), source)
+        return self.run(SetMany.create(self, worlds, positions, joints), source)
 
     def reset(self, worlds: Sequence[int] | None, source: str) -> ResetResult:
         """Send worlds (all when None) back to `home`, state and targets."""
-        return self.run(Reset.create(self.door, worlds), source)
+        return self.run(Reset.create(self, worlds), source)
 
     def set_mode(self, mode: Mode, source: str) -> int:
         """Switch realtime / fast / paused; returns the tick at which the switch happened."""
@@ -134,11 +124,11 @@ class Control:
         self, worlds: Sequence[int], spec: JointTrajectorySpec, source: str
     ) -> list[Started]:
         """Run a validated trajectory on every world of `worlds` from one tick (see trajectory)."""
-        return self.run(StartTrajectory.create(self.door, worlds, spec), source)
+        return self.run(StartTrajectory.create(self, worlds, spec), source)
 
     def cancel_trajectory(self, worlds: Sequence[int], source: str) -> list[TrajectoryStatus]:
         """Stop the worlds' running trajectories; they hold where they were. Those stopped."""
-        return self.run(CancelTrajectory.create(self.door, worlds), source)
+        return self.run(CancelTrajectory.create(self, worlds), source)
 
     def resume_trajectory(self, run: Resumable, source: str) -> Started:
         """Put back a trajectory that ran when a recording started (replay; see Resumable)."""

@@ -134,21 +134,11 @@ class Snapshot:
     flange: Poses
     bodies: Poses
 
-    @property
-    def flange_pos(self) -> np.ndarray:
-        return self.flange.get()[0]
-
-    @property
-    def flange_quat(self) -> np.ndarray:
-        return self.flange.get()[1]
-
-    @property
-    def body_pos(self) -> np.ndarray:
-        return self.bodies.get()[0]
-
-    @property
-    def body_quat(self) -> np.ndarray:
-        return self.bodies.get()[1]
+    # positions (.., 3) and quaternions (.., 4, w x y z), computed when first read
+    flange_pos = property(lambda self: self.flange.get()[0])
+    flange_quat = property(lambda self: self.flange.get()[1])
+    body_pos = property(lambda self: self.bodies.get()[0])
+    body_quat = property(lambda self: self.bodies.get()[1])
 
     @property
     def nworld(self) -> int:

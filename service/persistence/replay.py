@@ -286,4 +286,4 @@ def _replay_segment(
 
 def _apply(control: Control, cmd: dict[str, Any]) -> None:
     """Re-apply one recorded command as its class says (service.core.commands.registry)."""
-    control.run(BY_KIND[cmd["kind"]].from_record(control.door, cmd), REPLAY)
+    control.run(BY_KIND[cmd["kind"]].from_record(control, cmd), REPLAY)

@@ -32,12 +32,13 @@ R = TypeVar("R")
 HTTP, WS, BROWSER, REPLAY = "http", "ws", "browser", "replay"
 
 
-@dataclass(frozen=True)
 class Door:
-    """What a command stages through: the loop's command tables and the trajectory runner."""
+    """What a command stages through: the loop's command table and the trajectory runner.
+    `Control` is the one door of a running service (it adds the order and the listeners)."""
 
-    loop: SimLoop
-    trajectories: TrajectoryManager
+    def __init__(self, loop: SimLoop, trajectories: TrajectoryManager) -> None:
+        self.loop = loop
+        self.trajectories = trajectories
 
     @property
     def spec(self) -> RobotSpec:

@@ -15,6 +15,7 @@ from service.core.commands.base import Announcement, Command, Door, result_ack
 from service.core.errors import BadCommand
 from service.core.loop_types import CommandResult
 from service.core.schemas import IncrementRequest, JointTargets
+from service.core.types import RobotSpec
 
 __all__ = ["Increment", "SetMany", "SetTargets", "validation_detail"]
 
@@ -33,21 +34,45 @@ def _model(model: Any, body: dict[str, Any]) -> Any:
         raise BadCommand("message", validation_detail(exc)) from None
 
 
-def _one(result: CommandResult, joints: Sequence[int]) -> Announcement:
-    worlds = np.array([result.world], dtype=np.int64)
-    return Announcement(worlds, result.target[None, :], result.tick, {"joints": list(joints)})
+@dataclass(frozen=True)
+class _OneWorld(Command[CommandResult]):
+    """A target command on one world's named joints (`values`: joint index → value); the
+    subclass says how a value changes the latest row (`update`). Replayed as the rows it made:
+    recorded targets after the command, with the joints it named."""
+
+    world: int
+    values: Mapping[int, float]
+
+    def update(self, spec: RobotSpec, row: np.ndarray) -> arithmetic.TargetUpdate:
+        raise NotImplementedError
+
+    def stage(self, door: Door, source: str) -> CommandResult:
+        spec = door.spec
+        return door.loop.stage_rows(
+            [self.world], lambda _, row: self.update(spec, row), self.values
+        )[0]
+
+    def announce(self, door: Door, result: CommandResult) -> Announcement:
+        worlds = np.array([result.world], dtype=np.int64)
+        record = {"joints": list(self.values)}
+        return Announcement(worlds, result.target[None, :], result.tick, record)
+
+    def ack(self, door: Door, msg_id: Any, world: int, result: CommandResult) -> dict[str, Any]:
+        return result_ack(msg_id, result)
+
+    @classmethod
+    def from_record(cls, door: Door, rec: dict[str, Any]) -> Command[Any]:
+        return SetMany.from_record(door, rec)
 
 
 @dataclass(frozen=True)
-class Increment(Command[CommandResult]):
-    """Add to the named joints' latest targets, clamped to range: the seed's Up/Down."""
+class Increment(_OneWorld):
+    """Add to the named joints' latest targets (`values`: deltas), clamped to range: the seed's
+    Up/Down."""
 
     kind: ClassVar[str] = "increment"
     op: ClassVar[str | None] = "increment"
     http: ClassVar[tuple[str, ...]] = ("increments",)
-
-    world: int
-    deltas: Mapping[int, float]
 
     @classmethod
     def create(
@@ -64,33 +89,17 @@ class Increment(Command[CommandResult]):
         field = "deltas" if req.deltas is not None else "joint"
         return cls.create(door, world, req.as_mapping(), field)
 
-    def stage(self, door: Door, source: str) -> CommandResult:
-        spec = door.spec
-        return door.loop.stage_rows(
-            [self.world], lambda _, row: arithmetic.increment(spec, row, self.deltas), self.deltas
-        )[0]
-
-    def announce(self, door: Door, result: CommandResult) -> Announcement:
-        return _one(result, list(self.deltas))
-
-    def ack(self, door: Door, msg_id: Any, world: int, result: CommandResult) -> dict[str, Any]:
-        return result_ack(msg_id, result)
-
-    @classmethod
-    def from_record(cls, door: Door, rec: dict[str, Any]) -> Command[Any]:
-        return SetMany.from_record(door, rec)
+    def update(self, spec: RobotSpec, row: np.ndarray) -> arithmetic.TargetUpdate:
+        return arithmetic.increment(spec, row, self.values)
 
 
 @dataclass(frozen=True)
-class SetTargets(Command[CommandResult]):
+class SetTargets(_OneWorld):
     """JointState-shaped targets for one world: the named joints move, the others keep theirs."""
 
     kind: ClassVar[str] = "set_targets"
     op: ClassVar[str | None] = "set_targets"
     http: ClassVar[tuple[str, ...]] = ("targets",)
-
-    world: int
-    values: Mapping[int, float]
 
     @classmethod
     def create(cls, door: Door, world: object, name: Any, position: Any) -> SetTargets:
@@ -102,23 +111,8 @@ class SetTargets(Command[CommandResult]):
         req = _model(JointTargets, body)
         return cls.create(door, world, req.name, req.position)
 
-    def stage(self, door: Door, source: str) -> CommandResult:
-        spec = door.spec
-        return door.loop.stage_rows(
-            [self.world],
-            lambda _, row: arithmetic.replace_targets(spec, row, self.values),
-            self.values,
-        )[0]
-
-    def announce(self, door: Door, result: CommandResult) -> Announcement:
-        return _one(result, list(self.values))
-
-    def ack(self, door: Door, msg_id: Any, world: int, result: CommandResult) -> dict[str, Any]:
-        return result_ack(msg_id, result)
-
-    @classmethod
-    def from_record(cls, door: Door, rec: dict[str, Any]) -> Command[Any]:
-        return SetMany.from_record(door, rec)
+    def update(self, spec: RobotSpec, row: np.ndarray) -> arithmetic.TargetUpdate:
+        return arithmetic.replace_targets(spec, row, self.values)
 
 
 @dataclass(frozen=True)
