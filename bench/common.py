@@ -241,15 +241,20 @@ class Served:
 
 @contextlib.contextmanager
 def served(
-    nworld: int, mode: str, device: str, env: Mapping[str, str] | None = None
+    nworld: int,
+    mode: str,
+    device: str,
+    env: Mapping[str, str] | None = None,
+    cwd: str | Path | None = None,
 ) -> Iterator[Served]:
-    """`python -m service.cli serve` on `device` via clients.testing.serve (stopped with SIGINT)."""
+    """`python -m service.cli serve` on `device` via clients.testing.serve (stopped with SIGINT);
+    `cwd`: another source tree's root to serve that tree's code."""
     from clients.testing import serve
 
     args = ("--device", device, "--log-level", "warning")
     t0 = time.perf_counter()
     # A cold kernel cache compiles every kernel: minutes on a small CPU, more for CUDA.
-    with serve(nworld, mode, extra_args=args, env=env, ready_timeout=900) as server:
+    with serve(nworld, mode, extra_args=args, env=env, ready_timeout=900, cwd=cwd) as server:
         ready_s = time.perf_counter() - t0
         srv = Served(server, server.url, server.ws_url, nworld, ready_s)
         srv.info = srv.get_info()[1]

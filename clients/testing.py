@@ -122,6 +122,7 @@ def serve(
     ready_timeout: float = READY_TIMEOUT,
     stop_timeout: float = STOP_TIMEOUT,
     own_group: bool = False,
+    cwd: str | os.PathLike[str] | None = None,
 ) -> Iterator[Server]:
     """Start `armfleet serve` on 127.0.0.1, yield it once /readyz answers 200, stop it after.
 
@@ -134,6 +135,8 @@ def serve(
     own_group: start it in a process group of its own (setsid), as a shell starts a
         foreground job: `os.killpg(server.process.pid, signal.SIGINT)` is then what a
         terminal's Ctrl-C does (every process of the service gets it, workers included)
+    cwd: the folder the server starts in; a source checkout's root runs that checkout's
+        armfleet (`python -m` puts it first on the path), e.g. to compare two revisions
 
     Raises ServerFailed (with the log) when the server exits or is not ready in time.
     """
@@ -152,6 +155,7 @@ def serve(
                 stderr=subprocess.STDOUT,
                 env=_child_env(env, data_dir),
                 start_new_session=own_group,
+                cwd=cwd,
             )
         stack.callback(stop, process, stop_timeout)
         url = f"http://127.0.0.1:{port}"
