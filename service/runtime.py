@@ -2,8 +2,9 @@
 
 The engine is built off the event loop because the first build compiles kernels (tens of
 seconds cold); the HTTP server is up meanwhile, `/healthz` answers and `/readyz` says 503.
-Surfaces (ROS 2 bridge, rosbridge, Foxglove server, recordings: surfaces/registry.py) get a
-`SurfaceContext` once the loop runs and stop before it; this module names none of them.
+Surfaces (the ROS bridge, rosbridge, the Foxglove server: surfaces/registry.py) and persistence
+(snapshots and recordings: persistence/service.py) get a `SurfaceContext` once the loop runs and
+stop before it; this module names no surface.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ from service.core.stopping import reclaim_stop_signals
 from service.core.surface import Finishing, SurfaceContext
 from service.engines.choice import build_batch
 from service.persistence import provenance
-from service.persistence.snapshots import LATEST, SnapshotStore, check_state_support
+from service.persistence.service import Persistence
+from service.persistence.snapshots import LATEST, check_state_support
 from service.surfaces.registry import build_surfaces
 
 log = logging.getLogger("armfleet")
@@ -38,6 +40,9 @@ class Runtime:
         self.loop: SimLoop | None = None
         self.control: Control | None = None
         self.hub: StreamHub | None = None
+        # Before the surfaces: `--record`'s file is opened here, so one that cannot be written
+        # stops the start before anything is built (CannotWrite, raised by create_app).
+        self.persistence = Persistence(settings)
         self.surfaces = build_surfaces(settings)
         self.error: str | None = None
         self.metrics = Metrics()
@@ -46,7 +51,6 @@ class Runtime:
         self._watchdog: asyncio.Task[None] | None = None
         self.stop_problems: list[str] = []  # what `stop` could not save (the exit status)
         self._register_levels()
-        self.snapshots = SnapshotStore(settings.data_dir)
         self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
 
     @property
@@ -165,6 +169,7 @@ class Runtime:
         self._watchdog = asyncio.create_task(self._watch())
         ctx = SurfaceContext(loop, self.control, self.hub, s, self.slots, self.metrics)
         self.surfaces.start(ctx)
+        self.persistence.start(ctx)
         log.info(
             "armfleet ready at http://%s:%d (docs /docs): %d worlds on %s (%d shard%s), "
             "%d substeps of %.3f ms per %.0f Hz tick, mode %s; compile %.1f s, capture %.2f s%s",
@@ -196,13 +201,15 @@ class Runtime:
         """
         try:
             check_state_support(batch)
-            state = self.snapshots.load(name, self.header)
+            state = self.persistence.snapshots.load(name, self.header)
             batch.set_state(state)
         except NotFound:
             if name == LATEST:
-                log.warning("no snapshot latest in %s yet: starting at home", self.snapshots.dir)
+                log.warning(
+                    "no snapshot latest in %s yet: starting at home", self.persistence.snapshots.dir
+                )
                 return True
-            self.error = f"--restore {name}: no such snapshot in {self.snapshots.dir}"
+            self.error = f"--restore {name}: no such snapshot in {self.persistence.snapshots.dir}"
         except Exception as exc:  # Conflict (other model, size, corrupt), ValueError
             self.error = f"--restore {name}: {exc}"
         else:
@@ -219,6 +226,8 @@ class Runtime:
         """
         if self._watchdog is not None:
             self._watchdog.cancel()
+        self.persistence.stop()
+        self.stop_problems += self.persistence.unfinished()
         self.surfaces.stop()
         for surface in self.surfaces:
             if isinstance(surface, Finishing):
@@ -244,7 +253,7 @@ class Runtime:
         """Snapshot `latest` of the stopped batch; a failure is logged and kept, never raised."""
         assert self.loop is not None
         try:
-            info = self.snapshots.save(LATEST, self.loop.batch.get_state(), self.header)
+            info = self.persistence.snapshots.save(LATEST, self.loop.batch.get_state(), self.header)
             log.info("saved snapshot 'latest' at tick %d (%d bytes)", info.tick, info.size_bytes)
             return
         except ArmfleetError as exc:  # CannotWrite: the cause is in the message
@@ -252,5 +261,5 @@ class Runtime:
         except Exception as exc:
             log.exception("could not save snapshot 'latest'")
             why = f"{type(exc).__name__}: {exc}"
-        log.error("could not save snapshot 'latest' in %s: %s", self.snapshots.dir, why)
+        log.error("could not save snapshot 'latest' in %s: %s", self.persistence.snapshots.dir, why)
         self.stop_problems.append(f"snapshot 'latest' not saved: {why}")

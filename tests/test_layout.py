@@ -74,7 +74,7 @@ def test_importing_the_contract_and_building_the_app_compile_no_model() -> None:
 
 def test_the_registry_builds_what_the_settings_ask_for() -> None:
     plain = build_surfaces(Settings(worlds=4))
-    assert [s.name for s in plain] == ["recordings", "rosbridge"]  # always there
+    assert [s.name for s in plain] == ["rosbridge"]  # always there
     full = build_surfaces(Settings(worlds=4, foxglove=True, ros2=True, ros2_worlds="0-1"))
     assert [s.name for s in full] == [name for name, _ in REGISTRY]
     for surface in full:

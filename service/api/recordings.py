@@ -13,7 +13,6 @@ from service.core.schemas import RecordingRequest, RecordingStatus
 from service.persistence.recorder import Recorder
 from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
-from service.surfaces.recordings import Recordings
 
 router = APIRouter(prefix="/v1/recordings", tags=["recordings"])
 Rt = Annotated[Runtime, Depends(get_runtime)]
@@ -32,19 +31,19 @@ def _status(recorder: Recorder) -> RecordingStatus:
 )
 async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
     check_state_support(loop.batch)  # a recording starts from the full state
-    path = runtime.snapshots.dir.parent / "recordings" / f"{body.name}.mcap"
+    path = runtime.persistence.recordings_dir / f"{body.name}.mcap"
     # Opening and starting write the file's beginning before answering: a file that cannot be
     # written is a 507 naming the cause, never an "active" recording that is not.
     queue_items = runtime.settings.record_queue
     recorder = await asyncio.to_thread(Recorder, path, body.worlds, body.rate, queue_items)
     # Conflict while one runs; waits for a tick boundary (off the event loop).
-    await asyncio.to_thread(runtime.surfaces.of(Recordings).begin, recorder)
+    await asyncio.to_thread(runtime.persistence.begin, recorder)
     return _status(recorder)
 
 
 @router.get("/current", response_model=RecordingStatus, summary="The running (or last) recording")
 async def current(runtime: Rt) -> RecordingStatus:
-    recorder = runtime.surfaces.of(Recordings).current
+    recorder = runtime.persistence.current
     if recorder is None:
         raise NotFound("no recording has been started")
     return _status(recorder)
@@ -57,7 +56,7 @@ async def current(runtime: Rt) -> RecordingStatus:
     responses={404: {"description": "no recording is running"}},
 )
 async def stop(runtime: Rt) -> RecordingStatus:
-    recorder = runtime.surfaces.of(Recordings).current
+    recorder = runtime.persistence.current
     if recorder is None or not recorder.status.active:
         last = recorder.status if recorder is not None else None
         why = f"; the last one ({last.path}) stopped early: {last.error}" if last else ""

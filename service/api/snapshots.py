@@ -30,13 +30,15 @@ Rt = Annotated[Runtime, Depends(get_runtime)]
 async def save(runtime: Rt, loop: Loop, body: SnapshotRequest) -> SnapshotInfo:
     check_state_support(loop.batch)
     state = await asyncio.wrap_future(loop.request_state())
-    info = await asyncio.to_thread(runtime.snapshots.save, body.name, state, runtime.header)
+    info = await asyncio.to_thread(
+        runtime.persistence.snapshots.save, body.name, state, runtime.header
+    )
     return info
 
 
 @router.get("", response_model=list[SnapshotInfo], summary="Saved snapshots, newest first")
 async def listing(runtime: Rt) -> list[SnapshotInfo]:
-    infos = await asyncio.to_thread(runtime.snapshots.list)
+    infos = await asyncio.to_thread(runtime.persistence.snapshots.list)
     return infos
 
 
@@ -53,7 +55,7 @@ async def listing(runtime: Rt) -> list[SnapshotInfo]:
 async def restore(runtime: Rt, loop: Loop, name: Annotated[SnapshotName, Path()]) -> RestoreReply:
     check_state_support(loop.batch)
     # Read and check the whole file first: a bad one changes nothing.
-    state = await asyncio.to_thread(runtime.snapshots.load, name, runtime.header)
+    state = await asyncio.to_thread(runtime.persistence.snapshots.load, name, runtime.header)
     try:
         tick = await asyncio.wrap_future(loop.restore(state, name))
     except ValueError as exc:

@@ -58,7 +58,7 @@ def every_ticks(rate: float, control_hz: float) -> int:
 
 
 class Recorder:
-    """One recording from `start` to `stop` (or until it fails); surfaces/recordings.py holds
+    """One recording from `start` to `stop` (or until it fails); persistence/service.py holds
     the running one as a surface."""
 
     name = "recorder"

@@ -14,21 +14,14 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Any, TypeVar
+from typing import Any
 
 from service.core.settings import Settings
 from service.core.surface import Routed, Surface, SurfaceContext
 
 log = logging.getLogger("armfleet")
-S = TypeVar("S")
 
 Builder = Callable[[Settings, Mapping[str, Surface]], Surface | None]
-
-
-def _recordings(s: Settings, built: Mapping[str, Surface]) -> Surface:
-    from service.surfaces.recordings import Recordings
-
-    return Recordings(s)  # always: `--record` and POST /v1/recordings both go through it
 
 
 def _foxglove(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
@@ -61,7 +54,6 @@ def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
 
 # (name, builder), in start order. The names are the surfaces' `name`s.
 REGISTRY: tuple[tuple[str, Builder], ...] = (
-    ("recordings", _recordings),
     ("foxglove", _foxglove),
     ("ros2", _ros2),
     ("rosbridge", _rosbridge),
@@ -76,13 +68,6 @@ class SurfaceSet:
 
     def __iter__(self) -> Iterator[Surface]:
         return iter(self._all)
-
-    def of(self, kind: type[S]) -> S:
-        """The surface of that class (routes of the HTTP API reach theirs this way)."""
-        for surface in self._all:
-            if isinstance(surface, kind):
-                return surface
-        raise LookupError(f"no {kind.__name__} surface in this service")
 
     def routers(self) -> list[Any]:
         """The routers of the surfaces that serve routes on the service's port."""

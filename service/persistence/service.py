@@ -1,9 +1,11 @@
-"""Recordings as a surface: the running (or last) MCAP recording of this service.
+"""Persistence as one service: everything a running armfleet saves, in one place.
 
-`--record FILE` starts one with the service; `POST /v1/recordings` starts one later, once the
-last has stopped. There is one recording at a time and this surface holds it, so the service
-keeps one recorder however many were started, and stops the running one before the loop stops.
-The recording itself (what is written, off the sim thread) is persistence/recorder.py.
+Snapshots (`snapshots`: the store under `<data-dir>/snapshots`, saved on request, restored at a
+tick boundary, `latest` on a clean stop) and the MCAP recording (`--record FILE` starts one with
+the service; `POST /v1/recordings` starts one later, once the last has stopped). There is one
+recording at a time and this service holds it, so the service keeps one recorder however many
+were started, and stops the running one before the loop stops. What is written, off the sim
+thread, is recorder.py; the snapshot files are snapshots.py.
 """
 
 from __future__ import annotations
@@ -15,17 +17,18 @@ from service.core.errors import ArmfleetError, Conflict, Unavailable
 from service.core.settings import Settings
 from service.core.surface import SurfaceContext
 from service.persistence.recorder import Recorder
+from service.persistence.snapshots import SnapshotStore
 
 log = logging.getLogger("armfleet.recorder")
 
 
-class Recordings:
-    """The recordings surface (always present; it records only when asked to)."""
-
-    name = "recordings"
+class Persistence:
+    """Snapshots and the recording of one service (it records only when asked to)."""
 
     def __init__(self, settings: Settings) -> None:
         self._settings = settings
+        self.snapshots = SnapshotStore(settings.data_dir)
+        self.recordings_dir = self.snapshots.dir.parent / "recordings"
         self._ctx: SurfaceContext | None = None
         self._lock = threading.Lock()  # one start at a time: two must not both see none running
         self.current: Recorder | None = None  # the running or last recording
@@ -39,6 +42,7 @@ class Recordings:
         )
 
     def start(self, ctx: SurfaceContext) -> None:
+        """The loop runs: start `--record`'s recording, and let later ones start."""
         self._ctx = ctx
         recorder, self._asked = self._asked, None
         if recorder is None:
@@ -63,6 +67,7 @@ class Recordings:
             self.current = recorder
 
     def stop(self) -> None:
+        """Finish the recording (before the loop stops)."""
         if self._asked is not None:  # never started (the engine failed): close its file
             self._asked.stop()
         if self.current is not None:
