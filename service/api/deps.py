@@ -11,8 +11,9 @@ from typing import Annotated, Any
 
 from fastapi import Depends, Path, Request
 
+from service.core.commands import rules
 from service.core.control import Control
-from service.core.errors import Unavailable, UnknownWorld
+from service.core.errors import Unavailable
 from service.core.loop import SimLoop
 from service.core.schemas import ErrorReply
 from service.runtime import Runtime
@@ -40,13 +41,16 @@ Loop = Annotated[SimLoop, Depends(get_loop)]
 Ctl = Annotated[Control, Depends(get_control)]
 
 
-async def world_id(loop: Loop, world: Annotated[int, Path(description="world index")]) -> int:
-    if not 0 <= world < loop.batch.nworld:
-        raise UnknownWorld(world, loop.batch.nworld)
-    return world
+WorldPath = Annotated[int, Path(description="world index")]
 
 
-World = Annotated[int, Depends(world_id)]
+async def world_id(loop: Loop, world: WorldPath) -> int:
+    return rules.world_id(world, loop.batch.nworld)
+
+
+World = Annotated[int, Depends(world_id)]  # routes that read a world
+# Routes that run a command take the id as it came: the command checks it, once.
+CommandWorld = WorldPath
 
 # `responses=` of routes that write a file (snapshots, recordings): the domain error CannotWrite.
 CANNOT_WRITE: dict[int | str, dict[str, Any]] = {

@@ -14,7 +14,7 @@ import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
-from service.api.deps import Ctl, World
+from service.api.deps import CommandWorld, Ctl, World
 from service.core import wire
 from service.core.commands.base import HTTP
 from service.core.control import Control
@@ -44,7 +44,7 @@ def _json(payload: object) -> Response:
     response_model=StartedReply,
     summary="Follow a JointTrajectory (replaces a running one); answers its id and ticks",
 )
-async def start(control: Ctl, world: World, body: TrajectoryBody) -> Response:
+async def start(control: Ctl, world: CommandWorld, body: TrajectoryBody) -> Response:
     spec = parse(control.spec, body.as_json())
     started = control.start_trajectory([world], spec, HTTP)[0]
     return _json(started.as_json())
@@ -107,7 +107,7 @@ async def _outcome(control: Control, current: TrajectoryStatus, wait: float) -> 
     summary="Cancel the world's running trajectory; the world holds where it was",
     responses=errors(409),
 )
-async def cancel(control: Ctl, world: World) -> Response:
+async def cancel(control: Ctl, world: CommandWorld) -> Response:
     stopped = control.cancel_trajectory([world], HTTP)
     if not stopped:
         raise Conflict(f"world {world} runs no trajectory", "world")

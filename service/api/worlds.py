@@ -13,7 +13,7 @@ import numpy as np
 from fastapi import APIRouter, Body, Query
 from fastapi.responses import Response
 
-from service.api.deps import Ctl, Loop, World
+from service.api.deps import CommandWorld, Ctl, Loop, World
 from service.core import wire
 from service.core.commands.base import HTTP
 from service.core.errors import Unavailable
@@ -104,7 +104,7 @@ async def get_state(loop: Loop, world: World) -> Response:
     response_model=CommandReply,
     summary="Add to joint targets (the seed's Up/Down buttons); clamps to the joint range",
 )
-async def increment(control: Ctl, world: World, body: IncrementRequest) -> Response:
+async def increment(control: Ctl, world: CommandWorld, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
     result = control.increment(world, body.as_mapping(), HTTP, field)
     return _json(wire.command_reply(result))
@@ -115,7 +115,7 @@ async def increment(control: Ctl, world: World, body: IncrementRequest) -> Respo
     response_model=CommandReply,
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
 )
-async def put_targets(control: Ctl, world: World, body: JointTargets) -> Response:
+async def put_targets(control: Ctl, world: CommandWorld, body: JointTargets) -> Response:
     result = control.command_targets(world, body.name, body.position, HTTP)
     return _json(wire.command_reply(result))
 
@@ -135,7 +135,7 @@ async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     response_model=ResetReply,
     summary="Reset one world to home",
 )
-async def reset_world(control: Ctl, world: World) -> ResetReply:
+async def reset_world(control: Ctl, world: CommandWorld) -> ResetReply:
     done = control.reset([world], HTTP)
     return ResetReply(worlds=done.worlds, tick=done.tick)
 
