@@ -96,18 +96,30 @@ def serve(
     foxglove_port: Annotated[int | None, _opt("foxglove_port")] = None,
     foxglove_worlds: Annotated[str | None, _opt("foxglove_worlds")] = None,
     foxglove_rate: Annotated[float | None, _opt("foxglove_rate")] = None,
+    camera_size: Annotated[str | None, _opt("camera_size")] = None,
+    camera_outputs: Annotated[str | None, _opt("camera_outputs")] = None,
+    cameras: Annotated[str | None, _opt("cameras")] = None,
+    camera_batch: Annotated[int | None, _opt("camera_batch")] = None,
 ) -> None:
     """Start the service: N worlds, a real-time loop, REST + WebSocket on http://HOST:PORT.
 
     Bound to anything but loopback it needs --token (or ARMFLEET_TOKEN) unless --insecure.
     """
     given = {name: value for name, value in locals().items() if value is not None}
+    from pydantic import ValidationError
+
     from service.app import create_app
     from service.core.errors import ArmfleetError
     from service.core.settings import Settings
     from service.serving import serve_until_stopped
 
-    settings = Settings(**given)
+    try:
+        settings = Settings(**given)
+    except ValidationError as exc:  # a bad value: say which and why, no traceback
+        for err in exc.errors():
+            where = ".".join(str(p) for p in err["loc"])
+            typer.echo(f"armfleet serve: {where + ': ' if where else ''}{err['msg']}", err=True)
+        raise typer.Exit(2) from None
     _check_port_free(settings.host, settings.port)
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:

@@ -2,7 +2,8 @@
 
 `Batch` is what every engine implements. Optional capabilities are protocols of their own
 (`Restorable`: save and restore the full state; `Supervised`: workers that can be lost and are
-rebuilt), checked with `isinstance`, so that a caller never guesses from attributes or bodies.
+rebuilt; `Renderable`: hands the cameras the state of some worlds), checked with `isinstance`,
+so that a caller never guesses from attributes or bodies.
 Lives in the core with the types it speaks in; imports nothing above the core.
 """
 
@@ -120,4 +121,15 @@ class Supervised(Protocol):
 
     def health(self) -> list[str]:
         """What is wrong now (a lost shard, a rebuild under way); empty when all is well."""
+        ...
+
+
+@runtime_checkable
+class Renderable(Protocol):
+    """An engine whose worlds cameras can see: between two ticks (on the loop's thread) it hands
+    over the positions of the asked worlds, and the batch renderer draws them on a thread of
+    its own, so that a picture costs the loop one small copy, not the drawing."""
+
+    def render_state(self, worlds: np.ndarray) -> np.ndarray:
+        """qpos of `worlds` (k,) at the end of the last tick, (k, nq), a host copy."""
         ...

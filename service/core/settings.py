@@ -119,6 +119,34 @@ class Settings(BaseSettings):
     ros2_network: bool = Field(
         False, description="open DDS to the network (default: loopback only, like the HTTP bind)"
     )
+    # -- cameras (service/core/cameras.py): the renderer is built for these once, at start --
+    camera_size: str = Field(
+        "128x96", description="image size of every camera, WIDTHxHEIGHT (1..4096 a side)"
+    )
+    camera_outputs: str = Field(
+        "rgb,depth",
+        description="what cameras draw unless --cameras says otherwise: rgb, depth, seg",
+    )
+    cameras: str = Field(
+        "",
+        description="per camera: NAME=WxH[:OUTPUTS] or NAME=off, comma-separated, e.g. "
+        "wrist=320x240:rgb+depth,overview=off (OUTPUTS joined by +)",
+    )
+    camera_batch: int = Field(
+        16, ge=1, le=65_536, description="worlds one render draws at once (more are drawn in turn)"
+    )
+
+    @model_validator(mode="after")
+    def _cameras_parse(self) -> Settings:
+        from service.core.cameras import parse_outputs, parse_overrides, parse_size, scene_cameras
+
+        parse_size(self.camera_size, "camera_size")  # ValueError names the setting and limit
+        parse_outputs(self.camera_outputs, "camera_outputs")
+        unknown = sorted(set(parse_overrides(self.cameras)) - set(scene_cameras()))
+        if unknown:
+            have = ", ".join(scene_cameras())
+            raise ValueError(f"cameras: the scene has no camera {unknown[0]!r} (it has: {have})")
+        return self
 
     @model_validator(mode="after")
     def _ray_runs_the_warp_engine(self) -> Settings:
