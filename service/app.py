@@ -16,6 +16,7 @@ from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service.api import (
+    camera_ws,
     cameras,
     health,
     info,
@@ -166,7 +167,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for router in runtime.surfaces.routers():  # rosbridge's socket and GET /v1/ros
         app.include_router(router)
     # Every /v1 route can also answer 401/403 (token, origin) and 503 (not ready, client cap).
-    for module in (info, worlds, trajectory, sim, scene, ws, snapshots, recordings, cameras):
+    for module in (
+        info,
+        worlds,
+        trajectory,
+        sim,
+        scene,
+        ws,
+        snapshots,
+        recordings,
+        cameras,
+        camera_ws,
+    ):
         app.include_router(module.router, responses=errors(*ANY))
     web.mount_static(app)
     generate = app.openapi
