@@ -100,6 +100,11 @@ def serve(
     camera_outputs: Annotated[str | None, _opt("camera_outputs")] = None,
     cameras: Annotated[str | None, _opt("cameras")] = None,
     camera_batch: Annotated[int | None, _opt("camera_batch")] = None,
+    camera_rate: Annotated[float | None, _opt("camera_rate")] = None,
+    foxglove_cameras: Annotated[str | None, _opt("foxglove_cameras")] = None,
+    camera_record: Annotated[str | None, _opt("camera_record")] = None,
+    camera_record_cameras: Annotated[str | None, _opt("camera_record_cameras")] = None,
+    camera_record_worlds: Annotated[str | None, _opt("camera_record_worlds")] = None,
 ) -> None:
     """Start the service: N worlds, a real-time loop, REST + WebSocket on http://HOST:PORT.
 

@@ -183,7 +183,9 @@ class Runtime:
         self.cameras = camera_feed(loop, s)
         self.loop = loop
         self._watchdog = asyncio.create_task(self._watch())
-        ctx = SurfaceContext(loop, self.control, self.hub, s, self.slots, self.metrics)
+        ctx = SurfaceContext(
+            loop, self.control, self.hub, s, self.slots, self.metrics, self.cameras
+        )
         self.surfaces.start(ctx)
         log.info(
             "armfleet ready at http://%s:%d (docs /docs): %d worlds on %s (%d shard%s), "

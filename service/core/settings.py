@@ -135,6 +135,20 @@ class Settings(BaseSettings):
     camera_batch: int = Field(
         16, ge=1, le=65_536, description="worlds one render draws at once (more are drawn in turn)"
     )
+    camera_rate: float = Field(
+        10.0,
+        gt=0,
+        le=60,
+        description="images a second per camera on Foxglove and in --camera-record",
+    )
+    foxglove_cameras: str = Field(
+        "", description="cameras shown in Foxglove for --foxglove-worlds, e.g. wrist,overview"
+    )
+    camera_record: Path | None = Field(
+        None, description="record camera images (JPEG) and calibrations to this MCAP file"
+    )
+    camera_record_cameras: str = Field("wrist", description="cameras --camera-record records")
+    camera_record_worlds: str = Field("0", description="worlds --camera-record records, e.g. 0-3")
 
     @model_validator(mode="after")
     def _cameras_parse(self) -> Settings:
@@ -142,11 +156,25 @@ class Settings(BaseSettings):
 
         parse_size(self.camera_size, "camera_size")  # ValueError names the setting and limit
         parse_outputs(self.camera_outputs, "camera_outputs")
-        unknown = sorted(set(parse_overrides(self.cameras)) - set(scene_cameras()))
-        if unknown:
-            have = ", ".join(scene_cameras())
-            raise ValueError(f"cameras: the scene has no camera {unknown[0]!r} (it has: {have})")
+        asked = {
+            "cameras": list(parse_overrides(self.cameras)),
+            "foxglove_cameras": self._names(self.foxglove_cameras),
+            "camera_record_cameras": self._names(self.camera_record_cameras),
+        }
+        have = scene_cameras()
+        for setting, names in asked.items():
+            unknown = [n for n in names if n not in have]
+            if unknown:
+                raise ValueError(
+                    f"{setting}: the scene has no camera {unknown[0]!r} (it has: {', '.join(have)})"
+                )
+        if self.camera_record:
+            world_list(self.camera_record_worlds, self.worlds, "camera_record_worlds")
         return self
+
+    @staticmethod
+    def _names(text: str) -> list[str]:
+        return [p.strip() for p in text.split(",") if p.strip()]
 
     @model_validator(mode="after")
     def _ray_runs_the_warp_engine(self) -> Settings:

@@ -39,7 +39,22 @@ def _foxglove(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
     # Foxglove's protocol cannot carry the token: where writes need one, it is a viewer only.
     writes = s.token is None
     return FoxgloveLive(
-        s.host, s.foxglove_port, s.foxglove_worlds, s.foxglove_rate, commands=writes
+        s.host,
+        s.foxglove_port,
+        s.foxglove_worlds,
+        s.foxglove_rate,
+        commands=writes,
+        cameras=(s.foxglove_cameras, s.camera_rate),
+    )
+
+
+def _camera_recording(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
+    if s.camera_record is None:
+        return None
+    from service.surfaces.camera_recording import CameraRecording
+
+    return CameraRecording(
+        s.camera_record, s.camera_record_worlds, s.camera_record_cameras, s.camera_rate
     )
 
 
@@ -63,6 +78,7 @@ def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
 REGISTRY: tuple[tuple[str, Builder], ...] = (
     ("recordings", _recordings),
     ("foxglove", _foxglove),
+    ("camera_recording", _camera_recording),
     ("ros2", _ros2),
     ("rosbridge", _rosbridge),
 )
