@@ -9,7 +9,8 @@
   nobody looking, then over a window while one WebSocket streams all 16 wrist cameras at
   10 Hz (JPEG), side by side in one run; frames received per second and the drawing share.
 
-The GPU figures need a CUDA machine: run with --device cuda there (not measured here).
+On a CUDA machine, ``--section 29 --device cuda`` runs the same on the GPU (the warp engine
+and its renderer on the device; the native engine renders on the CPU); not measured yet.
 Standalone: ``python -m bench.cameras_bench --quick``.
 """
 
@@ -122,7 +123,11 @@ def _stream(ctx: Context, engine: str, window_s: float) -> dict[str, Any]:
 
 
 @section(
-    29, "cameras", "Cameras on the CPU: ms per image, 16 wrist cameras at 10 Hz beside real time"
+    29,
+    "cameras",
+    "Cameras: ms per image, 16 wrist cameras at 10 Hz beside real time",
+    devices=("cpu", "cuda"),
+    default_on=("cpu",),
 )
 def cameras(ctx: Context) -> Result:
     requests = ctx.pick(20, 5)
@@ -175,7 +180,7 @@ def cameras(ctx: Context) -> Result:
     notes = [
         "ms/image: the service's drawing time per image (MuJoCo Warp's CPU renderer, one "
         "thread, RGB + depth); request: what a client waited, PNG encoding included",
-        "GPU: not measured in this run (needs --device cuda on a CUDA machine)",
+        f"device: {ctx.device}" + ("" if ctx.cuda else "; GPU not measured in this run"),
     ]
     data = {"per_image": per_image, "streams": streams, "errors": errors}
     return Result(rows, data, notes)

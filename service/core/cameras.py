@@ -139,6 +139,8 @@ def camera_specs(
         outs = got_outputs or default_outputs
         if mjm.cam_projection[cid] != mujoco.mjtProjection.mjPROJ_PERSPECTIVE:
             continue  # orthographic cameras have no pinhole K: not served
+        if mjm.cam_sensorsize[cid][1] != 0:
+            continue  # sensor size + focal length cameras: K is not fovy's (not served yet)
         specs.append(
             CameraSpec(
                 name=name,
