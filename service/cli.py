@@ -102,6 +102,7 @@ def serve(
     camera_batch: Annotated[int | None, _opt("camera_batch")] = None,
     camera_rate: Annotated[float | None, _opt("camera_rate")] = None,
     foxglove_cameras: Annotated[str | None, _opt("foxglove_cameras")] = None,
+    ros2_cameras: Annotated[str | None, _opt("ros2_cameras")] = None,
     camera_record: Annotated[str | None, _opt("camera_record")] = None,
     camera_record_cameras: Annotated[str | None, _opt("camera_record_cameras")] = None,
     camera_record_worlds: Annotated[str | None, _opt("camera_record_worlds")] = None,

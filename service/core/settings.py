@@ -147,6 +147,9 @@ class Settings(BaseSettings):
     camera_record: Path | None = Field(
         None, description="record camera images (JPEG) and calibrations to this MCAP file"
     )
+    ros2_cameras: str = Field(
+        "", description="cameras on the ROS 2 graph (sensor_msgs/Image + CameraInfo), e.g. wrist"
+    )
     camera_record_cameras: str = Field("wrist", description="cameras --camera-record records")
     camera_record_worlds: str = Field("0", description="worlds --camera-record records, e.g. 0-3")
 
@@ -159,6 +162,7 @@ class Settings(BaseSettings):
         asked = {
             "cameras": list(parse_overrides(self.cameras)),
             "foxglove_cameras": self._names(self.foxglove_cameras),
+            "ros2_cameras": self._names(self.ros2_cameras),
             "camera_record_cameras": self._names(self.camera_record_cameras),
         }
         have = scene_cameras()

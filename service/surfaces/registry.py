@@ -63,7 +63,9 @@ def _ros2(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
         return None
     from service.surfaces.ros.dds import DdsBridge
 
-    return DdsBridge(s.ros2_rate, s.ros2_worlds, s.ros2_network)
+    return DdsBridge(
+        s.ros2_rate, s.ros2_worlds, s.ros2_network, cameras=(s.ros2_cameras, s.camera_rate)
+    )
 
 
 def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
