@@ -2,7 +2,7 @@
 
     .venv/bin/python scripts/camera_pictures.py
 
-A paused 4-world service with the wrist camera at 320x240: the wrist PNG is what
+A 4-world realtime service with the wrist camera at 320x240: the wrist PNG is what
 GET /v1/worlds/0/cameras/wrist returns at home; the page shot is headless Chromium showing
 world 0 with its camera pane.
 """
@@ -26,7 +26,7 @@ DOCS = ROOT / "docs"
 
 def main() -> None:
     extra = ("--cameras", "wrist=320x240,overview=320x240")
-    with serve(worlds=4, mode="paused", extra_args=extra) as s:
+    with serve(worlds=4, extra_args=extra) as s:
         deadline = time.monotonic() + 300
         while not httpx.get(f"{s.url}/v1/cameras").json()["ready"]:
             if time.monotonic() > deadline:
