@@ -54,6 +54,10 @@ WebSocket streams (not listed by OpenAPI):
   (every body of every listed world, plus the focus world's state; layout in service/core/wire.py)
   drawn with the geoms of `GET /v1/scene`; commands carry `"world"`.
 
+* `/v1/ws/cameras?camera=wrist&worlds=0-15&rate=10&format=jpeg`: binary messages of camera
+  images, one render of the listed worlds at one tick each (layout in service/core/camera_wire.py;
+  `pull=true`: one per text message sent).
+
 The browser page is served at `/`.
 """
 

@@ -245,6 +245,7 @@ def test_render_metrics_count(http: httpx.Client) -> None:
         (["--camera-size", "0x96"], "camera_size"),
         (["--camera-outputs", "rgb,heat"], "camera_outputs"),
         (["--cameras", "wrist=64x48:rgb+x"], "cameras.wrist"),
+        (["--camera-size", "4096x4096"], "camera_batch"),
     ],
 )
 def test_bad_camera_settings_are_refused_at_start(args: list[str], named: str) -> None:

@@ -15,6 +15,8 @@ from service.core.physics import DEFAULT_PHYSICS_DT
 from service.core.types import Mode
 from service.core.worlds import world_list
 
+MAX_RENDER_PIXELS = 1 << 26  # one camera's render batch: colour, depth, rays, ~12 bytes a pixel
+
 
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="ARMFLEET_")
@@ -157,8 +159,16 @@ class Settings(BaseSettings):
     def _cameras_parse(self) -> Settings:
         from service.core.cameras import parse_outputs, parse_overrides, parse_size, scene_cameras
 
-        parse_size(self.camera_size, "camera_size")  # ValueError names the setting and limit
+        w, h = parse_size(self.camera_size, "camera_size")  # ValueError names setting + limit
         parse_outputs(self.camera_outputs, "camera_outputs")
+        sizes = [(w, h)] + [c[0] for c in parse_overrides(self.cameras).values() if c and c[0]]
+        biggest = max(a * b for a, b in sizes)
+        if biggest * min(self.camera_batch, self.worlds) > MAX_RENDER_PIXELS:
+            raise ValueError(
+                f"camera_batch: {self.camera_batch} worlds of {biggest} pixels is over the "
+                f"render batch's limit of {MAX_RENDER_PIXELS} pixels (~12 bytes each): "
+                "lower --camera-batch or the size"
+            )
         asked = {
             "cameras": list(parse_overrides(self.cameras)),
             "foxglove_cameras": self._names(self.foxglove_cameras),
