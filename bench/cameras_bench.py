@@ -174,6 +174,7 @@ def cameras(ctx: Context) -> Result:
             "RTF streaming": s["rtf_streaming"],
             "frames/s": s["frames_per_s"],
             "draw share of a core": s["draw_share"],
+            "sim thread ms/s": s["sim_thread_ms_per_s"],
         }
         for s in streams
     ]
