@@ -253,3 +253,21 @@ def test_bad_camera_settings_are_refused_at_start(args: list[str], named: str) -
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert done.returncode == 2
     assert named in done.stderr and "Traceback" not in done.stderr
+
+
+def test_cameras_do_not_change_the_physics() -> None:
+    """The scene with its cameras steps bit for bit as the same scene without them."""
+    spec = mujoco.MjSpec.from_file(str(ROOT / "mjcf" / "scene.xml"))
+    for cam in list(spec.cameras):
+        spec.delete(cam)
+    bare = spec.compile()
+    assert bare.ncam == 0 and MJM.ncam == 2
+    runs = []
+    for model in (MJM, bare):
+        d = mujoco.MjData(model)
+        mujoco.mj_resetDataKeyframe(model, d, ROBOT.home_key)
+        d.ctrl[:] = [0.3, -1.3, 1.4, -1.6, -1.5, 0.2, 0.5]  # the arm moves, the gripper closes
+        for _ in range(500):
+            mujoco.mj_step(model, d)
+        runs.append(np.concatenate([d.qpos, d.qvel]))
+    assert np.array_equal(runs[0], runs[1])
