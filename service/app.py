@@ -16,6 +16,8 @@ from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service.api import (
+    camera_ws,
+    cameras,
     health,
     info,
     metrics,
@@ -51,6 +53,10 @@ WebSocket streams (not listed by OpenAPI):
 * `/v1/ws/view?worlds=0-63&focus=3&rate=30`: the browser page's socket: binary pose frames
   (every body of every listed world, plus the focus world's state; layout in service/core/wire.py)
   drawn with the geoms of `GET /v1/scene`; commands carry `"world"`.
+
+* `/v1/ws/cameras?camera=wrist&worlds=0-15&rate=10&format=jpeg`: binary messages of camera
+  images, one render of the listed worlds at one tick each (layout in service/core/camera_wire.py;
+  `pull=true`: one per text message sent).
 
 The browser page is served at `/`.
 """
@@ -165,7 +171,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for router in runtime.surfaces.routers():  # rosbridge's socket and GET /v1/ros
         app.include_router(router)
     # Every /v1 route can also answer 401/403 (token, origin) and 503 (not ready, client cap).
-    for module in (info, worlds, trajectory, sim, scene, ws, snapshots, recordings):
+    for module in (
+        info,
+        worlds,
+        trajectory,
+        sim,
+        scene,
+        ws,
+        snapshots,
+        recordings,
+        cameras,
+        camera_ws,
+    ):
         app.include_router(module.router, responses=errors(*ANY))
     web.mount_static(app)
     generate = app.openapi

@@ -100,12 +100,20 @@ def serve(**options: Any) -> None:
     Bound to anything but loopback it needs --token (or ARMFLEET_TOKEN) unless --insecure.
     """
     given = {name: value for name, value in options.items() if value is not None}
+    from pydantic import ValidationError
+
     from service.app import create_app
     from service.core.errors import ArmfleetError
     from service.core.settings import Settings
     from service.serving import serve_until_stopped
 
-    settings = Settings(**given)
+    try:
+        settings = Settings(**given)
+    except ValidationError as exc:  # a bad value: say which and why, no traceback
+        for err in exc.errors():
+            where = ".".join(str(p) for p in err["loc"])
+            typer.echo(f"armfleet serve: {where + ': ' if where else ''}{err['msg']}", err=True)
+        raise typer.Exit(2) from None
     _check_port_free(settings.host, settings.port)
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:

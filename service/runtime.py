@@ -17,6 +17,7 @@ import orjson
 
 from service.core.access import ClientSlots
 from service.core.batch import Batch, Supervised
+from service.core.camera_feed import CameraFeed
 from service.core.control import Accepted, Control
 from service.core.errors import ArmfleetError, Conflict, NotFound
 from service.core.hub import StreamHub
@@ -25,6 +26,7 @@ from service.core.metrics import Metrics
 from service.core.settings import Settings
 from service.core.stopping import reclaim_stop_signals
 from service.core.surface import Finishing, SurfaceContext
+from service.engines.camera_render import camera_feed
 from service.engines.choice import build_batch
 from service.persistence import provenance
 from service.persistence.service import Persistence
@@ -43,6 +45,7 @@ class Runtime:
         # Before the surfaces: `--record`'s file is opened here, so one that cannot be written
         # stops the start before anything is built (CannotWrite, raised by create_app).
         self.persistence = Persistence(settings)
+        self.cameras: CameraFeed | None = None  # built with the loop (service/core/camera_feed)
         self.surfaces = build_surfaces(settings)
         self.error: str | None = None
         self.metrics = Metrics()
@@ -123,6 +126,24 @@ class Runtime:
             "shard worker processes rebuilt after dying",
             self._restarts,
         )
+        self._register_cameras()
+
+    def _register_cameras(self) -> None:
+        for name, attr, help_text in (
+            ("armfleet_camera_renders", "renders", "camera renders (one per request or frame)"),
+            ("armfleet_camera_images", "images", "camera images drawn (worlds x renders)"),
+            ("armfleet_camera_render_seconds", "render_seconds", "wall time spent drawing"),
+            (
+                "armfleet_camera_state_seconds",
+                "state_seconds",
+                "wall time the sim thread spent handing world states to the cameras",
+            ),
+        ):
+            self.metrics.counter_level(
+                name,
+                help_text,
+                lambda a=attr: None if self.cameras is None else getattr(self.cameras, a),
+            )
 
     def _restarts(self) -> float | None:
         if self.loop is None:
@@ -165,9 +186,12 @@ class Runtime:
         self.control.add_listener(self._count_accepted)
         loop.add_tick_listener(self.metrics.on_tick)
         loop.start()
+        self.cameras = camera_feed(loop, s)
         self.loop = loop
         self._watchdog = asyncio.create_task(self._watch())
-        ctx = SurfaceContext(loop, self.control, self.hub, s, self.slots, self.metrics)
+        ctx = SurfaceContext(
+            loop, self.control, self.hub, s, self.slots, self.metrics, self.cameras
+        )
         self.surfaces.start(ctx)
         self.persistence.start(ctx)
         log.info(
@@ -232,6 +256,8 @@ class Runtime:
         for surface in self.surfaces:
             if isinstance(surface, Finishing):
                 self.stop_problems += surface.unfinished()
+        if self.cameras is not None:
+            self.cameras.close()
         if self.loop is not None:
             self.loop.stop()
             if self.hub is not None:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from service.core.batch import Batch, Restorable, Supervised
+from service.core.batch import Batch, Renderable, Restorable, Supervised
 from service.core.settings import Settings
 from service.core.surface import Routed, Surface
 from service.surfaces.registry import REGISTRY, build_surfaces
@@ -75,7 +75,11 @@ def test_importing_the_contract_and_building_the_app_compile_no_model() -> None:
 def test_the_registry_builds_what_the_settings_ask_for() -> None:
     plain = build_surfaces(Settings(worlds=4))
     assert [s.name for s in plain] == ["rosbridge"]  # always there
-    full = build_surfaces(Settings(worlds=4, foxglove=True, ros2=True, ros2_worlds="0-1"))
+    full = build_surfaces(
+        Settings(
+            worlds=4, foxglove=True, ros2=True, ros2_worlds="0-1", camera_record=Path("c.mcap")
+        )
+    )
     assert [s.name for s in full] == [name for name, _ in REGISTRY]
     for surface in full:
         assert isinstance(surface, Surface)
@@ -99,4 +103,6 @@ def test_engines_declare_their_capabilities() -> None:
     for engine in (WorldBatch, NativeBatch, ShardedBatch, RayBatch):
         assert Batch in engine.__mro__ and Restorable in engine.__mro__
     assert Supervised in ShardedBatch.__mro__
+    for engine in (WorldBatch, NativeBatch, ShardedBatch):  # cameras see their worlds
+        assert Renderable in engine.__mro__
     assert Supervised not in WorldBatch.__mro__

@@ -6,7 +6,8 @@ their feed-forward, resets, a slice of a world's qpos/qvel) is a field of `TickW
 command that writes state the engines already hold needs no change in any engine. Optional
 capabilities are protocols of their own (`Restorable`: save and restore the full state;
 `Supervised`: workers that can be lost and are rebuilt; `PacksFrames`: gathers stream rows on
-its side), checked with `isinstance`, so that a caller never guesses from attributes or bodies.
+its side; `Renderable`: hands the cameras the state of some worlds), checked with `isinstance`,
+so that a caller never guesses from attributes or bodies.
 Lives in the core with the types it speaks in; imports nothing above the core.
 """
 
@@ -193,4 +194,15 @@ class PacksFrames(Protocol):
 
     def host_columns(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(sim_time [s] float64, targets (k, 7) float64, faults int64) of `ids`, host copies."""
+        ...
+
+
+@runtime_checkable
+class Renderable(Protocol):
+    """An engine whose worlds cameras can see: between two ticks (on the loop's thread) it hands
+    over the positions of the asked worlds, and the batch renderer draws them on a thread of
+    its own, so that a picture costs the loop one small copy, not the drawing."""
+
+    def render_state(self, worlds: np.ndarray) -> np.ndarray:
+        """qpos of `worlds` (k,) at the end of the last tick, (k, nq), a host copy."""
         ...

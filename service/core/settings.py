@@ -15,6 +15,8 @@ from service.core.physics import DEFAULT_PHYSICS_DT
 from service.core.types import Mode
 from service.core.worlds import world_list
 
+MAX_RENDER_PIXELS = 1 << 26  # one camera's render batch: colour, depth, rays, ~12 bytes a pixel
+
 
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="ARMFLEET_")
@@ -119,6 +121,74 @@ class Settings(BaseSettings):
     ros2_network: bool = Field(
         False, description="open DDS to the network (default: loopback only, like the HTTP bind)"
     )
+    # -- cameras (service/core/cameras.py): the renderer is built for these once, at start --
+    camera_size: str = Field(
+        "128x96", description="image size of every camera, WIDTHxHEIGHT (1..4096 a side)"
+    )
+    camera_outputs: str = Field(
+        "rgb,depth",
+        description="what cameras draw unless --cameras says otherwise: rgb, depth, seg",
+    )
+    cameras: str = Field(
+        "",
+        description="per camera: NAME=WxH[:OUTPUTS] or NAME=off, comma-separated, e.g. "
+        "wrist=320x240:rgb+depth,overview=off (OUTPUTS joined by +)",
+    )
+    camera_batch: int = Field(
+        16, ge=1, le=65_536, description="worlds one render draws at once (more are drawn in turn)"
+    )
+    camera_rate: float = Field(
+        10.0,
+        gt=0,
+        le=60,
+        description="images a second per camera on Foxglove and in --camera-record",
+    )
+    foxglove_cameras: str = Field(
+        "", description="cameras shown in Foxglove for --foxglove-worlds, e.g. wrist,overview"
+    )
+    camera_record: Path | None = Field(
+        None, description="record camera images (JPEG) and calibrations to this MCAP file"
+    )
+    ros2_cameras: str = Field(
+        "", description="cameras on the ROS 2 graph (sensor_msgs/Image + CameraInfo), e.g. wrist"
+    )
+    camera_record_cameras: str = Field("wrist", description="cameras --camera-record records")
+    camera_record_worlds: str = Field("0", description="worlds --camera-record records, e.g. 0-3")
+
+    @model_validator(mode="after")
+    def _cameras_parse(self) -> Settings:
+        from service.core.cameras import parse_outputs, parse_overrides, parse_size, scene_cameras
+
+        w, h = parse_size(self.camera_size, "camera_size")  # ValueError names setting + limit
+        parse_outputs(self.camera_outputs, "camera_outputs")
+        sizes = [(w, h)] + [c[0] for c in parse_overrides(self.cameras).values() if c and c[0]]
+        biggest = max(a * b for a, b in sizes)
+        if biggest * min(self.camera_batch, self.worlds) > MAX_RENDER_PIXELS:
+            raise ValueError(
+                f"camera_batch: {self.camera_batch} worlds of {biggest} pixels is over the "
+                f"render batch's limit of {MAX_RENDER_PIXELS} pixels (~12 bytes each): "
+                "lower --camera-batch or the size"
+            )
+        asked = {
+            "cameras": list(parse_overrides(self.cameras)),
+            "foxglove_cameras": self._names(self.foxglove_cameras),
+            "ros2_cameras": self._names(self.ros2_cameras),
+            "camera_record_cameras": self._names(self.camera_record_cameras),
+        }
+        have = scene_cameras()
+        for setting, names in asked.items():
+            unknown = [n for n in names if n not in have]
+            if unknown:
+                raise ValueError(
+                    f"{setting}: the scene has no camera {unknown[0]!r} (it has: {', '.join(have)})"
+                )
+        if self.camera_record:
+            world_list(self.camera_record_worlds, self.worlds, "camera_record_worlds")
+        return self
+
+    @staticmethod
+    def _names(text: str) -> list[str]:
+        return [p.strip() for p in text.split(",") if p.strip()]
 
     @model_validator(mode="after")
     def _ray_runs_the_warp_engine(self) -> Settings:

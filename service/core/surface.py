@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 from service.core.access import ClientSlots
+from service.core.camera_feed import CameraFeed
 from service.core.control import Control
 from service.core.hub import StreamHub
 from service.core.loop import SimLoop
@@ -35,6 +36,7 @@ class SurfaceContext:
     settings: Settings
     slots: ClientSlots
     metrics: Metrics
+    cameras: CameraFeed | None = None  # pictures on request (None: `armfleet replay`)
 
 
 @runtime_checkable

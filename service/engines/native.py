@@ -27,7 +27,7 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from mjcf import SCENE_XML
-from service.core.batch import Batch, Restorable, StateWrite
+from service.core.batch import Batch, Renderable, Restorable, StateWrite
 from service.core.packed_rows import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
@@ -80,7 +80,7 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-class NativeBatch(HostMirror, Batch, Restorable):
+class NativeBatch(HostMirror, Batch, Restorable, Renderable):
     """N worlds of one model in native MuJoCo, advanced a control tick at a time on a pool."""
 
     shards = 1  # one batch; the cores are used by threads, not processes
@@ -328,6 +328,10 @@ class NativeBatch(HostMirror, Batch, Restorable):
     def qpos(self) -> np.ndarray:
         """Full qpos of every world (nworld, nq), a copy; for tests and diagnostics."""
         return self._qpos.copy()
+
+    def render_state(self, worlds: np.ndarray) -> np.ndarray:
+        """Renderable: the asked worlds' qpos rows, copied for the render batch."""
+        return self._qpos[np.asarray(worlds, dtype=np.int64)].copy()
 
     def qvel(self) -> np.ndarray:
         return self._qvel.copy()

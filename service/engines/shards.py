@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from service.core.batch import Batch, Restorable, StateWrite, Supervised
+from service.core.batch import Batch, Renderable, Restorable, StateWrite, Supervised
 from service.core.types import BatchState, Snapshot
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
@@ -66,7 +66,7 @@ def auto_shards(nworld: int, device: str) -> int:
     return max(1, min(usable_cores(), nworld // MIN_WORLDS_PER_SHARD))
 
 
-class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
+class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
     """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
 
     def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
@@ -234,6 +234,10 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised):
             self._local.write_state(write.moved(local))
         else:
             self._staged.state(shard, write.moved(local))
+
+    def render_state(self, worlds: np.ndarray) -> np.ndarray:
+        """Renderable: the asked rows of every shard's qpos (one round trip to each worker)."""
+        return self._gather_qpos()[0][np.asarray(worlds, dtype=np.int64)]
 
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         shard, local = self._plan.locate(world)

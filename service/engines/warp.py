@@ -21,7 +21,7 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
-from service.core.batch import Batch, Restorable, StateWrite
+from service.core.batch import Batch, Renderable, Restorable, StateWrite
 from service.core.packed_rows import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
@@ -99,7 +99,7 @@ def snapshot_from(a: SnapshotArrays, target: np.ndarray) -> Snapshot:
     )
 
 
-class WorldBatch(HostMirror, Batch, Restorable):
+class WorldBatch(HostMirror, Batch, Restorable, Renderable):
     """N worlds of one model on one Warp device, advanced in captured control ticks.
 
     Targets live in a float64 host mirror (what was commanded, reported as `target`) and are
@@ -354,6 +354,11 @@ class WorldBatch(HostMirror, Batch, Restorable):
 
     def qvel(self) -> np.ndarray:
         return np.array(self._d.qvel.numpy(), copy=True)
+
+    def render_state(self, worlds: np.ndarray) -> np.ndarray:
+        """Renderable: the asked rows of this batch's own qpos (on the CPU a view of the
+        device array, so only the k rows are copied)."""
+        return self._d.qpos.numpy()[np.asarray(worlds, dtype=np.int64)].copy()
 
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos (used to inject faults on purpose in tests)."""

@@ -183,8 +183,10 @@ class FoxgloveLive:
         worlds: str | None = None,
         rate: float = 30.0,
         commands: bool = True,
+        cameras: tuple[str, float] = ("", 10.0),  # camera names, images a second
     ):
         self._host, self._port, self._worlds_spec = host, port, worlds
+        self._cameras, self._camera_topics = cameras, None
         # Foxglove's protocol has no place for our token: where writes need one, the server
         # offers no ClientPublish and is a viewer only (commands go through HTTP/WS instead).
         self._commands = commands
@@ -217,6 +219,14 @@ class FoxgloveLive:
         }
         self._tf = FrameTransformsChannel("/tf", context=self._ctx)
         self._scene = SceneUpdateChannel("/scene", context=self._ctx)
+        names = [c.strip() for c in self._cameras[0].split(",") if c.strip()]
+        if names and ctx.cameras is not None:  # camera_topics.py: images + calibrations
+            from service.surfaces.camera_topics import CameraTopics
+
+            self._camera_topics = CameraTopics(
+                self._ctx, ctx.cameras, self.worlds, names, self._cameras[1], self._hz
+            )
+            self._camera_topics.start()
         self._server = foxglove.start_server(
             name="armfleet",
             host=self._host,
@@ -239,6 +249,8 @@ class FoxgloveLive:
         )
 
     def stop(self) -> None:
+        if self._camera_topics is not None:
+            self._camera_topics.stop()
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5)

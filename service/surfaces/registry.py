@@ -32,7 +32,22 @@ def _foxglove(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
     # Foxglove's protocol cannot carry the token: where writes need one, it is a viewer only.
     writes = s.token is None
     return FoxgloveLive(
-        s.host, s.foxglove_port, s.foxglove_worlds, s.foxglove_rate, commands=writes
+        s.host,
+        s.foxglove_port,
+        s.foxglove_worlds,
+        s.foxglove_rate,
+        commands=writes,
+        cameras=(s.foxglove_cameras, s.camera_rate),
+    )
+
+
+def _camera_recording(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
+    if s.camera_record is None:
+        return None
+    from service.surfaces.camera_recording import CameraRecording
+
+    return CameraRecording(
+        s.camera_record, s.camera_record_worlds, s.camera_record_cameras, s.camera_rate
     )
 
 
@@ -41,7 +56,9 @@ def _ros2(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
         return None
     from service.surfaces.ros.dds import DdsBridge
 
-    return DdsBridge(s.ros2_rate, s.ros2_worlds, s.ros2_network)
+    return DdsBridge(
+        s.ros2_rate, s.ros2_worlds, s.ros2_network, cameras=(s.ros2_cameras, s.camera_rate)
+    )
 
 
 def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
@@ -55,6 +72,7 @@ def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
 # (name, builder), in start order. The names are the surfaces' `name`s.
 REGISTRY: tuple[tuple[str, Builder], ...] = (
     ("foxglove", _foxglove),
+    ("camera_recording", _camera_recording),
     ("ros2", _ros2),
     ("rosbridge", _rosbridge),
 )

@@ -50,12 +50,21 @@ class DdsBridge:
 
     name = "ros2"
 
-    def __init__(self, rate: float = 60.0, worlds: str | None = None, network: bool = False):
+    def __init__(
+        self,
+        rate: float = 60.0,
+        worlds: str | None = None,
+        network: bool = False,
+        cameras: tuple[str, float] = ("", 10.0),  # camera names, images a second
+    ):
         if not 0 < rate <= 1000:
             raise ValueError(f"ros2_rate must be in (0, 1000] Hz, got {rate}")
         self.rate = rate
         self._worlds_spec = worlds
         self._network = network
+        self._camera_names = [c.strip() for c in cameras[0].split(",") if c.strip()]
+        self._camera_rate = cameras[1]
+        self.cameras: Any = None  # camera_dds.RosCameras when --ros2-cameras names some
         self.config: DdsConfig | None = None
         self.topics: TopicMap | None = None
         self.bad = BadMessageCounter("ros2")
@@ -123,6 +132,10 @@ class DdsBridge:
         from service.surfaces.ros.ur_dds import UrDriverDds
 
         self.ur = UrDriverDds(dp, ctx, self.topics, self.bad)
+        if self._camera_names and ctx.cameras is not None:
+            from service.surfaces.ros.camera_dds import RosCameras
+
+            self.cameras = RosCameras(dp, ctx, self.topics, self._camera_names, self._camera_rate)
         self._announce_node(dp, msgs)
 
         self._waitset = WaitSet(dp)
@@ -201,6 +214,8 @@ class DdsBridge:
         for t in self._threads:
             t.join(timeout=5)
         self.ur.stop()
+        if self.cameras is not None:
+            self.cameras.stop()
         # cyclonedds keeps every entity in a class-level table until it is deleted explicitly.
         for entity in reversed(self._entities):
             entity.__del__()
@@ -214,7 +229,13 @@ class DdsBridge:
             "domain_id": cfg.domain_id if cfg else None,
             "scope": cfg.scope if cfg else None,
             "rate_hz": self.rate,
-            "topics": (self.topics.all_topics() | ur_topics(self.topics)) if self.topics else {},
+            "topics": (
+                self.topics.all_topics()
+                | ur_topics(self.topics)
+                | (self.cameras.topic_types if self.cameras else {})
+            )
+            if self.topics
+            else {},
             "actions": ur_actions(self.topics) if self.topics else {},
             "commands_accepted": self.received + (self.ur.received if self._running else 0),
             "states_published": self.published,

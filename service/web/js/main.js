@@ -1,6 +1,7 @@
 // The page: fetches what to draw, opens the stream, wires panel actions to commands.
 // URL: /?world=3 (the world to drive), &view=fleet (grid of worlds), &worlds=0-63, &rate=30.
 
+import { CameraPane } from './cameras.js';
 import { Connection } from './connection.js';
 import { PoseTrack } from './frames.js';
 import { Panel } from './panel.js';
@@ -38,6 +39,8 @@ const page = {
   },
 };
 window.armfleet = page.stats;
+const cameraPane = new CameraPane(document.getElementById('camera'));
+window.armfleetCamera = cameraPane.stats;
 
 const track = new PoseTrack(page.rate);
 const panel = new Panel({
@@ -152,12 +155,14 @@ function go() {
     const asked = Number.isInteger(w) ? w : JSON.stringify(params.get('world'));
     showBanner(`World ${asked} does not exist: this service runs worlds 0–${n - 1}.`);
     panel.status('no world to show', true);
+    cameraPane.show(null);
     return;
   }
   panel.enable(true);
   hideBanner();
   const worlds = page.view === 'fleet' ? page.fleet || `0-${Math.min(n, FLEET_MAX) - 1}` : String(w);
   conn.open({ worlds, focus: w, rate: page.rate });
+  cameraPane.show(page.view === 'world' ? w : null);
 }
 
 // Text in the panel changes at most this often (each change costs a layout and a paint); the
@@ -250,6 +255,7 @@ async function main() {
   viewer.setScene(scene);
   viewer.controls.addEventListener('change', wake); // orbit, zoom, pan
   new ResizeObserver(wake).observe(document.getElementById('view'));
+  await cameraPane.load(authorised);
   go();
 }
 

@@ -1,0 +1,108 @@
+"""The camera stream: chosen worlds' images from one camera, at a chosen rate, over a WebSocket.
+
+    /v1/ws/cameras?camera=wrist&worlds=0-15&rate=10&image=rgb&format=jpeg
+
+Each binary message is one render of every listed world at one tick, laid out as
+service/core/camera_wire.py's `pack` (header JSON with `tick`, `worlds`, sizes; then the
+images). Newest only: the next picture is taken when the last one has been handed to the
+socket, so a slow reader holds drawing back instead of piling images up in the service (at
+most what the socket's buffers hold is in flight, a few MB on loopback); a reader that keeps
+up gets `rate` a second (fewer when drawing takes longer than a period). With `pull=true`
+nothing is in flight beyond what was asked: the client sends a text message (any text) for
+each picture it wants, and gets the newest at that moment (still at most `rate` a second).
+Nothing is drawn while nobody is connected.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from typing import Annotated
+
+from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
+
+from service.core import access, camera_wire
+from service.core.camera_feed import CameraFeed
+from service.core.errors import ArmfleetError
+from service.core.worlds import parse_worlds
+
+router = APIRouter(prefix="/v1")
+
+MAX_RATE = 60.0  # images a second per socket
+_CLOSE_TRY_AGAIN = 1013
+_CLOSE_POLICY = 1008
+
+
+@router.websocket("/ws/cameras")
+async def camera_socket(
+    ws: WebSocket,
+    camera: Annotated[str, Query(description="camera name, as GET /v1/cameras lists it")],
+    worlds: Annotated[str, Query(description="e.g. 0-15,20")] = "0",
+    rate: Annotated[float, Query(gt=0, le=MAX_RATE)] = 10.0,
+    image: Annotated[str, Query(description="rgb, depth or seg")] = "rgb",
+    format: Annotated[str | None, Query(description="png, jpeg (rgb) or raw")] = None,
+    quality: Annotated[int, Query(ge=1, le=100)] = 80,
+    pull: Annotated[bool, Query(description="one picture per text message sent")] = False,
+) -> None:
+    runtime = ws.app.state.runtime
+    grant = access.check_websocket(runtime.settings, ws)
+    feed: CameraFeed | None = runtime.cameras
+    await ws.accept(subprotocol=grant.subprotocol)
+    if not grant.read:
+        return await ws.close(code=_CLOSE_POLICY, reason=grant.reason[:120])
+    if feed is None:
+        return await ws.close(code=_CLOSE_TRY_AGAIN, reason="simulation is starting")
+    try:
+        fmt = camera_wire.choose(image, format, None)
+        feed.want(camera, image)
+        ids = parse_worlds(worlds, feed.loop.batch.nworld)
+    except ArmfleetError as exc:
+        return await ws.close(code=_CLOSE_POLICY, reason=str(exc)[:120])
+    wanted = asyncio.Semaphore(0) if pull else None
+    sender = asyncio.create_task(_send(ws, feed, ids, camera, image, fmt, quality, rate, wanted))
+    try:
+        while True:  # pull requests, and to notice the client leaving
+            message = await ws.receive()
+            if message["type"] == "websocket.disconnect":
+                break
+            if wanted is not None and message.get("text") is not None:
+                wanted.release()
+    except (WebSocketDisconnect, RuntimeError):
+        pass
+    finally:
+        sender.cancel()
+        with contextlib.suppress(BaseException):
+            await sender
+
+
+async def _send(
+    ws: WebSocket,
+    feed: CameraFeed,
+    ids: object,
+    camera: str,
+    image: str,
+    fmt: str,
+    quality: int,
+    rate: float,
+    wanted: asyncio.Semaphore | None,
+) -> None:
+    period = 1.0 / rate
+    due = time.monotonic()
+    while True:
+        if wanted is not None:
+            await wanted.acquire()
+        try:
+            shot = await feed.shoot_async(ids, camera)  # type: ignore[arg-type]
+        except ArmfleetError as exc:  # warming up: say so and try again a period later
+            if exc.status != 503:
+                await ws.close(code=_CLOSE_POLICY, reason=str(exc)[:120])
+                return
+            if wanted is not None:
+                wanted.release()  # still wanted
+            await asyncio.sleep(period)
+            continue
+        message = await asyncio.to_thread(camera_wire.pack, shot, image, fmt, quality)
+        await ws.send_bytes(message)  # waits while the reader is slow: no frame piles up
+        due = max(due + period, time.monotonic())  # late: start again from now, no burst
+        await asyncio.sleep(max(0.0, due - time.monotonic()))

@@ -1,0 +1,176 @@
+"""CameraFeed: pictures of the asked worlds and camera, taken only when someone asks.
+
+A picture is two steps. On the loop's thread, between two ticks, the engine hands over the
+asked worlds' positions (`Renderable.render_state`: one small copy, served like any other
+request through `SimLoop.call`), so the picture shows exactly one tick. Then the renderer
+draws them on a thread of its own, beside the stepping: the loop pays the copy, the drawing
+costs a core of its own where there is one. Requests are drawn one after the other (one
+render batch), and counted for /metrics.
+
+The renderer (service/engines/camera_render.py) is handed in by the runtime: the core only
+knows it through `ImageRenderer`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from service.core.batch import Batch, Renderable
+from service.core.cameras import CameraSpec
+from service.core.errors import Conflict, NotFound, Unavailable
+from service.core.loop import SimLoop
+
+
+class ImageRenderer(Protocol):
+    """Draws given world states (service/engines/camera_render.py's BatchRenderer)."""
+
+    cameras: dict[str, CameraSpec]
+
+    def warm(self) -> float: ...
+
+    def render(self, qpos: np.ndarray, camera: str) -> Any:
+        """An object with `rgb`, `depth` and `seg` arrays (None for an output not drawn)."""
+        ...
+
+
+@dataclass(frozen=True)
+class Shot:
+    """What one camera saw in some worlds at one tick (arrays as `Images` in camera_render)."""
+
+    tick: int
+    camera: CameraSpec
+    worlds: np.ndarray  # (k,) world ids, in the order of the images
+    rgb: np.ndarray | None
+    depth: np.ndarray | None
+    seg: np.ndarray | None
+
+    def image(self, output: str) -> np.ndarray:
+        """The (k, h, w[, 3]) array of `output` (rgb, depth, seg); Conflict if not drawn."""
+        arr = getattr(self, output)
+        if arr is None:
+            raise Conflict(
+                f"camera {self.camera.name!r} does not draw {output} (it draws "
+                f"{', '.join(self.camera.outputs)}; see --cameras)",
+                "query.image",
+            )
+        return arr
+
+
+class CameraFeed:
+    """The service's cameras: the specs served, and pictures on request."""
+
+    def __init__(
+        self, loop: SimLoop, specs: list[CameraSpec], build: Callable[[], ImageRenderer]
+    ) -> None:
+        self.loop = loop
+        self.specs = {s.name: s for s in specs}
+        self.renders = 0  # render calls (one per request, whatever its number of worlds)
+        self.images = 0  # images drawn (worlds x requests)
+        self.render_seconds = 0.0  # wall time spent drawing
+        self.state_seconds = 0.0  # wall time the loop's thread spent handing over states
+        self.warm_s: float | None = None  # seconds the first draw of every camera took
+        self.error: str | None = None
+        self._lock = threading.Lock()
+        self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="armfleet-render")
+        self._renderer = self._pool.submit(self._build, build)  # at start, off every hot path
+
+    def _build(self, build: Callable[[], ImageRenderer]) -> ImageRenderer:
+        try:
+            renderer = build()
+            self.warm_s = renderer.warm()
+            return renderer
+        except Exception as exc:
+            self.error = f"{type(exc).__name__}: {exc}"
+            raise
+
+    @property
+    def available(self) -> bool:
+        return bool(self.specs) and isinstance(self.loop.batch, Renderable)
+
+    def spec(self, name: str) -> CameraSpec:
+        """The served camera `name`; NotFound naming the cameras there are."""
+        if name not in self.specs:
+            have = (
+                ", ".join(self.specs)
+                or "none (the scene has no camera, or --cameras turned all off)"
+            )
+            raise NotFound(f"no camera {name!r}; cameras: {have}", "camera")
+        return self.specs[name]
+
+    def want(self, name: str, output: str) -> CameraSpec:
+        """The served camera `name`, checked to draw `output`; NotFound or Conflict naming it."""
+        spec = self.spec(name)
+        if output not in spec.outputs:
+            raise Conflict(
+                f"camera {name!r} does not draw {output} (it draws {', '.join(spec.outputs)}; "
+                "see --cameras)",
+                "query.image",
+            )
+        return spec
+
+    def shoot(self, worlds: np.ndarray, camera: str) -> concurrent.futures.Future[Shot]:
+        """A picture of `worlds` (valid ids) by `camera`, at the next tick boundary."""
+        spec = self.spec(camera)
+        if not isinstance(self.loop.batch, Renderable):
+            raise Conflict("this engine cannot hand its state to the cameras", "camera")
+        if not self._renderer.done() or self._renderer.exception() is not None:
+            raise Unavailable(self.error or "the cameras are starting (compiling kernels)")
+        ids = np.asarray(worlds, dtype=np.int64)
+        out: concurrent.futures.Future[Shot] = concurrent.futures.Future()
+
+        def take(batch: Batch) -> tuple[int, np.ndarray]:
+            t0 = time.perf_counter()
+            assert isinstance(batch, Renderable)
+            state = batch.tick, batch.render_state(ids)
+            with self._lock:
+                self.state_seconds += time.perf_counter() - t0
+            return state
+
+        def draw(got: concurrent.futures.Future[tuple[int, np.ndarray]]) -> None:
+            if got.exception() is not None:
+                out.set_exception(got.exception())  # type: ignore[arg-type]
+                return
+            tick, qpos = got.result()
+            try:
+                self._pool.submit(self._draw, tick, qpos, spec, ids, out)
+            except RuntimeError as exc:  # closed meanwhile
+                out.set_exception(Unavailable(f"cameras stopped: {exc}"))
+
+        self.loop.call(take).add_done_callback(draw)
+        return out
+
+    async def shoot_async(self, worlds: np.ndarray, camera: str) -> Shot:
+        return await asyncio.wrap_future(self.shoot(worlds, camera))
+
+    def _draw(
+        self,
+        tick: int,
+        qpos: np.ndarray,
+        spec: CameraSpec,
+        ids: np.ndarray,
+        out: concurrent.futures.Future[Shot],
+    ) -> None:
+        if not out.set_running_or_notify_cancel():
+            return
+        try:
+            t0 = time.perf_counter()
+            images = self._renderer.result().render(qpos, spec.name)
+            took = time.perf_counter() - t0
+            with self._lock:
+                self.renders += 1
+                self.images += len(ids)
+                self.render_seconds += took
+            out.set_result(Shot(tick, spec, ids, images.rgb, images.depth, images.seg))
+        except BaseException as exc:
+            out.set_exception(exc)
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)

@@ -1,0 +1,103 @@
+"""The camera WebSocket against a real realtime server: binary messages of many worlds, each
+with the tick it shows; the rate asked; a slow reader holds back drawing instead of piling up
+images; bad queries close with the reason. Pillow decodes every image."""
+
+from __future__ import annotations
+
+import io
+import time
+
+import httpx
+import numpy as np
+import pytest
+from PIL import Image
+from websockets.sync.client import connect
+
+from clients.testing import Server, serve
+from service.core.camera_wire import unpack
+from tests.conftest import wait_for
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
+    with serve(worlds=4, log_dir=tmp_path_factory.mktemp("s")) as s:
+        wait_for(lambda: httpx.get(f"{s.url}/v1/cameras").json()["ready"], "cameras", 300)
+        yield s
+
+
+def _renders(server: Server) -> float:
+    text = httpx.get(f"{server.url}/metrics").text
+    line = next(x for x in text.splitlines() if x.startswith("armfleet_camera_renders_total"))
+    return float(line.split()[1])
+
+
+def test_stream_sends_the_asked_worlds_at_the_asked_rate(server: Server) -> None:
+    url = f"{server.ws_url}/v1/ws/cameras?camera=wrist&worlds=1-3&rate=5&format=jpeg"
+    with connect(url) as ws:
+        got = [unpack(ws.recv(timeout=30)) for _ in range(6)]
+        t0 = time.monotonic()
+        for _ in range(5):
+            ws.recv(timeout=30)
+        took = time.monotonic() - t0
+    ticks = [h["tick"] for h, _ in got]
+    assert ticks == sorted(ticks) and ticks[-1] > ticks[0]  # realtime: the pictures move on
+    for header, images in got:
+        assert header["worlds"] == [1, 2, 3] and header["camera"] == "wrist"
+        assert header["content_type"] == "image/jpeg" and len(images) == 3
+        for data in images:
+            assert Image.open(io.BytesIO(data)).size == (128, 96)
+    assert 0.6 < took < 2.0  # five messages at 5 a second (1 s), give or take a loaded box
+
+
+def test_a_slow_reader_holds_drawing_back(server: Server) -> None:
+    # Big messages (raw float32 depth, 4 worlds) and a client that queues one message: while it
+    # does not read, the socket's buffers fill and no further picture is drawn.
+    url = f"{server.ws_url}/v1/ws/cameras?camera=overview&worlds=0-3&rate=30&image=depth&format=raw"
+    with connect(url, max_queue=1, max_size=None) as ws:
+        first, _ = unpack(ws.recv(timeout=30))
+        before = _renders(server)
+        time.sleep(3.0)
+        during = _renders(server) - before
+        newest = first
+        for _ in range(int(during) + 2):  # what was in flight, then a fresh one
+            newest, images = unpack(ws.recv(timeout=30))
+        depth = np.frombuffer(images[0], "<f4")
+        assert depth.size == 128 * 96 and depth.max() > 0
+    assert during < 45, f"{during} pictures drawn in 3 s at 30/s for a reader that read none"
+    tick = httpx.get(f"{server.url}/v1/info").json()["tick"]
+    assert newest["tick"] > first["tick"] and tick - newest["tick"] < 60  # fresh again
+
+
+@pytest.mark.parametrize(
+    ("query", "named"),
+    [
+        ("camera=nose", "nose"),
+        ("camera=wrist&worlds=7", "world"),
+        ("camera=wrist&image=seg", "seg"),
+        ("camera=wrist&format=gif", "format"),
+    ],
+)
+def test_bad_stream_queries_close_with_the_reason(server: Server, query: str, named: str) -> None:
+    with (
+        connect(f"{server.ws_url}/v1/ws/cameras?{query}") as ws,
+        pytest.raises(Exception) as closed,
+    ):
+        ws.recv(timeout=10)
+    assert named in str(closed.value) or named in str(ws.close_reason)
+    assert ws.close_code == 1008
+
+
+def test_pull_sends_one_fresh_picture_per_request_and_nothing_else(server: Server) -> None:
+    url = f"{server.ws_url}/v1/ws/cameras?camera=wrist&worlds=0&rate=30&pull=true&format=png"
+    with connect(url) as ws:
+        ws.send("next")
+        first, _ = unpack(ws.recv(timeout=30))
+        before = _renders(server)
+        time.sleep(1.0)
+        assert _renders(server) == before  # nobody asked: nothing drawn
+        with pytest.raises(TimeoutError):
+            ws.recv(timeout=0.2)
+        ws.send("next")
+        second, images = unpack(ws.recv(timeout=30))
+        assert Image.open(io.BytesIO(images[0])).size == (128, 96)
+    assert second["tick"] - first["tick"] >= 40  # about a second of 60 Hz ticks later: fresh
