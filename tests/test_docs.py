@@ -29,7 +29,7 @@ PAGES = sorted(DOCS.rglob("*.md"))
 # (class names such as WorldSession are not words of their own and do not match).
 TRACKER = re.compile(r"(?i)\bissues?\s*#?\d+(?![\w/])|\bsessions?\b")
 # A measured ratio typed into prose: "0.94×". Prose takes figures from `{{ fig ... }}`.
-RATIO = re.compile(r"\d×")
+RATIO = re.compile(r"\d×(?!\d)")  # a ratio, not a size (320×240)
 FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
 BENCH_BLOCK = re.compile(r"<!-- bench:(\w+) -->.*?<!-- /bench:\1 -->", re.S)
 
