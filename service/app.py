@@ -18,6 +18,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from service.api import (
     health,
     info,
+    leases,
     metrics,
     recordings,
     scene,
@@ -158,14 +159,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.runtime = runtime
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Added last = runs first: count refused commands, then check token, origin and slots.
-    app.add_middleware(access.AccessMiddleware, settings=settings, slots=runtime.slots)
+    app.add_middleware(
+        access.AccessMiddleware,
+        settings=settings,
+        slots=runtime.slots,
+        leases=lambda: runtime.leases,
+    )
     app.add_middleware(CommandCounter, metrics=runtime.metrics)
     for module in (health, metrics, web):
         app.include_router(module.router)
     for router in runtime.surfaces.routers():  # rosbridge's socket and GET /v1/ros
         app.include_router(router)
     # Every /v1 route can also answer 401/403 (token, origin) and 503 (not ready, client cap).
-    for module in (info, worlds, trajectory, sim, scene, ws, snapshots, recordings):
+    for module in (info, worlds, trajectory, sim, scene, ws, snapshots, recordings, leases):
         app.include_router(module.router, responses=errors(*ANY))
     web.mount_static(app)
     generate = app.openapi

@@ -8,6 +8,7 @@ from fastapi import APIRouter
 
 from service.api.deps import Ctl, Loop
 from service.core.commands.base import HTTP
+from service.core.commands.world import Step
 from service.core.schemas import ModeRequest, SimReply, StepRequest, errors
 from service.core.types import Mode
 
@@ -35,6 +36,7 @@ async def set_mode(control: Ctl, body: ModeRequest) -> SimReply:
     summary="Paused only: advance exactly `ticks` control ticks; replies once they are done",
     responses=errors(409),
 )
-async def step(loop: Loop, body: StepRequest) -> SimReply:
-    tick = await asyncio.wrap_future(loop.step(body.ticks))  # NotPaused → 409 (app handler)
+async def step(loop: Loop, control: Ctl, body: StepRequest) -> SimReply:
+    stepping = control.run(Step(body.ticks), HTTP)  # every world: the administrator's
+    tick = await asyncio.wrap_future(stepping)  # NotPaused → 409 (app handler)
     return SimReply(mode=loop.mode, tick=tick)

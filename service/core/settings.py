@@ -77,6 +77,17 @@ class Settings(BaseSettings):
     command_burst: int | None = Field(
         None, ge=1, description="commands a connection may send at once (default: one second's)"
     )
+    leases: Literal["off", "optional", "required"] = Field(
+        "optional",
+        description="worlds lent with tokens of their own (POST /v1/leases): optional: leased "
+        "worlds answer only to their lease; required: every command needs a lease or --token",
+    )
+    lease_reset: Literal["both", "start", "end", "none"] = Field(
+        "both", description="reset a leased world to home when its lease starts, ends, both"
+    )
+    lease_max_ttl_s: float = Field(
+        86_400.0, gt=0, le=31 * 86_400, description="longest time to live a lease may have [s]"
+    )
     data_dir: Path = Field(
         Path("~/.local/share/armfleet"), description="where snapshots and recordings are kept"
     )
@@ -124,6 +135,12 @@ class Settings(BaseSettings):
     def _ray_runs_the_warp_engine(self) -> Settings:
         if self.ray and self.engine != "warp":
             raise ValueError("ray: Ray actors run the warp engine only (use --engine warp)")
+        return self
+
+    @model_validator(mode="after")
+    def _required_leases_have_an_administrator(self) -> Settings:
+        if self.leases == "required" and not self.token:
+            raise ValueError("leases required: give --token, the administrator's (who lends)")
         return self
 
     @model_validator(mode="after")

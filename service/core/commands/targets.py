@@ -49,6 +49,10 @@ class Increment(Command[CommandResult]):
     world: int
     deltas: Mapping[int, float]
 
+    @property
+    def touches(self) -> Sequence[int]:
+        return (self.world,)
+
     @classmethod
     def create(
         cls, door: Door, world: object, deltas: Mapping[str | int, float], field: str = "deltas"
@@ -92,6 +96,10 @@ class SetTargets(Command[CommandResult]):
     world: int
     values: Mapping[int, float]
 
+    @property
+    def touches(self) -> Sequence[int]:
+        return (self.world,)
+
     @classmethod
     def create(cls, door: Door, world: object, name: Any, position: Any) -> SetTargets:
         world = rules.world_id(world, door.nworld)
@@ -131,6 +139,10 @@ class SetMany(Command[list[CommandResult]]):
     worlds: list[int]
     rows: np.ndarray
     joints: tuple[int, ...] | None = None
+
+    @property
+    def touches(self) -> Sequence[int] | None:
+        return self.worlds
 
     @classmethod
     def create(
