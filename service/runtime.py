@@ -14,7 +14,7 @@ from typing import Any
 
 import orjson
 
-from service.core.access import ClientSlots
+from service.core.access import ClientSlots, RateLimiter
 from service.core.batch import Batch, Supervised
 from service.core.callers import Gate
 from service.core.control import Accepted, Control
@@ -200,7 +200,9 @@ class Runtime:
         self.leases = LeaseBook(
             nworld, lambda worlds: control.reset(worlds, LEASE), reset_at, s.lease_max_ttl_s
         )
-        control.gate = Gate(s, self.leases, nworld)
+        # A lease gets the rate of one connection, over all its connections together.
+        bucket = lambda: RateLimiter(s.command_rate, s.command_burst)  # noqa: E731
+        control.gate = Gate(s, self.leases, nworld, bucket)
 
     async def going_away(self) -> None:
         """Close every stream with 1001 (going away) before the server stops: clients learn

@@ -17,9 +17,9 @@ Callers:
 from __future__ import annotations
 
 import hmac
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 from service.core.errors import ArmfleetError
 from service.core.leases import LeaseBook, looks_like_lease
@@ -30,6 +30,12 @@ class Forbidden(ArmfleetError):
     """This caller may not command that world: 403 (nothing was changed)."""
 
     status = 403
+
+
+class OverRate(ArmfleetError):
+    """A lease's commands, over all its connections together, came faster than its rate: 429."""
+
+    status = 429
 
 
 class BadToken(ArmfleetError):
@@ -90,24 +96,51 @@ def book_of(control: object) -> LeaseBook | None:
     return gate.book if isinstance(gate, Gate) else None
 
 
+class Bucket(Protocol):
+    """A token bucket (access.RateLimiter): take() says "ok" or not."""
+
+    detail: str
+
+    def take(self) -> str: ...
+
+
 class Gate:
     """The one check of a command's worlds against its caller (see the module docstring),
-    counting what it forbids by surface (`forbidden`, for /metrics)."""
+    counting what it forbids by surface (`forbidden`, for /metrics). A lease's commands also
+    pass one bucket of its own (`bucket()` makes it), whatever connections they come by.
+    Called by Control under its order lock: one check at a time."""
 
-    def __init__(self, settings: Settings, book: LeaseBook, nworld: int) -> None:
+    def __init__(
+        self, settings: Settings, book: LeaseBook, nworld: int, bucket: Callable[[], Bucket]
+    ) -> None:
         self.required = settings.leases == "required"
         self.book = book
         self.nworld = nworld
         self.forbidden: dict[str, int] = {}
+        self._bucket = bucket
+        self._buckets: dict[str, Bucket] = {}
 
     def check(self, caller: Caller, worlds: Sequence[int] | None, source: str) -> None:
-        """Forbidden naming the first world `caller` may not command; None when allowed."""
+        """Forbidden naming the first world `caller` may not command (OverRate when a lease
+        sends too fast); None when allowed."""
         if caller.admin:
             return
         why = self._why(caller, worlds)
         if why is not None:
             self.forbidden[source] = self.forbidden.get(source, 0) + 1
             raise Forbidden(why, "world")
+        if caller.lease_id is not None:
+            self._take(caller.lease_id)
+
+    def _take(self, lease_id: str) -> None:
+        bucket = self._buckets.get(lease_id)
+        if bucket is None:
+            if len(self._buckets) > 4 * max(1, self.book.active):  # drop ended leases' buckets
+                live = {v["id"] for v in self.book.views()}
+                self._buckets = {k: v for k, v in self._buckets.items() if k in live}
+            bucket = self._buckets[lease_id] = self._bucket()
+        if bucket.take() != "ok":
+            raise OverRate(f"this lease's {bucket.detail}", "lease")
 
     def _why(self, caller: Caller, worlds: Sequence[int] | None) -> str | None:
         if caller.kind == "lease":
