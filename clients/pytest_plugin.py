@@ -12,8 +12,9 @@ depends on armfleet gets the fixtures without any conftest:
   `serve()`) starts a server for one test; all it started stop when the test ends.
 - `armfleet_world`: one world of its own for one test, leased (reset to home, given back
   after the test) from the shared server named by ARMFLEET_URL (token: ARMFLEET_TOKEN, if the
-  server needs one to lend), else from `armfleet_server`. pytest-xdist workers each get their
-  own: `ARMFLEET_URL=http://ci-box:8000 pytest -n 4`.
+  server needs one to lend), else from a 4-world server of the module's own that lends
+  (`--leases optional`). pytest-xdist workers each get their own world:
+  `ARMFLEET_URL=http://ci-box:8000 pytest -n 4`.
 
       def test_elbow_moves(armfleet_world):
           arm, w = armfleet_world.client, armfleet_world.world
@@ -53,12 +54,20 @@ def armfleet_server_factory(tmp_path: Any) -> Iterator[ServerFactory]:
         yield start
 
 
+@pytest.fixture(scope="module")
+def armfleet_lending_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """A 4-world realtime server that lends worlds (`armfleet_world` without ARMFLEET_URL)."""
+    log_dir = tmp_path_factory.mktemp("armfleet-lending")
+    with serve(worlds=4, extra_args=("--leases", "optional"), log_dir=log_dir) as server:
+        yield server
+
+
 @pytest.fixture
 def armfleet_world(request: pytest.FixtureRequest) -> Iterator[LeasedWorld]:
     """A leased world of its own for this test (see the module docstring)."""
     url = os.environ.get("ARMFLEET_URL")
     if not url:
-        url = request.getfixturevalue("armfleet_server").url
+        url = request.getfixturevalue("armfleet_lending_server").url
     worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
     label = f"pytest {worker} {request.node.nodeid}"[:120]
     with lease_world(url, os.environ.get("ARMFLEET_TOKEN"), label) as world:

@@ -78,9 +78,10 @@ class Settings(BaseSettings):
         None, ge=1, description="commands a connection may send at once (default: one second's)"
     )
     leases: Literal["off", "optional", "required"] = Field(
-        "optional",
-        description="worlds lent with tokens of their own (POST /v1/leases): optional: leased "
-        "worlds answer only to their lease; required: every command needs a lease or --token",
+        "off",
+        description="lend worlds with tokens of their own (POST /v1/leases). optional: a leased "
+        "world answers only to its lease (and --token); required: every command needs a lease "
+        "token or --token",
     )
     lease_reset: Literal["both", "start", "end", "none"] = Field(
         "both", description="reset a leased world to home when its lease starts, ends, both"
