@@ -53,7 +53,7 @@ class AsyncArmfleetClient(_Closes):
         self.url = url.rstrip("/")
         self.timeout = timeout
         self.token = token  # the administrator's or a lease's; sent with every request
-        self.lease: models.Lease | None = None  # set on the client `lease()` yields
+        self.leased: models.Lease | None = None  # what the client `lease()` yields holds
         headers = _http.auth_headers(token)
         self._http = httpx.AsyncClient(base_url=self.url, timeout=timeout, headers=headers)
 
@@ -171,7 +171,7 @@ class AsyncArmfleetClient(_Closes):
         """Async twin of `ArmfleetClient.lease` (`async with client.lease() as mine:`)."""
         held = await self._call(_http.lease_call(count, worlds, ttl_s, label, wait_s))
         client = AsyncArmfleetClient(self.url, self.timeout, token=held.token)
-        client.lease = held
+        client.leased = held
         try:
             yield client
         finally:
@@ -180,9 +180,9 @@ class AsyncArmfleetClient(_Closes):
             await client.close()
 
     async def renew_lease(self, ttl_s: float = 600.0) -> models.Lease:
-        if self.lease is None:
+        if self.leased is None:
             raise ValueError("this client holds no lease (use `async with client.lease() as c:`)")
-        return await self._call(_http.renew_call(self.lease.id, ttl_s))
+        return await self._call(_http.renew_call(self.leased.id, ttl_s))
 
     # -- WebSocket ---------------------------------------------------------------------------
 

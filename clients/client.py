@@ -9,7 +9,7 @@
 A world of a shared server, for as long as the block runs (reset to home, given back after):
 
     with ArmfleetClient(url, token=TOKEN).lease(label="ci") as mine:
-        mine.increment(mine.lease.world, "elbow_joint", 0.1)
+        mine.increment(mine.leased.world, "elbow_joint", 0.1)
 
 The asynchronous twin, with the same methods, is `clients.async_client.AsyncArmfleetClient`.
 Both only do the I/O: requests and replies are built and read in `clients._http`, WebSocket
@@ -62,7 +62,7 @@ class ArmfleetClient(_Closes):
         self.url = url.rstrip("/")
         self.timeout = timeout
         self.token = token  # the administrator's or a lease's; sent with every request
-        self.lease: models.Lease | None = None  # set on the client `lease()` yields
+        self.leased: models.Lease | None = None  # what the client `lease()` yields holds
         headers = _http.auth_headers(token)
         self._http = httpx.Client(base_url=self.url, timeout=timeout, headers=headers)
 
@@ -190,12 +190,12 @@ class ArmfleetClient(_Closes):
         wait_s: float = 0.0,
     ) -> Iterator[ArmfleetClient]:
         """Borrow `count` free worlds (or the named `worlds`) for the block: yields a client
-        holding the lease's token (its `.lease` says which worlds), reset to home; gives them
+        holding the lease's token (its `.leased` says which worlds), reset to home; gives them
         back when the block ends. Conflict / NotReady (409 / 503) when none is free after
         `wait_s` seconds; `renew_lease` keeps a long block's lease alive."""
         held = self._call(_http.lease_call(count, worlds, ttl_s, label, wait_s))
         client = ArmfleetClient(self.url, self.timeout, token=held.token)
-        client.lease = held
+        client.leased = held
         try:
             yield client
         finally:
@@ -205,9 +205,9 @@ class ArmfleetClient(_Closes):
 
     def renew_lease(self, ttl_s: float = 600.0) -> models.Lease:
         """This client's lease lives `ttl_s` more seconds from now."""
-        if self.lease is None:
+        if self.leased is None:
             raise ValueError("this client holds no lease (use `with client.lease() as c:`)")
-        return self._call(_http.renew_call(self.lease.id, ttl_s))
+        return self._call(_http.renew_call(self.leased.id, ttl_s))
 
     # -- WebSocket ---------------------------------------------------------------------------
 

@@ -184,5 +184,5 @@ def lease_world(
         ArmfleetClient(url, timeout=timeout, token=token) as lender,
         lender.lease(1, ttl_s=LEASE_TTL_S, label=label, wait_s=LEASE_WAIT_S) as mine,
     ):
-        assert mine.lease is not None
-        yield LeasedWorld(url, mine.lease.world, mine.lease, mine)
+        assert mine.leased is not None
+        yield LeasedWorld(url, mine.leased.world, mine.leased, mine)

@@ -31,6 +31,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from starlette.responses import JSONResponse
+from starlette.routing import Match
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.core.callers import OPEN, BadToken, Caller, identify
@@ -51,6 +52,7 @@ _READ_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 # What a lease token may write over HTTP (its worlds are then Control's check); the rest
 # (snapshots, recordings, asking for leases) needs the administrator's token.
 LEASE_WRITES = ("/v1/worlds/", "/v1/targets", "/v1/reset", "/v1/trajectories", "/v1/sim/")
+_API_WRITES = frozenset({"POST", "PUT", "PATCH", "DELETE"})  # others: 405 from the routes
 LEASE_OWN = "/v1/leases/"  # + its own id: renew, release
 
 
@@ -142,7 +144,8 @@ def check_http(
             hint = "" if presented else ": send `Authorization: Bearer <token>`"
             raise AccessError(401, f"{what}: {exc.detail}{hint}") from None
         caller = None
-    if write and caller is not None and caller.kind == "lease" and not _lease_writes(caller, path):
+    lease_write = method.upper() in _API_WRITES and caller is not None and caller.kind == "lease"
+    if lease_write and not _lease_writes(caller, path):  # type: ignore[arg-type]
         raise AccessError(403, f"{path} needs the administrator's token, not a lease's")
     if write and not origin_allowed(settings, headers):
         raise AccessError(403, f"origin {headers.get('origin')!r} may not command this service")
@@ -300,6 +303,8 @@ class AccessMiddleware:
             await self.app(scope, receive, send)
 
     async def _http(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if not _routed(scope):  # no route takes it: the router answers 404 / 405 as it should
+            return await self.app(scope, receive, send)
         headers = _headers(scope)
         try:
             method, path = scope["method"], scope["path"]
@@ -337,6 +342,15 @@ class AccessMiddleware:
             await self.app(scope, receive, send)
         finally:
             self.slots.release()
+
+
+def _routed(scope: Scope) -> bool:
+    """Some route of the app takes this path and method (Starlette puts the app in the scope)."""
+    app = scope.get("app")
+    routes = getattr(getattr(app, "router", None), "routes", None)
+    if routes is None:
+        return True  # not under a Starlette app: check everything
+    return any(route.matches(scope)[0] is Match.FULL for route in routes)
 
 
 def _headers(scope: Scope) -> dict[str, str]:

@@ -24,6 +24,7 @@ from service.core.schema_fields import (
     Strict,
     WorldId,
     equal_lengths,
+    joint_names,
     json_int,
     non_null,
     paired,
@@ -225,6 +226,21 @@ class JointTargets(Strict):
         nameless = {"minItems": NJOINT, "maxItems": NJOINT}
         branches.append({"properties": {"name": {"maxItems": 0}, "position": nameless}})
         schema["oneOf"] = branches
+        # A joint named twice, once by name and once by index ("5" is wrist_3_joint), is a
+        # repeat too: JSON Schema's uniqueItems cannot see it, so each such pair is excluded.
+        schema["not"] = {
+            "anyOf": [
+                {
+                    "required": ["name"],
+                    "properties": {
+                        "name": {
+                            "allOf": [{"contains": {"const": n}}, {"contains": {"const": str(i)}}]
+                        }
+                    },
+                }
+                for i, n in enumerate(joint_names())
+            ]
+        }
         schema["examples"] = [
             {"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]},
             {"position": [0, -1.57, 1.57, -1.57, -1.57, 0, 0]},
