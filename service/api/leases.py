@@ -20,7 +20,8 @@ from service.core.leases import LeaseBook
 from service.core.schemas import errors
 from service.runtime import Runtime
 
-router = APIRouter(prefix="/v1", tags=["leases"])
+# Every route answers 404 when leases are off (armfleet serve --leases optional|required).
+router = APIRouter(prefix="/v1", tags=["leases"], responses=errors(404))
 LeaseId = Annotated[str, Path(description="the lease's id", max_length=64)]
 
 
@@ -52,7 +53,7 @@ def _may_manage(request: Request, lease_id: str) -> None:
     response_model=LeaseReply,
     status_code=201,
     summary="Lend free worlds (`count`) or named ones (`worlds`); the reply holds the token",
-    responses=errors(404, 409),
+    responses=errors(409),
 )
 async def grant(book: Book, body: LeaseRequest) -> LeaseReply:
     lease, token = await asyncio.to_thread(
