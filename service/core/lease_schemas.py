@@ -44,7 +44,11 @@ class LeaseRequest(Strict):
 
 
 class RenewRequest(Strict):
+    """Live `ttl_s` more seconds from now."""
+
     ttl_s: Seconds = 600.0
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"ttl_s": 3600}]})
 
 
 class LeaseReply(BaseModel):
