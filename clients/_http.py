@@ -206,6 +206,13 @@ def release_call(lease_id: str) -> Call:
     return Call("DELETE", f"/v1/leases/{lease_id}", Lease.from_json)
 
 
+def leases_call() -> Call:
+    def parse(d: Any) -> list[Lease]:
+        return [Lease.from_json(x) for x in d["leases"]]
+
+    return Call("GET", "/v1/leases", parse)
+
+
 def auth_headers(token: str | None) -> dict[str, str]:
     """The header a token travels in (HTTP requests and WebSocket handshakes)."""
     return {"Authorization": f"Bearer {token}"} if token else {}

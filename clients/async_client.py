@@ -179,6 +179,9 @@ class AsyncArmfleetClient(_Closes):
                 await client._call(_http.release_call(held.id))
             await client.close()
 
+    async def leases(self) -> list[models.Lease]:
+        return await self._call(_http.leases_call())
+
     async def renew_lease(self, ttl_s: float = 600.0) -> models.Lease:
         if self.leased is None:
             raise ValueError("this client holds no lease (use `async with client.lease() as c:`)")

@@ -203,6 +203,10 @@ class ArmfleetClient(_Closes):
                 client._call(_http.release_call(held.id))
             client.close()
 
+    def leases(self) -> list[models.Lease]:
+        """Every lease (the administrator's token), or this lease token's own."""
+        return self._call(_http.leases_call())
+
     def renew_lease(self, ttl_s: float = 600.0) -> models.Lease:
         """This client's lease lives `ttl_s` more seconds from now."""
         if self.leased is None:

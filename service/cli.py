@@ -213,16 +213,36 @@ def controller(
     url: Annotated[str, typer.Option(help="service base URL")] = "http://127.0.0.1:8000",
     world: Annotated[int, typer.Option(help="world to drive")] = 0,
     terminal: Annotated[bool, typer.Option(help="terminal UI instead of a Tk window")] = False,
+    token: Annotated[
+        str | None,
+        typer.Option(help="the service's token (env ARMFLEET_TOKEN)", envvar="ARMFLEET_TOKEN"),
+    ] = None,
+    lease: Annotated[
+        bool, typer.Option(help="take a free world for this session; give it back on exit")
+    ] = False,
+    lease_token: Annotated[
+        str | None, typer.Option(help="drive the world of a lease you were handed")
+    ] = None,
 ) -> None:
     """The seed's button controller: seven joints, Up (+0.1) / Down (-0.1)."""
-    if terminal:
-        from clients.tui import run_tui
+    from clients.errors import ArmfleetError
+    from clients.lease_session import session_world
 
-        run_tui(url=url, world=world)
-    else:
-        from clients.tk_controller import run_tk
+    try:
+        with session_world(url, token, world, lease, lease_token) as (world, token):
+            if lease or lease_token:
+                typer.echo(f"armfleet controller: driving world {world} (leased)", err=True)
+            if terminal:
+                from clients.tui import run_tui
 
-        run_tk(url=url, world=world)
+                run_tui(url=url, world=world, token=token)
+            else:
+                from clients.tk_controller import run_tk
+
+                run_tk(url=url, world=world, token=token)
+    except ArmfleetError as exc:  # no world free, a wrong token, an ended lease
+        typer.echo(f"armfleet controller: {exc}", err=True)
+        raise typer.Exit(1) from None
 
 
 @app.command()
