@@ -93,6 +93,7 @@ function command(msg) {
 
 function focus(w) {
   if (page.leased && !page.leased.includes(w)) {
+    panel.setWorld(page.world);
     panel.message(`world ${w} is not in your lease (yours: ${page.leased.join(', ')})`);
     return;
   }
