@@ -110,7 +110,13 @@ def serve(
     from service.core.settings import Settings
     from service.serving import serve_until_stopped
 
-    settings = Settings(**given)
+    try:
+        settings = Settings(**given)
+    except ValueError as exc:  # pydantic's ValidationError: each problem in words
+        errors = getattr(exc, "errors", lambda: [{"msg": str(exc)}])()
+        for err in errors:
+            typer.echo(f"armfleet serve: {err['msg'].removeprefix('Value error, ')}", err=True)
+        raise typer.Exit(2) from None
     _check_port_free(settings.host, settings.port)
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:

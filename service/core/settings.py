@@ -145,6 +145,15 @@ class Settings(BaseSettings):
         return self
 
     @model_validator(mode="after")
+    def _leases_need_token_carrying_surfaces(self) -> Settings:
+        if self.leases != "off" and self.ros2:
+            raise ValueError(
+                "leases: the in-process ROS 2 surface (--ros2) carries no token and could move "
+                "leased worlds; drive ROS through the ROS node (HTTP/WebSocket, a lease token)"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _ros2_worlds_exist(self) -> Settings:
         world_list(self.ros2_worlds, self.worlds, "ros2_worlds")  # ValueError names the bad part
         return self
