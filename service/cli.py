@@ -113,9 +113,9 @@ def serve(
     try:
         settings = Settings(**given)
     except ValueError as exc:  # pydantic's ValidationError: each problem in words
-        errors = getattr(exc, "errors", lambda: [{"msg": str(exc)}])()
-        for err in errors:
-            typer.echo(f"armfleet serve: {err['msg'].removeprefix('Value error, ')}", err=True)
+        problems = [e["msg"] for e in exc.errors()] if hasattr(exc, "errors") else [str(exc)]
+        for problem in problems:
+            typer.echo(f"armfleet serve: {problem.removeprefix('Value error, ')}", err=True)
         raise typer.Exit(2) from None
     _check_port_free(settings.host, settings.port)
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
