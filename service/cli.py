@@ -113,9 +113,10 @@ def serve(
     try:
         settings = Settings(**given)
     except ValueError as exc:  # pydantic's ValidationError: each problem in words
-        problems = [e["msg"] for e in exc.errors()] if hasattr(exc, "errors") else [str(exc)]
-        for problem in problems:
-            typer.echo(f"armfleet serve: {problem.removeprefix('Value error, ')}", err=True)
+        for err in exc.errors() if hasattr(exc, "errors") else [{"msg": str(exc), "loc": ()}]:
+            where = ".".join(str(x) for x in err["loc"])  # the setting (ARMFLEET_<NAME>)
+            what = err["msg"].removeprefix("Value error, ")
+            typer.echo(f"armfleet serve: {where + ': ' if where else ''}{what}", err=True)
         raise typer.Exit(2) from None
     _check_port_free(settings.host, settings.port)
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")

@@ -143,3 +143,18 @@ class _Always:
 
     def take(self) -> str:
         return "ok"
+
+
+def test_a_lease_has_one_rate_limit_over_all_its_connections() -> None:
+    from service.core.access import RateLimiter
+    from service.core.callers import OverRate
+
+    b, _ = book(2)
+    lease, _ = b.grant(count=1, ttl_s=60)
+    gate = Gate(Settings(leases="optional"), b, 2, lambda: RateLimiter(1.0, 2))
+    holder = Caller("lease", lease.id)
+    gate.check(holder, [0], "ws")  # one connection
+    gate.check(holder, [0], "http")  # another: the same bucket
+    with pytest.raises(OverRate, match="this lease's rate"):
+        gate.check(holder, [0], "rosbridge")
+    b.stop()

@@ -2,7 +2,7 @@
 
 Asking needs what any write needs (the administrator's token where the service has one); a
 lease token may list, renew and release its own lease only. The rules, waits and refusals are
-service.core.leases; these routes translate. Asking may wait (`wait_s`), in a worker thread.
+service.core.leases; these routes translate. Asking may wait (`wait_s`), polling on the event loop.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from fastapi import APIRouter, Depends, Path, Request
 
 from service.api.deps import get_runtime
 from service.core.callers import Caller, Forbidden
-from service.core.errors import NotFound, Unavailable
+from service.core.errors import Conflict, NotFound, Unavailable
 from service.core.lease_schemas import LeaseList, LeaseReply, LeaseRequest, RenewRequest
 from service.core.leases import LeaseBook
 from service.core.schemas import errors
@@ -22,6 +22,7 @@ from service.runtime import Runtime
 
 # Every route answers 404 when leases are off (armfleet serve --leases optional|required).
 router = APIRouter(prefix="/v1", tags=["leases"], responses=errors(404))
+_POLL_S = 0.05  # how often a waiting request looks for a free world
 LeaseId = Annotated[str, Path(description="the lease's id", max_length=64)]
 
 
@@ -56,9 +57,21 @@ def _may_manage(request: Request, lease_id: str) -> None:
     responses=errors(409),
 )
 async def grant(book: Book, body: LeaseRequest) -> LeaseReply:
-    lease, token = await asyncio.to_thread(
-        book.grant, body.count, body.worlds, body.ttl_s, body.label, body.wait_s
-    )
+    # Waiting polls on the event loop: a worker thread per waiting request would let a few
+    # waiters take every thread the service has.
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + body.wait_s
+    while True:
+        last = loop.time() >= deadline
+        try:
+            lease, token = book.grant(
+                body.count, body.worlds, body.ttl_s, body.label, last_try=last
+            )
+            break
+        except (Unavailable, Conflict):
+            if last:
+                raise
+            await asyncio.sleep(min(_POLL_S, max(0.0, deadline - loop.time())))
     return LeaseReply(**lease.view(lease.expires - lease.ttl_s), token=token)
 
 

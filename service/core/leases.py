@@ -130,9 +130,12 @@ class LeaseBook:
         ttl_s: float = 600.0,
         label: str = "",
         wait_s: float = 0.0,
+        last_try: bool = True,
     ) -> tuple[Lease, str]:
         """A new lease and its token (shown this once). Refused: Unavailable (503, a count:
-        too few free) or Conflict (409, a named world is held), after waiting up to `wait_s`."""
+        too few free) or Conflict (409, a named world is held), after waiting up to `wait_s`
+        (blocking this thread; the HTTP route polls instead, with `last_try` False until its
+        last attempt so that a wait is counted as one refusal)."""
         wanted = self._wanted(count, worlds)
         self._check_ttl(ttl_s)
         if not 0 <= wait_s <= MAX_WAIT_S:
@@ -147,7 +150,7 @@ class LeaseBook:
                     break
                 left = deadline - self._clock()
                 if left <= 0 or self._stopping:
-                    self.counts.refused += 1
+                    self.counts.refused += last_try
                     raise self._refusal(wanted)
                 self._cond.wait(left)
             lease, token = self._new(picked, ttl_s, label)

@@ -118,11 +118,14 @@ class ErrorReply(BaseModel):
 
 _ERROR_MEANING = {
     400: "the body is not JSON (or not UTF-8)",
-    401: "a write (or, with token_reads, a read) without the token",
-    403: "a write from a browser page of a foreign origin",
+    401: "a write (or, with token_reads, a read) without the token, or with a lease's that "
+    "has ended",
+    403: "a write from a browser page of a foreign origin, or a lease token's on a world (or a "
+    "route) not its own",
     404: "no such world (the detail names the ids and the valid range)",
     409: "the request does not fit the current state (e.g. step while not paused)",
     413: "the body is over the size limit",
+    429: "a lease's commands came faster than its rate (all its connections together)",
     503: "the engine is starting, failed or is rebuilding a shard; or too many clients at once",
 }
 
@@ -133,7 +136,7 @@ def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
 
 
 # Statuses every /v1 route can answer (engine not ready, client cap, token and origin checks).
-ANY = (401, 403, 503)
+ANY = (401, 403, 429, 503)
 WITH_BODY = (*ANY, 400, 413)
 
 
