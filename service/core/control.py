@@ -171,6 +171,10 @@ class _Acting(Control):
         self.trajectories = control.trajectories
         self.door = control.door
 
+    @property  # type: ignore[override]
+    def gate(self) -> Gate | None:
+        return self._of.gate
+
     def add_listener(self, listener: Listener) -> None:
         self._of.add_listener(listener)
 
