@@ -303,14 +303,14 @@ class AccessMiddleware:
             await self.app(scope, receive, send)
 
     async def _http(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if not _routed(scope):  # no route takes it: the router answers 404 / 405 as it should
-            return await self.app(scope, receive, send)
         headers = _headers(scope)
         try:
             method, path = scope["method"], scope["path"]
             caller = check_http(self.settings, method, path, headers, self.leases())
             scope.setdefault("state", {})["caller"] = caller
         except AccessError as exc:
+            if not _routed(scope):  # no route takes it: the router's 404 / 405 says more
+                return await self.app(scope, receive, send)
             extra = {"WWW-Authenticate": "Bearer"} if exc.status == 401 else None
             reply = JSONResponse({"detail": exc.detail}, status_code=exc.status, headers=extra)
             return await reply(scope, receive, send)
