@@ -53,7 +53,11 @@ WebSocket streams (not listed by OpenAPI):
   (every body of every listed world, plus the focus world's state; layout in service/core/wire.py)
   drawn with the geoms of `GET /v1/scene`; commands carry `"world"`.
 
-The browser page is served at `/`.
+Leases (`armfleet serve --leases optional|required`): `POST /v1/leases` lends worlds with a
+token of their own, which commands those worlds only, here and on every socket (403 naming any
+other world); see docs/guides/leases.md.
+
+The browser page is served at `/` (`/?lease=<token>`: a lease's worlds only).
 """
 
 
