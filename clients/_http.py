@@ -23,6 +23,7 @@ from clients.models import (
     CommandAck,
     Info,
     JointRef,
+    Lease,
     ResetResult,
     SimStatus,
     WorldSpec,
@@ -182,6 +183,39 @@ def step_call(ticks: int = 1) -> Call:
     # The reply comes once the ticks are done: no read limit.
     body = {"ticks": int(ticks)}
     return Call("POST", "/v1/sim/step", SimStatus.from_json, json=body, read_timeout=None)
+
+
+def lease_call(
+    count: int | None, worlds: Iterable[int] | None, ttl_s: float, label: str, wait_s: float
+) -> Call:
+    body: dict[str, Any] = {"ttl_s": float(ttl_s), "label": label, "wait_s": float(wait_s)}
+    if worlds is not None:
+        body["worlds"] = [int(w) for w in worlds]
+    else:
+        body["count"] = int(count if count is not None else 1)
+    # the server may wait `wait_s` for free worlds before answering
+    return Call("POST", "/v1/leases", Lease.from_json, json=body, read_timeout=wait_s + 30)
+
+
+def renew_call(lease_id: str, ttl_s: float) -> Call:
+    body = {"ttl_s": float(ttl_s)}
+    return Call("POST", f"/v1/leases/{lease_id}/renew", Lease.from_json, json=body)
+
+
+def release_call(lease_id: str) -> Call:
+    return Call("DELETE", f"/v1/leases/{lease_id}", Lease.from_json)
+
+
+def leases_call() -> Call:
+    def parse(d: Any) -> list[Lease]:
+        return [Lease.from_json(x) for x in d["leases"]]
+
+    return Call("GET", "/v1/leases", parse)
+
+
+def auth_headers(token: str | None) -> dict[str, str]:
+    """The header a token travels in (HTTP requests and WebSocket handshakes)."""
+    return {"Authorization": f"Bearer {token}"} if token else {}
 
 
 def readyz_call() -> Call:

@@ -47,10 +47,15 @@ class _Closes:
 class AsyncArmfleetClient(_Closes):
     """REST + WebSocket client for one armfleet service, for asyncio."""
 
-    def __init__(self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT) -> None:
+    def __init__(
+        self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
+    ) -> None:
         self.url = url.rstrip("/")
         self.timeout = timeout
-        self._http = httpx.AsyncClient(base_url=self.url, timeout=timeout)
+        self.token = token  # the administrator's or a lease's; sent with every request
+        self.leased: models.Lease | None = None  # what the client `lease()` yields holds
+        headers = _http.auth_headers(token)
+        self._http = httpx.AsyncClient(base_url=self.url, timeout=timeout, headers=headers)
 
     async def _call(self, call: Call) -> Any:
         kwargs = call.request_kwargs(self.timeout)
@@ -154,6 +159,34 @@ class AsyncArmfleetClient(_Closes):
                 wait.failed(exc)
             await asyncio.sleep(poll)
 
+    @contextlib.asynccontextmanager
+    async def lease(
+        self,
+        count: int = 1,
+        worlds: Iterable[int] | None = None,
+        ttl_s: float = 600.0,
+        label: str = "",
+        wait_s: float = 0.0,
+    ) -> AsyncIterator[AsyncArmfleetClient]:
+        """Async twin of `ArmfleetClient.lease` (`async with client.lease() as mine:`)."""
+        held = await self._call(_http.lease_call(count, worlds, ttl_s, label, wait_s))
+        client = AsyncArmfleetClient(self.url, self.timeout, token=held.token)
+        client.leased = held
+        try:
+            yield client
+        finally:
+            with contextlib.suppress(ArmfleetError):
+                await client._call(_http.release_call(held.id))
+            await client.close()
+
+    async def leases(self) -> list[models.Lease]:
+        return await self._call(_http.leases_call())
+
+    async def renew_lease(self, ttl_s: float = 600.0) -> models.Lease:
+        if self.leased is None:
+            raise ValueError("this client holds no lease (use `async with client.lease() as c:`)")
+        return await self._call(_http.renew_call(self.leased.id, ttl_s))
+
     # -- WebSocket ---------------------------------------------------------------------------
 
     async def stream(
@@ -166,7 +199,7 @@ class AsyncArmfleetClient(_Closes):
         policy = _stream.Reconnector.for_stream(self.url, worlds, rate, options)
         while True:
             try:
-                async with await _open(policy.url, self.timeout) as ws:
+                async with await _open(policy.url, self.timeout, self.token) as ws:
                     policy.opened()
                     async for text in ws:
                         if (msg := policy.frame(text)) is not None:
@@ -178,14 +211,21 @@ class AsyncArmfleetClient(_Closes):
 
     async def connect(self, world: int, rate: float | None = None) -> AsyncWorldSession:
         """Open a WebSocket to one world (`async with await client.connect(0) as s:`)."""
-        session = AsyncWorldSession(_stream.ws_url(self.url, world, rate), world, self.timeout)
+        url = _stream.ws_url(self.url, world, rate)
+        session = AsyncWorldSession(url, world, self.timeout, self.token)
         await session.open()
         return session
 
 
-async def _open(url: str, timeout: float) -> ClientConnection:
+async def _open(url: str, timeout: float, token: str | None = None) -> ClientConnection:
     try:
-        return await ws_connect(url, open_timeout=timeout, max_size=_stream.MAX_SIZE, proxy=None)
+        return await ws_connect(
+            url,
+            open_timeout=timeout,
+            max_size=_stream.MAX_SIZE,
+            proxy=None,
+            additional_headers=_http.auth_headers(token),
+        )
     except InvalidURI as exc:
         raise ArmfleetError(None, str(exc)) from exc
 
@@ -195,10 +235,13 @@ class AsyncWorldSession(_Closes):
     several tasks may send commands at once; state frames queue up for iteration (the oldest
     are dropped past 256)."""
 
-    def __init__(self, url: str, world: int, timeout: float = DEFAULT_TIMEOUT) -> None:
+    def __init__(
+        self, url: str, world: int, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
+    ) -> None:
         self.url = url
         self.world = world
         self.timeout = timeout
+        self._token = token
         self.latest: models.WorldState | None = None
         self._ids = _stream.CommandIds()
         self._pending: dict[int, asyncio.Future[models.CommandAck]] = {}
@@ -209,7 +252,7 @@ class AsyncWorldSession(_Closes):
 
     async def open(self) -> None:
         try:
-            self._ws = await _open(self.url, self.timeout)
+            self._ws = await _open(self.url, self.timeout, self._token)
         except _stream.DROPPED as exc:
             raise _stream.lost(self.url, exc) from exc
         self._reader = asyncio.create_task(self._read())

@@ -6,6 +6,11 @@
         for state in arm.stream(0, rate=10):
             print(state.tick, state.position)
 
+A world of a shared server, for as long as the block runs (reset to home, given back after):
+
+    with ArmfleetClient(url, token=TOKEN).lease(label="ci") as mine:
+        mine.increment(mine.leased.world, "elbow_joint", 0.1)
+
 The asynchronous twin, with the same methods, is `clients.async_client.AsyncArmfleetClient`.
 Both only do the I/O: requests and replies are built and read in `clients._http`, WebSocket
 frames and the reconnect policy in `clients._stream`.
@@ -13,6 +18,7 @@ frames and the reconnect policy in `clients._stream`.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections import deque
@@ -50,10 +56,15 @@ class _Closes:
 class ArmfleetClient(_Closes):
     """REST + WebSocket client for one armfleet service. Thread-safe for HTTP calls."""
 
-    def __init__(self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT) -> None:
+    def __init__(
+        self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
+    ) -> None:
         self.url = url.rstrip("/")
         self.timeout = timeout
-        self._http = httpx.Client(base_url=self.url, timeout=timeout)
+        self.token = token  # the administrator's or a lease's; sent with every request
+        self.leased: models.Lease | None = None  # what the client `lease()` yields holds
+        headers = _http.auth_headers(token)
+        self._http = httpx.Client(base_url=self.url, timeout=timeout, headers=headers)
 
     def _call(self, call: Call) -> Any:
         try:
@@ -169,6 +180,39 @@ class ArmfleetClient(_Closes):
                 wait.failed(exc)
             time.sleep(poll)
 
+    @contextlib.contextmanager
+    def lease(
+        self,
+        count: int = 1,
+        worlds: Iterable[int] | None = None,
+        ttl_s: float = 600.0,
+        label: str = "",
+        wait_s: float = 0.0,
+    ) -> Iterator[ArmfleetClient]:
+        """Borrow `count` free worlds (or the named `worlds`) for the block: yields a client
+        holding the lease's token (its `.leased` says which worlds), reset to home; gives them
+        back when the block ends. Conflict / NotReady (409 / 503) when none is free after
+        `wait_s` seconds; `renew_lease` keeps a long block's lease alive."""
+        held = self._call(_http.lease_call(count, worlds, ttl_s, label, wait_s))
+        client = ArmfleetClient(self.url, self.timeout, token=held.token)
+        client.leased = held
+        try:
+            yield client
+        finally:
+            with contextlib.suppress(ArmfleetError):  # already ended (expired) is fine
+                client._call(_http.release_call(held.id))
+            client.close()
+
+    def leases(self) -> list[models.Lease]:
+        """Every lease (the administrator's token), or this lease token's own."""
+        return self._call(_http.leases_call())
+
+    def renew_lease(self, ttl_s: float = 600.0) -> models.Lease:
+        """This client's lease lives `ttl_s` more seconds from now."""
+        if self.leased is None:
+            raise ValueError("this client holds no lease (use `with client.lease() as c:`)")
+        return self._call(_http.renew_call(self.leased.id, ttl_s))
+
     # -- WebSocket ---------------------------------------------------------------------------
 
     def stream(
@@ -189,7 +233,7 @@ class ArmfleetClient(_Closes):
         policy = _stream.Reconnector.for_stream(self.url, worlds, rate, options)
         while True:
             try:
-                with _open(policy.url, self.timeout) as ws:
+                with _open(policy.url, self.timeout, self.token) as ws:
                     policy.opened()
                     for text in ws:
                         if (msg := policy.frame(text)) is not None:
@@ -201,12 +245,19 @@ class ArmfleetClient(_Closes):
 
     def connect(self, world: int, rate: float | None = None) -> WorldSession:
         """Open a WebSocket to one world: send commands, get their acks, iterate states."""
-        return WorldSession(_stream.ws_url(self.url, world, rate), world, self.timeout)
+        url = _stream.ws_url(self.url, world, rate)
+        return WorldSession(url, world, self.timeout, self.token)
 
 
-def _open(url: str, timeout: float) -> ClientConnection:
+def _open(url: str, timeout: float, token: str | None = None) -> ClientConnection:
     try:
-        return ws_connect(url, open_timeout=timeout, max_size=_stream.MAX_SIZE, proxy=None)
+        return ws_connect(
+            url,
+            open_timeout=timeout,
+            max_size=_stream.MAX_SIZE,
+            proxy=None,
+            additional_headers=_http.auth_headers(token),
+        )
     except InvalidURI as exc:
         raise ArmfleetError(None, str(exc)) from exc
 
@@ -221,7 +272,9 @@ class WorldSession(_Closes):
             for state in s: ...
     """
 
-    def __init__(self, url: str, world: int, timeout: float = DEFAULT_TIMEOUT) -> None:
+    def __init__(
+        self, url: str, world: int, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
+    ) -> None:
         self.url = url
         self.world = world
         self.timeout = timeout
@@ -229,7 +282,7 @@ class WorldSession(_Closes):
         self._states: deque[models.WorldState] = deque(maxlen=256)
         self._lock = threading.Lock()
         try:
-            self._ws = _open(url, timeout).__enter__()  # closed by close()
+            self._ws = _open(url, timeout, token).__enter__()  # closed by close()
         except _stream.DROPPED as exc:
             raise _stream.lost(url, exc) from exc
         self.latest: models.WorldState | None = None

@@ -207,12 +207,13 @@ class ControllerBackend:
         emit: Callable[[Event], None],
         rate: float = STREAM_RATE,
         timeout: float = 5.0,
+        token: str | None = None,
     ) -> None:
         self.url = url
         self.world = world
         self.emit = emit
         self.rate = rate
-        self.client = AsyncArmfleetClient(url, timeout=timeout)
+        self.client = AsyncArmfleetClient(url, timeout=timeout, token=token)
         self._switch = asyncio.Event()
         self._info_task: asyncio.Task[None] | None = None
         self.info: Info | None = None  # the last /v1/info read

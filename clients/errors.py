@@ -34,6 +34,14 @@ class Conflict(ArmfleetError):
     """409: not possible in the current mode (e.g. step while not paused)."""
 
 
+class Unauthorized(ArmfleetError):
+    """401: no token, a wrong one, or a lease token whose lease has ended."""
+
+
+class Forbidden(ArmfleetError):
+    """403: this token may not command that world (not in its lease) or that route."""
+
+
 class PayloadTooLarge(ArmfleetError):
     """413: request body over the server's limit."""
 
@@ -52,6 +60,8 @@ class CommandRejected(ArmfleetError):
 
 _BY_STATUS: dict[int, type[ArmfleetError]] = {
     400: InvalidRequest,
+    401: Unauthorized,
+    403: Forbidden,
     404: NotFound,
     409: Conflict,
     413: PayloadTooLarge,

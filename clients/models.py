@@ -12,7 +12,7 @@ Arrays are numpy float64; JSON null (a NaN on the server side) becomes NaN.
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -288,6 +288,35 @@ class ResetResult:
     def from_json(cls, d: Mapping[str, Any]) -> ResetResult:
         worlds = tuple(int(w) for w in d["worlds"])
         return cls(worlds=worlds, tick=int(d["tick"]))
+
+
+@dataclass(frozen=True)
+class Lease:
+    """Worlds lent to this client (`ArmfleetClient.lease`): only they answer to `token`."""
+
+    id: str
+    worlds: tuple[int, ...]
+    label: str
+    ttl_s: float  # [s] from the last grant or renewal
+    expires_at: float  # wall clock, seconds since the epoch
+    token: str | None = field(default=None, repr=False)  # never printed
+
+    @property
+    def world(self) -> int:
+        """The first (with `count=1`, the only) world of the lease."""
+        return self.worlds[0]
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Lease:
+        worlds = tuple(int(w) for w in d["worlds"])
+        return cls(
+            str(d["id"]),
+            worlds,
+            str(d["label"]),
+            float(d["ttl_s"]),
+            float(d["expires_at"]),
+            d.get("token"),
+        )
 
 
 @dataclass(frozen=True)

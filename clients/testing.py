@@ -30,6 +30,7 @@ from pathlib import Path
 import httpx
 
 from clients.client import ArmfleetClient
+from clients.models import Lease
 
 READY_TIMEOUT = 300.0  # [s] a cold kernel cache compiles for minutes on a small CPU
 STOP_TIMEOUT = 15.0  # [s] after SIGINT, before the process is killed
@@ -162,3 +163,30 @@ def serve(
         server = Server(url, f"ws://127.0.0.1:{port}", process, log_path)
         _wait_ready(server, ready_timeout)
         yield server
+
+
+LEASE_WAIT_S = 60.0  # a test waits this long for a free world of a busy shared server
+LEASE_TTL_S = 900.0  # a test's lease ends by itself after this, should its process die
+
+
+@dataclass
+class LeasedWorld:
+    """One world lent to one test: `client` holds the lease's token, `world` is its id."""
+
+    url: str
+    world: int
+    lease: Lease
+    client: ArmfleetClient
+
+
+@contextlib.contextmanager
+def lease_world(
+    url: str, token: str | None = None, label: str = "test", timeout: float = 10.0
+) -> Iterator[LeasedWorld]:
+    """Borrow one free world of the server at `url` (reset to home) for the block."""
+    with (
+        ArmfleetClient(url, timeout=timeout, token=token) as lender,
+        lender.lease(1, ttl_s=LEASE_TTL_S, label=label, wait_s=LEASE_WAIT_S) as mine,
+    ):
+        assert mine.leased is not None
+        yield LeasedWorld(url, mine.leased.world, mine.leased, mine)

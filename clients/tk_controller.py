@@ -43,20 +43,22 @@ GEOMETRY_ENV = "ARMFLEET_TK_GEOMETRY_FILE"
 class _BackendThread:
     """An asyncio loop on a daemon thread running the backend; thread-safe `submit`."""
 
-    def __init__(self, url: str, world: int, events: queue.Queue[Event]) -> None:
+    def __init__(
+        self, url: str, world: int, events: queue.Queue[Event], token: str | None = None
+    ) -> None:
         self.loop = asyncio.new_event_loop()
         self.backend: ControllerBackend | None = None
         self._ready = threading.Event()
         self._main: asyncio.Task[None] | None = None
         self._thread = threading.Thread(
-            target=self._run, args=(url, world, events), name="armfleet-net", daemon=True
+            target=self._run, args=(url, world, events, token), name="armfleet-net", daemon=True
         )
         self._thread.start()
         self._ready.wait()
 
-    def _run(self, url: str, world: int, events: queue.Queue[Event]) -> None:
+    def _run(self, url: str, world: int, events: queue.Queue[Event], token: str | None) -> None:
         asyncio.set_event_loop(self.loop)
-        self.backend = ControllerBackend(url, world, events.put)
+        self.backend = ControllerBackend(url, world, events.put, token=token)
         self._main = self.loop.create_task(self.backend.run())
         self._ready.set()
         with contextlib.suppress(asyncio.CancelledError):
@@ -281,12 +283,13 @@ class TkController:
         self._write_probe()
 
 
-def run_tk(url: str, world: int) -> None:
-    """Open the controller window for `world` of the service at `url`; returns when closed."""
+def run_tk(url: str, world: int, token: str | None = None) -> None:
+    """Open the controller window for `world` of the service at `url`; returns when closed.
+    `token`: the administrator's or a lease's, sent with every command."""
     root = tk.Tk()
     model = ControllerModel(url.rstrip("/"), world)
     app = TkController(root, model, None)
-    app.net = _BackendThread(model.url, world, app.events)
+    app.net = _BackendThread(model.url, world, app.events, token)
 
     def quit_app() -> None:
         if app.net is not None:

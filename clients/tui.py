@@ -47,10 +47,10 @@ class ControllerApp(App[None]):
         Binding("q", "quit", "quit"),
     ]
 
-    def __init__(self, url: str, world: int) -> None:
+    def __init__(self, url: str, world: int, token: str | None = None) -> None:
         super().__init__()
         self.model = ControllerModel(url.rstrip("/"), world)
-        self.backend = ControllerBackend(self.model.url, world, self.on_backend_event)
+        self.backend = ControllerBackend(self.model.url, world, self.on_backend_event, token=token)
 
     def compose(self) -> ComposeResult:
         yield Static(id="title")
@@ -112,6 +112,7 @@ class ControllerApp(App[None]):
         self.refresh_view()
 
 
-def run_tui(url: str, world: int) -> None:
-    """Run the terminal controller for `world` of the service at `url` until q."""
-    ControllerApp(url, world).run()
+def run_tui(url: str, world: int, token: str | None = None) -> None:
+    """Run the terminal controller for `world` of the service at `url` until q; `token`: the
+    administrator's or a lease's, sent with every command."""
+    ControllerApp(url, world, token).run()

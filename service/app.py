@@ -20,6 +20,7 @@ from service.api import (
     cameras,
     health,
     info,
+    leases,
     metrics,
     recordings,
     scene,
@@ -58,7 +59,11 @@ WebSocket streams (not listed by OpenAPI):
   images, one render of the listed worlds at one tick each (layout in service/core/camera_wire.py;
   `pull=true`: one per text message sent).
 
-The browser page is served at `/`.
+Leases (`armfleet serve --leases optional|required`): `POST /v1/leases` lends worlds with a
+token of their own, which commands those worlds only, here and on every socket (403 naming any
+other world); see docs/guides/leases.md.
+
+The browser page is served at `/` (`/?lease=<token>`: a lease's worlds only).
 """
 
 
@@ -164,7 +169,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.runtime = runtime
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     # Added last = runs first: count refused commands, then check token, origin and slots.
-    app.add_middleware(access.AccessMiddleware, settings=settings, slots=runtime.slots)
+    app.add_middleware(
+        access.AccessMiddleware,
+        settings=settings,
+        slots=runtime.slots,
+        leases=lambda: runtime.leases,
+    )
     app.add_middleware(CommandCounter, metrics=runtime.metrics)
     for module in (health, metrics, web):
         app.include_router(module.router)
@@ -182,6 +192,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         recordings,
         cameras,
         camera_ws,
+        leases,
     ):
         app.include_router(module.router, responses=errors(*ANY))
     web.mount_static(app)

@@ -100,7 +100,6 @@ def serve(**options: Any) -> None:
     Bound to anything but loopback it needs --token (or ARMFLEET_TOKEN) unless --insecure.
     """
     given = {name: value for name, value in options.items() if value is not None}
-    from pydantic import ValidationError
 
     from service.app import create_app
     from service.core.errors import ArmfleetError
@@ -109,10 +108,11 @@ def serve(**options: Any) -> None:
 
     try:
         settings = Settings(**given)
-    except ValidationError as exc:  # a bad value: say which and why, no traceback
-        for err in exc.errors():
-            where = ".".join(str(p) for p in err["loc"])
-            typer.echo(f"armfleet serve: {where + ': ' if where else ''}{err['msg']}", err=True)
+    except ValueError as exc:  # pydantic's ValidationError: each problem in words
+        for err in exc.errors() if hasattr(exc, "errors") else [{"msg": str(exc), "loc": ()}]:
+            where = ".".join(str(x) for x in err["loc"])  # the setting (ARMFLEET_<NAME>)
+            what = err["msg"].removeprefix("Value error, ")
+            typer.echo(f"armfleet serve: {where + ': ' if where else ''}{what}", err=True)
         raise typer.Exit(2) from None
     _check_port_free(settings.host, settings.port)
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
@@ -216,16 +216,36 @@ def controller(
     url: Annotated[str, typer.Option(help="service base URL")] = "http://127.0.0.1:8000",
     world: Annotated[int, typer.Option(help="world to drive")] = 0,
     terminal: Annotated[bool, typer.Option(help="terminal UI instead of a Tk window")] = False,
+    token: Annotated[
+        str | None,
+        typer.Option(help="the service's token (env ARMFLEET_TOKEN)", envvar="ARMFLEET_TOKEN"),
+    ] = None,
+    lease: Annotated[
+        bool, typer.Option(help="take a free world for this session; give it back on exit")
+    ] = False,
+    lease_token: Annotated[
+        str | None, typer.Option(help="drive the world of a lease you were handed")
+    ] = None,
 ) -> None:
     """The seed's button controller: seven joints, Up (+0.1) / Down (-0.1)."""
-    if terminal:
-        from clients.tui import run_tui
+    from clients.errors import ArmfleetError
+    from clients.lease_session import session_world
 
-        run_tui(url=url, world=world)
-    else:
-        from clients.tk_controller import run_tk
+    try:
+        with session_world(url, token, world, lease, lease_token) as (world, token):
+            if lease or lease_token:
+                typer.echo(f"armfleet controller: driving world {world} (leased)", err=True)
+            if terminal:
+                from clients.tui import run_tui
 
-        run_tk(url=url, world=world)
+                run_tui(url=url, world=world, token=token)
+            else:
+                from clients.tk_controller import run_tk
+
+                run_tk(url=url, world=world, token=token)
+    except ArmfleetError as exc:  # no world free, a wrong token, an ended lease
+        typer.echo(f"armfleet controller: {exc}", err=True)
+        raise typer.Exit(1) from None
 
 
 @app.command()

@@ -15,12 +15,15 @@ from typing import Any
 
 import orjson
 
-from service.core.access import ClientSlots
+from service.core.access import ClientSlots, RateLimiter
 from service.core.batch import Batch, Supervised
+from service.core.callers import Gate
 from service.core.camera_feed import CameraFeed
 from service.core.control import Accepted, Control
 from service.core.errors import ArmfleetError, Conflict, NotFound
 from service.core.hub import StreamHub
+from service.core.lease_metrics import LeaseCollector
+from service.core.leases import LeaseBook
 from service.core.loop import SimLoop
 from service.core.metrics import Metrics
 from service.core.settings import Settings
@@ -34,6 +37,7 @@ from service.persistence.snapshots import LATEST, check_state_support
 from service.surfaces.registry import build_surfaces
 
 log = logging.getLogger("armfleet")
+LEASE = "lease"  # the source of the resets that start and end leases
 
 
 class Runtime:
@@ -55,6 +59,8 @@ class Runtime:
         self.stop_problems: list[str] = []  # what `stop` could not save (the exit status)
         self._register_levels()
         self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
+        self.leases: LeaseBook | None = None  # worlds lent (service.core.leases); None: off
+        self.metrics.registry.register(LeaseCollector(lambda: self.control and self.control.gate))
 
     @property
     def ready(self) -> bool:
@@ -184,6 +190,7 @@ class Runtime:
         loop.add_restore_listener(lambda _tick, _state, _name: hub.restored())
         self.control = Control(loop)
         self.control.add_listener(self._count_accepted)
+        self._lend(batch.nworld)
         loop.add_tick_listener(self.metrics.on_tick)
         loop.start()
         self.cameras = camera_feed(loop, s)
@@ -211,6 +218,20 @@ class Runtime:
             batch.capture_s,
             "" if batch.captured else f" (NOT captured: {batch.capture_error})",
         )
+
+    def _lend(self, nworld: int) -> None:
+        """The LeaseBook and the Gate Control checks every caller's commands with (leases on).
+        Leases live in memory only: every lease ends when the service stops (see leases)."""
+        s, control = self.settings, self.control
+        if s.leases == "off" or control is None:
+            return
+        reset_at = {"both": ("start", "end"), "none": ()}.get(s.lease_reset, (s.lease_reset,))
+        self.leases = LeaseBook(
+            nworld, lambda worlds: control.reset(worlds, LEASE), reset_at, s.lease_max_ttl_s
+        )
+        # A lease gets the rate of one connection, over all its connections together.
+        bucket = lambda: RateLimiter(s.command_rate, s.command_burst)  # noqa: E731
+        control.gate = Gate(s, self.leases, nworld, bucket)
 
     async def going_away(self) -> None:
         """Close every stream with 1001 (going away) before the server stops: clients learn
@@ -253,6 +274,8 @@ class Runtime:
         self.persistence.stop()
         self.stop_problems += self.persistence.unfinished()
         self.surfaces.stop()
+        if self.leases is not None:
+            self.leases.stop()
         for surface in self.surfaces:
             if isinstance(surface, Finishing):
                 self.stop_problems += surface.unfinished()

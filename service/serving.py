@@ -16,6 +16,7 @@ from collections.abc import Awaitable, Callable, Iterator
 
 import uvicorn
 
+from service.core import redact
 from service.core.settings import Settings
 from service.core.stopping import StopSignals
 from service.runtime import Runtime
@@ -75,6 +76,9 @@ def serve_until_stopped(app: object, runtime: Runtime, settings: Settings) -> li
         ws_per_message_deflate=settings.ws_compression,
         timeout_graceful_shutdown=3,
     )
+    # uvicorn prints paths with their query: a socket's ?token= or the page's ?lease= (after
+    # Config, which sets its loggers up).
+    redact.install("", "uvicorn", "uvicorn.access", "uvicorn.error")
     if settings.ray == "local":  # a private instance: it goes with us, even on a second signal
         from service.engines import ray_local
 

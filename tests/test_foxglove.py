@@ -217,18 +217,28 @@ def test_the_layout_in_docs_uses_what_the_server_offers(client):
     assert set(json.loads(publish["value"])) == {"name", "position"}
 
 
-def test_with_a_token_foxglove_is_a_viewer_and_publishes_change_nothing(tmp_path):
-    """Foxglove's protocol cannot carry our token, so where writes need one it must not write."""
+def test_with_a_token_publishes_need_it_as_a_parameter(tmp_path):
+    """Foxglove's handshake cannot carry our token: a client presents it as the parameter
+    `armfleet.token`; until then its publishes change nothing and a status says why."""
     port = free_port()
     extra = ("--foxglove", "--foxglove-port", str(port), "--token", "s3cret")
     with serve(worlds=1, extra_args=extra, log_dir=tmp_path) as srv:
         before = httpx.get(f"{srv.url}/v1/worlds/0/state").json()["target"]
         with connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL]) as ws:
             c = FoxgloveClient(ws)
-            assert "clientPublish" not in c.handshake()["capabilities"]
+            assert {"clientPublish", "parameters"} <= set(c.handshake()["capabilities"])
             c.advertise(7, "/joint_commands")
             c.publish(7, {"name": ["elbow_joint"], "position": [0.5]})
-            c.subscribe(["/world_0/joint_states"])  # it still serves the viewer
+            c.subscribe(["/world_0/joint_states"])  # it serves the viewer meanwhile
             c.next_message("/world_0/joint_states")
-        after = httpx.get(f"{srv.url}/v1/worlds/0/state").json()["target"]
-    assert after == before
+            assert httpx.get(f"{srv.url}/v1/worlds/0/state").json()["target"] == before
+            assert any("armfleet.token" in s["message"] for s in c.statuses), c.statuses
+            token = [{"name": "armfleet.token", "value": "s3cret"}]
+            ws.send(json.dumps({"op": "setParameters", "id": "p", "parameters": token}))
+            c.publish(7, {"name": ["elbow_joint"], "position": [0.5]})
+
+            def moved() -> bool:
+                target = httpx.get(f"{srv.url}/v1/worlds/0/state").json()["target"]
+                return abs(target[ELBOW] - 0.5) < 1e-9
+
+            wait_for(moved, "the publish with the token to apply")

@@ -31,10 +31,14 @@ async def get_loop(runtime: Annotated[Runtime, Depends(get_runtime)]) -> SimLoop
 
 
 async def get_control(
-    runtime: Annotated[Runtime, Depends(get_runtime)], loop: Annotated[SimLoop, Depends(get_loop)]
+    request: Request,
+    runtime: Annotated[Runtime, Depends(get_runtime)],
+    loop: Annotated[SimLoop, Depends(get_loop)],
 ) -> Control:
+    """Control acting for the request's caller (AccessMiddleware found it): every command a
+    route runs is checked against the worlds that caller may command."""
     assert runtime.control is not None  # set together with the loop
-    return runtime.control
+    return runtime.control.acting_for(getattr(request.state, "caller", None))
 
 
 Loop = Annotated[SimLoop, Depends(get_loop)]

@@ -9,7 +9,7 @@ from fastapi import APIRouter, Depends
 
 from service.api.deps import CANNOT_WRITE, Loop, get_runtime
 from service.core.errors import NotFound
-from service.core.schemas import RecordingRequest, RecordingStatus
+from service.core.schemas import RecordingRequest, RecordingStatus, errors
 from service.persistence.recorder import Recorder
 from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
@@ -41,7 +41,12 @@ async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingSta
     return _status(recorder)
 
 
-@router.get("/current", response_model=RecordingStatus, summary="The running (or last) recording")
+@router.get(
+    "/current",
+    response_model=RecordingStatus,
+    summary="The running (or last) recording",
+    responses=errors(404),  # none started yet
+)
 async def current(runtime: Rt) -> RecordingStatus:
     recorder = runtime.persistence.current
     if recorder is None:

@@ -192,7 +192,8 @@ async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
 
 
 def _grant(ws: WebSocket) -> access.Grant:
-    return access.check_websocket(ws.app.state.runtime.settings, ws)
+    runtime = ws.app.state.runtime
+    return access.check_websocket(runtime.settings, ws, runtime.leases)
 
 
 async def _serve(
@@ -208,6 +209,7 @@ async def _serve(
     grant = _grant(ws)
     limiter = access.RateLimiter(runtime.settings.command_rate, runtime.settings.command_burst)
     metrics = runtime.metrics
+    control = control.acting_for(grant.caller)  # each command checked for its worlds
     await ws.accept(subprotocol=grant.subprotocol)
 
     async def close(code: int, reason: str) -> None:

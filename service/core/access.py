@@ -10,6 +10,11 @@ colleague who happens to have the service open). Each connection's commands go t
 bucket (`RateLimiter`), and `ClientSlots` caps how many clients are served at once, so that one
 client cannot starve the loop or the others.
 
+Leases (service.core.leases) add tokens of their own: a lease token may command its lease's
+worlds on every surface (the check per world is `callers.Gate`, run by Control); over HTTP it
+may write only the command routes and its own lease (`LEASE_WRITES`), never the service's files.
+The resolved `callers.Caller` of a request is kept in its scope's state (`caller`).
+
 HTTP is checked by `AccessMiddleware` (so routes added later are covered without opting in);
 WebSocket surfaces call `check_ws(...)` for a `Grant`, hold a `ClientSlots` slot while connected,
 and feed each command to their own `RateLimiter`.
@@ -20,14 +25,17 @@ from __future__ import annotations
 import hmac
 import ipaddress
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from starlette.responses import JSONResponse
+from starlette.routing import Match
 from starlette.types import ASGIApp, Receive, Scope, Send
 
+from service.core.callers import OPEN, BadToken, Caller, identify
+from service.core.leases import LeaseBook
 from service.core.settings import Settings
 
 TOKEN_SUBPROTOCOL = "armfleet.token."  # + the token: how a browser socket presents it
@@ -41,6 +49,11 @@ OPEN_PATHS = frozenset(
 )
 OPEN_PREFIXES = ("/web/",)
 _READ_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+# What a lease token may write over HTTP (its worlds are then Control's check); the rest
+# (snapshots, recordings, asking for leases) needs the administrator's token.
+LEASE_WRITES = ("/v1/worlds/", "/v1/targets", "/v1/reset", "/v1/trajectories", "/v1/sim/")
+_API_WRITES = frozenset({"POST", "PUT", "PATCH", "DELETE"})  # others: 405 from the routes
+LEASE_OWN = "/v1/leases/"  # + its own id: renew, release
 
 
 class AccessError(Exception):
@@ -110,16 +123,40 @@ def is_open(path: str) -> bool:
     return path in OPEN_PATHS or path.startswith(OPEN_PREFIXES)
 
 
-def check_http(settings: Settings, method: str, path: str, headers: Mapping[str, str]) -> None:
-    """Raise AccessError unless this request may go on (see the module docstring)."""
+def check_http(
+    settings: Settings,
+    method: str,
+    path: str,
+    headers: Mapping[str, str],
+    book: LeaseBook | None = None,
+) -> Caller | None:
+    """The request's caller (None: an open path, or a read presenting no valid token); raise
+    AccessError unless this request may go on (see the module docstring)."""
     if is_open(path):
-        return
+        return None
     write = method.upper() not in _READ_METHODS
-    if (write or settings.token_reads) and not token_matches(settings, bearer(headers)):
-        what = "writes" if write else "reads"
-        raise AccessError(401, f"{what} need the token: send `Authorization: Bearer <token>`")
+    presented = bearer(headers)
+    try:
+        caller: Caller | None = identify(settings, book, presented)
+    except BadToken as exc:
+        if write or settings.token_reads:
+            what = "writes" if write else "reads"
+            hint = "" if presented else ": send `Authorization: Bearer <token>`"
+            raise AccessError(401, f"{what}: {exc.detail}{hint}") from None
+        caller = None
+    lease_write = method.upper() in _API_WRITES and caller is not None and caller.kind == "lease"
+    if lease_write and not _lease_writes(caller, path):  # type: ignore[arg-type]
+        raise AccessError(403, f"{path} needs the administrator's token, not a lease's")
     if write and not origin_allowed(settings, headers):
         raise AccessError(403, f"origin {headers.get('origin')!r} may not command this service")
+    return caller
+
+
+def _lease_writes(caller: Caller, path: str) -> bool:
+    if path.startswith(LEASE_WRITES):
+        return True
+    own = f"{LEASE_OWN}{caller.lease_id}"
+    return path == own or path.startswith(f"{own}/")
 
 
 @dataclass(frozen=True)
@@ -130,12 +167,14 @@ class Grant:
     command: may send commands / publish
     reason: why `command` (or `read`) is refused, for the error frames; "" when allowed
     subprotocol: the subprotocol to accept with (the client offered one), or None
+    caller: who commands through it (its worlds are checked per command by Control)
     """
 
     read: bool
     command: bool
     reason: str
     subprotocol: str | None
+    caller: Caller = OPEN
 
 
 def check_ws(
@@ -143,11 +182,13 @@ def check_ws(
     headers: Mapping[str, str],
     query: Mapping[str, str] | str = "",
     subprotocols: Sequence[str] = (),
+    book: LeaseBook | None = None,
 ) -> Grant:
     """The Grant of a WebSocket handshake; any WebSocket server can call this.
 
     headers: the handshake's headers with lower-case names; query: the URL's query (a mapping or
-    the raw string); subprotocols: what the client offered, in order.
+    the raw string); subprotocols: what the client offered, in order; book: the service's
+    leases (a lease token commands its worlds).
     """
     if isinstance(query, str):
         query = {k: v[-1] for k, v in parse_qs(query).items()}
@@ -159,20 +200,22 @@ def check_ws(
             reply_protocol = reply_protocol or proto
         elif proto == APP_SUBPROTOCOL:
             reply_protocol = APP_SUBPROTOCOL
-    authorised = token_matches(settings, presented)
-    if not authorised:
-        why = "commands need the token (?token=, Authorization: Bearer, or subprotocol)"
+    try:
+        caller = identify(settings, book, presented)
+    except BadToken as exc:
+        how = "(?token=, Authorization: Bearer, or subprotocol)"
+        why = f"commands need a token {how}: {exc.detail}"
         return Grant(not settings.token_reads, False, why, reply_protocol)
     if not origin_allowed(settings, headers):
         why = f"origin {headers.get('origin')!r} may watch but not command this service"
-        return Grant(True, False, why, reply_protocol)
-    return Grant(True, True, "", reply_protocol)
+        return Grant(True, False, why, reply_protocol, caller)
+    return Grant(True, True, "", reply_protocol, caller)
 
 
-def check_websocket(settings: Settings, ws: Any) -> Grant:
+def check_websocket(settings: Settings, ws: Any, book: LeaseBook | None = None) -> Grant:
     """check_ws for a Starlette/FastAPI WebSocket (headers, query string, offered subprotocols)."""
     headers = {k.lower(): v for k, v in ws.headers.items()}
-    return check_ws(settings, headers, ws.url.query, ws.scope.get("subprotocols", ()))
+    return check_ws(settings, headers, ws.url.query, ws.scope.get("subprotocols", ()), book)
 
 
 # -- rates and slots --------------------------------------------------------------------------
@@ -239,10 +282,17 @@ class AccessMiddleware:
     through `check_websocket`.
     """
 
-    def __init__(self, app: ASGIApp, settings: Settings, slots: ClientSlots) -> None:
+    def __init__(
+        self,
+        app: ASGIApp,
+        settings: Settings,
+        slots: ClientSlots,
+        leases: Callable[[], LeaseBook | None] = lambda: None,
+    ) -> None:
         self.app = app
         self.settings = settings
         self.slots = slots
+        self.leases = leases  # the service's LeaseBook once it runs
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] == "http":
@@ -255,8 +305,12 @@ class AccessMiddleware:
     async def _http(self, scope: Scope, receive: Receive, send: Send) -> None:
         headers = _headers(scope)
         try:
-            check_http(self.settings, scope["method"], scope["path"], headers)
+            method, path = scope["method"], scope["path"]
+            caller = check_http(self.settings, method, path, headers, self.leases())
+            scope.setdefault("state", {})["caller"] = caller
         except AccessError as exc:
+            if not _routed(scope):  # no route takes it: the router's 404 / 405 says more
+                return await self.app(scope, receive, send)
             extra = {"WWW-Authenticate": "Bearer"} if exc.status == 401 else None
             reply = JSONResponse({"detail": exc.detail}, status_code=exc.status, headers=extra)
             return await reply(scope, receive, send)
@@ -276,7 +330,9 @@ class AccessMiddleware:
 
     async def _websocket(self, scope: Scope, receive: Receive, send: Send) -> None:
         query = scope.get("query_string", b"").decode("latin-1")
-        grant = check_ws(self.settings, _headers(scope), query, scope.get("subprotocols", ()))
+        grant = check_ws(
+            self.settings, _headers(scope), query, scope.get("subprotocols", ()), self.leases()
+        )
         if not grant.read:
             return await _close_handshake(receive, send, CLOSE_POLICY, grant.reason)
         if not self.slots.acquire():
@@ -286,6 +342,15 @@ class AccessMiddleware:
             await self.app(scope, receive, send)
         finally:
             self.slots.release()
+
+
+def _routed(scope: Scope) -> bool:
+    """Some route of the app takes this path and method (Starlette puts the app in the scope)."""
+    app = scope.get("app")
+    routes = getattr(getattr(app, "router", None), "routes", None)
+    if routes is None:
+        return True  # not under a Starlette app: check everything
+    return any(route.matches(scope)[0] is Match.FULL for route in routes)
 
 
 def _headers(scope: Scope) -> dict[str, str]:

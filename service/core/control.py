@@ -6,6 +6,10 @@ command tables directly. A command object is valid by construction (service.core
 a rejected command changes nothing; `run` stages it in order with every other and announces
 every accepted one to the listeners (metrics, the recorder) with its source, kind, worlds,
 resulting targets, effective tick and record fields.
+
+Who may run a command is checked here too, once for every surface: a surface that knows its
+caller runs commands through `acting_for(caller)`, and `run` asks the `gate`
+(service.core.callers.Gate) about the worlds the command touches before staging it.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from service.core.callers import Caller, Gate
 from service.core.commands import rules
 from service.core.commands.base import Accepted, Command, Door
 from service.core.commands.targets import Increment, SetMany, SetTargets
@@ -46,6 +51,7 @@ class Control(Door):
         # Staging and announcing happen under one lock so that listeners hear commands in the
         # order the loop staged them (a recording replays them in that order).
         self._order = threading.Lock()
+        self.gate: Gate | None = None  # set when the service lends worlds (callers.Gate)
 
     def add_listener(self, listener: Listener) -> None:
         """Call `listener(Accepted)` after every accepted command, on the caller's thread."""
@@ -54,9 +60,17 @@ class Control(Door):
     def remove_listener(self, listener: Listener) -> None:
         self._listeners = tuple(x for x in self._listeners if x is not listener)
 
-    def run(self, command: Command[R], source: str) -> R:
-        """Stage `command` in order with every other and tell the listeners; its result."""
+    def acting_for(self, caller: Caller | None) -> Control:
+        """This Control as `caller` sees it: every command it runs is checked for `caller`
+        (None: the service itself, unchecked: replay, lease resets)."""
+        return self if caller is None else _Acting(self, caller)
+
+    def run(self, command: Command[R], source: str, caller: Caller | None = None) -> R:
+        """Stage `command` in order with every other and tell the listeners; its result.
+        With a `caller`, Forbidden (403, nothing staged) unless it may touch those worlds."""
         with self._ordered():
+            if caller is not None and self.gate is not None:
+                self.gate.check(caller, command.touches, source)
             result = command.stage(self, source)
             if self._listeners:
                 said = command.announce(self, result)
@@ -134,3 +148,27 @@ class Control(Door):
         """Put back a trajectory that ran when a recording started (replay; see Resumable)."""
         rules.world_id(run.world, self.nworld)
         return self.run(ResumeTrajectory(run), source)[0]
+
+
+class _Acting(Control):
+    """A Control that runs every command for one caller (`Control.acting_for`); it shares
+    everything else (loop, trajectories, listeners, the order lock) with the one it wraps."""
+
+    def __init__(self, control: Control, caller: Caller) -> None:  # no super(): shares state
+        self._of = control
+        self.caller = caller
+        self.loop = control.loop
+        self.trajectories = control.trajectories
+
+    @property  # type: ignore[override]
+    def gate(self) -> Gate | None:
+        return self._of.gate
+
+    def add_listener(self, listener: Listener) -> None:
+        self._of.add_listener(listener)
+
+    def remove_listener(self, listener: Listener) -> None:
+        self._of.remove_listener(listener)
+
+    def run(self, command: Command[R], source: str, caller: Caller | None = None) -> R:
+        return self._of.run(command, source, caller or self.caller)

@@ -27,6 +27,7 @@ from service.core.schema_fields import (
     WorldId,
     default_spec,
     equal_lengths,
+    joint_names,
     json_int,
     non_null,
     paired_config,
@@ -119,11 +120,14 @@ class ErrorReply(BaseModel):
 
 _ERROR_MEANING = {
     400: "the body is not JSON (or not UTF-8)",
-    401: "a write (or, with token_reads, a read) without the token",
-    403: "a write from a browser page of a foreign origin",
+    401: "a write (or, with token_reads, a read) without the token, or with a lease's that "
+    "has ended",
+    403: "a write from a browser page of a foreign origin, or a lease token's on a world (or a "
+    "route) not its own",
     404: "no such world (the detail names the ids and the valid range)",
     409: "the request does not fit the current state (e.g. step while not paused)",
     413: "the body is over the size limit",
+    429: "a lease's commands came faster than its rate (all its connections together)",
     503: "the engine is starting, failed or is rebuilding a shard; or too many clients at once",
 }
 
@@ -134,7 +138,7 @@ def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
 
 
 # Statuses every /v1 route can answer (engine not ready, client cap, token and origin checks).
-ANY = (401, 403, 503)
+ANY = (401, 403, 429, 503)
 WITH_BODY = (*ANY, 400, 413)
 
 
@@ -227,6 +231,21 @@ class JointTargets(Strict):
         nameless = {"minItems": NJOINT, "maxItems": NJOINT}
         branches.append({"properties": {"name": {"maxItems": 0}, "position": nameless}})
         schema["oneOf"] = branches
+        # A joint named twice, once by name and once by index ("5" is wrist_3_joint), is a
+        # repeat too: JSON Schema's uniqueItems cannot see it, so each such pair is excluded.
+        schema["not"] = {
+            "anyOf": [
+                {
+                    "required": ["name"],
+                    "properties": {
+                        "name": {
+                            "allOf": [{"contains": {"const": n}}, {"contains": {"const": str(i)}}]
+                        }
+                    },
+                }
+                for i, n in enumerate(joint_names())
+            ]
+        }
         schema["examples"] = [
             {"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]},
             {"position": [0, -1.57, 1.57, -1.57, -1.57, 0, 0]},

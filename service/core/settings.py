@@ -79,6 +79,18 @@ class Settings(BaseSettings):
     command_burst: int | None = Field(
         None, ge=1, description="commands a connection may send at once (default: one second's)"
     )
+    leases: Literal["off", "optional", "required"] = Field(
+        "off",
+        description="lend worlds with tokens of their own (POST /v1/leases). optional: a leased "
+        "world answers only to its lease (and --token); required: every command needs a lease "
+        "token or --token",
+    )
+    lease_reset: Literal["both", "start", "end", "none"] = Field(
+        "both", description="reset a leased world to home when its lease starts, ends, both"
+    )
+    lease_max_ttl_s: float = Field(
+        86_400.0, gt=0, le=31 * 86_400, description="longest time to live a lease may have [s]"
+    )
     data_dir: Path = Field(
         Path("~/.local/share/armfleet"), description="where snapshots and recordings are kept"
     )
@@ -194,6 +206,21 @@ class Settings(BaseSettings):
     def _ray_runs_the_warp_engine(self) -> Settings:
         if self.ray and self.engine != "warp":
             raise ValueError("ray: Ray actors run the warp engine only (use --engine warp)")
+        return self
+
+    @model_validator(mode="after")
+    def _required_leases_have_an_administrator(self) -> Settings:
+        if self.leases == "required" and not self.token:
+            raise ValueError("leases required: give --token, the administrator's (who lends)")
+        return self
+
+    @model_validator(mode="after")
+    def _leases_need_token_carrying_surfaces(self) -> Settings:
+        if self.leases != "off" and self.ros2:
+            raise ValueError(
+                "leases: the in-process ROS 2 surface (--ros2) carries no token and could move "
+                "leased worlds; drive ROS through the ROS node (HTTP/WebSocket, a lease token)"
+            )
         return self
 
     @model_validator(mode="after")

@@ -13,6 +13,10 @@ foxglove.websocket protocol. This surface publishes, for each shown world `w`:
 Clients may publish JSON JointState (`{"name": [...], "position": [...]}`) on `/joint_commands`
 (world 0, as the seed's topic) or `/world_<w>/joint_commands`; it goes through the control layer
 with source `foxglove`, so it is validated, clamped and recorded like any other command.
+Foxglove's handshake has no place for a token, so a client presents one (the administrator's or
+a lease's) by setting the parameter `armfleet.token`; the server keeps who that client is and
+never publishes the value back. A command on a world its caller may not command is refused
+by Control (service/core/callers.py) and reported in a status message naming the world.
 
 A thread of its own samples the batch at `rate` Hz (one request to the loop per frame, served
 between ticks) and does all encoding; the SDK keeps a bounded queue per client and drops the
@@ -49,13 +53,16 @@ from foxglove.messages import (
     Vector3,
 )
 
+from service.core.callers import book_of
 from service.core.errors import ArmfleetError
 from service.core.robot import load_robot
 from service.core.worlds import pick_worlds
+from service.surfaces.foxglove_callers import TOKEN_PARAMETER, ClientCallers
 
 if TYPE_CHECKING:
     from foxglove.websocket import ChannelView, Client, ClientChannel
 
+    from service.core.settings import Settings
     from service.core.surface import SurfaceContext
     from service.core.types import Snapshot
 
@@ -184,12 +191,13 @@ class FoxgloveLive:
         rate: float = 30.0,
         commands: bool = True,
         cameras: tuple[str, float] = ("", 10.0),  # camera names, images a second
+        settings: Settings | None = None,
     ):
         self._host, self._port, self._worlds_spec = host, port, worlds
         self._cameras, self._camera_topics = cameras, None
-        # Foxglove's protocol has no place for our token: where writes need one, the server
-        # offers no ClientPublish and is a viewer only (commands go through HTTP/WS instead).
         self._commands = commands
+        self._settings = settings
+        self._callers = None if settings is None else ClientCallers(settings)
         self._period = 1.0 / rate
         self._stop = threading.Event()
         self._scene_wanted = threading.Event()
@@ -231,7 +239,9 @@ class FoxgloveLive:
             name="armfleet",
             host=self._host,
             port=self._port,
-            capabilities=[Capability.ClientPublish] if self._commands else [],
+            capabilities=[Capability.ClientPublish, Capability.Parameters]
+            if self._commands
+            else [],
             supported_encodings=["json"],
             server_listener=self,
             context=self._ctx,
@@ -245,7 +255,7 @@ class FoxgloveLive:
             self.port,
             ",".join(map(str, self.worlds)),
             1 / self._period,
-            "" if self._commands else "; view only: writes need the token",
+            "" if self._commands else "; view only",
         )
 
     def stop(self) -> None:
@@ -353,6 +363,19 @@ class FoxgloveLive:
     def on_client_unadvertise(self, client: Client, client_channel_id: int) -> None:
         self._client_topics.pop((client.id, client_channel_id), None)
 
+    def on_set_parameters(
+        self, client: Client, parameters: list[Any], request_id: str | None = None
+    ) -> list[Any]:
+        """`armfleet.token`: who this client is from now on; answered with no parameters, so
+        the token is never published to any client."""
+        for p in parameters:
+            if p.name == TOKEN_PARAMETER and self._callers is not None:
+                try:
+                    self._callers.present(client.id, p.get_value(), book_of(self._control))
+                except ArmfleetError as exc:
+                    self._server.publish_status(f"{TOKEN_PARAMETER}: {exc}", StatusLevel.Warning)
+        return []
+
     def on_message_data(self, client: Client, client_channel_id: int, data: bytes) -> None:
         if not self._commands:
             return  # not offered (see __init__); refused even if a client sends anyway
@@ -361,11 +384,17 @@ class FoxgloveLive:
             world = self._command_world(topic)
             if world is None:
                 return  # a topic we do not take commands on
+            control = self._control
+            if self._callers is not None:
+                caller, limiter = self._callers.of(client.id, book_of(self._control))
+                if limiter.take() != "ok":
+                    raise ValueError(limiter.detail)
+                control = control.acting_for(caller)
             msg = json.loads(data)
             if not isinstance(msg, dict):
                 raise ValueError("a JointState message must be a JSON object")
             name, position = msg.get("name", []), msg.get("position", [])
-            self._control.command_targets(world, name, position, FOXGLOVE)
+            control.command_targets(world, name, position, FOXGLOVE)
         except (ArmfleetError, ValueError) as exc:
             log.warning("Foxglove command on %s refused: %s", topic, exc)
             self._server.publish_status(f"{topic}: {exc}", StatusLevel.Warning)

@@ -29,15 +29,14 @@ def _foxglove(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
         return None
     from service.surfaces.foxglove_live import FoxgloveLive
 
-    # Foxglove's protocol cannot carry the token: where writes need one, it is a viewer only.
-    writes = s.token is None
+    # A client presents its token (the administrator's or a lease's) as a parameter.
     return FoxgloveLive(
         s.host,
         s.foxglove_port,
         s.foxglove_worlds,
         s.foxglove_rate,
-        commands=writes,
         cameras=(s.foxglove_cameras, s.camera_rate),
+        settings=s,
     )
 
 

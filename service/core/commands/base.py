@@ -12,6 +12,7 @@ metrics count `kind`. The registry (`registry.py`) lists the classes.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
@@ -97,6 +98,13 @@ class Command(ABC, Generic[R]):
     op: ClassVar[str | None] = None
     http: ClassVar[tuple[str, ...]] = ()
     replayed: ClassVar[bool] = True
+
+    @property
+    def touches(self) -> Sequence[int] | None:
+        """The worlds it writes, known once it exists (`callers.Gate` checks them before it is
+        staged); None: every world, or the whole service (a mode switch). A command that does
+        not say touches every world, so only the administrator may run it."""
+        return None
 
     @abstractmethod
     def stage(self, door: Door, source: str) -> R:

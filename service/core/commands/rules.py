@@ -5,9 +5,8 @@
   on every surface (HTTP, WebSocket, the page, rosbridge, Foxglove, the ROS node). Names and
   positions pair up (a subset moves only those joints); with no names, one position per joint
   in joint order, as the seed's Isaac subscriber read them; every name a joint's name or its
-  index as a digit string, none written twice (a name and the index of the same joint: the
-  later wins, as with duplicate keys of a JSON object; the schema cannot tell them apart);
-  every position a finite number.
+  index as a digit string, no joint named twice (neither by the same name nor by its name and
+  its index); every position a finite number.
 - Clamping to the joint ranges happens when a target is staged (`arithmetic`), once; the loop
   and the engines trust what was staged.
 """
@@ -82,9 +81,6 @@ def joint_state(spec: RobotSpec, name: Any, position: Any) -> dict[int, float]:
             f"name and position must have equal lengths ({len(name)} names, "
             f"{len(position)} positions)",
         )
-    if len(set(name)) != len(name):
-        dup = next(n for n in name if name.count(n) > 1)
-        raise BadJointState("duplicate_joint", "name", f"joint {dup!r} named twice")
     out: dict[int, float] = {}
     for n, p in zip(name, position, strict=True):
         if not isinstance(n, str):
@@ -94,6 +90,9 @@ def joint_state(spec: RobotSpec, name: Any, position: Any) -> dict[int, float]:
         except (KeyError, TypeError):
             why = f"unknown joint {n!r}; joints are {joints}"
             raise BadJointState("unknown_joint", "name", why) from None
+        if index in out:  # the same name twice, or a name and that joint's index
+            why = f"joint {spec.names[index]!r} named twice"
+            raise BadJointState("duplicate_joint", "name", why)
         if isinstance(p, bool) or not isinstance(p, int | float):
             raise BadJointState("bad_type", f"position.{n}", f"must be a number, got {p!r}")
         if not math.isfinite(p):

@@ -43,6 +43,10 @@ class _OneWorld(Command[CommandResult]):
     world: int
     values: Mapping[int, float]
 
+    @property
+    def touches(self) -> Sequence[int]:
+        return (self.world,)
+
     def update(self, spec: RobotSpec, row: np.ndarray) -> arithmetic.TargetUpdate:
         raise NotImplementedError
 
@@ -125,6 +129,10 @@ class SetMany(Command[list[CommandResult]]):
     worlds: list[int]
     rows: np.ndarray
     joints: tuple[int, ...] | None = None
+
+    @property
+    def touches(self) -> Sequence[int] | None:
+        return self.worlds
 
     @classmethod
     def create(

@@ -36,6 +36,10 @@ class StartTrajectory(Command[list[Started]]):
     worlds: list[int]
     spec: JointTrajectorySpec
 
+    @property
+    def touches(self) -> Sequence[int] | None:
+        return self.worlds
+
     @classmethod
     def create(
         cls, door: Door, worlds: Sequence[object], spec: JointTrajectorySpec
@@ -76,6 +80,10 @@ class CancelTrajectory(Command[list[TrajectoryStatus]]):
     op: ClassVar[str | None] = "cancel_trajectory"
 
     worlds: list[int]
+
+    @property
+    def touches(self) -> Sequence[int] | None:
+        return self.worlds
 
     @classmethod
     def create(cls, door: Door, worlds: Sequence[object]) -> CancelTrajectory:
@@ -122,6 +130,10 @@ class ResumeTrajectory(Command[tuple[Started, int]]):
     kind: ClassVar[str] = "trajectory_resume"
 
     run: Resumable
+
+    @property
+    def touches(self) -> Sequence[int]:
+        return (self.run.world,)
 
     def stage(self, door: Door, source: str) -> tuple[Started, int]:
         return door.trajectories.resume(self.run, source)

@@ -44,6 +44,10 @@ class Reset(Command[ResetResult]):
 
     worlds: list[int] | None
 
+    @property
+    def touches(self) -> Sequence[int] | None:
+        return self.worlds
+
     @classmethod
     def create(cls, door: Door, worlds: Sequence[object] | None) -> Reset:
         return cls(None if worlds is None else rules.world_ids(worlds, door.nworld))

@@ -34,6 +34,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from service.core.control import Control
 from service.core.surface import SurfaceContext
 from service.core.trajectory import AbortReason, TrajectoryStatus
 from service.surfaces.ros import topics
@@ -116,15 +117,18 @@ class GoalRunner:
         source: str,
         on_feedback: Callable[[Goal, dict[str, Any]], None],
         on_done: Callable[[Goal], None],
+        control: Control | None = None,
     ) -> Goal:
-        """Validate and start a goal; GoalRejected (nothing moved) if it is invalid."""
+        """Validate and start a goal; GoalRejected (nothing moved) if it is invalid. `control`:
+        the one acting for the goal's sender (Control.acting_for), checked per world."""
+        control = control or self.control
         if not isinstance(goal, dict):
             raise GoalRejected(f"the goal must be a {kind} goal object")
         g = Goal(action, kind, world, self.now(), on_feedback, on_done)
         if kind == FJT_TYPE:
             spec = trajectory_spec(self.spec, self.arm, goal)
             # no lock of ours held: a preempted trajectory's listener runs in this thread
-            (started,) = self.control.start_trajectory([world], spec, source)
+            (started,) = control.start_trajectory([world], spec, source)
             with self._lock:
                 g.traj_id = started.id
                 self._by_traj[started.id] = g
@@ -133,7 +137,7 @@ class GoalRunner:
                     self._outcomes.put(early)
         else:
             position = gripper_position(goal)
-            done = self.control.command_targets(world, ["finger_joint"], [position], source)
+            done = control.command_targets(world, ["finger_joint"], [position], source)
             g.finger_target = float(done.target[self.finger])
             g.effective_tick = done.tick
             g.moved_at = math.inf  # counted from the first tick with the new target

@@ -27,6 +27,7 @@ import orjson
 from fastapi import WebSocket
 
 from service.core import access
+from service.core.callers import Forbidden, book_of
 from service.core.commands.rules import BadJointState
 from service.core.errors import ArmfleetError
 from service.core.hub import StreamHub, Subscription
@@ -85,16 +86,17 @@ class Session:
         self.ctx = ctx
         self.loop = ctx.loop
         self.hub: StreamHub = ctx.hub
-        self.control = ctx.control
+        settings = ctx.settings
+        # One access policy for every surface (service/core/access.py): may it publish, how fast;
+        # which worlds: Control checks each command for this socket's caller (core/callers.py).
+        self.grant = access.check_websocket(settings, ws, book_of(ctx.control))
+        self.control = ctx.control.acting_for(self.grant.caller)
         self.joints = tuple(self.loop.spec.names)
         self.tick_dt = self.loop.batch.tick_dt
         self.replies: deque[bytes] = deque()
         self.subs: dict[str, _TopicSub] = {}
         self.advertised: dict[str, str] = {}
         self.ready = asyncio.Event()
-        # One access policy for every surface (service/core/access.py): may it publish, how fast.
-        settings = ctx.settings
-        self.grant = access.check_websocket(settings, ws)
         self.limiter = access.RateLimiter(settings.command_rate, settings.command_burst)
         self.over_rate = False  # set when the client kept publishing over its rate: close 1008
 
@@ -180,6 +182,8 @@ class Session:
             self.control.command_targets(world, name, position, ROSBRIDGE)
         except BadJointState as exc:
             raise BadMessage(exc.reason, str(exc)) from None
+        except Forbidden as exc:
+            raise BadMessage("forbidden", str(exc)) from None
         except ArmfleetError as exc:
             raise BadMessage("rejected", str(exc)) from None
         self.server.accepted += 1

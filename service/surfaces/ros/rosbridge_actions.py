@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
+from service.core.errors import ArmfleetError
 from service.surfaces.ros.goal_msgs import GoalRejected, Status, action_names
 from service.surfaces.ros.goals import Goal, runner_of
 from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, topic_name
@@ -103,10 +104,12 @@ def send_action_goal(session: Any, msg: dict[str, Any]) -> None:
             goals.send({**frame, "id": msg_id} if msg_id is not None else frame)
 
         runner = runner_of(session.ctx)
-        goal = runner.submit(name, kind, world, args, ROSBRIDGE, on_feedback, on_done)
+        goal = runner.submit(
+            name, kind, world, args, ROSBRIDGE, on_feedback, on_done, session.control
+        )
         goal.key = msg_id
         goals.by_id[msg_id] = goal
-    except (GoalRejected, ProtocolError) as exc:
+    except (GoalRejected, ProtocolError, ArmfleetError) as exc:  # Forbidden: not its world
         _failure(session, msg_id, action, str(exc))
 
 

@@ -25,12 +25,14 @@ export class Connection {
     return this.ws !== null && this.ws.readyState === WebSocket.OPEN;
   }
 
-  /** Watch `worlds` ("0-63") with `focus`'s joint state, at `rate` frames per second. */
-  open({ worlds, focus, rate }) {
+  /** Watch `worlds` ("0-63") with `focus`'s joint state, at `rate` frames per second;
+   * `lease`: a lease token, presented as a subprotocol (never in the URL). */
+  open({ worlds, focus, rate, lease }) {
     const q = new URLSearchParams({ worlds, focus: String(focus), rate: String(rate) });
     // A service started with --token: the page's own URL carries it (/?token=...).
     const token = new URLSearchParams(location.search).get('token');
-    if (token) q.set('token', token);
+    if (token && !lease) q.set('token', token);
+    this.protocols = lease ? ['armfleet', `armfleet.token.${lease}`] : undefined;
     const scheme = location.protocol === 'https:' ? 'wss' : 'ws';
     this.url = `${scheme}://${location.host}/v1/ws/view?${q}`;
     this.wanted = true;
@@ -68,7 +70,7 @@ export class Connection {
       old.onclose = old.onmessage = old.onerror = null;
       old.close(1000, 'view changed');
     }
-    const ws = new WebSocket(this.url);
+    const ws = new WebSocket(this.url, this.protocols);
     ws.binaryType = 'arraybuffer';
     this.ws = ws;
     ws.onopen = () => {

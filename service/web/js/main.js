@@ -1,22 +1,25 @@
 // The page: fetches what to draw, opens the stream, wires panel actions to commands.
-// URL: /?world=3 (the world to drive), &view=fleet (grid of worlds), &worlds=0-63, &rate=30.
+// URL: /?world=3 (the world to drive), &view=fleet (grid of worlds), &worlds=0-63, &rate=30,
+// &lease=<token> (or &lease alone: asked for): only the lease's worlds are shown and driven.
 
 import { CameraPane } from './cameras.js';
 import { Connection } from './connection.js';
+import { forgetLease, leaseToken, leaseWorlds } from './lease.js';
 import { PoseTrack } from './frames.js';
 import { Panel } from './panel.js';
 import { Viewer } from './viewer.js';
 
 const FLEET_MAX = 256; // the server's limit per view socket too
 const params = new URLSearchParams(location.search);
+const lease = leaseToken();
 // A service started with --token (and --token-reads): the page's URL carries the token.
-const authorised = params.get('token')
-  ? { headers: { Authorization: `Bearer ${params.get('token')}` } }
-  : {};
+const bearer = lease || params.get('token');
+const authorised = bearer ? { headers: { Authorization: `Bearer ${bearer}` } } : {};
 const banner = document.getElementById('banner');
 
 const page = {
   world: Number(params.get('world') ?? 0),
+  leased: null, // with a lease: its worlds, the only ones shown and driven
   view: params.get('view') === 'fleet' ? 'fleet' : 'world',
   fleet: params.get('worlds'),
   rate: Number(params.get('rate')) || 30,
@@ -92,6 +95,11 @@ function command(msg) {
 }
 
 function focus(w) {
+  if (page.leased && !page.leased.includes(w)) {
+    panel.setWorld(page.world);
+    panel.message(`world ${w} is not in your lease (yours: ${page.leased.join(', ')})`);
+    return;
+  }
   page.world = w;
   go();
 }
@@ -160,8 +168,9 @@ function go() {
   }
   panel.enable(true);
   hideBanner();
-  const worlds = page.view === 'fleet' ? page.fleet || `0-${Math.min(n, FLEET_MAX) - 1}` : String(w);
-  conn.open({ worlds, focus: w, rate: page.rate });
+  const all = page.leased ? page.leased.join(',') : page.fleet || `0-${Math.min(n, FLEET_MAX) - 1}`;
+  const worlds = page.view === 'fleet' ? all : String(w);
+  conn.open({ worlds, focus: w, rate: page.rate, lease });
   cameraPane.show(page.view === 'world' ? w : null);
 }
 
@@ -247,6 +256,18 @@ setInterval(() => {
 document.addEventListener('visibilitychange', () => (document.hidden ? conn.pause() : conn.resume()));
 
 async function main() {
+  if (lease) {
+    const got = await leaseWorlds(lease);
+    if (got.error) {
+      forgetLease();
+      showBanner(`${got.error}. Open the page with ?lease=<token> for another.`);
+      panel.enable(false);
+      return;
+    }
+    page.leased = got.worlds;
+    if (!got.worlds.includes(page.world)) page.world = got.worlds[0];
+    panel.message(`lease ${got.label || ''}: worlds ${got.worlds.join(', ')}`.replace('  ', ' '));
+  }
   const [info, scene] = [await fetchReady('/v1/info'), await fetchReady('/v1/scene')];
   page.info = info;
   page.sceneText = JSON.stringify(scene);

@@ -1,0 +1,83 @@
+"""Where people meet leases: the clients' `lease()` (sync and async), the controller's session
+world (`armfleet controller --lease`), and the `armfleet_world` fixture on its own lending
+server; against a real server over real sockets."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from clients import ArmfleetClient, AsyncArmfleetClient, Forbidden, Unauthorized
+from clients.lease_session import session_world
+from clients.testing import LeasedWorld
+from tests.conftest import HOME, Server, serve
+
+
+@pytest.fixture(scope="module")
+def lending(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    extra = ("--leases", "optional", "--engine", "mujoco")
+    with serve(worlds=4, extra_args=extra, log_dir=tmp_path_factory.mktemp("lending")) as srv:
+        yield srv
+
+
+def test_the_sync_client_borrows_a_world_for_a_block(lending: Server) -> None:
+    with ArmfleetClient(lending.url) as anyone:
+        anyone.increment(0, "elbow_joint", 0.3)  # the last user left world 0 moved
+        with anyone.lease(label="block") as mine:
+            held = mine.leased
+            assert held is not None and held.world == 0 and held.label == "block"
+            assert np.allclose(mine.state(0).target, HOME)  # handed over at home
+            mine.increment(0, "elbow_joint", 0.1)
+            with pytest.raises(Forbidden, match="world 1 is not in this lease"):
+                mine.increment(1, "elbow_joint", 0.1)
+            with pytest.raises(Forbidden, match="world 0 is leased"):
+                anyone.increment(0, "elbow_joint", 0.1)  # no token: keep off leased worlds
+            assert mine.renew_lease(60).ttl_s == 60
+            with mine.connect(0) as ws:  # the token rides the WebSocket handshake too
+                assert ws.increment("elbow_joint", 0.1).world == 0
+            token = held.token
+        assert anyone.leases() == []  # given back
+        assert np.allclose(anyone.state(0).target, HOME)  # and reset
+    with ArmfleetClient(lending.url, token=token) as stale, pytest.raises(Unauthorized):
+        stale.increment(0, "elbow_joint", 0.1)
+
+
+def test_the_async_client_borrows_a_world_for_a_block(lending: Server) -> None:
+    async def main() -> None:
+        async with AsyncArmfleetClient(lending.url) as anyone:
+            async with anyone.lease(count=2, label="pair") as mine:
+                assert mine.leased is not None and mine.leased.worlds == (0, 1)
+                await mine.increment(1, "elbow_joint", 0.1)
+                with pytest.raises(Forbidden):
+                    await mine.increment(2, "elbow_joint", 0.1)
+                assert [x.id for x in await mine.leases()] == [mine.leased.id]
+            assert await anyone.leases() == []
+
+    asyncio.run(main())
+
+
+def test_the_controller_takes_a_world_for_its_session_and_gives_it_back(lending: Server) -> None:
+    with ArmfleetClient(lending.url) as anyone:
+        with session_world(lending.url, lease=True, label="controller test") as (world, token):
+            (held,) = anyone.leases()
+            assert held.worlds == (world,) and held.label == "controller test"
+            assert token is not None and token != ""
+            with session_world(lending.url, lease_token=token) as (same, again):
+                assert (same, again) == (world, token)  # a handed-out lease: its world
+            assert len(anyone.leases()) == 1  # not given back by the one it was handed to
+        assert anyone.leases() == []
+
+
+@pytest.mark.skipif("ARMFLEET_URL" in os.environ, reason="uses the shared server instead")
+def test_armfleet_world_without_a_shared_server_leases_from_its_own(
+    armfleet_world: LeasedWorld,
+) -> None:
+    arm, w = armfleet_world.client, armfleet_world.world
+    assert np.allclose(arm.state(w).target, HOME)
+    assert arm.increment(w, "elbow_joint", 0.1).world == w
+    (held,) = arm.leases()
+    assert "test_armfleet_world_without_a_shared_server" in held.label
