@@ -221,7 +221,7 @@ def controller(
         typer.Option(help="the service's token (env ARMFLEET_TOKEN)", envvar="ARMFLEET_TOKEN"),
     ] = None,
     lease: Annotated[
-        bool, typer.Option(help="take a free world for this session; give it back on exit")
+        bool, typer.Option(help="take a free world while the controller runs; give it back on exit")
     ] = False,
     lease_token: Annotated[
         str | None, typer.Option(help="drive the world of a lease you were handed")

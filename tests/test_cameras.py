@@ -209,7 +209,6 @@ def test_many_worlds_in_one_binary_reply(http: httpx.Client) -> None:
     [
         ("/v1/worlds/9/cameras/wrist", {}, 404, "world 9"),
         ("/v1/worlds/0/cameras/nose", {}, 404, "'nose'"),
-        ("/v1/worlds/0/cameras/wrist", {"image": "depth", "format": "jpeg"}, 422, "format"),
         ("/v1/worlds/0/cameras/wrist", {"image": "heat"}, 422, "image"),
         ("/v1/worlds/0/cameras/overview", {"image": "seg"}, 409, "seg"),
         ("/v1/worlds/0/cameras/wrist", {"quality": "0"}, 422, "quality"),
@@ -223,6 +222,13 @@ def test_bad_requests_name_the_field(
     r = http.get(path, params=params)
     assert r.status_code == status, r.text
     assert named in r.text
+
+
+def test_depth_asked_as_jpeg_comes_as_16_bit_png(http: httpx.Client) -> None:
+    """JPEG cannot hold millimetres: the pair the schema allows is served as PNG, and says so."""
+    r = http.get("/v1/worlds/0/cameras/wrist", params={"image": "depth", "format": "jpeg"})
+    assert r.status_code == 200 and r.headers["content-type"] == "image/png"
+    assert Image.open(io.BytesIO(r.content)).mode in ("I", "I;16")
 
 
 def test_render_metrics_count(http: httpx.Client) -> None:

@@ -38,7 +38,8 @@ ImageQ = Annotated[str, Query(description="rgb, depth or seg", pattern="^(rgb|de
 FormatQ = Annotated[
     str | None,
     Query(
-        description="png, jpeg (rgb only) or raw; unset: from Accept, else png",
+        description="png, jpeg or raw (depth and seg asked as jpeg come as png: JPEG cannot "
+        "hold them exactly); unset: from Accept, else png",
         pattern="^(png|jpeg|raw)$",
     ),
 ]

@@ -36,7 +36,8 @@ MULTI_TYPE = "application/x-armfleet-images"
 
 def choose(image: str, fmt: str | None, accept: str | None) -> str:
     """The format for `image`: `fmt` when given, else the first of Accept's types that fits,
-    else PNG; BadCommand naming the query field when the pair is not served."""
+    else PNG. JPEG cannot hold depth (16-bit) or segment ids exactly, so asked for them it is
+    PNG (the reply's Content-Type says so): every pair the query schema allows is served."""
     if image not in FORMATS:
         raise BadCommand("query.image", f"{image!r}: choose one of {', '.join(IMAGES)}")
     served = FORMATS[image]
@@ -46,6 +47,8 @@ def choose(image: str, fmt: str | None, accept: str | None) -> str:
             found = [f for f in served if CONTENT_TYPES[f] == kind]
             if found:
                 return found[0]
+        return "png"
+    if fmt == "jpeg" and image != "rgb":
         return "png"
     if fmt not in served:
         raise BadCommand("query.format", f"{fmt!r}: {image} images come as {', '.join(served)}")

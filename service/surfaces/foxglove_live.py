@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import threading
 import time
 from typing import TYPE_CHECKING, Any
@@ -39,16 +38,10 @@ import numpy as np
 from foxglove import Capability, StatusLevel
 from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 from foxglove.messages import (
-    Color,
-    CubePrimitive,
-    CylinderPrimitive,
     FrameTransform,
     FrameTransforms,
-    Pose,
     Quaternion,
-    SceneEntity,
     SceneUpdate,
-    SpherePrimitive,
     Timestamp,
     Vector3,
 )
@@ -58,6 +51,7 @@ from service.core.errors import ArmfleetError
 from service.core.robot import load_robot
 from service.core.worlds import pick_worlds
 from service.surfaces.foxglove_callers import TOKEN_PARAMETER, ClientCallers
+from service.surfaces.foxglove_scene import geom_entities, quat_msg, vec_msg, world_offset
 
 if TYPE_CHECKING:
     from foxglove.websocket import ChannelView, Client, ClientChannel
@@ -68,10 +62,6 @@ if TYPE_CHECKING:
 
 FOXGLOVE = "foxglove"  # the label of commands that came from a Foxglove client
 log = logging.getLogger("armfleet.foxglove")
-
-SPACING = 2.5  # m between neighbouring worlds in the shared `world` frame
-_VISIBLE_GROUPS = (0, 1, 2)  # MuJoCo's viewer shows these groups by default
-_FLOOR_HALF = 1.2  # m: the (infinite) floor plane drawn as a square tile per world
 
 JOINT_STATE_SCHEMA = {
     "type": "object",
@@ -93,89 +83,6 @@ JOINT_STATE_SCHEMA = {
         "effort": {"type": "array", "items": {"type": "number"}},
     },
 }
-
-
-def world_offset(index: int, count: int) -> tuple[float, float]:
-    """Where the `index`-th shown world stands in the shared frame (a square-ish grid)."""
-    cols = max(1, math.ceil(math.sqrt(count)))
-    return (index % cols) * SPACING, (index // cols) * SPACING
-
-
-def _quat(wxyz: np.ndarray) -> Quaternion:
-    return Quaternion(x=float(wxyz[1]), y=float(wxyz[2]), z=float(wxyz[3]), w=float(wxyz[0]))
-
-
-def _vec(xyz: Any) -> Vector3:
-    return Vector3(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
-
-
-def _pose(pos: Any, wxyz: Any) -> Pose:
-    return Pose(position=_vec(pos), orientation=_quat(np.asarray(wxyz)))
-
-
-def geom_entities(mjm: mujoco.MjModel, prefix: str, stamp: Timestamp) -> list[SceneEntity]:
-    """One SceneEntity per body with visible geoms, in the body's frame `<prefix>/<body>`."""
-    per_body: dict[int, dict[str, list[Any]]] = {}
-    for g in range(mjm.ngeom):
-        if mjm.geom_group[g] not in _VISIBLE_GROUPS:
-            continue
-        rgba = mjm.mat_rgba[mjm.geom_matid[g]] if mjm.geom_matid[g] >= 0 else mjm.geom_rgba[g]
-        if rgba[3] == 0:
-            continue
-        color = Color(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3]))
-        size, pos, quat = mjm.geom_size[g], mjm.geom_pos[g], mjm.geom_quat[g]
-        prims = per_body.setdefault(
-            int(mjm.geom_bodyid[g]), {"cubes": [], "cylinders": [], "spheres": []}
-        )
-        kind = mujoco.mjtGeom(int(mjm.geom_type[g]))
-        if kind == mujoco.mjtGeom.mjGEOM_BOX:
-            prims["cubes"].append(
-                CubePrimitive(pose=_pose(pos, quat), size=_vec(2 * size), color=color)
-            )
-        elif kind == mujoco.mjtGeom.mjGEOM_PLANE:
-            tile = (2 * _FLOOR_HALF, 2 * _FLOOR_HALF, 0.002)
-            prims["cubes"].append(
-                CubePrimitive(pose=_pose(pos, quat), size=_vec(tile), color=color)
-            )
-        elif kind == mujoco.mjtGeom.mjGEOM_SPHERE:
-            prims["spheres"].append(
-                SpherePrimitive(pose=_pose(pos, quat), size=_vec([2 * size[0]] * 3), color=color)
-            )
-        elif kind in (mujoco.mjtGeom.mjGEOM_CYLINDER, mujoco.mjtGeom.mjGEOM_CAPSULE):
-            r, half = float(size[0]), float(size[1])
-            prims["cylinders"].append(
-                CylinderPrimitive(
-                    pose=_pose(pos, quat),
-                    size=_vec((2 * r, 2 * r, 2 * half)),
-                    bottom_scale=1.0,
-                    top_scale=1.0,
-                    color=color,
-                )
-            )
-            if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
-                for sign in (-1.0, 1.0):
-                    end = np.zeros(3)
-                    mujoco.mju_rotVecQuat(end, np.array([0.0, 0.0, sign * half]), quat)
-                    prims["spheres"].append(
-                        SpherePrimitive(
-                            pose=_pose(pos + end, quat), size=_vec([2 * r] * 3), color=color
-                        )
-                    )
-    out = []
-    for body, p in sorted(per_body.items()):
-        name = mjm.body(body).name
-        out.append(
-            SceneEntity(
-                timestamp=stamp,
-                frame_id=f"{prefix}/{name}",
-                id=f"{prefix}/{name}",
-                frame_locked=True,
-                cubes=p["cubes"],
-                cylinders=p["cylinders"],
-                spheres=p["spheres"],
-            )
-        )
-    return out
 
 
 class FoxgloveLive:
@@ -320,8 +227,8 @@ class FoxgloveLive:
                         timestamp=stamp,
                         parent_frame_id=f"w{w}/world",
                         child_frame_id=f"w{w}/{m.body(b).name}",
-                        translation=_vec(d.xpos[b]),
-                        rotation=_quat(d.xquat[b]),
+                        translation=vec_msg(d.xpos[b]),
+                        rotation=quat_msg(d.xquat[b]),
                     )
                 )
         self._tf.log(FrameTransforms(transforms=transforms), log_time=time.time_ns())
