@@ -1,5 +1,6 @@
 """Target commands: the seed's Up/Down (`increment`), JointState-shaped targets (`set_targets`)
-and full rows for many worlds at one tick boundary (`set_many`, recorded as `set_targets`)."""
+and full rows for many worlds at one tick boundary (`set_many`). The first two replay as the
+third: recorded as the rows they made and the joints they named."""
 
 from __future__ import annotations
 
@@ -28,10 +29,11 @@ def validation_detail(exc: ValidationError) -> str:
 
 
 def _model(model: Any, body: dict[str, Any]) -> Any:
+    """A WebSocket op's body read by its HTTP twin's model: the same rules, the same words."""
     try:
         return model.model_validate(body)
-    except ValidationError as exc:
-        raise BadCommand("message", validation_detail(exc)) from None
+    except ValidationError as exc:  # the detail names each field itself
+        raise BadCommand("", validation_detail(exc)) from None
 
 
 @dataclass(frozen=True)
