@@ -99,6 +99,15 @@ CONFIGS = [
 ]
 
 
+_HALF_TURN_Z = np.diag([-1.0, -1.0, 1.0])
+UR_ALIASES = {
+    # ur_description: base_link -> base is a half turn about z; tool0 has the flange face's
+    # position and wrist_3_link's axes (z out of the tool)
+    "base_link": lambda d: (d.body("base").xpos, d.body("base").xmat.reshape(3, 3) @ _HALF_TURN_Z),
+    "tool0": lambda d: (d.site("flange").xpos, d.body("wrist_3_link").xmat.reshape(3, 3)),
+}
+
+
 @pytest.mark.parametrize("q", CONFIGS)
 def test_urdf_forward_kinematics_matches_mujoco(q: dict[str, float]) -> None:
     robot = URDF.from_xml_string(urdf.generate(ROBOT.mjm, ROBOT.spec))
@@ -110,7 +119,9 @@ def test_urdf_forward_kinematics_matches_mujoco(q: dict[str, float]) -> None:
         if link.name == "world":
             continue
         body = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_BODY, link.name)
-        if body >= 0:
+        if link.name in UR_ALIASES:  # ur_description's names: defined from other frames
+            pos, rot = UR_ALIASES[link.name](data)
+        elif body >= 0:
             pos, rot = data.xpos[body], data.xmat[body].reshape(3, 3)
         else:
             site = data.site(link.name)
@@ -118,7 +129,7 @@ def test_urdf_forward_kinematics_matches_mujoco(q: dict[str, float]) -> None:
         np.testing.assert_allclose(poses[link.name][:3, 3], pos, atol=1e-9, err_msg=link.name)
         np.testing.assert_allclose(poses[link.name][:3, :3], rot, atol=1e-9, err_msg=link.name)
         checked += 1
-    assert checked == mjm.nbody - 2 + 3  # all bodies but world and the cube; 3 sites
+    assert checked == mjm.nbody - 2 + 3 + 2  # all bodies but world and the cube; 3 sites; 2 UR
 
 
 def test_urdf_declares_joints_limits_mimics_and_visuals() -> None:

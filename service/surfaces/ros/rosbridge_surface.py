@@ -10,14 +10,17 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import time
 from typing import TYPE_CHECKING, Any
 
-from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, HTTPException, WebSocket, WebSocketDisconnect
+from pydantic import BaseModel, Field
 
 from service.core import access
 from service.core.settings import Settings
 from service.core.surface import SurfaceContext
 from service.core.worlds import world_list
+from service.surfaces.ros import description
 from service.surfaces.ros.rosbridge import RosbridgeServer, Session
 from service.surfaces.ros.topics import TopicMap
 
@@ -26,6 +29,16 @@ if TYPE_CHECKING:
 
 _MAX_QUEUED_REPLIES = 256
 _STATUS_DOC = "ROS 2 over DDS and rosbridge: topics, accepted commands, rejected messages by kind."
+
+
+class NodeReport(BaseModel):
+    """What the armfleet_ros node says of itself: connected, namespaces, messages by fate."""
+
+    name: str = Field(max_length=200)
+    connected: bool
+    worlds: int = Field(ge=0)
+    accepted: int = Field(ge=0)
+    rejected: dict[str, int] = Field(max_length=64)
 
 
 class RosbridgeSurface:
@@ -40,6 +53,7 @@ class RosbridgeSurface:
         self.settings = settings
         self.dds = dds
         self.ctx: SurfaceContext | None = None
+        self.node_report: dict[str, Any] | None = None
         self.router = self._routes()
 
     def start(self, ctx: SurfaceContext) -> None:
@@ -61,10 +75,34 @@ class RosbridgeSurface:
         async def ros_status() -> dict[str, Any]:
             return {
                 "dds": self.dds.status() if self.dds is not None else {"enabled": False},
+                "node": self.node_report,
                 "rosbridge": self.server.status(),
             }
 
+        @router.put("/v1/ros/node", tags=["ros"])
+        async def ros_node_report(report: NodeReport) -> dict[str, Any]:
+            """The armfleet_ros node's counters (it reports them every 0.5 s)."""
+            self.node_report = {**report.model_dump(), "reported": time.time()}
+            return self.node_report
+
+        @router.get("/v1/ros/robot_description", tags=["ros"])
+        async def ros_robot_description() -> dict[str, str]:
+            """The URDF that `/robot_description` carries (generated from the MuJoCo model)."""
+            loop = self._loop()
+            return {"urdf": description.robot_description(loop.batch.robot.mjm, loop.spec)}
+
+        @router.get("/v1/ros/frames", tags=["ros"])
+        async def ros_frames() -> dict[str, Any]:
+            """The tf tree: fixed transforms, and the body pair that gives each moving frame."""
+            loop = self._loop()
+            return description.frames(loop.batch.robot.mjm, loop.spec)
+
         return router
+
+    def _loop(self) -> Any:
+        if self.ctx is None:
+            raise HTTPException(503, "simulation is starting")
+        return self.ctx.loop
 
     async def _serve(self, ws: WebSocket) -> None:
         await ws.accept(subprotocol=access.check_websocket(self.settings, ws).subprotocol)

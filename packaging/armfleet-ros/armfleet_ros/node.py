@@ -1,0 +1,164 @@
+"""`armfleet_node`: armfleet's worlds on the ROS 2 graph, as a node of the user's own ROS.
+
+    ros2 run armfleet_ros armfleet_node --ros-args -p url:=http://127.0.0.1:8000 -p worlds:=0-7
+
+It reaches armfleet by URL (HTTP and WebSocket, with armfleet's client library), so armfleet may
+run on another machine; everything ROS (middleware, QoS, graph, type hashes, services, actions)
+is the installation's own. Parameters: `url`, `worlds` (worlds with `/world_N/...`; world 0 is
+also at the root, the seed's names), `rate` (Hz of `/joint_states`, `/clock`, `/tf`).
+Written for Python 3.10 and rclpy 3.3 (Humble) on: no newer API is used.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import sys
+import threading
+import time
+from typing import Any
+
+import rclpy
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+
+from armfleet_ros.convert import Counter, stamp
+from armfleet_ros.frames import TfTree
+from armfleet_ros.link import FleetLink
+from armfleet_ros.world import WorldTopics
+from clients import ArmfleetClient
+from clients._http import Call
+from clients.errors import ArmfleetError
+
+NODE_NAME = "armfleet"
+
+
+def parse_worlds(spec: str, nworld: int) -> list[int]:
+    """'0-7,9' → [0, ..., 7, 9] (each < nworld); '' → []."""
+    out: list[int] = []
+    for part in filter(None, (p.strip() for p in spec.split(","))):
+        lo, _, hi = part.partition("-")
+        first, last = int(lo), int(hi or lo)
+        if not 0 <= first <= last < nworld:
+            raise ValueError(f"worlds: {part!r} is outside 0..{nworld - 1}")
+        out.extend(range(first, last + 1))
+    return sorted(set(out))
+
+
+class ArmfleetNode:
+    """The node, its link to armfleet and every world's topics and actions."""
+
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        log = node.get_logger()
+        self.url = str(node.declare_parameter("url", "http://127.0.0.1:8000").value)
+        spec = str(node.declare_parameter("worlds", "").value)
+        self.rate = float(node.declare_parameter("rate", 60.0).value)
+        self.http = ArmfleetClient(self.url, timeout=10.0)
+        self._wait_for_armfleet(log)
+        info = self.http.info()
+        self.joints = info.names
+        self.tick_dt = 1.0 / info.control_hz
+        self.worlds = parse_worlds(spec, info.nworld)
+        self.urdf = self.http._call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
+        self.tree = TfTree(self.http._call(Call("GET", "/v1/ros/frames", lambda d: d)))
+        self.group = ReentrantCallbackGroup()
+        self.bad = Counter(log)
+        self.accepted = 0
+        self.clock = node.create_publisher(Clock, "/clock", 10)
+        spaces = [("", 0)] + [(f"/world_{w}", w) for w in self.worlds]
+        self.spaces = [WorldTopics(self, w, ns) for ns, w in spaces]
+        served = sorted({w for _, w in spaces})
+        self.link = FleetLink(self.url, served, self.rate, self._publish)
+        self.link.start()
+        node.create_timer(0.5, self._refresh, callback_group=self.group)
+        self._last_tick = -1
+        log.info(
+            f"serving {len(served)} worlds of {self.url} "
+            f"({len(self.spaces)} namespaces, {self.rate:g} Hz)"
+        )
+
+    def _wait_for_armfleet(self, log: Any) -> None:
+        said = False
+        while True:
+            try:
+                self.http.wait_ready(timeout=3600.0 * 24)
+                return
+            except ArmfleetError as exc:
+                if not said:
+                    log.info(f"waiting for armfleet at {self.url}: {exc}")
+                    said = True
+                time.sleep(0.5)
+
+    def _refresh(self) -> None:
+        for space in self.spaces:
+            space.refresh()
+        self.link.watch_poses(sorted({s.world for s in self.spaces if s.listened_tf}))
+        self._report()
+
+    def _report(self) -> None:
+        """The node's counters, shown by armfleet's `GET /v1/ros` (best effort)."""
+        body = {
+            "name": f"/{NODE_NAME}",
+            "connected": self.link.connected,
+            "worlds": len(self.spaces),
+            "accepted": self.accepted,
+            "rejected": self.bad.counts(),
+        }
+        with contextlib.suppress(ArmfleetError):
+            self.http._call(Call("PUT", "/v1/ros/node", lambda d: d, json=body))
+
+    def _publish(self, batch: Any) -> None:
+        """A state frame arrived (link thread): `/clock`, then each listened world."""
+        if batch.tick == self._last_tick:
+            return
+        self._last_tick = batch.tick
+        sec, nanosec = stamp(batch.tick * self.tick_dt)
+        clock = Clock()
+        clock.clock.sec, clock.clock.nanosec = sec, nanosec
+        self.clock.publish(clock)
+        rows = {int(w): i for i, w in enumerate(batch.worlds)}
+        poses = self.link.poses
+        for space in self.spaces:
+            if space.listened_states:
+                space.publish_state(batch, rows[space.world], sec, nanosec)
+            if space.listened_tf and poses is not None and space.world in poses.row:
+                world_poses = poses.poses[poses.row[space.world]]
+                space.tf.publish(self.tree.moving_message(world_poses, sec, nanosec))
+
+    def close(self) -> None:
+        self.link.stop()
+        self.http.close()
+
+
+def main(args: list | None = None) -> None:
+    logging.basicConfig(level=logging.INFO, format="[armfleet_ros] %(message)s")
+    logging.getLogger("httpx").setLevel(logging.WARNING)
+    rclpy.init(args=args)
+    node = Node(NODE_NAME)
+    try:
+        fleet = ArmfleetNode(node)
+    except (ValueError, ArmfleetError) as exc:
+        node.get_logger().error(str(exc))
+        node.destroy_node()
+        rclpy.shutdown()
+        sys.exit(2)
+    executor = MultiThreadedExecutor(num_threads=min(64, 2 * len(fleet.spaces) + 6))
+    executor.add_node(node)
+    stop = threading.Event()
+    try:
+        executor.spin()
+    except KeyboardInterrupt:
+        stop.set()
+    finally:
+        fleet.close()
+        executor.shutdown()
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()
