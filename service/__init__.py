@@ -10,3 +10,7 @@ never above (scripts/import_graph.py checks it, tests/test_layout.py runs it):
 - api/, app.py, runtime.py, serving.py, cli.py   the app: HTTP routes, composition, the server,
   the `armfleet` command
 """
+
+from service.pythonpath import scrub as _scrub_ros_pythonpath
+
+_scrub_ros_pythonpath()  # before anything else is imported: see service/pythonpath.py

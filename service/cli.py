@@ -84,7 +84,7 @@ def serve(
     ros2: Annotated[bool | None, _opt("ros2")] = None,
     ros2_rate: Annotated[float | None, _opt("ros2_rate")] = None,
     ros2_worlds: Annotated[str | None, _opt("ros2_worlds")] = None,
-    ros2_network: Annotated[bool | None, _opt("ros2_network")] = None,
+    ros2_python: Annotated[str | None, _opt("ros2_python")] = None,
     data_dir: Annotated[str | None, _opt("data_dir")] = None,
     restore: Annotated[str | None, _opt("restore")] = None,
     save_on_exit: Annotated[bool | None, _opt("save_on_exit")] = None,

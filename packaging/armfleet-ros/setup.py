@@ -1,7 +1,7 @@
 """armfleet_ros: a colcon (ament_python) package and a pip distribution at once.
 
-    colcon build --packages-select armfleet_ros      # in a workspace: src/armfleet_ros -> here
-    python3 -m pip install ./packaging/armfleet-client ./packaging/armfleet-ros
+colcon build --packages-select armfleet_ros      # in a workspace: src/armfleet_ros -> here
+python3 -m pip install ./packaging/armfleet-client ./packaging/armfleet-ros
 """
 
 from setuptools import setup

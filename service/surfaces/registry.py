@@ -6,8 +6,8 @@ core/settings.py (each an `ARMFLEET_*` variable; an `armfleet serve` option is o
 in cli.py). The registry builds them in order, each builder
 seeing the surfaces built before it (rosbridge reports the DDS bridge's topics); the runtime
 starts them in that order once the loop runs and stops them in reverse. A builder imports its
-surface only when the settings ask for it, so an unused surface costs nothing (no DDS, no
-Foxglove SDK).
+surface only when the settings ask for it, so an unused surface costs nothing (no ROS 2 node,
+no Foxglove SDK).
 """
 
 from __future__ import annotations
@@ -46,17 +46,15 @@ def _foxglove(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
 def _ros2(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
     if not s.ros2:
         return None
-    from service.surfaces.ros.dds import DdsBridge
+    from service.surfaces.ros.node_process import RosNode
 
-    return DdsBridge(s.ros2_rate, s.ros2_worlds, s.ros2_network)
+    return RosNode(s)  # ValueError (one line) where no ROS 2 is found
 
 
 def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
-    from service.surfaces.ros.dds import DdsBridge
     from service.surfaces.ros.rosbridge_surface import RosbridgeSurface
 
-    dds = built.get("ros2")
-    return RosbridgeSurface(s, dds if isinstance(dds, DdsBridge) else None)  # always on
+    return RosbridgeSurface(s, built.get("ros2"))  # always on; reports the ROS 2 node too
 
 
 # (name, builder), in start order. The names are the surfaces' `name`s.

@@ -79,7 +79,10 @@ def actions(ns: str) -> None:
 
     node = Node("judge_actions")
     names = ["scaled_joint_trajectory_controller", "joint_trajectory_controller"]
-    fjt = {n: ActionClient(node, FollowJointTrajectory, f"{ns}/{n}/follow_joint_trajectory") for n in names}
+    fjt = {
+        n: ActionClient(node, FollowJointTrajectory, f"{ns}/{n}/follow_joint_trajectory")
+        for n in names
+    }
     grip = ActionClient(node, GripperCommand, f"{ns}/robotiq_gripper_controller/gripper_cmd")
     report: dict = {}
     for c in [*fjt.values(), grip]:
@@ -126,7 +129,11 @@ def actions(ns: str) -> None:
         "actual": list(r["last_feedback"].actual.positions) if r["last_feedback"] else None,
     }
     r = run(fjt[names[1]], traj([0.0, -1.57, 1.57, -1.57, -1.57, 0.0], 3.0), cancel_after=0.5)
-    report["cancel"] = {"status": r["status"], "error_code": r["result"].error_code, "feedback": r["feedback"]}
+    report["cancel"] = {
+        "status": r["status"],
+        "error_code": r["result"].error_code,
+        "feedback": r["feedback"],
+    }
     r = run(fjt[names[1]], traj([0.1] * 7, 1.0, JOINTS))
     report["refused_finger"] = r["accepted"]
     r = run(fjt[names[0]], traj([float("nan")] * 6, 1.0))
@@ -153,8 +160,8 @@ def actions(ns: str) -> None:
 
 def tf(ns: str) -> None:
     """Every frame composed from /tf + /tf_static as tf2 does: world → link for each link."""
-    from tf2_msgs.msg import TFMessage
     from rclpy.qos import DurabilityPolicy, QoSProfile
+    from tf2_msgs.msg import TFMessage
 
     node = Node("judge_tf")
     edges: dict = {}

@@ -67,6 +67,9 @@ class ArmfleetNode:
         self.group = ReentrantCallbackGroup()
         self.bad = Counter(log)
         self.accepted = 0
+        self._last_tick = -1
+        self._reported: dict = {}
+        self._reported_at = 0.0
         self.clock = node.create_publisher(Clock, "/clock", 10)
         spaces = [("", 0)] + [(f"/world_{w}", w) for w in self.worlds]
         self.spaces = [WorldTopics(self, w, ns) for ns, w in spaces]
@@ -74,7 +77,6 @@ class ArmfleetNode:
         self.link = FleetLink(self.url, served, self.rate, self._publish)
         self.link.start()
         node.create_timer(0.5, self._refresh, callback_group=self.group)
-        self._last_tick = -1
         log.info(
             f"serving {len(served)} worlds of {self.url} "
             f"({len(self.spaces)} namespaces, {self.rate:g} Hz)"
@@ -99,7 +101,8 @@ class ArmfleetNode:
         self._report()
 
     def _report(self) -> None:
-        """The node's counters, shown by armfleet's `GET /v1/ros` (best effort)."""
+        """The node's counters, shown by armfleet's `GET /v1/ros` (best effort): when they
+        changed, else every 10 s."""
         body = {
             "name": f"/{NODE_NAME}",
             "connected": self.link.connected,
@@ -107,6 +110,10 @@ class ArmfleetNode:
             "accepted": self.accepted,
             "rejected": self.bad.counts(),
         }
+        now = time.monotonic()
+        if body == self._reported and now - self._reported_at < 10.0:
+            return
+        self._reported, self._reported_at = body, now
         with contextlib.suppress(ArmfleetError):
             self.http._call(Call("PUT", "/v1/ros/node", lambda d: d, json=body))
 

@@ -1,5 +1,7 @@
 """rosbridge as a surface: its socket on the service's port (`/` and `/rosbridge`) and
-`GET /v1/ros`, the ROS status of both ROS surfaces (DDS and rosbridge).
+`GET /v1/ros`, the ROS status of both ROS surfaces (the armfleet_ros node and rosbridge),
+and what the node reads from armfleet (`/v1/ros/robot_description`, `/v1/ros/frames`) or
+reports to it (`PUT /v1/ros/node`).
 
 The protocol itself (one client's ops, services and outbox) is rosbridge.py; this module owns
 what one service shares: the topic map from the settings, the counters, and the read loop that
@@ -25,10 +27,12 @@ from service.surfaces.ros.rosbridge import RosbridgeServer, Session
 from service.surfaces.ros.topics import TopicMap
 
 if TYPE_CHECKING:
-    from service.surfaces.ros.dds import DdsBridge
+    from service.core.surface import Surface
 
 _MAX_QUEUED_REPLIES = 256
-_STATUS_DOC = "ROS 2 over DDS and rosbridge: topics, accepted commands, rejected messages by kind."
+_STATUS_DOC = (
+    "The ROS 2 node (process, restarts, its counters) and rosbridge: topics, commands by fate."
+)
 
 
 class NodeReport(BaseModel):
@@ -42,16 +46,17 @@ class NodeReport(BaseModel):
 
 
 class RosbridgeSurface:
-    """rosbridge v2 for ROS web and script clients, always on; `dds` is the DDS bridge, if any,
+    """rosbridge v2 for ROS web and script clients, always on; `node` is the ROS 2 node's
+    supervisor (`--ros2`), if any,
     whose status `GET /v1/ros` reports beside rosbridge's."""
 
     name = "rosbridge"
 
-    def __init__(self, settings: Settings, dds: DdsBridge | None = None) -> None:
+    def __init__(self, settings: Settings, node: Surface | None = None) -> None:
         worlds = world_list(settings.ros2_worlds, settings.worlds, "ros2_worlds")
         self.server = RosbridgeServer(TopicMap(worlds), settings.ros2_rate)
         self.settings = settings
-        self.dds = dds
+        self.node = node  # the ROS 2 node's supervisor (`--ros2`), if any
         self.ctx: SurfaceContext | None = None
         self.node_report: dict[str, Any] | None = None
         self.router = self._routes()
@@ -73,9 +78,9 @@ class RosbridgeSurface:
 
         @router.get("/v1/ros", tags=["ros"], description=_STATUS_DOC)
         async def ros_status() -> dict[str, Any]:
+            process = getattr(self.node, "status", lambda: {"enabled": False})()
             return {
-                "dds": self.dds.status() if self.dds is not None else {"enabled": False},
-                "node": self.node_report,
+                "node": {**process, "report": self.node_report},
                 "rosbridge": self.server.status(),
             }
 
