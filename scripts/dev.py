@@ -112,11 +112,12 @@ def ensure_test_tools() -> None:
     run(*sudo, "apt-get", "install", "-y", "-qq", "--no-install-recommends", *missing, env=env)
 
 
-def build_test_peers() -> None:
-    """The Fast DDS peer, compiled once per source change (cached under build/fastdds_peer)."""
-    done = subprocess.run([BIN / "python", "-m", "tests.fastdds_peer"], cwd=ROOT)
+def build_ros2_judge() -> None:
+    """The real ROS 2 (Jazzy rclpy + Fast DDS, ../shared/ros2_judge) the ROS 2 tests run on,
+    built once per version of its sources under ~/.cache/armfleet (tests/ros2_judge.py)."""
+    done = subprocess.run([BIN / "python", "-m", "tests.ros2_judge"], cwd=ROOT)
     if done.returncode:
-        say("the Fast DDS peer could not be built: its ROS 2 tests will be skipped")
+        say("the ROS 2 judge could not be built: the ROS 2 node's tests will be skipped")
 
 
 def ensure_js_tools() -> None:
@@ -141,7 +142,7 @@ def main(argv: list[str]) -> int:
     ensure_venv()
     if command == "test":
         ensure_test_tools()
-        build_test_peers()
+        build_ros2_judge()
         ensure_js_tools()
     warm_kernel_cache()
     if command == "serve":

@@ -71,6 +71,33 @@ def seed(ns: str, value: float) -> None:
     )
 
 
+def bad(ns: str) -> None:
+    """Messages that must change nothing: NaN, lengths, a joint named twice, a short array."""
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    node = Node("judge_bad")
+    pub = node.create_publisher(JointState, f"{ns}/joint_commands", 10)
+    fwd = node.create_publisher(Float64MultiArray, f"{ns}/forward_position_controller/commands", 10)
+    spin_until(node, lambda: pub.get_subscription_count() and fwd.get_subscription_count(), 20)
+    sent = 0
+    for names, values in (
+        (["elbow_joint"], [float("nan")]),
+        (["elbow_joint", "finger_joint"], [0.1]),
+        (["elbow_joint", "elbow_joint"], [0.1, 0.2]),
+    ):
+        msg = JointState()
+        msg.name, msg.position = names, values
+        pub.publish(msg)
+        sent += 1
+    short = Float64MultiArray()
+    short.data = [0.1, 0.2]
+    fwd.publish(short)
+    sent += 1
+    spin_until(node, lambda: False, 1.0)
+    out(sent=sent)
+
+
 def actions(ns: str) -> None:
     """ActionClients: both trajectory actions, the gripper, a cancel and refused goals."""
     from control_msgs.action import FollowJointTrajectory, GripperCommand
@@ -85,6 +112,10 @@ def actions(ns: str) -> None:
     }
     grip = ActionClient(node, GripperCommand, f"{ns}/robotiq_gripper_controller/gripper_cmd")
     report: dict = {}
+    from sensor_msgs.msg import JointState
+
+    states: list = []
+    node.create_subscription(JointState, f"{ns}/joint_states", states.append, 10)
     for c in [*fjt.values(), grip]:
         assert c.wait_for_server(timeout_sec=20), "no action server"
 
@@ -122,7 +153,9 @@ def actions(ns: str) -> None:
 
     target = [0.3, -1.3, 1.6, -1.8, -1.4, 0.4]
     r = run(fjt[names[0]], traj(target, 1.0))
+    spin_until(node, lambda: False, 0.1)
     report["scaled"] = {
+        "position": list(states[-1].position) if states else None,
         "status": r["status"],
         "error_code": r["result"].error_code,
         "feedback": r["feedback"],
@@ -212,6 +245,8 @@ def main() -> None:
     try:
         if cmd == "seed":
             seed(args[0], float(args[1]))
+        elif cmd == "bad":
+            bad(args[0])
         elif cmd == "actions":
             actions(args[0])
         elif cmd == "tf":

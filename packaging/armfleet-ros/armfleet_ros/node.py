@@ -83,16 +83,13 @@ class ArmfleetNode:
         )
 
     def _wait_for_armfleet(self, log: Any) -> None:
-        said = False
-        while True:
-            try:
-                self.http.wait_ready(timeout=3600.0 * 24)
-                return
-            except ArmfleetError as exc:
-                if not said:
-                    log.info(f"waiting for armfleet at {self.url}: {exc}")
-                    said = True
-                time.sleep(0.5)
+        """Whichever starts first: wait (for ever) until armfleet answers /readyz."""
+        if self.http.ready():
+            return
+        log.info(f"waiting for armfleet at {self.url}")
+        while not self.http.ready():
+            time.sleep(0.5)
+        log.info(f"armfleet at {self.url} is ready")
 
     def _refresh(self) -> None:
         for space in self.spaces:
