@@ -63,9 +63,10 @@ def skip_reason() -> str | None:
     return "the ROS 2 judge is not built: run `python -m tests.ros2_judge` (or scripts/dev.py test)"
 
 
-def domain_id() -> int:
-    """This test process's ROS_DOMAIN_ID: 20..219, from the pid."""
-    return 20 + os.getpid() % 200
+def domain_id(offset: int = 0) -> int:
+    """This test process's ROS_DOMAIN_ID: 20..219, from the pid (`offset`: another graph of
+    the same process, for a test that must not see the module's node)."""
+    return 20 + (os.getpid() + offset) % 200
 
 
 @cache
@@ -89,6 +90,10 @@ def python() -> str:
     r = root()
     assert r is not None
     return str(r / "venv" / "bin" / "python")
+
+
+def on_domain(e: dict[str, str], offset: int) -> dict[str, str]:
+    return {**e, "ROS_DOMAIN_ID": str(domain_id(offset))}
 
 
 def node_env() -> dict[str, str]:

@@ -32,11 +32,14 @@ pytestmark = pytest.mark.skipif(
 WORLDS = "0-3"
 
 
-def judge(*args: str, timeout: float = 90) -> dict[str, Any]:
-    """Run one judge node; its JSON line."""
+OWN_GRAPH = 100  # domain offset of tests that start their own armfleet beside the module's
+
+
+def judge(*args: str, timeout: float = 90, domain: int = 0) -> dict[str, Any]:
+    """Run one judge node (on this process's domain + `domain`); its JSON line."""
     done = subprocess.run(
         [ros2_judge.python(), str(ros2_judge.JUDGE_SCRIPT), *args],
-        env=ros2_judge.env(),
+        env=ros2_judge.on_domain(ros2_judge.env(), domain),
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -46,18 +49,20 @@ def judge(*args: str, timeout: float = 90) -> dict[str, Any]:
     return json.loads(lines[-1])
 
 
-def server_env() -> dict[str, str]:
+def server_env(domain: int = 0) -> dict[str, str]:
     """A shell that sourced the ROS 2 judge, as the seed's user has one with ROS sourced."""
-    env = dict(ros2_judge.env())
+    env = ros2_judge.on_domain(ros2_judge.env(), domain)
     env["PYTHONPATH"] = os.pathsep.join([str(ros2_judge.ROOT), env.get("PYTHONPATH", "")])
     return env
 
 
 @contextlib.contextmanager
-def ros_server(port: int | None = None, log_dir: Any = None) -> Iterator[Server]:
+def ros_server(port: int | None = None, log_dir: Any = None, domain: int = 0) -> Iterator[Server]:
     args = ["--engine", "mujoco", "--ros2", "--ros2-worlds", WORLDS]
     args += ["--ros2-python", ros2_judge.python()]
-    with serve(worlds=4, port=port, extra_args=args, env=server_env(), log_dir=log_dir) as srv:
+    with serve(
+        worlds=4, port=port, extra_args=args, env=server_env(domain), log_dir=log_dir
+    ) as srv:
         yield srv
 
 
@@ -249,7 +254,10 @@ def test_graph_lists_the_node_topics_and_actions(ros: tuple[Server, httpx.Client
 
 
 def test_node_restarts_when_it_dies_and_readyz_says_so(tmp_path: Any) -> None:
-    with ros_server(log_dir=tmp_path) as srv, httpx.Client(base_url=srv.url, timeout=10) as http:
+    with (
+        ros_server(log_dir=tmp_path, domain=OWN_GRAPH) as srv,
+        httpx.Client(base_url=srv.url, timeout=10) as http,
+    ):
         pid = node_report(http)["pid"]
         os.kill(pid, signal.SIGKILL)
 
@@ -264,7 +272,8 @@ def test_node_restarts_when_it_dies_and_readyz_says_so(tmp_path: Any) -> None:
         )
         assert node["restarts"] == 1 and node["last_exit"] == -signal.SIGKILL
         assert http.get("/readyz").status_code == 200
-        assert judge("seed", "", "0.3")["reached"]
+        assert judge("seed", "", "0.3", domain=OWN_GRAPH)["reached"]
+        assert targets(http, 0)[6] == 0.3
         new_pid = node["pid"]
     with contextlib.suppress(ProcessLookupError):
         os.kill(new_pid, 0)
@@ -278,7 +287,10 @@ def test_node_started_before_armfleet(tmp_path: Any) -> None:
     cmd = [ros2_judge.python(), "-m", "armfleet_ros.node", "--ros-args"]
     cmd += ["-p", f"url:=http://127.0.0.1:{port}", "-p", "worlds:=0-1"]
     node = subprocess.Popen(
-        cmd, env=ros2_judge.node_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT
+        cmd,
+        env=ros2_judge.on_domain(ros2_judge.node_env(), OWN_GRAPH),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
     )
     try:
         time.sleep(3)
@@ -288,7 +300,7 @@ def test_node_started_before_armfleet(tmp_path: Any) -> None:
             serve(worlds=2, port=port, extra_args=args, log_dir=tmp_path) as srv,
             httpx.Client(base_url=srv.url, timeout=10) as http,
         ):
-            seen = judge("seed", "/world_1", "0.25")
+            seen = judge("seed", "/world_1", "0.25", domain=OWN_GRAPH)
             assert seen["reached"]
             assert targets(http, 1)[6] == 0.25
     finally:
