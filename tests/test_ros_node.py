@@ -250,6 +250,34 @@ def test_graph_lists_the_node_topics_and_actions(ros: tuple[Server, httpx.Client
         ]
 
 
+def test_simulation_interfaces(ros: tuple[Server, httpx.Client]) -> None:
+    srv, http = ros
+    http.put("/v1/worlds/1/targets", json={"name": ["elbow_joint"], "position": [1.0]})
+    seen = judge("sim", "/world_3", "/world_1", timeout=120)
+    assert {20, 22, 24, 25, 26, 31, 32, 33, 10} == set(seen["features"])
+    assert 11 not in seen["features"] and "twist" in seen["custom_info"]
+    assert seen["state0"] == 1 and seen["step_playing"] == 3  # PLAYING; INCORRECT_STATE
+    assert (seen["pause"], seen["pause_again"], seen["state_paused"]) == (1, 101, 2)
+    dt = 1 / http.get("/v1/info").json()["control_hz"]
+    t0, t1, t2 = seen["clock"]
+    assert t1 - t0 == pytest.approx(5 * dt, abs=1e-6)  # exactly five ticks, then ten
+    assert t2 - t1 == pytest.approx(10 * dt, abs=1e-6)
+    assert seen["simulate"] == {"status": 4, "result": 1, "feedback": list(range(1, 11))}
+    assert (seen["play"], seen["state_playing"]) == (1, 1)
+    assert http.get("/v1/info").json()["mode"] == "realtime"
+    assert "cube" in seen["entities"] and "wrist_3_link" in seen["entities"]
+    assert seen["wrists"] == ["wrist_1_link", "wrist_2_link", "wrist_3_link"]
+    assert seen["cube"]["result"] == 1 and seen["cube"]["frame"] == "world"
+    scene = {b["name"]: b["id"] for b in http.get("/v1/ros/frames").json()["bodies"]}
+    poses = _poses(srv, 3)  # world 3 rests: nothing commands it
+    np.testing.assert_allclose(seen["cube"]["pose"], poses[scene["cube"]], atol=1e-4)
+    for name, pos in seen["states"].items():
+        np.testing.assert_allclose(pos, poses[scene[name], :3], atol=2e-3, err_msg=name)
+    assert seen["missing"] == 2 and seen["set_entity"] == 0  # NOT_FOUND; FEATURE_UNSUPPORTED
+    assert (seen["reset_time"], seen["reset_state"]) == (0, 1)
+    assert targets(http, 1)[2] == http.get("/v1/info").json()["joints"][2]["home"]
+
+
 # -- supervision and start orders ----------------------------------------------------------------
 
 

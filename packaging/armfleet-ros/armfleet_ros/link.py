@@ -68,6 +68,7 @@ class FleetLink:
         self.latest: BatchStates | None = None
         self.poses: Poses | None = None
         self.connected = False
+        self.generation = 0  # connections so far: ticks may start over on a new one
         self._pose_worlds: tuple[int, ...] = ()
         self._pose_changed: asyncio.Event | None = None
         self._ids = _stream.CommandIds()
@@ -152,6 +153,7 @@ class FleetLink:
         if isinstance(msg, BatchStates):
             if not self.connected:
                 self.connected = True
+                self.generation += 1
                 backoff.reset()
                 log.info("connected to armfleet at %s (%d worlds)", self.url, len(self.worlds))
             self.latest = msg

@@ -5,7 +5,8 @@
 It reaches armfleet by URL (HTTP and WebSocket, with armfleet's client library), so armfleet may
 run on another machine; everything ROS (middleware, QoS, graph, type hashes, services, actions)
 is the installation's own. Parameters: `url`, `worlds` (worlds with `/world_N/...`; world 0 is
-also at the root, the seed's names), `rate` (Hz of `/joint_states`, `/clock`, `/tf`).
+also at the root, the seed's names), `rate` (Hz of `/joint_states`, `/clock`, `/tf`),
+`play_mode` (what simulation_interfaces' PLAYING means: realtime or fast).
 Written for Python 3.10 and rclpy 3.3 (Humble) on: no newer API is used.
 """
 
@@ -27,6 +28,7 @@ from rosgraph_msgs.msg import Clock
 from armfleet_ros.convert import Counter, stamp
 from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
+from armfleet_ros.sim import GlobalSim, WorldSim
 from armfleet_ros.world import WorldTopics
 from clients import ArmfleetClient
 from clients._http import Call
@@ -63,16 +65,20 @@ class ArmfleetNode:
         self.tick_dt = 1.0 / info.control_hz
         self.worlds = parse_worlds(spec, info.nworld)
         self.urdf = self.http._call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
-        self.tree = TfTree(self.http._call(Call("GET", "/v1/ros/frames", lambda d: d)))
+        self.frames = self.http._call(Call("GET", "/v1/ros/frames", lambda d: d))
+        self.tree = TfTree(self.frames)
         self.group = ReentrantCallbackGroup()
         self.bad = Counter(log)
         self.accepted = 0
         self._last_tick = -1
+        self._last_generation = 0
         self._reported: dict = {}
         self._reported_at = 0.0
         self.clock = node.create_publisher(Clock, "/clock", 10)
         spaces = [("", 0)] + [(f"/world_{w}", w) for w in self.worlds]
         self.spaces = [WorldTopics(self, w, ns) for ns, w in spaces]
+        self.sim = GlobalSim(self)
+        self.entities = [WorldSim(self, w, ns) for ns, w in spaces]
         served = sorted({w for _, w in spaces})
         self.link = FleetLink(self.url, served, self.rate, self._publish)
         self.link.start()
@@ -116,9 +122,11 @@ class ArmfleetNode:
 
     def _publish(self, batch: Any) -> None:
         """A state frame arrived (link thread): `/clock`, then each listened world."""
-        if batch.tick == self._last_tick:
+        # never back in time (a frame older than a catch-up), unless armfleet restarted
+        gen = self.link.generation
+        if batch.tick <= self._last_tick and gen == self._last_generation:
             return
-        self._last_tick = batch.tick
+        self._last_tick, self._last_generation = batch.tick, gen
         sec, nanosec = stamp(batch.tick * self.tick_dt)
         clock = Clock()
         clock.clock.sec, clock.clock.nanosec = sec, nanosec
@@ -131,6 +139,15 @@ class ArmfleetNode:
             if space.listened_tf and poses is not None and space.world in poses.row:
                 world_poses = poses.poses[poses.row[space.world]]
                 space.tf.publish(self.tree.moving_message(world_poses, sec, nanosec))
+
+    def catch_up(self) -> None:
+        """Publish the states of now, read over HTTP: after a pause or steps through this node
+        (armfleet's stream keeps its cadence, so a burst of stepped ticks ends between frames
+        and, paused, no later frame comes)."""
+        try:
+            self._publish(self.http.states(self.link.worlds))
+        except ArmfleetError as exc:
+            self.node.get_logger().warning(f"states after a step: {exc}")
 
     def close(self) -> None:
         self.link.stop()

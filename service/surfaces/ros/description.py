@@ -2,9 +2,9 @@
 
 `GET /v1/ros/robot_description` is the URDF (urdf.py) that `/robot_description` carries, and
 `GET /v1/ros/frames` the tf tree (tf_frames.py) in a form a node can compose without MuJoCo:
-the fixed transforms for `/tf_static`, and for each moving frame the two bodies whose world
-poses (the `WS /v1/ws/view` pose frames, MjModel body order) give it. Both are computed once
-per service: the model never changes while it runs.
+the fixed transforms for `/tf_static`, the bodies (`free`: not part of the robot), and for each
+moving frame the two bodies whose world poses (the `WS /v1/ws/view` pose frames, MjModel body
+order) give it. Both are computed once per service: the model never changes while it runs.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import mujoco
 
 from service.core.types import RobotSpec
 from service.surfaces.ros.tf_frames import FrameTree
-from service.surfaces.ros.urdf import ROOT_LINK, generate
+from service.surfaces.ros.urdf import ROOT_LINK, free_floating, generate
 
 
 @cache
@@ -28,6 +28,14 @@ def _cached(mjm: mujoco.MjModel, spec: RobotSpec) -> tuple[str, dict[str, Any]]:
         "static": [
             {"parent": t.parent, "child": t.child, "pos": list(t.pos), "quat": list(t.quat)}
             for t in tree.static
+        ],
+        "bodies": [  # simulation_interfaces' entities: the robot's links and the free bodies
+            {
+                "id": b,
+                "name": mujoco.mj_id2name(mjm, mujoco.mjtObj.mjOBJ_BODY, b) or f"body_{b}",
+                "free": free_floating(mjm, b),
+            }
+            for b in range(1, mjm.nbody)
         ],
         "moving": [
             {"parent": p, "child": c, "parent_body": int(pb), "child_body": int(cb)}

@@ -62,7 +62,7 @@ def _name(mjm: mujoco.MjModel, obj: mujoco.mjtObj, i: int) -> str:
     return mujoco.mj_id2name(mjm, obj, i) or f"{obj.name.removeprefix('mjOBJ_').lower()}_{i}"
 
 
-def _free_floating(mjm: mujoco.MjModel, body: int) -> bool:
+def free_floating(mjm: mujoco.MjModel, body: int) -> bool:
     """True if the body or an ancestor has a free joint (it is scenery, not the robot)."""
     while body > 0:
         start, count = mjm.body_jntadr[body], mjm.body_jntnum[body]
@@ -79,7 +79,7 @@ def robot_links(mjm: mujoco.MjModel) -> list[Link]:
     a body with two joints, or a joint placed away from its body's origin, has no URDF form.
     """
     links: list[Link] = []
-    bodies = [b for b in range(1, mjm.nbody) if not _free_floating(mjm, b)]
+    bodies = [b for b in range(1, mjm.nbody) if not free_floating(mjm, b)]
     for b in bodies:
         name = _name(mjm, mujoco.mjtObj.mjOBJ_BODY, b)
         parent_id = int(mjm.body_parentid[b])
