@@ -309,7 +309,7 @@ def sim(ns: str, reset_ns: str) -> None:
     many = call(srv.GetEntitiesStates, f"{ns}/get_entities_states")
     r["states"] = {
         n: [s.pose.position.x, s.pose.position.y, s.pose.position.z]
-        for n, s in zip(many.entities, many.states)
+        for n, s in zip(many.entities, many.states, strict=True)
     }
     r["set_entity"] = call(
         srv.SetEntityState, f"{ns}/set_entity_state", entity="cube"
