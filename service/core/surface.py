@@ -1,6 +1,6 @@
 """The plug-in point for surfaces: what a surface may use of a running service, and its shape.
 
-A surface is a way in or out of the service besides the HTTP API (ROS 2 over DDS, rosbridge,
+A surface is a way in or out of the service besides the HTTP API (the ROS 2 node, rosbridge,
 Foxglove, recordings). It is started once the loop runs and stopped before the loop stops, and
 it gets a `SurfaceContext`: the loop (listen with `add_sink`), `Control` (the one door for
 commands), the stream hub, the settings, the client slots it must hold a seat in per client,

@@ -4,7 +4,7 @@ Adding a surface is one module (a class with `name`, `start(ctx)` and `stop()`, 
 core/surface.py) plus one entry in `REGISTRY` below, and its options as fields of
 core/settings.py (each an `ARMFLEET_*` variable; an `armfleet serve` option is one `_opt` line
 in cli.py). The registry builds them in order, each builder
-seeing the surfaces built before it (rosbridge reports the DDS bridge's topics); the runtime
+seeing the surfaces built before it (rosbridge reports the ROS 2 node's process); the runtime
 starts them in that order once the loop runs and stops them in reverse. A builder imports its
 surface only when the settings ask for it, so an unused surface costs nothing (no ROS 2 node,
 no Foxglove SDK).

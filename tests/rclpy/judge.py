@@ -323,11 +323,101 @@ def sim(ns: str, reset_ns: str) -> None:
     out(**r)
 
 
-def graph() -> None:
+def latency(worlds: int, rounds: int) -> None:
+    """publish → first /world_N/joint_states showing the joint move (>= 1e-4 rad), per round."""
+    from sensor_msgs.msg import JointState
+
+    node = Node("judge_latency")
+    latest: dict = {}
+    pubs = {}
+    for w in range(worlds):
+        pubs[w] = node.create_publisher(JointState, f"/world_{w}/joint_commands", 10)
+        node.create_subscription(
+            JointState,
+            f"/world_{w}/joint_states",
+            lambda m, w=w: latest.__setitem__(w, (time.perf_counter(), m.position[2])),
+            10,
+        )
+    spin_until(
+        node,
+        lambda: len(latest) == worlds and all(p.get_subscription_count() for p in pubs.values()),
+        60,
+    )
+    spin_until(node, lambda: False, 1.0)
+    out_ms = []
+    for i in range(rounds):
+        w = i % worlds
+        before = latest[w][1]
+        target = 1.3 if before > 1.45 else 1.6
+        msg = JointState()
+        msg.name, msg.position = ["elbow_joint"], [target]
+        t0 = time.perf_counter()
+        pubs[w].publish(msg)
+        moved = spin_until(
+            node,
+            lambda w=w, t0=t0, before=before: (
+                latest[w][0] > t0 and abs(latest[w][1] - before) >= 1e-4
+            ),
+            5,
+        )
+        if moved:
+            out_ms.append((latest[w][0] - t0) * 1e3)
+        spin_until(node, lambda: False, 0.05)
+    out(ms=out_ms, rounds=rounds)
+
+
+def flood(worlds: int, rate: float, seconds: float) -> None:
+    """`rate` JointState commands/s spread over /world_0..N-1/joint_commands."""
+    from sensor_msgs.msg import JointState
+
+    node = Node("judge_flood")
+    pubs = [
+        node.create_publisher(JointState, f"/world_{w}/joint_commands", 100) for w in range(worlds)
+    ]
+    spin_until(node, lambda: all(p.get_subscription_count() for p in pubs), 60)
+    spin_until(node, lambda: False, 1.0)
+    n = int(rate * seconds)
+    t0 = time.perf_counter()
+    last = {}
+    for i in range(n):
+        w = i % worlds
+        value = round(0.001 * (i % 500), 3)
+        msg = JointState()
+        msg.name, msg.position = ["finger_joint"], [value]
+        pubs[w].publish(msg)
+        last[w] = value
+        delay = t0 + (i + 1) / rate - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+    wall = time.perf_counter() - t0
+    spin_until(node, lambda: False, 2.0)
+    out(sent=n, wall=wall, last={str(k): v for k, v in last.items()})
+
+
+def graph(counts: bool = False) -> None:
     """What `ros2 node list`, `ros2 topic list -t` and `ros2 action list -t` see."""
     from rclpy.action import get_action_names_and_types
 
     node = Node("judge_graph")
+    if counts:  # the scale bench: how many, and how long until they are all seen
+        t0 = time.perf_counter()
+        spin_until(node, lambda: ("armfleet", "/") in node.get_node_names_and_namespaces(), 60)
+        sizes: list = []
+        while time.perf_counter() - t0 < 60:
+            spin_until(node, lambda: False, 1.0)
+            sizes.append(len(node.get_topic_names_and_types()))
+            if len(sizes) > 2 and sizes[-1] == sizes[-3]:
+                break
+        out(
+            topics=len(node.get_topic_names_and_types()),
+            services=len(node.get_service_names_and_types()),
+            actions=len(get_action_names_and_types(node)),
+            publishers=sum(node.count_publishers(t) for t, _ in node.get_topic_names_and_types()),
+            subscriptions=sum(
+                node.count_subscribers(t) for t, _ in node.get_topic_names_and_types()
+            ),
+        )
+        return
     spin_until(node, lambda: ("armfleet", "/") in node.get_node_names_and_namespaces(), 20)
     spin_until(node, lambda: False, 1.0)
     out(
@@ -353,8 +443,12 @@ def main() -> None:
             description(args[0])
         elif cmd == "sim":
             sim(args[0], args[1])
+        elif cmd == "latency":
+            latency(int(args[0]), int(args[1]))
+        elif cmd == "flood":
+            flood(int(args[0]), float(args[1]), float(args[2]))
         elif cmd == "graph":
-            graph()
+            graph(bool(args and args[0] == "counts"))
         else:
             raise SystemExit(f"unknown judge {cmd!r}")
     finally:

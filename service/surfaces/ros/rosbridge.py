@@ -2,9 +2,9 @@
 
 roslibpy's `Ros('localhost', 8000)` dials `ws://localhost:8000/` and roslib.js takes any URL, so
 the socket is served at `/` (beside the browser page's GET) and at `/rosbridge`. The topics are
-the DDS bridge's (service/surfaces/ros/topics.py); commands go through the control layer (source
-`rosbridge`); states come from the stream hub with its latest-state delivery, so a slow client
-skips frames instead of queueing them, and every client subscribed to a topic shares one
+the armfleet_ros node's (service/surfaces/ros/topics.py); commands go through the control layer
+(source `rosbridge`); states come from the stream hub with its latest-state delivery, so a slow
+client skips frames instead of queueing them, and every client subscribed to a topic shares one
 serialisation per tick.
 
 Replies (`service_response`, `status`) are never dropped; a client that sends faster than it
@@ -61,7 +61,7 @@ class RosbridgeServer:
 
     def __init__(self, topic_map: TopicMap | None = None, max_rate: float = 60.0) -> None:
         self.topic_map = topic_map or TopicMap(())
-        self.max_rate = max_rate  # states go out at most this often, like the DDS bridge
+        self.max_rate = max_rate  # states go out at most this often, like the ROS 2 node
         self.bad = BadMessageCounter("rosbridge")
         self.accepted = 0
         self.clients = 0
