@@ -31,7 +31,7 @@ from bench.registry import Context, Result, section
 
 WORLDS = 256
 STATE_HZ = 60
-LATENCY_WORLDS = 16
+LATENCY_WORLDS = 4
 FLOOD_WORLDS = 16
 FLOOD_RATE = 1000.0
 ELBOW = 2

@@ -3,8 +3,8 @@
 Two sockets, both armfleet's public API read with armfleet's own client library (`clients`):
 
 - the batch socket `WS /v1/ws?worlds=...&format=binary` for every served world: float32 state
-  frames in (parsed by `clients._stream.parse`), target commands out (`CommandIds`, acks routed
-  back by id). One socket for 256 worlds costs one frame per tick instead of 256 JSON frames.
+  frames in (parsed by `clients._stream.parse`). One socket for 256 worlds costs one frame per
+  tick instead of 256 JSON frames. Commands go out on command lanes (lanes.py).
 - the pose socket `WS /v1/ws/view` (every body's world pose), opened only for the worlds whose
   `/tf` somebody listens to, and reopened when that set changes.
 
@@ -25,9 +25,9 @@ from typing import Any
 import numpy as np
 from websockets.asyncio.client import connect
 
+from armfleet_ros.lanes import lanes_for
 from clients import _stream
-from clients.errors import CommandRejected, Unreachable
-from clients.models import BatchStates, CommandAck, WsError
+from clients.models import BatchStates
 
 log = logging.getLogger("armfleet_ros")
 
@@ -60,6 +60,7 @@ class FleetLink:
         worlds: Sequence[int],
         rate: float,
         on_states: Callable[[BatchStates], None],
+        command_rate: float = 200.0,
     ) -> None:
         self.url = url.rstrip("/")
         self.worlds = list(worlds)
@@ -71,9 +72,8 @@ class FleetLink:
         self.generation = 0  # connections so far: ticks may start over on a new one
         self._pose_worlds: tuple[int, ...] = ()
         self._pose_changed: asyncio.Event | None = None
-        self._ids = _stream.CommandIds()
-        self._pending: dict[int, Future] = {}
-        self._ws: Any = None
+        # a margin below armfleet's per-connection budget (clocks and bursts differ a little)
+        self.lanes, self._lane_of = lanes_for(self.url, self.worlds, 0.9 * command_rate, on_states)
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._run, name="armfleet-link", daemon=True)
         self._stopping = False
@@ -93,7 +93,10 @@ class FleetLink:
         asyncio.set_event_loop(self._loop)
         self._pose_changed = asyncio.Event()
         try:
-            self._loop.run_until_complete(asyncio.gather(self._states(), self._pose_stream()))
+            lanes = [lane.run(lambda: self._stopping) for lane in self.lanes]
+            self._loop.run_until_complete(
+                asyncio.gather(self._states(), self._pose_stream(), *lanes)
+            )
         except asyncio.CancelledError:
             pass
         except Exception:
@@ -102,26 +105,12 @@ class FleetLink:
     # -- commands (any thread) -------------------------------------------------------------
 
     def set_targets(self, world: int, targets: Mapping[str, float]) -> Future:
-        """Send a target command on the batch socket; the future gets its CommandAck, or
+        """Send a target command on the world's lane; the future gets its CommandAck, or
         CommandRejected with armfleet's reason, or Unreachable while armfleet is away."""
         fut: Future = Future()
-        msg_id, text = self._ids.set_targets(targets, world)
-        self._loop.call_soon_threadsafe(self._send, msg_id, text, fut)
+        lane = self._lane_of[world]
+        self._loop.call_soon_threadsafe(lane.submit, world, dict(targets), fut)
         return fut
-
-    def _send(self, msg_id: int, text: str, fut: Future) -> None:
-        if self._ws is None:
-            fut.set_exception(Unreachable(None, f"{self.url}: not connected to armfleet"))
-            return
-        self._pending[msg_id] = fut
-        task = self._loop.create_task(self._ws.send(text))
-        task.add_done_callback(lambda t: self._sent(t, msg_id))
-
-    def _sent(self, task: asyncio.Task, msg_id: int) -> None:
-        if task.cancelled() or task.exception() is not None:
-            fut = self._pending.pop(msg_id, None)
-            if fut is not None and not fut.done():
-                fut.set_exception(Unreachable(None, f"{self.url}: connection lost"))
 
     def watch_poses(self, worlds: Sequence[int]) -> None:
         """Ask for the body poses of `worlds` (empty: close the pose socket)."""
@@ -139,7 +128,6 @@ class FleetLink:
         while not self._stopping:
             try:
                 async with connect(url, max_size=_stream.MAX_SIZE, proxy=None) as ws:
-                    self._ws = ws
                     async for data in ws:
                         self._frame(data, backoff)
                     reason = _stream.close_reason(ws.close_code, ws.close_reason)
@@ -161,24 +149,11 @@ class FleetLink:
                 self.on_states(msg)
             except Exception:
                 log.exception("publishing a state frame failed")
-        elif isinstance(msg, (CommandAck, WsError)):
-            fut = self._pending.pop(msg.id, None) if msg.id is not None else None
-            if fut is None or fut.done():
-                return
-            if isinstance(msg, WsError):
-                fut.set_exception(CommandRejected(None, msg.detail))
-            else:
-                fut.set_result(msg)
 
     def _drop(self, reason: str) -> None:
-        self._ws = None
         if self.connected:
             log.warning("lost armfleet at %s: %s; reconnecting", self.url, reason)
         self.connected = False
-        for fut in self._pending.values():
-            if not fut.done():
-                fut.set_exception(Unreachable(None, f"{self.url}: {reason}"))
-        self._pending.clear()
 
     async def _pose_stream(self) -> None:
         assert self._pose_changed is not None

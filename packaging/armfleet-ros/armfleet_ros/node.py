@@ -6,7 +6,8 @@ It reaches armfleet by URL (HTTP and WebSocket, with armfleet's client library),
 run on another machine; everything ROS (middleware, QoS, graph, type hashes, services, actions)
 is the installation's own. Parameters: `url`, `worlds` (worlds with `/world_N/...`; world 0 is
 also at the root, the seed's names), `rate` (Hz of `/joint_states`, `/clock`, `/tf`),
-`play_mode` (what simulation_interfaces' PLAYING means: realtime or fast).
+`play_mode` (what simulation_interfaces' PLAYING means: realtime or fast), `command_rate`
+(armfleet's `--command-rate`, the budget of each of the node's command lanes: lanes.py).
 Written for Python 3.10 and rclpy 3.3 (Humble) on: no newer API is used.
 """
 
@@ -70,7 +71,9 @@ class ArmfleetNode:
         self.group = ReentrantCallbackGroup()
         self.bad = Counter(log)
         self.accepted = 0
-        self._last_tick = -1
+        self._publish_lock = threading.Lock()
+        self._clock_tick = -1
+        self._world_tick: dict[int, int] = {}
         self._last_generation = 0
         self._reported: dict = {}
         self._reported_at = 0.0
@@ -80,7 +83,8 @@ class ArmfleetNode:
         self.sim = GlobalSim(self)
         self.entities = [WorldSim(self, w, ns) for ns, w in spaces]
         served = sorted({w for _, w in spaces})
-        self.link = FleetLink(self.url, served, self.rate, self._publish)
+        command_rate = float(node.declare_parameter("command_rate", 200.0).value)
+        self.link = FleetLink(self.url, served, self.rate, self._publish, command_rate)
         self.link.start()
         node.create_timer(0.5, self._refresh, callback_group=self.group)
         log.info(
@@ -111,6 +115,7 @@ class ArmfleetNode:
             "connected": self.link.connected,
             "worlds": len(self.spaces),
             "accepted": self.accepted,
+            "merged": sum(lane.merged for lane in self.link.lanes),
             "rejected": self.bad.counts(),
         }
         now = time.monotonic()
@@ -121,24 +126,38 @@ class ArmfleetNode:
             self.http._call(Call("PUT", "/v1/ros/node", lambda d: d, json=body))
 
     def _publish(self, batch: Any) -> None:
-        """A state frame arrived (link thread): `/clock`, then each listened world."""
-        # never back in time (a frame older than a catch-up), unless armfleet restarted
-        gen = self.link.generation
-        if batch.tick <= self._last_tick and gen == self._last_generation:
-            return
-        self._last_tick, self._last_generation = batch.tick, gen
-        sec, nanosec = stamp(batch.tick * self.tick_dt)
-        clock = Clock()
-        clock.clock.sec, clock.clock.nanosec = sec, nanosec
-        self.clock.publish(clock)
-        rows = {int(w): i for i, w in enumerate(batch.worlds)}
-        poses = self.link.poses
-        for space in self.spaces:
-            if space.listened_states:
-                space.publish_state(batch, rows[space.world], sec, nanosec)
-            if space.listened_tf and poses is not None and space.world in poses.row:
-                world_poses = poses.poses[poses.row[space.world]]
-                space.tf.publish(self.tree.moving_message(world_poses, sec, nanosec))
+        """A state frame arrived (the link's thread; a catch-up: an executor thread): `/clock`,
+        then each listened world the frame is news for. Never back in time (the state socket
+        and the command lanes deliver frames of the same ticks), unless armfleet restarted."""
+        with self._publish_lock:
+            gen = self.link.generation
+            if gen != self._last_generation:
+                self._last_generation, self._clock_tick = gen, -1
+                self._world_tick = {}
+            tick = batch.tick
+            sec, nanosec = stamp(tick * self.tick_dt)
+            if tick > self._clock_tick:
+                self._clock_tick = tick
+                clock = Clock()
+                clock.clock.sec, clock.clock.nanosec = sec, nanosec
+                self.clock.publish(clock)
+            rows = {}
+            for i, w in enumerate(batch.worlds.tolist()):
+                if tick > self._world_tick.get(w, -1):
+                    self._world_tick[w] = tick
+                    rows[w] = i
+            if not rows:
+                return
+            poses = self.link.poses
+            for space in self.spaces:
+                row = rows.get(space.world)
+                if row is None:
+                    continue
+                if space.listened_states:
+                    space.publish_state(batch, row, sec, nanosec)
+                if space.listened_tf and poses is not None and space.world in poses.row:
+                    world_poses = poses.poses[poses.row[space.world]]
+                    space.tf.publish(self.tree.moving_message(world_poses, sec, nanosec))
 
     def catch_up(self) -> None:
         """Publish the states of now, read over HTTP: after a pause or steps through this node

@@ -42,6 +42,7 @@ class NodeReport(BaseModel):
     connected: bool
     worlds: int = Field(ge=0)
     accepted: int = Field(ge=0)
+    merged: int = Field(0, ge=0)  # messages sent merged with a later one (lanes.py)
     rejected: dict[str, int] = Field(max_length=64)
 
 
