@@ -323,8 +323,9 @@ def sim(ns: str, reset_ns: str) -> None:
     out(**r)
 
 
-def latency(worlds: int, rounds: int) -> None:
-    """publish → first /world_N/joint_states showing the joint move (>= 1e-4 rad), per round."""
+def latency(worlds: int, rounds: int, gap: float) -> None:
+    """publish → first /world_N/joint_states showing the joint move toward the new target
+    (>= 1e-4 rad), one world at a time, `gap` s between rounds (the arm at rest each time)."""
     from sensor_msgs.msg import JointState
 
     node = Node("judge_latency")
@@ -348,21 +349,22 @@ def latency(worlds: int, rounds: int) -> None:
     for i in range(rounds):
         w = i % worlds
         before = latest[w][1]
-        target = 1.3 if before > 1.45 else 1.6
+        target = before + (0.05 if (i // worlds) % 2 == 0 else -0.05)
+        sign = 1.0 if target > before else -1.0
         msg = JointState()
         msg.name, msg.position = ["elbow_joint"], [target]
         t0 = time.perf_counter()
         pubs[w].publish(msg)
         moved = spin_until(
             node,
-            lambda w=w, t0=t0, before=before: (
-                latest[w][0] > t0 and abs(latest[w][1] - before) >= 1e-4
+            lambda w=w, t0=t0, before=before, sign=sign: (
+                latest[w][0] > t0 and sign * (latest[w][1] - before) >= 1e-4
             ),
             5,
         )
         if moved:
             out_ms.append((latest[w][0] - t0) * 1e3)
-        spin_until(node, lambda: False, 0.05)
+        spin_until(node, lambda: False, gap)  # each world rests again before its next round
     out(ms=out_ms, rounds=rounds)
 
 
@@ -392,6 +394,37 @@ def flood(worlds: int, rate: float, seconds: float) -> None:
     wall = time.perf_counter() - t0
     spin_until(node, lambda: False, 2.0)
     out(sent=n, wall=wall, last={str(k): v for k, v in last.items()})
+
+
+def isaac(rate: float, seconds: float) -> None:
+    """topic_based_ros2_control's side of the Isaac contract: full JointState commands on
+    /isaac_joint_commands at `rate`, states read back on /isaac_joint_states."""
+    from sensor_msgs.msg import JointState
+
+    node = Node("judge_isaac")
+    pub = node.create_publisher(JointState, "/isaac_joint_commands", 10)
+    states: list = []
+    node.create_subscription(
+        JointState, "/isaac_joint_states", lambda m: states.append(time.perf_counter()), 10
+    )
+    spin_until(node, lambda: pub.get_subscription_count() and states, 30)
+    n = int(rate * seconds)
+    t0 = time.perf_counter()
+    n_states = len(states)
+    for i in range(n):
+        msg = JointState()
+        msg.name = list(JOINTS)
+        msg.position = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0, 0.3 * i / n]
+        msg.velocity = [0.0] * 7
+        pub.publish(msg)
+        rclpy.spin_once(node, timeout_sec=0)
+        delay = t0 + (i + 1) / rate - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+    wall = time.perf_counter() - t0
+    got = len(states) - n_states
+    spin_until(node, lambda: False, 1.0)
+    out(sent=n, wall=wall, states_per_s=got / wall, last=0.3 * (n - 1) / n)
 
 
 def graph(counts: bool = False) -> None:
@@ -444,9 +477,11 @@ def main() -> None:
         elif cmd == "sim":
             sim(args[0], args[1])
         elif cmd == "latency":
-            latency(int(args[0]), int(args[1]))
+            latency(int(args[0]), int(args[1]), float(args[2]))
         elif cmd == "flood":
             flood(int(args[0]), float(args[1]), float(args[2]))
+        elif cmd == "isaac":
+            isaac(float(args[0]), float(args[1]))
         elif cmd == "graph":
             graph(bool(args and args[0] == "counts"))
         else:

@@ -26,6 +26,9 @@ LATCHED = QoSProfile(
     depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
 )
 TF_QOS = QoSProfile(depth=100)
+# Commands: rclpy's default QoS (reliable, volatile) with a deep history, so that a burst the
+# executor has not taken yet (1000/s, Isaac's 500 Hz) waits instead of being overwritten.
+COMMAND_DEPTH = 1000
 
 
 class WorldTopics:
@@ -43,13 +46,17 @@ class WorldTopics:
         self.description.publish(String(data=owner.urdf))
         self.subs = [
             node.create_subscription(
-                JointState, f"{ns}/joint_commands", self._joint_command, 10, callback_group=group
+                JointState,
+                f"{ns}/joint_commands",
+                self._joint_command,
+                COMMAND_DEPTH,
+                callback_group=group,
             ),
             node.create_subscription(
                 Float64MultiArray,
                 f"{ns}/forward_position_controller/commands",
                 self._forward_command,
-                10,
+                COMMAND_DEPTH,
                 callback_group=group,
             ),
         ]
@@ -60,7 +67,7 @@ class WorldTopics:
                     JointTrajectory,
                     topic,
                     lambda msg, topic=topic: self._trajectory(msg, topic),
-                    10,
+                    COMMAND_DEPTH,
                     callback_group=group,
                 )
             )
