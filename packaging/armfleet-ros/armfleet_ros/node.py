@@ -29,7 +29,6 @@ from rosgraph_msgs.msg import Clock
 from armfleet_ros.convert import Counter, stamp
 from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
-from armfleet_ros.sim import GlobalSim, WorldSim
 from armfleet_ros.world import WorldTopics
 from clients import ArmfleetClient
 from clients._http import Call
@@ -80,8 +79,7 @@ class ArmfleetNode:
         self.clock = node.create_publisher(Clock, "/clock", 10)
         spaces = [("", 0)] + [(f"/world_{w}", w) for w in self.worlds]
         self.spaces = [WorldTopics(self, w, ns) for ns, w in spaces]
-        self.sim = GlobalSim(self)
-        self.entities = [WorldSim(self, w, ns) for ns, w in spaces]
+        self._simulation_interfaces(spaces, log)
         served = sorted({w for _, w in spaces})
         command_rate = float(node.declare_parameter("command_rate", 200.0).value)
         self.link = FleetLink(self.url, served, self.rate, self._publish, command_rate)
@@ -91,6 +89,16 @@ class ArmfleetNode:
             f"serving {len(served)} worlds of {self.url} "
             f"({len(self.spaces)} namespaces, {self.rate:g} Hz)"
         )
+
+    def _simulation_interfaces(self, spaces: list, log: Any) -> None:
+        """The standard simulator services, where the installation has the package."""
+        try:
+            from armfleet_ros.sim import GlobalSim, WorldSim
+        except ImportError as exc:
+            log.warning(f"simulation_interfaces is not installed ({exc}): its services are off")
+            return
+        self.sim = GlobalSim(self)
+        self.entities = [WorldSim(self, w, ns) for ns, w in spaces]
 
     def _wait_for_armfleet(self, log: Any) -> None:
         """Whichever starts first: wait (for ever) until armfleet answers /readyz."""

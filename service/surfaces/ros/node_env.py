@@ -114,7 +114,8 @@ def prepare(python: str, version: tuple[int, int], env: dict[str, str]) -> Path:
     if (target / ".complete").exists():
         return target
     log.info("ROS 2 node: installing armfleet's client for %s into %s (once)", python, target)
-    shutil.rmtree(target, ignore_errors=True)
+    for old in target.parent.glob(f"ros-node-py{version[0]}.{version[1]}-*"):
+        shutil.rmtree(old, ignore_errors=True)  # earlier sources' folders (this one's too)
     pip = [sys.executable, "-m", "pip", "--python", python, "install", "--target", str(target)]
     steps = [[*pip, "--no-deps", str(CLIENT_DIST), str(NODE_DIST)]]
     has_deps = subprocess.run(
