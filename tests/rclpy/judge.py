@@ -8,37 +8,13 @@ Nothing of armfleet is imported here: only rclpy and the distribution's message 
 
 from __future__ import annotations
 
-import json
 import sys
 import threading
 import time
 
 import rclpy
+from common import ARM, JOINTS, out, spin_until
 from rclpy.node import Node
-
-JOINTS = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-    "finger_joint",
-]
-ARM = JOINTS[:6]
-
-
-def out(**kw) -> None:
-    print(json.dumps(kw), flush=True)
-
-
-def spin_until(node: Node, pred, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        rclpy.spin_once(node, timeout_sec=0.02)
-        if pred():
-            return True
-    return False
 
 
 def seed(ns: str, value: float) -> None:
@@ -225,208 +201,6 @@ def description(ns: str) -> None:
     out(urdf=got[0] if got else None)
 
 
-def sim(ns: str, reset_ns: str) -> None:
-    """Every simulation_interfaces call: global ones at the root, entity ones in `ns`, a
-    world's reset in `reset_ns`."""
-    from rclpy.action import ActionClient
-    from rosgraph_msgs.msg import Clock
-    from simulation_interfaces import srv
-    from simulation_interfaces.action import SimulateSteps
-    from simulation_interfaces.msg import SimulationState
-
-    node = Node("judge_sim")
-    clock: list = []
-    node.create_subscription(Clock, "/clock", lambda m: clock.append(m.clock), 10)
-
-    def call(kind, name, **fields):
-        client = node.create_client(kind, name)
-        assert client.wait_for_service(timeout_sec=20), name
-        req = kind.Request()
-        for k, v in fields.items():
-            setattr(req, k, v)
-        fut = client.call_async(req)
-        rclpy.spin_until_future_complete(node, fut, timeout_sec=30)
-        return fut.result()
-
-    def now() -> float:
-        n = len(clock)
-        spin_until(node, lambda: len(clock) > n, 2)
-        spin_until(node, lambda: False, 0.3)  # the frame of the last tick
-        c = clock[-1]
-        return c.sec + c.nanosec * 1e-9
-
-    def state(value: int):
-        s = SimulationState()
-        s.state = value
-        return s
-
-    r: dict = {}
-    feats = call(srv.GetSimulatorFeatures, "/get_simulator_features").features
-    r["features"] = list(feats.features)
-    r["custom_info"] = feats.custom_info
-    r["state0"] = call(srv.GetSimulationState, "/get_simulation_state").state.state
-    r["step_playing"] = call(srv.StepSimulation, "/step_simulation", steps=1).result.result
-    r["pause"] = call(srv.SetSimulationState, "/set_simulation_state", state=state(2)).result.result
-    r["pause_again"] = call(
-        srv.SetSimulationState, "/set_simulation_state", state=state(2)
-    ).result.result
-    r["state_paused"] = call(srv.GetSimulationState, "/get_simulation_state").state.state
-    t0 = now()
-    r["step5"] = call(srv.StepSimulation, "/step_simulation", steps=5).result.result
-    t1 = now()
-    steps = ActionClient(node, SimulateSteps, "/simulate_steps")
-    assert steps.wait_for_server(timeout_sec=20)
-    goal = SimulateSteps.Goal()
-    goal.steps = 10
-    feedback: list = []
-    fut = steps.send_goal_async(
-        goal, feedback_callback=lambda f: feedback.append(f.feedback.completed_steps)
-    )
-    rclpy.spin_until_future_complete(node, fut, timeout_sec=20)
-    rf = fut.result().get_result_async()
-    rclpy.spin_until_future_complete(node, rf, timeout_sec=30)
-    t2 = now()
-    r["simulate"] = {
-        "status": rf.result().status,
-        "result": rf.result().result.result.result,
-        "feedback": feedback,
-    }
-    r["clock"] = [t0, t1, t2]
-    r["play"] = call(srv.SetSimulationState, "/set_simulation_state", state=state(1)).result.result
-    r["state_playing"] = call(srv.GetSimulationState, "/get_simulation_state").state.state
-    r["entities"] = list(call(srv.GetEntities, f"{ns}/get_entities").entities)
-    filt = srv.GetEntities.Request().filters
-    filt.filter = "^wrist"
-    r["wrists"] = list(call(srv.GetEntities, f"{ns}/get_entities", filters=filt).entities)
-    cube = call(srv.GetEntityState, f"{ns}/get_entity_state", entity="cube")
-    p, q = cube.state.pose.position, cube.state.pose.orientation
-    r["cube"] = {
-        "result": cube.result.result,
-        "frame": cube.state.header.frame_id,
-        "pose": [p.x, p.y, p.z, q.w, q.x, q.y, q.z],
-    }
-    r["missing"] = call(srv.GetEntityState, f"{ns}/get_entity_state", entity="nope").result.result
-    many = call(srv.GetEntitiesStates, f"{ns}/get_entities_states")
-    r["states"] = {
-        n: [s.pose.position.x, s.pose.position.y, s.pose.position.z]
-        for n, s in zip(many.entities, many.states, strict=True)
-    }
-    r["set_entity"] = call(
-        srv.SetEntityState, f"{ns}/set_entity_state", entity="cube"
-    ).result.result
-    r["reset_time"] = call(
-        srv.ResetSimulation, f"{reset_ns}/reset_simulation", scope=1
-    ).result.result
-    r["reset_state"] = call(
-        srv.ResetSimulation, f"{reset_ns}/reset_simulation", scope=2
-    ).result.result
-    out(**r)
-
-
-def latency(worlds: int, rounds: int, gap: float) -> None:
-    """publish → first /world_N/joint_states showing the joint move toward the new target
-    (>= 1e-4 rad), one world at a time, `gap` s between rounds (the arm at rest each time)."""
-    from sensor_msgs.msg import JointState
-
-    node = Node("judge_latency")
-    latest: dict = {}
-    pubs = {}
-    for w in range(worlds):
-        pubs[w] = node.create_publisher(JointState, f"/world_{w}/joint_commands", 10)
-        node.create_subscription(
-            JointState,
-            f"/world_{w}/joint_states",
-            lambda m, w=w: latest.__setitem__(w, (time.perf_counter(), m.position[2])),
-            10,
-        )
-    spin_until(
-        node,
-        lambda: len(latest) == worlds and all(p.get_subscription_count() for p in pubs.values()),
-        60,
-    )
-    spin_until(node, lambda: False, 1.0)
-    out_ms = []
-    for i in range(rounds):
-        w = i % worlds
-        before = latest[w][1]
-        target = before + (0.05 if (i // worlds) % 2 == 0 else -0.05)
-        sign = 1.0 if target > before else -1.0
-        msg = JointState()
-        msg.name, msg.position = ["elbow_joint"], [target]
-        t0 = time.perf_counter()
-        pubs[w].publish(msg)
-        moved = spin_until(
-            node,
-            lambda w=w, t0=t0, before=before, sign=sign: (
-                latest[w][0] > t0 and sign * (latest[w][1] - before) >= 1e-4
-            ),
-            5,
-        )
-        if moved:
-            out_ms.append((latest[w][0] - t0) * 1e3)
-        spin_until(node, lambda: False, gap)  # each world rests again before its next round
-    out(ms=out_ms, rounds=rounds)
-
-
-def flood(worlds: int, rate: float, seconds: float) -> None:
-    """`rate` JointState commands/s spread over /world_0..N-1/joint_commands."""
-    from sensor_msgs.msg import JointState
-
-    node = Node("judge_flood")
-    pubs = [
-        node.create_publisher(JointState, f"/world_{w}/joint_commands", 100) for w in range(worlds)
-    ]
-    spin_until(node, lambda: all(p.get_subscription_count() for p in pubs), 60)
-    spin_until(node, lambda: False, 1.0)
-    n = int(rate * seconds)
-    t0 = time.perf_counter()
-    last = {}
-    for i in range(n):
-        w = i % worlds
-        value = round(0.001 * (i % 500), 3)
-        msg = JointState()
-        msg.name, msg.position = ["finger_joint"], [value]
-        pubs[w].publish(msg)
-        last[w] = value
-        delay = t0 + (i + 1) / rate - time.perf_counter()
-        if delay > 0:
-            time.sleep(delay)
-    wall = time.perf_counter() - t0
-    spin_until(node, lambda: False, 2.0)
-    out(sent=n, wall=wall, last={str(k): v for k, v in last.items()})
-
-
-def isaac(rate: float, seconds: float) -> None:
-    """topic_based_ros2_control's side of the Isaac contract: full JointState commands on
-    /isaac_joint_commands at `rate`, states read back on /isaac_joint_states."""
-    from sensor_msgs.msg import JointState
-
-    node = Node("judge_isaac")
-    pub = node.create_publisher(JointState, "/isaac_joint_commands", 10)
-    states: list = []
-    node.create_subscription(
-        JointState, "/isaac_joint_states", lambda m: states.append(time.perf_counter()), 10
-    )
-    spin_until(node, lambda: pub.get_subscription_count() and states, 30)
-    n = int(rate * seconds)
-    t0 = time.perf_counter()
-    n_states = len(states)
-    for i in range(n):
-        msg = JointState()
-        msg.name = list(JOINTS)
-        msg.position = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0, 0.3 * i / n]
-        msg.velocity = [0.0] * 7
-        pub.publish(msg)
-        rclpy.spin_once(node, timeout_sec=0)
-        delay = t0 + (i + 1) / rate - time.perf_counter()
-        if delay > 0:
-            time.sleep(delay)
-    wall = time.perf_counter() - t0
-    got = len(states) - n_states
-    spin_until(node, lambda: False, 1.0)
-    out(sent=n, wall=wall, states_per_s=got / wall, last=0.3 * (n - 1) / n)
-
-
 def graph(counts: bool = False) -> None:
     """What `ros2 node list`, `ros2 topic list -t` and `ros2 action list -t` see."""
     from rclpy.action import get_action_names_and_types
@@ -475,12 +249,20 @@ def main() -> None:
         elif cmd == "description":
             description(args[0])
         elif cmd == "sim":
+            from sim_judge import sim
+
             sim(args[0], args[1])
         elif cmd == "latency":
+            from load_judge import latency
+
             latency(int(args[0]), int(args[1]), float(args[2]))
         elif cmd == "flood":
+            from load_judge import flood
+
             flood(int(args[0]), float(args[1]), float(args[2]))
         elif cmd == "isaac":
+            from load_judge import isaac
+
             isaac(float(args[0]), float(args[1]))
         elif cmd == "graph":
             graph(bool(args and args[0] == "counts"))

@@ -53,7 +53,7 @@ class TrajectoryActions:
         self._lock = threading.Lock()
         self.servers = [
             ActionServer(
-                owner.node,
+                owner.servers,
                 FollowJointTrajectory,
                 f"{ns}/{name}/follow_joint_trajectory",
                 execute_callback=self._execute,
@@ -139,7 +139,7 @@ class GripperAction:
         self.owner, self.world = owner, world
         self.finger = owner.joints.index("finger_joint")
         self.server = ActionServer(
-            owner.node,
+            owner.servers,
             GripperCommand,
             f"{ns}/{GRIPPER_ACTION}",
             execute_callback=self._execute,

@@ -22,7 +22,7 @@ from typing import Any
 
 import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
@@ -52,8 +52,9 @@ def parse_worlds(spec: str, nworld: int) -> list[int]:
 class ArmfleetNode:
     """The node, its link to armfleet and every world's topics and actions."""
 
-    def __init__(self, node: Node) -> None:
-        self.node = node
+    def __init__(self, node: Node, servers: Node) -> None:
+        self.node = node  # parameters, topics, /clock: one executor thread of its own
+        self.servers = servers  # actions and services: a thread pool (their callbacks block)
         log = node.get_logger()
         self.url = str(node.declare_parameter("url", "http://127.0.0.1:8000").value)
         spec = str(node.declare_parameter("worlds", "").value)
@@ -186,26 +187,40 @@ def main(args: list | None = None) -> None:
     logging.getLogger("httpx").setLevel(logging.WARNING)
     rclpy.init(args=args)
     node = Node(NODE_NAME)
+    servers = Node(f"{NODE_NAME}_actions")
     try:
-        fleet = ArmfleetNode(node)
+        fleet = ArmfleetNode(node, servers)
     except (ValueError, ArmfleetError) as exc:
         node.get_logger().error(str(exc))
-        node.destroy_node()
+        for n in (node, servers):
+            n.destroy_node()
         rclpy.shutdown()
         sys.exit(2)
-    executor = MultiThreadedExecutor(num_threads=min(64, 2 * len(fleet.spaces) + 6))
-    executor.add_node(node)
-    stop = threading.Event()
+    # Two executors: rclpy walks every entity of its nodes on each wake-up, so the command
+    # subscriptions must not share a wait set with thousands of action and service endpoints.
+    topics = SingleThreadedExecutor()
+    topics.add_node(node)
+    pool = MultiThreadedExecutor(num_threads=min(64, 2 * len(fleet.spaces) + 6))
+    pool.add_node(servers)
+    serving = threading.Thread(target=_spin, args=(pool,), name="armfleet-actions", daemon=True)
+    serving.start()
     try:
-        executor.spin()
+        topics.spin()
     except KeyboardInterrupt:
-        stop.set()
+        pass
     finally:
         fleet.close()
-        executor.shutdown()
-        node.destroy_node()
+        for ex in (topics, pool):
+            ex.shutdown()
+        for n in (node, servers):
+            n.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
+
+
+def _spin(executor: Any) -> None:
+    with contextlib.suppress(Exception):  # ends with the context at shutdown
+        executor.spin()
 
 
 if __name__ == "__main__":

@@ -68,8 +68,8 @@ class GlobalSim:
 
     def __init__(self, owner: Any) -> None:
         self.owner = owner
-        node, group = owner.node, owner.group
-        self.play_mode = str(node.declare_parameter("play_mode", "realtime").value)
+        node, group = owner.servers, owner.group
+        self.play_mode = str(owner.node.declare_parameter("play_mode", "realtime").value)
         if self.play_mode not in ("realtime", "fast"):
             raise ValueError(f"play_mode must be realtime or fast, got {self.play_mode!r}")
         srv = node.create_service
@@ -186,7 +186,7 @@ class WorldSim:
 
     def __init__(self, owner: Any, world: int, ns: str) -> None:
         self.owner, self.world = owner, world
-        node, group = owner.node, owner.group
+        node, group = owner.servers, owner.group
         self.bodies = {b["name"]: b["id"] for b in owner.frames["bodies"]}
         srv = node.create_service
         if ns:  # the root's reset_simulation is the global one
