@@ -47,19 +47,19 @@ def _fill_point(point: Any, values: Any, elapsed: float) -> None:
 class TrajectoryActions:
     """FollowJointTrajectory servers of one world (both controller names)."""
 
-    def __init__(self, owner: Any, world: int, ns: str) -> None:
+    def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
         self.owner, self.world = owner, world
         self._started: dict[int, int] = {}  # id(goal message) → trajectory id
         self._lock = threading.Lock()
         self.servers = [
             ActionServer(
-                owner.servers,
+                part.servers,
                 FollowJointTrajectory,
                 f"{ns}/{name}/follow_joint_trajectory",
                 execute_callback=self._execute,
                 goal_callback=self._goal,
                 cancel_callback=lambda _h: CancelResponse.ACCEPT,
-                callback_group=owner.group,
+                callback_group=part.group,
             )
             for name in FJT_ACTIONS
         ]
@@ -135,17 +135,17 @@ class TrajectoryActions:
 class GripperAction:
     """The Robotiq GripperCommand server of one world."""
 
-    def __init__(self, owner: Any, world: int, ns: str) -> None:
+    def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
         self.owner, self.world = owner, world
         self.finger = owner.joints.index("finger_joint")
         self.server = ActionServer(
-            owner.servers,
+            part.servers,
             GripperCommand,
             f"{ns}/{GRIPPER_ACTION}",
             execute_callback=self._execute,
             goal_callback=self._goal,
             cancel_callback=lambda _h: CancelResponse.ACCEPT,
-            callback_group=owner.group,
+            callback_group=part.group,
         )
 
     def _goal(self, goal: Any) -> GoalResponse:

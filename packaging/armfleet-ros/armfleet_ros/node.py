@@ -21,14 +21,13 @@ import time
 from typing import Any
 
 import rclpy
-from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
 from armfleet_ros.convert import Counter, stamp
 from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
+from armfleet_ros.parts import slices
 from armfleet_ros.world import WorldTopics
 from clients import ArmfleetClient
 from clients._http import Call
@@ -52,9 +51,8 @@ def parse_worlds(spec: str, nworld: int) -> list[int]:
 class ArmfleetNode:
     """The node, its link to armfleet and every world's topics and actions."""
 
-    def __init__(self, node: Node, servers: Node) -> None:
-        self.node = node  # parameters, topics, /clock: one executor thread of its own
-        self.servers = servers  # actions and services: a thread pool (their callbacks block)
+    def __init__(self, node: Node) -> None:
+        self.node = node  # parameters, /clock and the first slice's topics (parts.py)
         log = node.get_logger()
         self.url = str(node.declare_parameter("url", "http://127.0.0.1:8000").value)
         spec = str(node.declare_parameter("worlds", "").value)
@@ -68,7 +66,6 @@ class ArmfleetNode:
         self.urdf = self.http._call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
         self.frames = self.http._call(Call("GET", "/v1/ros/frames", lambda d: d))
         self.tree = TfTree(self.frames)
-        self.group = ReentrantCallbackGroup()
         self.bad = Counter(log)
         self.accepted = 0
         self._publish_lock = threading.Lock()
@@ -79,27 +76,30 @@ class ArmfleetNode:
         self._reported_at = 0.0
         self.clock = node.create_publisher(Clock, "/clock", 10)
         spaces = [("", 0)] + [(f"/world_{w}", w) for w in self.worlds]
-        self.spaces = [WorldTopics(self, w, ns) for ns, w in spaces]
-        self._simulation_interfaces(spaces, log)
+        self.parts = slices(spaces, NODE_NAME, node)
+        self.spaces = [WorldTopics(self, w, ns, part) for part, sl in self.parts for ns, w in sl]
+        self._simulation_interfaces(log)
         served = sorted({w for _, w in spaces})
         command_rate = float(node.declare_parameter("command_rate", 200.0).value)
         self.link = FleetLink(self.url, served, self.rate, self._publish, command_rate)
         self.link.start()
-        node.create_timer(0.5, self._refresh, callback_group=self.group)
+        self._stop = threading.Event()
+        # not an executor timer: a wake-up of the topics executor walks all its entities
+        threading.Thread(target=self._refresh_loop, name="armfleet-refresh", daemon=True).start()
         log.info(
             f"serving {len(served)} worlds of {self.url} "
             f"({len(self.spaces)} namespaces, {self.rate:g} Hz)"
         )
 
-    def _simulation_interfaces(self, spaces: list, log: Any) -> None:
+    def _simulation_interfaces(self, log: Any) -> None:
         """The standard simulator services, where the installation has the package."""
         try:
             from armfleet_ros.sim import GlobalSim, WorldSim
         except ImportError as exc:
             log.warning(f"simulation_interfaces is not installed ({exc}): its services are off")
             return
-        self.sim = GlobalSim(self)
-        self.entities = [WorldSim(self, w, ns) for ns, w in spaces]
+        self.sim = GlobalSim(self, self.parts[0][0])
+        self.entities = [WorldSim(self, w, ns, part) for part, sl in self.parts for ns, w in sl]
 
     def _wait_for_armfleet(self, log: Any) -> None:
         """Whichever starts first: wait (for ever) until armfleet answers /readyz."""
@@ -109,6 +109,13 @@ class ArmfleetNode:
         while not self.http.ready():
             time.sleep(0.5)
         log.info(f"armfleet at {self.url} is ready")
+
+    def _refresh_loop(self) -> None:
+        while not self._stop.wait(0.5):
+            try:
+                self._refresh()
+            except Exception as exc:  # never end the loop: it keeps state topics alive
+                self.node.get_logger().warning(f"refresh: {exc}")
 
     def _refresh(self) -> None:
         for space in self.spaces:
@@ -177,7 +184,11 @@ class ArmfleetNode:
         except ArmfleetError as exc:
             self.node.get_logger().warning(f"states after a step: {exc}")
 
+    def executors(self) -> list[Any]:
+        return [ex for part, _ in self.parts for ex in part.executors()]
+
     def close(self) -> None:
+        self._stop.set()
         self.link.stop()
         self.http.close()
 
@@ -187,33 +198,24 @@ def main(args: list | None = None) -> None:
     logging.getLogger("httpx").setLevel(logging.WARNING)
     rclpy.init(args=args)
     node = Node(NODE_NAME)
-    servers = Node(f"{NODE_NAME}_actions")
     try:
-        fleet = ArmfleetNode(node, servers)
+        fleet = ArmfleetNode(node)
     except (ValueError, ArmfleetError) as exc:
         node.get_logger().error(str(exc))
-        for n in (node, servers):
-            n.destroy_node()
+        node.destroy_node()
         rclpy.shutdown()
         sys.exit(2)
-    # Two executors: rclpy walks every entity of its nodes on each wake-up, so the command
-    # subscriptions must not share a wait set with thousands of action and service endpoints.
-    topics = SingleThreadedExecutor()
-    topics.add_node(node)
-    pool = MultiThreadedExecutor(num_threads=min(64, 2 * len(fleet.spaces) + 6))
-    pool.add_node(servers)
-    serving = threading.Thread(target=_spin, args=(pool,), name="armfleet-actions", daemon=True)
-    serving.start()
+    first, *others = fleet.executors()
+    for ex in others:
+        threading.Thread(target=_spin, args=(ex,), name="armfleet-executor", daemon=True).start()
     try:
-        topics.spin()
+        first.spin()
     except KeyboardInterrupt:
         pass
     finally:
         fleet.close()
-        for ex in (topics, pool):
-            ex.shutdown()
-        for n in (node, servers):
-            n.destroy_node()
+        for part, _ in fleet.parts:
+            part.close()
         if rclpy.ok():
             rclpy.shutdown()
 

@@ -66,9 +66,9 @@ def _result(msg: Any, code: int, text: str = "") -> Any:
 class GlobalSim:
     """The services and the action that act on the whole simulation."""
 
-    def __init__(self, owner: Any) -> None:
+    def __init__(self, owner: Any, part: Any) -> None:
         self.owner = owner
-        node, group = owner.servers, owner.group
+        node, group = part.servers, part.group
         self.play_mode = str(owner.node.declare_parameter("play_mode", "realtime").value)
         if self.play_mode not in ("realtime", "fast"):
             raise ValueError(f"play_mode must be realtime or fast, got {self.play_mode!r}")
@@ -184,9 +184,9 @@ def reset(owner: Any, world: Any, req: Any, res: Any) -> Any:
 class WorldSim:
     """The entity services of one world namespace (and its own reset)."""
 
-    def __init__(self, owner: Any, world: int, ns: str) -> None:
+    def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
         self.owner, self.world = owner, world
-        node, group = owner.servers, owner.group
+        node, group = part.servers, part.group
         self.bodies = {b["name"]: b["id"] for b in owner.frames["bodies"]}
         srv = node.create_service
         if ns:  # the root's reset_simulation is the global one

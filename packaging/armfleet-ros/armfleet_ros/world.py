@@ -34,10 +34,10 @@ COMMAND_DEPTH = 1000
 class WorldTopics:
     """The publishers, subscriptions and action servers of one world under one namespace."""
 
-    def __init__(self, owner: Any, world: int, ns: str) -> None:
-        node = owner.node
+    def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
+        node = part.topics
         self.owner, self.world, self.ns = owner, world, ns
-        group = owner.group
+        group = part.group
         self.states = node.create_publisher(JointState, f"{ns}/joint_states", 10)
         self.tf = node.create_publisher(TFMessage, f"{ns}/tf", TF_QOS)
         self.tf_static = node.create_publisher(TFMessage, f"{ns}/tf_static", LATCHED)
@@ -71,8 +71,8 @@ class WorldTopics:
                     callback_group=group,
                 )
             )
-        self.actions = TrajectoryActions(owner, world, ns)
-        self.gripper = GripperAction(owner, world, ns)
+        self.actions = TrajectoryActions(owner, world, ns, part)
+        self.gripper = GripperAction(owner, world, ns, part)
         self.listened_states = False
         self.listened_tf = False
 
