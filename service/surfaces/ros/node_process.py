@@ -44,6 +44,8 @@ class RosNode:
     name = "ros2"
 
     def __init__(self, settings: Settings, prepared: NodeEnv | None = None) -> None:
+        if settings.token:
+            raise ValueError("--ros2 with --token: the node's client cannot present a token yet")
         self.settings = settings
         self.node = prepared or node_env(settings.ros2_python)
         self.process: subprocess.Popen[bytes] | None = None

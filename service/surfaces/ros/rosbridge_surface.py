@@ -16,9 +16,10 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from fastapi import APIRouter, HTTPException, WebSocket, WebSocketDisconnect
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from service.core import access
+from service.core.schema_fields import json_int
 from service.core.settings import Settings
 from service.core.surface import SurfaceContext
 from service.core.worlds import world_list
@@ -35,15 +36,20 @@ _STATUS_DOC = (
 )
 
 
+_COUNT = json_int(minimum=0)
+
+
 class NodeReport(BaseModel):
     """What the armfleet_ros node says of itself: connected, namespaces, messages by fate."""
 
+    model_config = ConfigDict(extra="forbid")
+
     name: str = Field(max_length=200)
-    connected: bool
-    worlds: int = Field(ge=0)
-    accepted: int = Field(ge=0)
-    merged: int = Field(0, ge=0)  # messages sent merged with a later one (lanes.py)
-    rejected: dict[str, int] = Field(max_length=64)
+    connected: StrictBool
+    worlds: _COUNT  # type: ignore[valid-type]
+    accepted: _COUNT  # type: ignore[valid-type]
+    merged: _COUNT = 0  # type: ignore[valid-type]  # sent merged with a later one (lanes.py)
+    rejected: dict[str, _COUNT] = Field(max_length=64)  # type: ignore[valid-type]
 
 
 class RosbridgeSurface:
