@@ -42,7 +42,21 @@ _COUNT = json_int(minimum=0)
 class NodeReport(BaseModel):
     """What the armfleet_ros node says of itself: connected, namespaces, messages by fate."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "name": "/armfleet",
+                    "connected": True,
+                    "worlds": 9,
+                    "accepted": 120,
+                    "merged": 0,
+                    "rejected": {"unknown_joint": 1},
+                }
+            ]
+        },
+    )
 
     name: str = Field(max_length=200)
     connected: StrictBool
