@@ -132,6 +132,20 @@ def test_bad_messages_are_counted_and_change_nothing(ros: tuple[Server, httpx.Cl
     wait_for(counted, "the bad messages counted", 15)
 
 
+def test_ur_command_topics_move_the_arm(ros: tuple[Server, httpx.Client]) -> None:
+    """forward_position_controller/commands sets the six arm targets; a JointTrajectory on
+    joint_trajectory_controller/joint_trajectory runs on the trajectory core."""
+    _, http = ros
+    forward = judge("topics", "/world_2", "forward")["forward"]
+    wait_for(lambda: targets(http, 2)[:6] == forward, "the forward command's targets", 10)
+    seen = judge("topics", "/world_2", "trajectory")
+    traj = http.get("/v1/worlds/2/trajectory").json()
+    assert traj["joint_names"] == JOINTS[:6] and traj["desired"] is not None
+    final = http.get("/v1/worlds/2/trajectory", params={"wait": "5"}).json()
+    assert final["state"] == "succeeded", final
+    np.testing.assert_allclose(targets(http, 2)[:6], seen["trajectory"], atol=1e-9)
+
+
 # -- actions ------------------------------------------------------------------------------------
 
 

@@ -74,6 +74,35 @@ def bad(ns: str) -> None:
     out(sent=sent)
 
 
+def topics(ns: str, which: str) -> None:
+    """The UR driver's command topics: forward_position_controller or a JointTrajectory."""
+    from std_msgs.msg import Float64MultiArray
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    node = Node("judge_topics")
+    fwd = node.create_publisher(Float64MultiArray, f"{ns}/forward_position_controller/commands", 10)
+    jt = node.create_publisher(
+        JointTrajectory, f"{ns}/joint_trajectory_controller/joint_trajectory", 10
+    )
+    spin_until(node, lambda: fwd.get_subscription_count() and jt.get_subscription_count(), 20)
+    msg = Float64MultiArray()
+    msg.data = [0.2, -1.4, 1.4, -1.6, -1.5, 0.1]
+    if which == "forward":
+        fwd.publish(msg)
+        spin_until(node, lambda: False, 0.5)
+        out(forward=list(msg.data))
+        return
+    traj = JointTrajectory()
+    traj.joint_names = list(ARM)
+    point = JointTrajectoryPoint()
+    point.positions = [0.0, -1.57, 1.57, -1.57, -1.57, 0.0]
+    point.time_from_start.sec = 1
+    traj.points = [point]
+    jt.publish(traj)
+    spin_until(node, lambda: False, 0.5)
+    out(trajectory=list(point.positions))
+
+
 def actions(ns: str) -> None:
     """ActionClients: both trajectory actions, the gripper, a cancel and refused goals."""
     from control_msgs.action import FollowJointTrajectory, GripperCommand
@@ -240,6 +269,8 @@ def main() -> None:
     try:
         if cmd == "seed":
             seed(args[0], float(args[1]))
+        elif cmd == "topics":
+            topics(args[0], args[1])
         elif cmd == "bad":
             bad(args[0])
         elif cmd == "actions":
