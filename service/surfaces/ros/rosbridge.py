@@ -34,6 +34,13 @@ from service.core.surface import SurfaceContext
 from service.core.types import Snapshot
 from service.surfaces.ros import rosapi, rosbridge_actions, topics
 from service.surfaces.ros.rosbridge_base import ProtocolError, same_type, topic_name
+from service.surfaces.ros.rosbridge_frames import (
+    KINDS,
+    LATCHED,
+    TF_TYPE,
+    RobotFrames,
+    frame_topic,
+)
 from service.surfaces.ros.topics import (
     CLOCK_TOPIC,
     CLOCK_TYPE,
@@ -65,6 +72,7 @@ class RosbridgeServer:
         self.bad = BadMessageCounter("rosbridge")
         self.accepted = 0
         self.clients = 0
+        self.frames: RobotFrames | None = None  # the robot topics' renderer, made on first use
 
     def status(self) -> dict[str, Any]:
         return {
@@ -188,10 +196,14 @@ class Session:
 
     def op_subscribe(self, msg: dict[str, Any]) -> None:
         topic = topic_name(msg.get("topic"))
+        robot = frame_topic(self.server.topic_map.namespaces(), topic)
+        if robot is not None and robot[1] in LATCHED:  # sent once, as transient-local is
+            self._check_type(topic, KINDS[robot[1]], msg.get("type"))
+            self.replies.append(self._frames().latched(topic, robot[1]))
+            self.ready.set()
+            return
         _, _, kind = self._renderer(topic)  # unknown topics fail here, before any change
-        given = msg.get("type")
-        if given is not None and (not isinstance(given, str) or not same_type(given, kind)):
-            raise ProtocolError(f"type: {topic} carries {kind}, not {given!r}")
+        self._check_type(topic, kind, msg.get("type"))
         throttle = msg.get("throttle_rate", 0)
         queue_length = msg.get("queue_length", 0)
         for value, what in ((throttle, "throttle_rate"), (queue_length, "queue_length")):
@@ -204,6 +216,16 @@ class Session:
         ids = dict(existing.ids) if existing else {}
         ids[msg.get("id")] = throttle
         self._deliver(topic, ids)
+
+    @staticmethod
+    def _check_type(topic: str, kind: str, given: Any) -> None:
+        if given is not None and (not isinstance(given, str) or not same_type(given, kind)):
+            raise ProtocolError(f"type: {topic} carries {kind}, not {given!r}")
+
+    def _frames(self) -> RobotFrames:
+        if self.server.frames is None:
+            self.server.frames = RobotFrames(self.loop)
+        return self.server.frames
 
     def op_unsubscribe(self, msg: dict[str, Any]) -> None:
         topic = topic_name(msg.get("topic"))
@@ -280,6 +302,9 @@ class Session:
                 return orjson.dumps({"op": "publish", "topic": topic, "msg": body})
 
             return clock, 0, CLOCK_TYPE
+        robot = frame_topic(self.server.topic_map.namespaces(), topic)
+        if robot is not None and robot[1] == "tf":
+            return self._frames().tf(topic, robot[0], tick_dt), robot[0], TF_TYPE
         world = self.server.topic_map.state_topics().get(topic)
         if world is None:
             if topic in self.server.topic_map.command_topics():

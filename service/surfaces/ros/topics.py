@@ -27,6 +27,8 @@ log = logging.getLogger("armfleet.ros")
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 CLOCK_TOPIC = "/clock"
+TF = "tf2_msgs/msg/TFMessage"
+STRING = "std_msgs/msg/String"
 
 
 class BadMessage(ValueError):
@@ -67,6 +69,8 @@ class TopicMap:
         """Topic name → ROS 2 type, everything armfleet has on the graph."""
         out = dict.fromkeys([*self.command_topics(), *self.state_topics()], JOINT_STATE_TYPE)
         out[CLOCK_TOPIC] = CLOCK_TYPE
+        for ns in self.namespaces():  # the robot topics (rosbridge_frames.py)
+            out |= {f"{ns}/tf": TF, f"{ns}/tf_static": TF, f"{ns}/robot_description": STRING}
         return dict(sorted(out.items()))
 
 
