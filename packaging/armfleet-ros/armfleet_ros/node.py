@@ -27,6 +27,7 @@ from rosgraph_msgs.msg import Clock
 from armfleet_ros.convert import Counter, stamp
 from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
+from armfleet_ros.params import param
 from armfleet_ros.parts import slices
 from armfleet_ros.world import WorldTopics
 from clients import ArmfleetClient
@@ -54,9 +55,9 @@ class ArmfleetNode:
     def __init__(self, node: Node) -> None:
         self.node = node  # parameters, /clock and the first slice's topics (parts.py)
         log = node.get_logger()
-        self.url = str(node.declare_parameter("url", "http://127.0.0.1:8000").value)
-        spec = str(node.declare_parameter("worlds", "").value)
-        self.rate = float(node.declare_parameter("rate", 60.0).value)
+        self.url = str(param(node, "url", "http://127.0.0.1:8000"))
+        spec = str(param(node, "worlds", ""))  # `worlds:=3` arrives as an integer
+        self.rate = float(param(node, "rate", 60.0))  # `rate:=100` too
         self.http = ArmfleetClient(self.url, timeout=10.0)
         self._wait_for_armfleet(log)
         info = self.http.info()
@@ -80,7 +81,7 @@ class ArmfleetNode:
         self.spaces = [WorldTopics(self, w, ns, part) for part, sl in self.parts for ns, w in sl]
         self._simulation_interfaces(log)
         served = sorted({w for _, w in spaces})
-        command_rate = float(node.declare_parameter("command_rate", 200.0).value)
+        command_rate = float(param(node, "command_rate", 200.0))
         self.link = FleetLink(self.url, served, self.rate, self._publish, command_rate)
         self.link.start()
         self._stop = threading.Event()

@@ -34,6 +34,7 @@ from websockets.sync.client import connect
 
 from armfleet_ros.convert import stamp
 from armfleet_ros.link import POSE_MAGIC, Poses
+from armfleet_ros.params import param
 from clients import _stream
 from clients.errors import ArmfleetError, Conflict
 
@@ -69,7 +70,7 @@ class GlobalSim:
     def __init__(self, owner: Any, part: Any) -> None:
         self.owner = owner
         node, group = part.servers, part.group
-        self.play_mode = str(owner.node.declare_parameter("play_mode", "realtime").value)
+        self.play_mode = str(param(owner.node, "play_mode", "realtime"))
         if self.play_mode not in ("realtime", "fast"):
             raise ValueError(f"play_mode must be realtime or fast, got {self.play_mode!r}")
         srv = node.create_service
