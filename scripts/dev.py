@@ -37,10 +37,9 @@ TEST_DEBS = {
     "tmux": "tmux",
     "xwd": "x11-apps",
     "chromium": "chromium",
-    # the Fast DDS peer of the ROS 2 tests (tests/fastdds_peer): a header stands for the library
-    "fastddsgen": "fastddsgen",
+    # the ROS 2 judge's build (tests/ros2_judge.py: rosidl generators over CMake)
+    "cmake": "cmake",
     "g++": "g++",
-    "/usr/include/fastdds/dds/domain/DomainParticipant.hpp": "libfastrtps-dev",
     # urdfdom, the C++ URDF parser RViz and robot_state_publisher use (tests/test_ros_ur.py)
     "check_urdf": "liburdfdom-tools",
 }
@@ -112,11 +111,12 @@ def ensure_test_tools() -> None:
     run(*sudo, "apt-get", "install", "-y", "-qq", "--no-install-recommends", *missing, env=env)
 
 
-def build_test_peers() -> None:
-    """The Fast DDS peer, compiled once per source change (cached under build/fastdds_peer)."""
-    done = subprocess.run([BIN / "python", "-m", "tests.fastdds_peer"], cwd=ROOT)
+def build_ros2_judge() -> None:
+    """The real ROS 2 (Jazzy rclpy + Fast DDS, ../shared/ros2_judge) the ROS 2 tests run on,
+    built once per version of its sources under ~/.cache/armfleet (tests/ros2_judge.py)."""
+    done = subprocess.run([BIN / "python", "-m", "tests.ros2_judge"], cwd=ROOT)
     if done.returncode:
-        say("the Fast DDS peer could not be built: its ROS 2 tests will be skipped")
+        say("the ROS 2 judge could not be built: the ROS 2 node's tests will be skipped")
 
 
 def ensure_js_tools() -> None:
@@ -141,7 +141,7 @@ def main(argv: list[str]) -> int:
     ensure_venv()
     if command == "test":
         ensure_test_tools()
-        build_test_peers()
+        build_ros2_judge()
         ensure_js_tools()
     warm_kernel_cache()
     if command == "serve":

@@ -6,7 +6,11 @@ never above (scripts/import_graph.py checks it, tests/test_layout.py runs it):
 - core/         types, the `Batch` protocol, the loop, `Control`, hub, wire, schemas, settings
 - engines/      the `Batch` implementations (Warp, native MuJoCo, process shards, Ray)
 - persistence/  snapshots, MCAP recordings, replay
-- surfaces/     ROS 2 over DDS, rosbridge, Foxglove, recordings: plug-ins on core/surface.py
+- surfaces/     the ROS 2 node, rosbridge, Foxglove, recordings: plug-ins on core/surface.py
 - api/, app.py, runtime.py, serving.py, cli.py   the app: HTTP routes, composition, the server,
   the `armfleet` command
 """
+
+from service.core.pythonpath import scrub as _scrub_ros_pythonpath
+
+_scrub_ros_pythonpath()  # before anything else is imported: see service/core/pythonpath.py

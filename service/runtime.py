@@ -75,6 +75,8 @@ class Runtime:
             out.append(f"ticks are failing: {self.loop.failure}")
         if isinstance(self.loop.batch, Supervised):
             out += self.loop.batch.health()
+        for surface in self.surfaces:  # a supervised child that is down (the ROS 2 node)
+            out += getattr(surface, "problems", list)()
         return out
 
     async def _watch(self, period: float = 0.1) -> None:

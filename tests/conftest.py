@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import random
 import shutil
 import subprocess
 import time
@@ -25,7 +24,6 @@ from clients import ArmfleetClient, WorldState
 from clients import pytest_plugin as armfleet_plugin
 from clients.testing import Server, free_port, serve
 from service.core.robot import load_robot
-from tests.peer_stdio import UrPeer
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -103,35 +101,6 @@ def http(server: Server) -> Iterator[httpx.Client]:
     """An HTTP client on the module's server."""
     with httpx.Client(base_url=server.url, timeout=10) as client:
         yield client
-
-
-# -- the UR driver's DDS surface (tests/test_ros_ur.py, tests/test_ros_actions.py) ----------
-
-
-@pytest.fixture(scope="module")
-def ur_domain() -> int:
-    """A DDS domain of the module's own, so that parallel runs do not hear each other."""
-    return random.SystemRandom().randrange(1, 233)
-
-
-@pytest.fixture(scope="module")
-def ur_server(tmp_path_factory: pytest.TempPathFactory, ur_domain: int) -> Iterator[Server]:
-    """`serve --ros2` with 2 worlds, world 1 also under /world_1. The native MuJoCo engine:
-    the ROS layer is the same on both, and it starts in seconds (Warp's kernels take ~15 s)."""
-    extra = ("--ros2", "--ros2-worlds", "1", "--ros2-rate", "30", "--engine", "mujoco")
-    env = {"ROS_DOMAIN_ID": str(ur_domain)}
-    with serve(worlds=2, extra_args=extra, env=env, log_dir=tmp_path_factory.mktemp("ur")) as s:
-        yield s
-
-
-@pytest.fixture(scope="module")
-def ur_peer(ur_server: Server, ur_domain: int) -> Iterator[UrPeer]:
-    """An independent ROS 2 peer process (tests/ros2_ur_peer.py) on the server's domain."""
-    p = UrPeer(ur_domain)
-    try:
-        yield p
-    finally:
-        p.close()
 
 
 # -- roslib.js (tests/js: Node scripts that drive the rosbridge endpoint) ---------------------

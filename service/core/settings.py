@@ -123,15 +123,20 @@ class Settings(BaseSettings):
         None, description="worlds shown in Foxglove, e.g. 0-3 (default: first 8)"
     )
     foxglove_rate: float = Field(30.0, gt=0, le=240, description="Foxglove frames per second")
-    ros2: bool = Field(False, description="join the ROS 2 graph over DDS (Cyclone DDS)")
+    ros2: bool = Field(
+        False, description="run the armfleet_ros node on the sourced ROS 2 (a supervised child)"
+    )
     ros2_rate: float = Field(
-        60.0, gt=0, le=1000, description="/joint_states and /clock rate over DDS and rosbridge [Hz]"
+        60.0,
+        gt=0,
+        le=1000,
+        description="/joint_states, /clock and /tf rate of the ROS 2 node and rosbridge [Hz]",
     )
     ros2_worlds: str = Field(
         "", description="worlds with /world_N/ topics, e.g. 0-7 (world 0 always has /joint_*)"
     )
-    ros2_network: bool = Field(
-        False, description="open DDS to the network (default: loopback only, like the HTTP bind)"
+    ros2_python: str | None = Field(
+        None, description="Python of the ROS 2 installation for --ros2 (default: the sourced one's)"
     )
     # -- cameras (service/core/cameras.py): the renderer is built for these once, at start --
     camera_size: str = Field(

@@ -1,12 +1,12 @@
 """The plug-in point for surfaces: what a surface may use of a running service, and its shape.
 
-A surface is a way in or out of the service besides the HTTP API (ROS 2 over DDS, rosbridge,
-Foxglove; persistence, snapshots and recordings, gets the same context). It is started once the
-loop runs and stopped before the loop stops, and it gets a `SurfaceContext`: the loop (listen
-with `add_sink`), `Control` (the one door for commands), the stream hub, the settings, the
-client slots it must hold a seat in per client, and the metrics. Nothing else: no surface sees
-the runtime, the engine choice or another surface. `armfleet replay` builds the same context for
-the recorder that writes a replayed run.
+A surface is a way in or out of the service besides the HTTP API (the ROS 2 node's supervisor,
+rosbridge, Foxglove; persistence, snapshots and recordings, gets the same context). It is
+started once the loop runs and stopped before the loop stops, and it gets a `SurfaceContext`:
+the loop (listen with `add_sink`), `Control` (the one door for commands), the stream hub, the
+settings, the client slots it must hold a seat in per client, and the metrics. Nothing else: no
+surface sees the runtime, the engine choice or another surface. `armfleet replay` builds the
+same context for the recorder that writes a replayed run.
 
 A surface that serves HTTP or WebSocket routes also has a `router` (`Routed`); the app
 includes it. Which surfaces exist, and from which settings, is surfaces/registry.py.

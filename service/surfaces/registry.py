@@ -4,10 +4,10 @@ Adding a surface is one module (a class with `name`, `start(ctx)` and `stop()`, 
 core/surface.py) plus one entry in `REGISTRY` below, and its options as fields of
 core/settings.py (each an `ARMFLEET_*` variable; an `armfleet serve` option is one `_opt` line
 in cli.py). The registry builds them in order, each builder
-seeing the surfaces built before it (rosbridge reports the DDS bridge's topics); the runtime
+seeing the surfaces built before it (rosbridge reports the ROS 2 node's process); the runtime
 starts them in that order once the loop runs and stops them in reverse. A builder imports its
-surface only when the settings ask for it, so an unused surface costs nothing (no DDS, no
-Foxglove SDK).
+surface only when the settings ask for it, so an unused surface costs nothing (no ROS 2 node,
+no Foxglove SDK).
 """
 
 from __future__ import annotations
@@ -53,19 +53,15 @@ def _camera_recording(s: Settings, built: Mapping[str, Surface]) -> Surface | No
 def _ros2(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
     if not s.ros2:
         return None
-    from service.surfaces.ros.dds import DdsBridge
+    from service.surfaces.ros.node_process import RosNode
 
-    return DdsBridge(
-        s.ros2_rate, s.ros2_worlds, s.ros2_network, cameras=(s.ros2_cameras, s.camera_rate)
-    )
+    return RosNode(s)  # ValueError (one line) where no ROS 2 is found
 
 
 def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
-    from service.surfaces.ros.dds import DdsBridge
     from service.surfaces.ros.rosbridge_surface import RosbridgeSurface
 
-    dds = built.get("ros2")
-    return RosbridgeSurface(s, dds if isinstance(dds, DdsBridge) else None)  # always on
+    return RosbridgeSurface(s, built.get("ros2"))  # always on; reports the ROS 2 node too
 
 
 # (name, builder), in start order. The names are the surfaces' `name`s.

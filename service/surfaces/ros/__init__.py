@@ -1,4 +1,5 @@
-"""ROS 2: the DDS bridge (`dds`, `ur_dds`, `discovery`, `qos`, `msgs*` declared through `idl`,
-`urdf`, `tf_frames`), rosbridge (`rosbridge` the protocol, `rosbridge_surface` its socket and
-`/v1/ros`), and the topic names and JointState rules both share (`topics`). Imports as its
-parent package (surfaces)."""
+"""ROS 2: the armfleet_ros node (packaging/armfleet-ros) as a supervised child on the user's ROS
+(`node_process`, `node_env`) and what it reads of the model (`description`: `urdf`, `tf_frames`);
+rosbridge (`rosbridge` the protocol, `rosbridge_surface` its socket and `/v1/ros`, `rosapi`,
+`rosbridge_actions` on `goals` / `goal_msgs`) with its topic names and JointState rules
+(`topics`). Imports as its parent package (surfaces)."""

@@ -1,7 +1,6 @@
 """The UR driver's actions as messages: names, types, goal checks, feedback and result shapes.
 
-Everything here works on the ROS messages in their JSON shape (what rosbridge carries and what
-the DDS surface converts its samples to), so both surfaces share one set of rules.
+Everything here works on the ROS messages in their JSON shape (what rosbridge carries).
 """
 
 from __future__ import annotations

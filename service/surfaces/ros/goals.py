@@ -1,8 +1,8 @@
-"""The UR driver's action goals, shared by DDS and rosbridge: accept, run, feed back, finish.
+"""The UR driver's action goals over rosbridge: accept, run, feed back, finish.
 
-Both surfaces hand a goal over as the ROS message in JSON shape (what rosbridge carries; DDS
-samples are converted) and get feedback and the result back in the same shape, so the rules
-live once, here:
+A goal comes as the ROS message in JSON shape (what rosbridge carries) and gets feedback and
+the result back in the same shape; the rules (the armfleet_ros node keeps the same ones over
+the HTTP API):
 
 - `FollowJointTrajectory` (on `scaled_joint_trajectory_controller` and
   `joint_trajectory_controller`): the goal becomes a `JointTrajectorySpec` (validated before
@@ -71,7 +71,7 @@ class Goal:
     on_feedback: Callable[[Goal, dict[str, Any]], None]
     on_done: Callable[[Goal], None]
     status: Status = Status.EXECUTING
-    key: Any = None  # the surface's id of the goal (DDS: the goal's UUID bytes)
+    key: Any = None  # the surface's id of the goal
     result: dict[str, Any] = field(default_factory=dict)
     traj_id: int | None = None
     finger_target: float = 0.0
@@ -281,7 +281,7 @@ class GoalRunner:
 
 
 def runner_of(ctx: SurfaceContext) -> GoalRunner:
-    """The service's one GoalRunner (made on first use; DDS and rosbridge, given the same
+    """The service's one GoalRunner (made on first use; every rosbridge session, given the same
     context, share it)."""
     with _RUNNERS_LOCK:
         runner = _RUNNERS.get(ctx)

@@ -13,7 +13,7 @@ from typing import Any
 from service.surfaces.ros import rosbridge_actions, topics
 from service.surfaces.ros.goal_msgs import action_names
 from service.surfaces.ros.rosbridge_base import topic_name
-from service.surfaces.ros.topics import CLOCK_TYPE, JOINT_STATE_TYPE
+from service.surfaces.ros.topics import CLOCK_TYPE, JOINT_STATE_TYPE, STRING, TF
 
 _RULE = "=" * 80
 
@@ -29,6 +29,18 @@ TYPEDEFS = {
     ),
     CLOCK_TYPE: (
         f"builtin_interfaces/Time clock\n\n{_RULE}\nMSG: builtin_interfaces/Time\n{_TIME_DEF}"
+    ),
+    STRING: "string data\n",
+    TF: (
+        f"geometry_msgs/TransformStamped[] transforms\n\n{_RULE}\n"
+        "MSG: geometry_msgs/TransformStamped\n"
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n\n"
+        f"{_RULE}\nMSG: std_msgs/Header\n{_HEADER_DEF}\n{_RULE}\n"
+        f"MSG: builtin_interfaces/Time\n{_TIME_DEF}\n{_RULE}\nMSG: geometry_msgs/Transform\n"
+        "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n\n"
+        f"{_RULE}\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n\n"
+        f"{_RULE}\nMSG: geometry_msgs/Quaternion\n"
+        "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
     ),
 }
 

@@ -2,9 +2,9 @@
 
 roslibpy's `Ros('localhost', 8000)` dials `ws://localhost:8000/` and roslib.js takes any URL, so
 the socket is served at `/` (beside the browser page's GET) and at `/rosbridge`. The topics are
-the DDS bridge's (service/surfaces/ros/topics.py); commands go through the control layer (source
-`rosbridge`); states come from the stream hub with its latest-state delivery, so a slow client
-skips frames instead of queueing them, and every client subscribed to a topic shares one
+the armfleet_ros node's (service/surfaces/ros/topics.py); commands go through the control layer
+(source `rosbridge`); states come from the stream hub with its latest-state delivery, so a slow
+client skips frames instead of queueing them, and every client subscribed to a topic shares one
 serialisation per tick.
 
 Replies (`service_response`, `status`) are never dropped; a client that sends faster than it
@@ -35,6 +35,13 @@ from service.core.surface import SurfaceContext
 from service.core.types import Snapshot
 from service.surfaces.ros import rosapi, rosbridge_actions, topics
 from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, same_type, topic_name
+from service.surfaces.ros.rosbridge_frames import (
+    KINDS,
+    LATCHED,
+    TF_TYPE,
+    RobotFrames,
+    frame_topic,
+)
 from service.surfaces.ros.topics import (
     CLOCK_TOPIC,
     CLOCK_TYPE,
@@ -62,10 +69,11 @@ class RosbridgeServer:
 
     def __init__(self, topic_map: TopicMap | None = None, max_rate: float = 60.0) -> None:
         self.topic_map = topic_map or TopicMap(())
-        self.max_rate = max_rate  # states go out at most this often, like the DDS bridge
+        self.max_rate = max_rate  # states go out at most this often, like the ROS 2 node
         self.bad = BadMessageCounter("rosbridge")
         self.accepted = 0
         self.clients = 0
+        self.frames: RobotFrames | None = None  # the robot topics' renderer, made on first use
 
     def status(self) -> dict[str, Any]:
         return {
@@ -190,10 +198,14 @@ class Session:
 
     def op_subscribe(self, msg: dict[str, Any]) -> None:
         topic = topic_name(msg.get("topic"))
+        robot = frame_topic(self.server.topic_map.namespaces(), topic)
+        if robot is not None and robot[1] in LATCHED:  # sent once, as transient-local is
+            self._check_type(topic, KINDS[robot[1]], msg.get("type"))
+            self.replies.append(self._frames().latched(topic, robot[1]))
+            self.ready.set()
+            return
         _, _, kind = self._renderer(topic)  # unknown topics fail here, before any change
-        given = msg.get("type")
-        if given is not None and (not isinstance(given, str) or not same_type(given, kind)):
-            raise ProtocolError(f"type: {topic} carries {kind}, not {given!r}")
+        self._check_type(topic, kind, msg.get("type"))
         throttle = msg.get("throttle_rate", 0)
         queue_length = msg.get("queue_length", 0)
         for value, what in ((throttle, "throttle_rate"), (queue_length, "queue_length")):
@@ -206,6 +218,16 @@ class Session:
         ids = dict(existing.ids) if existing else {}
         ids[msg.get("id")] = throttle
         self._deliver(topic, ids)
+
+    @staticmethod
+    def _check_type(topic: str, kind: str, given: Any) -> None:
+        if given is not None and (not isinstance(given, str) or not same_type(given, kind)):
+            raise ProtocolError(f"type: {topic} carries {kind}, not {given!r}")
+
+    def _frames(self) -> RobotFrames:
+        if self.server.frames is None:
+            self.server.frames = RobotFrames(self.loop)
+        return self.server.frames
 
     def op_unsubscribe(self, msg: dict[str, Any]) -> None:
         topic = topic_name(msg.get("topic"))
@@ -282,6 +304,9 @@ class Session:
                 return orjson.dumps({"op": "publish", "topic": topic, "msg": body})
 
             return clock, 0, CLOCK_TYPE
+        robot = frame_topic(self.server.topic_map.namespaces(), topic)
+        if robot is not None and robot[1] == "tf":
+            return self._frames().tf(topic, robot[0], tick_dt), robot[0], TF_TYPE
         world = self.server.topic_map.state_topics().get(topic)
         if world is None:
             if topic in self.server.topic_map.command_topics():

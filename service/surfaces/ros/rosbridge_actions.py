@@ -9,7 +9,7 @@ result frame carries the result message in `values`, the final GoalStatus in `st
 command) gets `result: false` with the reason in `values` and status UNKNOWN, which roslibpy
 hands to its errback and roslib.js to its failed callback; nothing moves.
 
-The goals run in service/ros/goals.py, shared with the DDS surface; its callbacks come from
+The goals run in service/surfaces/ros/goals.py; its callbacks come from
 other threads, so frames are queued onto the socket's event loop.
 """
 

@@ -1,5 +1,7 @@
 """rosbridge as a surface: its socket on the service's port (`/` and `/rosbridge`) and
-`GET /v1/ros`, the ROS status of both ROS surfaces (DDS and rosbridge).
+`GET /v1/ros`, the ROS status of both ROS surfaces (the armfleet_ros node and rosbridge),
+and what the node reads from armfleet (`/v1/ros/robot_description`, `/v1/ros/frames`) or
+reports to it (`PUT /v1/ros/node`).
 
 The protocol itself (one client's ops, services and outbox) is rosbridge.py; this module owns
 what one service shares: the topic map from the settings, the counters, and the read loop that
@@ -10,36 +12,74 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import time
 from typing import TYPE_CHECKING, Any
 
-from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, HTTPException, WebSocket, WebSocketDisconnect
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from service.core import access
+from service.core.schema_fields import json_int
 from service.core.settings import Settings
 from service.core.surface import SurfaceContext
 from service.core.worlds import world_list
+from service.surfaces.ros import description
 from service.surfaces.ros.rosbridge import RosbridgeServer, Session
 from service.surfaces.ros.topics import TopicMap
 
 if TYPE_CHECKING:
-    from service.surfaces.ros.dds import DdsBridge
+    from service.core.surface import Surface
 
 _MAX_QUEUED_REPLIES = 256
-_STATUS_DOC = "ROS 2 over DDS and rosbridge: topics, accepted commands, rejected messages by kind."
+_STATUS_DOC = (
+    "The ROS 2 node (process, restarts, its counters) and rosbridge: topics, commands by fate."
+)
+
+
+_COUNT = json_int(minimum=0)
+
+
+class NodeReport(BaseModel):
+    """What the armfleet_ros node says of itself: connected, namespaces, messages by fate."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "name": "/armfleet",
+                    "connected": True,
+                    "worlds": 9,
+                    "accepted": 120,
+                    "merged": 0,
+                    "rejected": {"unknown_joint": 1},
+                }
+            ]
+        },
+    )
+
+    name: str = Field(max_length=200)
+    connected: StrictBool
+    worlds: _COUNT  # type: ignore[valid-type]
+    accepted: _COUNT  # type: ignore[valid-type]
+    merged: _COUNT = 0  # type: ignore[valid-type]  # sent merged with a later one (lanes.py)
+    rejected: dict[str, _COUNT] = Field(max_length=64)  # type: ignore[valid-type]
 
 
 class RosbridgeSurface:
-    """rosbridge v2 for ROS web and script clients, always on; `dds` is the DDS bridge, if any,
+    """rosbridge v2 for ROS web and script clients, always on; `node` is the ROS 2 node's
+    supervisor (`--ros2`), if any,
     whose status `GET /v1/ros` reports beside rosbridge's."""
 
     name = "rosbridge"
 
-    def __init__(self, settings: Settings, dds: DdsBridge | None = None) -> None:
+    def __init__(self, settings: Settings, node: Surface | None = None) -> None:
         worlds = world_list(settings.ros2_worlds, settings.worlds, "ros2_worlds")
         self.server = RosbridgeServer(TopicMap(worlds), settings.ros2_rate)
         self.settings = settings
-        self.dds = dds
+        self.node = node  # the ROS 2 node's supervisor (`--ros2`), if any
         self.ctx: SurfaceContext | None = None
+        self.node_report: dict[str, Any] | None = None
         self.router = self._routes()
 
     def start(self, ctx: SurfaceContext) -> None:
@@ -59,12 +99,36 @@ class RosbridgeSurface:
 
         @router.get("/v1/ros", tags=["ros"], description=_STATUS_DOC)
         async def ros_status() -> dict[str, Any]:
+            process = getattr(self.node, "status", lambda: {"enabled": False})()
             return {
-                "dds": self.dds.status() if self.dds is not None else {"enabled": False},
+                "node": {**process, "report": self.node_report},
                 "rosbridge": self.server.status(),
             }
 
+        @router.put("/v1/ros/node", tags=["ros"])
+        async def ros_node_report(report: NodeReport) -> dict[str, Any]:
+            """The armfleet_ros node's counters (it reports them every 0.5 s)."""
+            self.node_report = {**report.model_dump(), "reported": time.time()}
+            return self.node_report
+
+        @router.get("/v1/ros/robot_description", tags=["ros"])
+        async def ros_robot_description() -> dict[str, str]:
+            """The URDF that `/robot_description` carries (generated from the MuJoCo model)."""
+            loop = self._loop()
+            return {"urdf": description.robot_description(loop.batch.robot.mjm, loop.spec)}
+
+        @router.get("/v1/ros/frames", tags=["ros"])
+        async def ros_frames() -> dict[str, Any]:
+            """The tf tree: fixed transforms, and the body pair that gives each moving frame."""
+            loop = self._loop()
+            return description.frames(loop.batch.robot.mjm, loop.spec)
+
         return router
+
+    def _loop(self) -> Any:
+        if self.ctx is None:
+            raise HTTPException(503, "simulation is starting")
+        return self.ctx.loop
 
     async def _serve(self, ws: WebSocket) -> None:
         await ws.accept(subprotocol=access.check_websocket(self.settings, ws).subprotocol)

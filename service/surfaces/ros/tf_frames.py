@@ -69,6 +69,16 @@ class FrameTree:
         self._child_body = np.array([link.body for link in moving], dtype=np.int64)
 
     @property
+    def parent_bodies(self) -> list[int]:
+        """The body whose pose is each moving frame's parent frame (MjModel order)."""
+        return self._parent_body.tolist()
+
+    @property
+    def child_bodies(self) -> list[int]:
+        """The body whose pose is each moving frame."""
+        return self._child_body.tolist()
+
+    @property
     def frames(self) -> list[str]:
         """Every frame of the tree, root first."""
         return [ROOT_LINK] + [t.child for t in self.static] + self.moving_children

@@ -1,10 +1,11 @@
-"""What DDS and rosbridge share: topic names ↔ worlds, JointState ↔ commands, bad-message counts.
+"""rosbridge's topics: topic names ↔ worlds, JointState ↔ commands, bad-message counts.
 
-Both bridges speak the same ROS graph: `/joint_commands` and `/joint_states` are world 0 (the
-seed's topics), `/world_N/joint_commands` and `/world_N/joint_states` are world N for the worlds
-the user exposes, and `/clock` is the simulated time. A JointState command is checked here before
-it reaches the control layer so that a bad one is counted under a stable kind (the control layer
-validates again and stays the authority).
+rosbridge speaks the same ROS graph as the armfleet_ros node: `/joint_commands` and
+`/joint_states` are world 0 (the seed's topics), `/world_N/joint_commands` and
+`/world_N/joint_states` are world N for the worlds the user exposes, and `/clock` is the
+simulated time. A JointState command is checked here before it reaches the control layer so that
+a bad one is counted under a stable kind (the control layer validates again and stays the
+authority).
 """
 
 from __future__ import annotations
@@ -13,14 +14,12 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from service.core.commands.rules import BadJointState
-from service.core.errors import ArmfleetError
 from service.core.types import Snapshot
 
 log = logging.getLogger("armfleet.ros")
@@ -28,6 +27,8 @@ log = logging.getLogger("armfleet.ros")
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 CLOCK_TOPIC = "/clock"
+TF = "tf2_msgs/msg/TFMessage"
+STRING = "std_msgs/msg/String"
 
 ROS2 = "ros2"  # the label of commands that came over DDS (metrics, recordings)
 
@@ -70,12 +71,9 @@ class TopicMap:
         """Topic name → ROS 2 type, everything armfleet has on the graph."""
         out = dict.fromkeys([*self.command_topics(), *self.state_topics()], JOINT_STATE_TYPE)
         out[CLOCK_TOPIC] = CLOCK_TYPE
+        for ns in self.namespaces():  # the robot topics (rosbridge_frames.py)
+            out |= {f"{ns}/tf": TF, f"{ns}/tf_static": TF, f"{ns}/robot_description": STRING}
         return dict(sorted(out.items()))
-
-
-def dds_name(topic: str) -> str:
-    """ROS 2 topic name → DDS topic name (the rmw convention: `rt` prefix)."""
-    return "rt" + topic
 
 
 def sim_seconds(snap: Snapshot, tick_dt: float) -> float:
@@ -153,59 +151,3 @@ class BadMessageCounter:
     def total(self) -> int:
         with self._lock:
             return sum(self._counts.values())
-
-
-class ListenedWriters:
-    """The DDS writers somebody subscribes to, refreshed every `interval` seconds: a message
-    nobody reads is not even built (many `--ros2-worlds` cost nothing until someone listens)."""
-
-    def __init__(self, writers: list[tuple[Any, int]], interval: float = 0.5) -> None:
-        self.writers = writers  # (writer, world)
-        self._interval = interval
-        self._checked = -math.inf
-        self._listened: list[tuple[Any, int]] = []
-
-    def current(self) -> list[tuple[Any, int]]:
-        now = time.monotonic()
-        if now - self._checked >= self._interval:
-            self._checked = now
-            self._listened = [
-                (w, world)
-                for w, world in self.writers
-                if w.get_publication_matched_status().current_count
-            ]
-        return self._listened
-
-
-def take_commands(
-    reader: Any, kind: type, topic: str, bad: BadMessageCounter, apply: Callable[[Any], None]
-) -> tuple[bool, int]:
-    """Take up to a batch of samples from a DDS reader and `apply` each message in order.
-
-    Returns (whether anything was taken, how many were accepted). A BadMessage or a refusal of
-    the control layer is counted under its kind, never raised: one bad message must not end
-    the reader thread. Cyclone checks every sample's CDR against the type before handing it
-    over, so a take that fails to decode should not happen; if it does, it counts as malformed.
-    """
-    try:
-        samples = reader.take(N=64)
-    except Exception as exc:
-        bad.report("malformed", topic, f"undecodable CDR ({type(exc).__name__}: {exc})")
-        return True, 0
-    accepted = 0
-    for msg in samples:
-        if not isinstance(msg, kind):
-            continue  # a dispose/unregister notice, not a message
-        try:
-            apply(msg)
-        except BadMessage as exc:
-            bad.report(exc.kind, topic, exc.detail)
-        except BadJointState as exc:  # the one JointState rule, classified
-            bad.report(exc.reason, topic, str(exc))
-        except ArmfleetError as exc:
-            bad.report("rejected", topic, str(exc))
-        except Exception:
-            log.exception("ROS 2 command on %s failed", topic)
-        else:
-            accepted += 1
-    return bool(samples), accepted

@@ -55,13 +55,14 @@ class Link:
     pos: tuple[float, float, float]
     quat: tuple[float, float, float, float]
     site: int = -1
+    alias: bool = False  # a UR frame name (`base_link`, `tool0`): a frame only, no shapes
 
 
 def _name(mjm: mujoco.MjModel, obj: mujoco.mjtObj, i: int) -> str:
     return mujoco.mj_id2name(mjm, obj, i) or f"{obj.name.removeprefix('mjOBJ_').lower()}_{i}"
 
 
-def _free_floating(mjm: mujoco.MjModel, body: int) -> bool:
+def free_floating(mjm: mujoco.MjModel, body: int) -> bool:
     """True if the body or an ancestor has a free joint (it is scenery, not the robot)."""
     while body > 0:
         start, count = mjm.body_jntadr[body], mjm.body_jntnum[body]
@@ -78,7 +79,7 @@ def robot_links(mjm: mujoco.MjModel) -> list[Link]:
     a body with two joints, or a joint placed away from its body's origin, has no URDF form.
     """
     links: list[Link] = []
-    bodies = [b for b in range(1, mjm.nbody) if not _free_floating(mjm, b)]
+    bodies = [b for b in range(1, mjm.nbody) if not free_floating(mjm, b)]
     for b in bodies:
         name = _name(mjm, mujoco.mjtObj.mjOBJ_BODY, b)
         parent_id = int(mjm.body_parentid[b])
@@ -114,10 +115,36 @@ def robot_links(mjm: mujoco.MjModel) -> list[Link]:
             name = _name(mjm, mujoco.mjtObj.mjOBJ_SITE, s)
             pos, quat = _tuple(mjm.site_pos[s]), _tuple(mjm.site_quat[s])
             links.append(Link(name, parent, body, -1, f"{parent}_to_{name}", pos, quat, site=s))
+    links += _ur_frames(links)
     names = [ROOT_LINK] + [link.name for link in links]
     if len(set(names)) != len(names):
         raise ValueError("body and site names must be unique to name URDF links")
     return links
+
+
+# Frames ur_description names that the model has no body or site for: (name, parent, quat w x y z).
+# The model's `base` body is ur_description's `base` (base_link turned half a turn about z), and
+# its `flange` site sits on the flange face with wrist_3_link's axes (z out of the tool), which
+# are tool0's; so a chain `base_link` -> `tool0` resolves as on a real UR.
+_UR_FRAMES = (
+    ("base_link", "base", (0.0, 0.0, 0.0, 1.0)),
+    ("tool0", "flange", (1.0, 0.0, 0.0, 0.0)),
+)
+
+
+def _ur_frames(links: list[Link]) -> list[Link]:
+    """The UR frame names missing from the model, fixed to the frames they are defined from."""
+    have = {link.name: link for link in links}
+    out = []
+    for name, parent, quat in _UR_FRAMES:
+        if name not in have and parent in have:
+            body = have[parent].body
+            out.append(
+                Link(
+                    name, parent, body, -1, f"{parent}_to_{name}", (0.0, 0.0, 0.0), quat, alias=True
+                )
+            )
+    return out
 
 
 def _tuple(values: np.ndarray) -> tuple:
@@ -175,7 +202,7 @@ def _shapes(mjm: mujoco.MjModel, g: int) -> list[tuple[str, np.ndarray]]:
 def _visuals(mjm: mujoco.MjModel, link: Link, materials: dict[tuple, str]) -> list[str]:
     out = []
     for g in range(mjm.ngeom):
-        if int(mjm.geom_bodyid[g]) != link.body or link.site >= 0:
+        if int(mjm.geom_bodyid[g]) != link.body or link.site >= 0 or link.alias:
             continue
         if int(mjm.geom_group[g]) not in VISIBLE_GROUPS or mjm.geom_rgba[g, 3] == 0:
             continue
@@ -196,7 +223,7 @@ def _visuals(mjm: mujoco.MjModel, link: Link, materials: dict[tuple, str]) -> li
 
 def _inertial(mjm: mujoco.MjModel, link: Link) -> str:
     mass = float(mjm.body_mass[link.body])
-    if link.site >= 0 or mass <= 0:
+    if link.site >= 0 or link.alias or mass <= 0:
         return ""
     ixx, iyy, izz = (_num(v) for v in mjm.body_inertia[link.body])
     return (

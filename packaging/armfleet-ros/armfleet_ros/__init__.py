@@ -1,0 +1,8 @@
+"""armfleet_ros: armfleet's worlds as a ROS 2 node of the user's own ROS installation.
+
+Runs on the installation's Python (Humble's 3.10 on) with its rclpy and message packages, and
+reaches armfleet over HTTP/WebSocket with armfleet's client library (`clients`, the
+armfleet-client distribution). Modules: `node` (parameters, wiring, `main`), `world` (one
+namespace's topics), `actions` (FollowJointTrajectory, GripperCommand), `frames` (/tf),
+`link` (the WebSockets), `convert` (messages checked and turned into commands).
+"""

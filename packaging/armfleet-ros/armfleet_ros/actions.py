@@ -1,0 +1,212 @@
+"""The UR driver's and the Robotiq driver's action servers, per world, on armfleet's API.
+
+- FollowJointTrajectory (`scaled_joint_trajectory_controller`, `joint_trajectory_controller`):
+  a goal is started on armfleet's trajectory core (`POST /v1/worlds/{w}/trajectory`) inside the
+  goal callback, so an invalid one is rejected at `send_goal` with armfleet's reason and nothing
+  moves; feedback polls `GET /v1/trajectories/{id}` at 20 Hz; the outcome maps to control_msgs'
+  error codes (path -4, goal tolerance -5, preempted / manual override / reset / fault -1 with
+  the reason in `error_string`); cancel is `DELETE .../trajectory` and the arm holds.
+- GripperCommand (`robotiq_gripper_controller/gripper_cmd`): a target on `finger_joint`
+  (clamped by armfleet), tended from the state stream as GripperActionController does:
+  reached within 0.01 rad, or stalled after 0.2 simulated seconds without motion; another
+  command on the finger (a newer goal included) aborts it; cancel holds the finger.
+
+Execute callbacks block (one executor thread per running goal): rclpy's coroutine callbacks
+behave differently across distributions, threads do not.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any
+
+from control_msgs.action import FollowJointTrajectory, GripperCommand
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+
+from armfleet_ros.convert import ARM_JOINTS, BadMessage, stamp, trajectory_body
+from clients import trajectory as tj
+from clients.errors import ArmfleetError
+
+FEEDBACK_HZ = 20.0  # joint_trajectory_controller's default action_monitor_rate
+GOAL_TOLERANCE = 0.01  # rad: GripperActionController's default goal_tolerance
+STALL_VELOCITY = 0.01  # rad/s: below this the finger counts as not moving
+STALL_TIMEOUT_S = 0.2  # simulated seconds short of the goal without motion: stalled
+FJT_ACTIONS = ("scaled_joint_trajectory_controller", "joint_trajectory_controller")
+GRIPPER_ACTION = "robotiq_gripper_controller/gripper_cmd"
+_CODES = {"path_tolerance": -4, "goal_tolerance": -5}  # else INVALID_GOAL (-1)
+
+
+def _fill_point(point: Any, values: Any, elapsed: float) -> None:
+    point.positions = [0.0 if math.isnan(v) else float(v) for v in values]
+    sec, nanosec = stamp(elapsed)
+    point.time_from_start.sec, point.time_from_start.nanosec = sec, nanosec
+
+
+class TrajectoryActions:
+    """FollowJointTrajectory servers of one world (both controller names)."""
+
+    def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
+        self.owner, self.world = owner, world
+        self._started: dict[int, int] = {}  # id(goal message) → trajectory id
+        self._lock = threading.Lock()
+        self.servers = [
+            ActionServer(
+                part.servers,
+                FollowJointTrajectory,
+                f"{ns}/{name}/follow_joint_trajectory",
+                execute_callback=self._execute,
+                goal_callback=self._goal,
+                cancel_callback=lambda _h: CancelResponse.ACCEPT,
+                callback_group=part.group,
+            )
+            for name in FJT_ACTIONS
+        ]
+
+    def _goal(self, goal: Any) -> GoalResponse:
+        where = f"world {self.world} follow_joint_trajectory"
+        arm = self.owner.joints[:ARM_JOINTS]
+        try:
+            extra = [n for n in goal.trajectory.joint_names if n not in arm]
+            if extra:
+                raise BadMessage("rejected_goal", f"joints {extra} are not the arm's {arm}")
+            body = trajectory_body(
+                goal.trajectory, goal.path_tolerance, goal.goal_tolerance, goal.goal_time_tolerance
+            )
+            started = self.owner.http._call(tj.start_call(self.world, body))
+        except BadMessage as exc:
+            self.owner.bad.report("rejected_goal", where, exc.detail)
+            return GoalResponse.REJECT
+        except ArmfleetError as exc:
+            self.owner.bad.report("rejected_goal", where, str(exc))
+            return GoalResponse.REJECT
+        with self._lock:
+            self._started[id(goal)] = started.id
+        return GoalResponse.ACCEPT
+
+    def _execute(self, handle: Any) -> Any:
+        with self._lock:
+            traj_id = self._started.pop(id(handle.request))
+        http, dt = self.owner.http, self.owner.tick_dt
+        result = FollowJointTrajectory.Result()
+        while True:
+            if handle.is_cancel_requested:
+                status = http._call(tj.by_id_call(traj_id))
+                if not status.done:
+                    http._call(tj.cancel_call(self.world))
+                    status = http._call(tj.by_id_call(traj_id, 2.0))
+                if status.reason == "cancelled" or not status.done:
+                    handle.canceled()
+                    result.error_string = "cancelled"
+                    return result
+            else:
+                status = http._call(tj.by_id_call(traj_id, 1.0 / FEEDBACK_HZ))
+            if status.done:
+                break
+            if status.actual.size:
+                handle.publish_feedback(self._feedback(status, dt))
+        if status.succeeded:
+            handle.succeed()
+            return result
+        reason = status.reason or "aborted"
+        result.error_code = _CODES.get(reason, -1)
+        result.error_string = f"{reason}: {status.detail}" if status.detail else reason
+        if reason == "cancelled":
+            result.error_code = 0
+            handle.canceled()
+        else:
+            handle.abort()
+        return result
+
+    @staticmethod
+    def _feedback(status: Any, dt: float) -> Any:
+        fb = FollowJointTrajectory.Feedback()
+        sec, nanosec = stamp(status.tick * dt)
+        fb.header.stamp.sec, fb.header.stamp.nanosec = sec, nanosec
+        fb.joint_names = list(status.joint_names)
+        elapsed = max(0.0, (status.tick - status.start_tick + 1) * dt)
+        _fill_point(fb.desired, status.desired, elapsed)
+        _fill_point(fb.actual, status.actual, elapsed)
+        _fill_point(fb.error, status.error, elapsed)
+        return fb
+
+
+class GripperAction:
+    """The Robotiq GripperCommand server of one world."""
+
+    def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
+        self.owner, self.world = owner, world
+        self.finger = owner.joints.index("finger_joint")
+        self.server = ActionServer(
+            part.servers,
+            GripperCommand,
+            f"{ns}/{GRIPPER_ACTION}",
+            execute_callback=self._execute,
+            goal_callback=self._goal,
+            cancel_callback=lambda _h: CancelResponse.ACCEPT,
+            callback_group=part.group,
+        )
+
+    def _goal(self, goal: Any) -> GoalResponse:
+        position, effort = goal.command.position, goal.command.max_effort
+        bad = None
+        if not (math.isfinite(position) and math.isfinite(effort)):
+            bad = f"command.position {position} and max_effort {effort} must be finite"
+        elif effort < 0:
+            bad = f"command.max_effort must be >= 0, got {effort}"
+        if bad is not None:
+            self.owner.bad.report("rejected_goal", f"world {self.world} gripper_cmd", bad)
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _execute(self, handle: Any) -> Any:
+        link = self.owner.link
+        try:
+            ack = link.set_targets(self.world, {"finger_joint": handle.request.command.position})
+            ack = ack.result(timeout=5.0)
+        except Exception as exc:
+            self.owner.bad.report("rejected_goal", f"world {self.world} gripper_cmd", str(exc))
+            handle.abort()
+            return self._result(False)
+        target = float(ack.target[self.finger])
+        moved_at = math.inf
+        period = 1.0 / FEEDBACK_HZ
+        while True:
+            time.sleep(period)
+            st = link.latest
+            if st is None or st.tick < ack.tick:
+                continue  # the new target is not stepped yet
+            row = st.row(self.world)
+            now = st.tick * self.owner.tick_dt
+            moved_at = min(moved_at, now)
+            position = float(st.position[row, self.finger])
+            if handle.is_cancel_requested:
+                link.set_targets(self.world, {"finger_joint": position})
+                handle.canceled()
+                return self._result(False, position, st.effort[row, self.finger])
+            if abs(float(st.target[row, self.finger]) - target) > 1e-5:
+                handle.abort()  # another command (or a newer goal) took the finger over
+                return self._result(False, position, st.effort[row, self.finger])
+            reached = abs(position - target) < GOAL_TOLERANCE
+            if reached:
+                handle.succeed()
+                return self._result(False, position, st.effort[row, self.finger], True)
+            if abs(float(st.velocity[row, self.finger])) > STALL_VELOCITY:
+                moved_at = now
+            elif now - moved_at >= STALL_TIMEOUT_S:
+                handle.succeed()
+                return self._result(True, position, st.effort[row, self.finger], False)
+            fb = GripperCommand.Feedback()
+            fb.position, fb.effort = position, float(st.effort[row, self.finger])
+            fb.stalled, fb.reached_goal = False, False
+            handle.publish_feedback(fb)
+
+    @staticmethod
+    def _result(
+        stalled: bool, position: float = 0.0, effort: float = 0.0, reached: bool = False
+    ) -> Any:
+        result = GripperCommand.Result()
+        result.position, result.effort = float(position), float(effort)
+        result.stalled, result.reached_goal = stalled, reached
+        return result

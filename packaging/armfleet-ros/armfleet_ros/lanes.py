@@ -1,0 +1,164 @@
+"""Command lanes: the node's commands to armfleet, on a few WebSockets of their own.
+
+armfleet gives each connection a command budget (`--command-rate`, 200/s by default), meant
+for one client; the node speaks for every ROS user of every world. So commands go out on up to
+16 lanes (world w on lane w mod 16), each its own connection and budget, each paced here below
+that budget. A lane never has a command refused for rate: while its budget is spent, commands
+for a world wait and merge (later joint values replace earlier ones, in arrival order) and go
+out as one command as soon as budget returns; each message's future completes with that ack.
+The control loop applies targets once per tick, so a merge within a tick changes nothing it
+would have done; it only happens past the budget (e.g. one world commanded at 500 Hz).
+
+A command's ack makes armfleet send that lane's worlds' next state frame at once, whatever the
+lane's 1 Hz cadence; the node publishes it, which keeps a command's round trip short.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable, Mapping
+from concurrent.futures import Future
+from typing import Any
+
+from websockets.asyncio.client import connect
+
+from clients import _stream
+from clients.errors import CommandRejected, Unreachable
+from clients.models import BatchStates, CommandAck, WsError
+
+log = logging.getLogger("armfleet_ros")
+
+MAX_LANES = 16
+LANE_STATE_HZ = 1.0
+
+
+class Lane:
+    """One command connection for some worlds, paced below armfleet's per-connection budget."""
+
+    def __init__(
+        self, url: str, worlds: list[int], rate: float, on_states: Callable[[BatchStates], None]
+    ) -> None:
+        self.url = url
+        self.worlds = worlds
+        self.rate = rate  # commands/s this lane may send (a margin below armfleet's)
+        self.burst = max(1.0, rate / 2)
+        self.on_states = on_states
+        self._tokens = self.burst
+        self._last = time.monotonic()
+        self._ws: Any = None
+        self._ids = _stream.CommandIds()
+        self._pending: dict[int, list[Future]] = {}
+        self._queued: dict[int, tuple[dict[str, float], list[Future]]] = {}
+        self._wake: asyncio.Event | None = None
+        self.merged = 0  # messages that went out merged with a later one
+
+    def submit(self, world: int, targets: Mapping[str, float], fut: Future) -> None:
+        """On the link's event loop: send now, or queue (merging) until budget returns."""
+        if self._ws is None:
+            fut.set_exception(Unreachable(None, f"{self.url}: not connected to armfleet"))
+            return
+        if world in self._queued:
+            values, futs = self._queued[world]
+            values.update(targets)
+            futs.append(fut)
+            self.merged += 1
+            return
+        if self._take():
+            self._send(world, dict(targets), [fut])
+        else:
+            self._queued[world] = (dict(targets), [fut])
+            assert self._wake is not None
+            self._wake.set()
+
+    def _take(self) -> bool:
+        now = time.monotonic()
+        self._tokens = min(self.burst, self._tokens + (now - self._last) * self.rate)
+        self._last = now
+        if self._tokens >= 1.0:
+            self._tokens -= 1.0
+            return True
+        return False
+
+    def _send(self, world: int, targets: dict[str, float], futs: list[Future]) -> None:
+        msg_id, text = self._ids.set_targets(targets, world)
+        self._pending[msg_id] = futs
+        task = asyncio.ensure_future(self._ws.send(text))
+        task.add_done_callback(lambda t: self._sent(t, msg_id))
+
+    def _sent(self, task: asyncio.Task, msg_id: int) -> None:
+        if task.cancelled() or task.exception() is not None:
+            self._fail(self._pending.pop(msg_id, []), "connection lost")
+
+    def _fail(self, futs: list[Future], why: str) -> None:
+        for fut in futs:
+            if not fut.done():
+                fut.set_exception(Unreachable(None, f"{self.url}: {why}"))
+
+    async def _flush(self) -> None:
+        """Send queued (merged) commands as budget returns."""
+        assert self._wake is not None
+        while True:
+            await self._wake.wait()
+            while self._queued:
+                if not self._take():
+                    await asyncio.sleep(max(0.001, (1.0 - self._tokens) / self.rate))
+                    continue
+                world = next(iter(self._queued))
+                values, futs = self._queued.pop(world)
+                if self._ws is None:
+                    self._fail(futs, "not connected to armfleet")
+                else:
+                    self._send(world, values, futs)
+            self._wake.clear()
+
+    async def run(self, stopping: Callable[[], bool]) -> None:
+        self._wake = asyncio.Event()
+        flusher = asyncio.ensure_future(self._flush())
+        url = _stream.ws_url(self.url, self.worlds, LANE_STATE_HZ, binary=True)
+        backoff = _stream.Backoff(maximum=1.0)
+        try:
+            while not stopping():
+                try:
+                    async with connect(url, max_size=_stream.MAX_SIZE, proxy=None) as ws:
+                        self._ws = ws
+                        backoff.reset()
+                        async for data in ws:
+                            self._frame(data)
+                except _stream.LOST as exc:
+                    log.debug("command lane: %s", _stream.reason_for(exc))
+                self._ws = None
+                for futs in self._pending.values():
+                    self._fail(futs, "connection lost")
+                self._pending.clear()
+                await asyncio.sleep(backoff.next())
+        finally:
+            flusher.cancel()
+
+    def _frame(self, data: Any) -> None:
+        msg = _stream.parse(data)
+        if isinstance(msg, BatchStates):
+            try:
+                self.on_states(msg)
+            except Exception:
+                log.exception("publishing a state frame failed")
+        elif isinstance(msg, (CommandAck, WsError)):
+            futs = self._pending.pop(msg.id, []) if msg.id is not None else []
+            for fut in futs:
+                if fut.done():
+                    continue
+                if isinstance(msg, WsError):
+                    fut.set_exception(CommandRejected(None, msg.detail))
+                else:
+                    fut.set_result(msg)
+
+
+def lanes_for(
+    url: str, worlds: list[int], rate: float, on_states: Callable[[BatchStates], None]
+) -> tuple[list[Lane], dict[int, Lane]]:
+    """Up to MAX_LANES lanes over `worlds`, and which lane each world's commands take."""
+    n = max(1, min(MAX_LANES, len(worlds)))
+    groups = [worlds[i::n] for i in range(n)]
+    lanes = [Lane(url, g, rate, on_states) for g in groups if g]
+    return lanes, {w: lane for lane in lanes for w in lane.worlds}

@@ -1,0 +1,230 @@
+"""`armfleet_node`: armfleet's worlds on the ROS 2 graph, as a node of the user's own ROS.
+
+    ros2 run armfleet_ros armfleet_node --ros-args -p url:=http://127.0.0.1:8000 -p worlds:=0-7
+
+It reaches armfleet by URL (HTTP and WebSocket, with armfleet's client library), so armfleet may
+run on another machine; everything ROS (middleware, QoS, graph, type hashes, services, actions)
+is the installation's own. Parameters: `url`, `worlds` (worlds with `/world_N/...`; world 0 is
+also at the root, the seed's names), `rate` (Hz of `/joint_states`, `/clock`, `/tf`),
+`play_mode` (what simulation_interfaces' PLAYING means: realtime or fast), `command_rate`
+(armfleet's `--command-rate`, the budget of each of the node's command lanes: lanes.py).
+Written for Python 3.10 and rclpy 3.3 (Humble) on: no newer API is used.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import sys
+import threading
+import time
+from typing import Any
+
+import rclpy
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+
+from armfleet_ros.convert import Counter, stamp
+from armfleet_ros.frames import TfTree
+from armfleet_ros.link import FleetLink
+from armfleet_ros.params import param
+from armfleet_ros.parts import slices
+from armfleet_ros.world import WorldTopics
+from clients import ArmfleetClient
+from clients._http import Call
+from clients.errors import ArmfleetError
+
+NODE_NAME = "armfleet"
+
+
+def parse_worlds(spec: str, nworld: int) -> list[int]:
+    """'0-7,9' → [0, ..., 7, 9] (each < nworld); '' → []."""
+    out: list[int] = []
+    for part in filter(None, (p.strip() for p in spec.split(","))):
+        lo, _, hi = part.partition("-")
+        first, last = int(lo), int(hi or lo)
+        if not 0 <= first <= last < nworld:
+            raise ValueError(f"worlds: {part!r} is outside 0..{nworld - 1}")
+        out.extend(range(first, last + 1))
+    return sorted(set(out))
+
+
+class ArmfleetNode:
+    """The node, its link to armfleet and every world's topics and actions."""
+
+    def __init__(self, node: Node) -> None:
+        self.node = node  # parameters, /clock and the first slice's topics (parts.py)
+        log = node.get_logger()
+        self.url = str(param(node, "url", "http://127.0.0.1:8000"))
+        spec = str(param(node, "worlds", ""))  # `worlds:=3` arrives as an integer
+        self.rate = float(param(node, "rate", 60.0))  # `rate:=100` too
+        self.http = ArmfleetClient(self.url, timeout=10.0)
+        self._wait_for_armfleet(log)
+        info = self.http.info()
+        self.joints = info.names
+        self.tick_dt = 1.0 / info.control_hz
+        self.worlds = parse_worlds(spec, info.nworld)
+        self.urdf = self.http._call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
+        self.frames = self.http._call(Call("GET", "/v1/ros/frames", lambda d: d))
+        self.tree = TfTree(self.frames)
+        self.bad = Counter(log)
+        self.accepted = 0
+        self._publish_lock = threading.Lock()
+        self._clock_tick = -1
+        self._world_tick: dict[int, int] = {}
+        self._last_generation = 0
+        self._reported: dict = {}
+        self._reported_at = 0.0
+        self.clock = node.create_publisher(Clock, "/clock", 10)
+        spaces = [("", 0)] + [(f"/world_{w}", w) for w in self.worlds]
+        self.parts = slices(spaces, NODE_NAME, node)
+        self.spaces = [WorldTopics(self, w, ns, part) for part, sl in self.parts for ns, w in sl]
+        self._simulation_interfaces(log)
+        served = sorted({w for _, w in spaces})
+        command_rate = float(param(node, "command_rate", 200.0))
+        self.link = FleetLink(self.url, served, self.rate, self._publish, command_rate)
+        self.link.start()
+        self._stop = threading.Event()
+        # not an executor timer: a wake-up of the topics executor walks all its entities
+        threading.Thread(target=self._refresh_loop, name="armfleet-refresh", daemon=True).start()
+        log.info(
+            f"serving {len(served)} worlds of {self.url} "
+            f"({len(self.spaces)} namespaces, {self.rate:g} Hz)"
+        )
+
+    def _simulation_interfaces(self, log: Any) -> None:
+        """The standard simulator services, where the installation has the package."""
+        try:
+            from armfleet_ros.sim import GlobalSim, WorldSim
+        except ImportError as exc:
+            log.warning(f"simulation_interfaces is not installed ({exc}): its services are off")
+            return
+        self.sim = GlobalSim(self, self.parts[0][0])
+        self.entities = [WorldSim(self, w, ns, part) for part, sl in self.parts for ns, w in sl]
+
+    def _wait_for_armfleet(self, log: Any) -> None:
+        """Whichever starts first: wait (for ever) until armfleet answers /readyz."""
+        if self.http.ready():
+            return
+        log.info(f"waiting for armfleet at {self.url}")
+        while not self.http.ready():
+            time.sleep(0.5)
+        log.info(f"armfleet at {self.url} is ready")
+
+    def _refresh_loop(self) -> None:
+        while not self._stop.wait(0.5):
+            try:
+                self._refresh()
+            except Exception as exc:  # never end the loop: it keeps state topics alive
+                self.node.get_logger().warning(f"refresh: {exc}")
+
+    def _refresh(self) -> None:
+        for space in self.spaces:
+            space.refresh()
+        self.link.watch_poses(sorted({s.world for s in self.spaces if s.listened_tf}))
+        self._report()
+
+    def _report(self) -> None:
+        """The node's counters, shown by armfleet's `GET /v1/ros` (best effort): when they
+        changed, else every 10 s."""
+        body = {
+            "name": f"/{NODE_NAME}",
+            "connected": self.link.connected,
+            "worlds": len(self.spaces),
+            "accepted": self.accepted,
+            "merged": sum(lane.merged for lane in self.link.lanes),
+            "rejected": self.bad.counts(),
+        }
+        now = time.monotonic()
+        if body == self._reported and now - self._reported_at < 10.0:
+            return
+        self._reported, self._reported_at = body, now
+        with contextlib.suppress(ArmfleetError):
+            self.http._call(Call("PUT", "/v1/ros/node", lambda d: d, json=body))
+
+    def _publish(self, batch: Any) -> None:
+        """A state frame arrived (the link's thread; a catch-up: an executor thread): `/clock`,
+        then each listened world the frame is news for. Never back in time (the state socket
+        and the command lanes deliver frames of the same ticks), unless armfleet restarted."""
+        with self._publish_lock:
+            gen = self.link.generation
+            if gen != self._last_generation:
+                self._last_generation, self._clock_tick = gen, -1
+                self._world_tick = {}
+            tick = batch.tick
+            sec, nanosec = stamp(tick * self.tick_dt)
+            if tick > self._clock_tick:
+                self._clock_tick = tick
+                clock = Clock()
+                clock.clock.sec, clock.clock.nanosec = sec, nanosec
+                self.clock.publish(clock)
+            rows = {}
+            for i, w in enumerate(batch.worlds.tolist()):
+                if tick > self._world_tick.get(w, -1):
+                    self._world_tick[w] = tick
+                    rows[w] = i
+            if not rows:
+                return
+            poses = self.link.poses
+            for space in self.spaces:
+                row = rows.get(space.world)
+                if row is None:
+                    continue
+                if space.listened_states:
+                    space.publish_state(batch, row, sec, nanosec)
+                if space.listened_tf and poses is not None and space.world in poses.row:
+                    world_poses = poses.poses[poses.row[space.world]]
+                    space.tf.publish(self.tree.moving_message(world_poses, sec, nanosec))
+
+    def catch_up(self) -> None:
+        """Publish the states of now, read over HTTP: after a pause or steps through this node
+        (armfleet's stream keeps its cadence, so a burst of stepped ticks ends between frames
+        and, paused, no later frame comes)."""
+        try:
+            self._publish(self.http.states(self.link.worlds))
+        except ArmfleetError as exc:
+            self.node.get_logger().warning(f"states after a step: {exc}")
+
+    def executors(self) -> list[Any]:
+        return [ex for part, _ in self.parts for ex in part.executors()]
+
+    def close(self) -> None:
+        self._stop.set()
+        self.link.stop()
+        self.http.close()
+
+
+def main(args: list | None = None) -> None:
+    logging.basicConfig(level=logging.INFO, format="[armfleet_ros] %(message)s")
+    logging.getLogger("httpx").setLevel(logging.WARNING)
+    rclpy.init(args=args)
+    node = Node(NODE_NAME)
+    try:
+        fleet = ArmfleetNode(node)
+    except (ValueError, ArmfleetError) as exc:
+        node.get_logger().error(str(exc))
+        node.destroy_node()
+        rclpy.shutdown()
+        sys.exit(2)
+    first, *others = fleet.executors()
+    for ex in others:
+        threading.Thread(target=_spin, args=(ex,), name="armfleet-executor", daemon=True).start()
+    try:
+        first.spin()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        fleet.close()
+        for part, _ in fleet.parts:
+            part.close()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+def _spin(executor: Any) -> None:
+    with contextlib.suppress(Exception):  # ends with the context at shutdown
+        executor.spin()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,143 @@
+"""One world's topics in one namespace (`/world_N`, and the root for world 0).
+
+In: `joint_commands` (sensor_msgs/JointState, the seed's message), `forward_position_controller/
+commands` (std_msgs/Float64MultiArray, six arm joints), `scaled_joint_trajectory_controller/
+joint_trajectory` and `joint_trajectory_controller/joint_trajectory` (trajectory_msgs/
+JointTrajectory; no points = stop and hold). Out: `joint_states`, `tf`, `tf_static`,
+`robot_description`. A state topic costs nothing until something subscribes to it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+from tf2_msgs.msg import TFMessage
+from trajectory_msgs.msg import JointTrajectory
+
+from armfleet_ros import convert
+from armfleet_ros.actions import FJT_ACTIONS, GripperAction, TrajectoryActions
+from clients import trajectory as tj
+from clients.errors import ArmfleetError
+
+LATCHED = QoSProfile(
+    depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
+)
+TF_QOS = QoSProfile(depth=100)
+# Commands: rclpy's default QoS (reliable, volatile) with a deep history, so that a burst the
+# executor has not taken yet (1000/s, Isaac's 500 Hz) waits instead of being overwritten.
+COMMAND_DEPTH = 1000
+
+
+class WorldTopics:
+    """The publishers, subscriptions and action servers of one world under one namespace."""
+
+    def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
+        node = part.topics
+        self.owner, self.world, self.ns = owner, world, ns
+        group = part.group
+        self.states = node.create_publisher(JointState, f"{ns}/joint_states", 10)
+        self.tf = node.create_publisher(TFMessage, f"{ns}/tf", TF_QOS)
+        self.tf_static = node.create_publisher(TFMessage, f"{ns}/tf_static", LATCHED)
+        self.description = node.create_publisher(String, f"{ns}/robot_description", LATCHED)
+        self.tf_static.publish(owner.tree.static_message())
+        self.description.publish(String(data=owner.urdf))
+        self.subs = [
+            node.create_subscription(
+                JointState,
+                f"{ns}/joint_commands",
+                self._joint_command,
+                COMMAND_DEPTH,
+                callback_group=group,
+            ),
+            node.create_subscription(
+                Float64MultiArray,
+                f"{ns}/forward_position_controller/commands",
+                self._forward_command,
+                COMMAND_DEPTH,
+                callback_group=group,
+            ),
+        ]
+        for name in FJT_ACTIONS:
+            topic = f"{ns}/{name}/joint_trajectory"
+            self.subs.append(
+                node.create_subscription(
+                    JointTrajectory,
+                    topic,
+                    lambda msg, topic=topic: self._trajectory(msg, topic),
+                    COMMAND_DEPTH,
+                    callback_group=group,
+                )
+            )
+        self.actions = TrajectoryActions(owner, world, ns, part)
+        self.gripper = GripperAction(owner, world, ns, part)
+        self.listened_states = False
+        self.listened_tf = False
+
+    def refresh(self) -> None:
+        """Whether anyone subscribes to the state topics now (checked twice a second)."""
+        self.listened_states = self.states.get_subscription_count() > 0
+        self.listened_tf = self.tf.get_subscription_count() > 0
+
+    # -- in ------------------------------------------------------------------------------------
+
+    def _send(self, targets: dict[str, float], topic: str) -> None:
+        fut = self.owner.link.set_targets(self.world, targets)
+        fut.add_done_callback(lambda f: self._acked(f, topic))
+
+    def _acked(self, fut: Any, topic: str) -> None:
+        exc = fut.exception()
+        if exc is None:
+            self.owner.accepted += 1
+        else:
+            self.owner.bad.report("rejected", topic, str(exc))
+
+    def _joint_command(self, msg: Any) -> None:
+        topic = f"{self.ns}/joint_commands"
+        try:
+            targets = convert.joint_state_targets(self.owner.joints, msg.name, msg.position)
+        except convert.BadMessage as exc:
+            self.owner.bad.report(exc.kind, topic, exc.detail)
+            return
+        self._send(targets, topic)
+
+    def _forward_command(self, msg: Any) -> None:
+        topic = f"{self.ns}/forward_position_controller/commands"
+        try:
+            targets = convert.forward_targets(self.owner.joints, msg.data)
+        except convert.BadMessage as exc:
+            self.owner.bad.report(exc.kind, topic, exc.detail)
+            return
+        self._send(targets, topic)
+
+    def _trajectory(self, msg: Any, topic: str) -> None:
+        http = self.owner.http
+        arm = self.owner.joints[: convert.ARM_JOINTS]
+        try:
+            extra = [n for n in msg.joint_names if n not in arm]
+            if extra:
+                raise convert.BadMessage("unknown_joint", f"joints {extra} are not the arm's {arm}")
+            if not msg.points:
+                http._call(tj.cancel_call(self.world))  # no points: stop and hold
+            else:
+                http._call(tj.start_call(self.world, convert.trajectory_body(msg)))
+        except convert.BadMessage as exc:
+            self.owner.bad.report(exc.kind, topic, exc.detail)
+            return
+        except ArmfleetError as exc:
+            self.owner.bad.report("rejected", topic, str(exc))
+            return
+        self.owner.accepted += 1
+
+    # -- out -----------------------------------------------------------------------------------
+
+    def publish_state(self, batch: Any, row: int, sec: int, nanosec: int) -> None:
+        msg = JointState()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+        msg.name = list(batch.name)
+        msg.position = batch.position[row].astype(float).tolist()
+        msg.velocity = batch.velocity[row].astype(float).tolist()
+        msg.effort = batch.effort[row].astype(float).tolist()
+        self.states.publish(msg)

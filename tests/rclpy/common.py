@@ -1,0 +1,34 @@
+"""What the judge nodes share: the robot's joint names (as any UR10e + 2F-140 user writes
+them), one JSON line out, and spinning until a condition holds."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import rclpy
+from rclpy.node import Node
+
+JOINTS = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+    "finger_joint",
+]
+ARM = JOINTS[:6]
+
+
+def out(**kw) -> None:
+    print(json.dumps(kw), flush=True)
+
+
+def spin_until(node: Node, pred, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.02)
+        if pred():
+            return True
+    return False
