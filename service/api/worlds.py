@@ -15,7 +15,7 @@ from fastapi.responses import Response
 
 from service.api.deps import Ctl, Loop, World
 from service.core import wire
-from service.core.commands import entities
+from service.core.commands import entities, params
 from service.core.commands.base import HTTP
 from service.core.errors import Unavailable
 from service.core.loop import SimLoop
@@ -205,3 +205,41 @@ async def post_entities(control: Ctl, body: entities.EntityWrites) -> Response:
     items = [w.model_dump(exclude_none=True) for w in body.writes]
     done = control.run(entities.SetEntities.create(control.door, items), HTTP)
     return _json({"tick": done.tick, "worlds": done.worlds, "normalised": done.normalised})
+
+
+# -- per-world physics parameters (service/core/commands/params.py) ------------------------
+
+
+@router.get("/params", summary="The parameters a world may have of its own: names, units, ranges")
+async def get_param_table(loop: Loop) -> Response:
+    table = params.param_table(loop.batch.robot.mjm, loop.spec.names)
+    return _json({"params": [p.describe() for p in table.values()]})
+
+
+@router.get("/worlds/{world}/params", summary="One world's physics parameters")
+async def get_params(loop: Loop, world: World) -> Response:
+    await _read(loop, [world])
+    got = await asyncio.wrap_future(loop.call(lambda batch: params.read(batch, [world])))
+    return _json({"tick": got["tick"], **got["worlds"][0]})
+
+
+@router.put(
+    "/worlds/{world}/params",
+    response_model=params.ParamsAck,
+    summary="Give one world its own physics parameters, from the next tick boundary",
+)
+async def put_params(control: Ctl, world: World, body: params.ParamValues) -> Response:
+    item = {"world": world, "params": body.params}
+    done = control.run(params.SetParams.create(control.door, [item]), HTTP)
+    return _json({"tick": done.tick, "worlds": done.worlds})
+
+
+@router.post(
+    "/params",
+    response_model=params.ParamsAck,
+    summary="Physics parameters of many worlds, all from one tick boundary (or none)",
+)
+async def post_params(control: Ctl, body: params.ParamWrites) -> Response:
+    items = [w.model_dump() for w in body.writes]
+    done = control.run(params.SetParams.create(control.door, items), HTTP)
+    return _json({"tick": done.tick, "worlds": done.worlds})
