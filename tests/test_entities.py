@@ -165,3 +165,34 @@ def test_every_engine_holds_a_written_pose_bit_for_bit(engine):
         assert not np.array_equal(batch.qpos()[0], batch.qpos()[1])
     finally:
         batch.close()
+
+
+def test_the_python_clients_set_and_read_entities_and_parameters(paused):
+    import asyncio
+
+    from clients import ArmfleetClient, AsyncArmfleetClient
+
+    with ArmfleetClient(paused.url) as client:
+        ack = client.set_entity(0, "cube", position=[0.3, -0.5, 1.0], linear=[0, 0, 0])
+        client.set_params(0, {"cube.mass": 0.2})
+        client.step(1)
+        cube = client.entity(0, "cube")
+        assert cube["tick"] == ack["tick"] and cube["position"][:2] == [0.3, -0.5]
+        assert client.params(0)["params"]["cube.mass"] == 0.2
+        assert any(p["name"] == "payload" for p in client.param_table()["params"])
+        many = client.set_entities(
+            [{"world": w, "name": "cube", "angular": [0, 0, 1]} for w in (1, 2)]
+        )
+        assert many["worlds"] == [1, 2]
+
+    async def go() -> None:
+        async with AsyncArmfleetClient(paused.url) as client:
+            ack = await client.set_params_many(
+                [(1, {"cube.friction": 0.5}), (2, {"payload": [1, 0, 0, 0]})]
+            )
+            await client.step(1)
+            assert (await client.params(1))["params"]["cube.friction"] == 0.5
+            assert (await client.params(2))["tick"] == ack["tick"]
+            assert [e["name"] for e in (await client.entities(2))["entities"]] == ["cube"]
+
+    asyncio.run(go())
