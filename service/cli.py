@@ -67,6 +67,7 @@ def serve(
     host: Annotated[str | None, _opt("host")] = None,
     port: Annotated[int | None, _opt("port")] = None,
     mode: Annotated[Mode | None, _opt("mode")] = None,
+    scene: Annotated[str | None, _opt("scene")] = None,
     shards: Annotated[int | None, _opt("shards")] = None,
     ray: Annotated[str | None, _opt("ray")] = None,
     ray_checkpoint_s: Annotated[float | None, _opt("ray_checkpoint_s")] = None,
@@ -102,12 +103,21 @@ def serve(
     Bound to anything but loopback it needs --token (or ARMFLEET_TOKEN) unless --insecure.
     """
     given = {name: value for name, value in locals().items() if value is not None}
+    from pydantic import ValidationError
+
     from service.app import create_app
     from service.core.errors import ArmfleetError
     from service.core.settings import Settings
     from service.serving import serve_until_stopped
 
-    settings = Settings(**given)
+    try:
+        settings = Settings(**given)
+    except ValidationError as exc:  # one line per problem, e.g. a scene that cannot be served
+        for err in exc.errors():
+            where = ".".join(str(p) for p in err["loc"])
+            why = str(err["msg"]).removeprefix("Value error, ")
+            typer.echo(f"armfleet serve: {where + ': ' if where else ''}{why}", err=True)
+        raise typer.Exit(2) from None
     _check_port_free(settings.host, settings.port)
     logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
     try:

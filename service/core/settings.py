@@ -12,6 +12,7 @@ from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.core.physics import DEFAULT_PHYSICS_DT
+from service.core.scene_check import check_scene
 from service.core.types import Mode
 from service.core.worlds import world_list
 
@@ -45,6 +46,11 @@ class Settings(BaseSettings):
         gt=0,
         description="--ray: seconds between copies of each shard's state into this process; a "
         "shard whose node is lost is rebuilt elsewhere from its last copy",
+    )
+    scene: Path | None = Field(
+        None,
+        description="your cell's MJCF, which brings the arm in with <include "
+        'file="ur10e_2f140.xml"/> (default: the table and cube); checked before serving',
     )
     mode: Mode = Field(Mode.REALTIME, description="how time advances: realtime, fast or paused")
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
@@ -124,6 +130,12 @@ class Settings(BaseSettings):
     def _ray_runs_the_warp_engine(self) -> Settings:
         if self.ray and self.engine != "warp":
             raise ValueError("ray: Ray actors run the warp engine only (use --engine warp)")
+        return self
+
+    @model_validator(mode="after")
+    def _scene_can_be_served(self) -> Settings:
+        if self.scene is not None:
+            check_scene(self.scene)  # SceneError (a ValueError) says what is wrong
         return self
 
     @model_validator(mode="after")
