@@ -15,7 +15,7 @@ from fastapi.responses import Response
 
 from service.api.deps import Ctl, Loop, World
 from service.core import wire
-from service.core.commands import entities, params
+from service.core.commands import entities, params, randomize
 from service.core.commands.base import HTTP
 from service.core.errors import Unavailable
 from service.core.loop import SimLoop
@@ -243,3 +243,14 @@ async def post_params(control: Ctl, body: params.ParamWrites) -> Response:
     items = [w.model_dump() for w in body.writes]
     done = control.run(params.SetParams.create(control.door, items), HTTP)
     return _json({"tick": done.tick, "worlds": done.worlds})
+
+
+@router.post(
+    "/randomize",
+    response_model=randomize.RandomizeAck,
+    summary="Reset worlds (default: all) with entity poses and parameters drawn with a seed",
+)
+async def post_randomize(control: Ctl, body: randomize.RandomizeRequest) -> Response:
+    command = randomize.Randomize.create(control.door, body.worlds, body.seed, body.spec)
+    done = control.run(command, HTTP)
+    return _json({"tick": done.tick, "worlds": done.worlds, "seed": body.seed, "spec": body.spec})
