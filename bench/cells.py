@@ -185,7 +185,7 @@ def cells(ctx: Context) -> Result:
             "measure": "randomize 10,000 worlds: draw and validate",
             "value": f"{rz['seconds']} s",
             "ratio": "",
-        }  # fmt: skip
+        }
     )
     notes = [
         "ratio: ticks/s with every listed parameter given per world over ticks/s of the shared "
