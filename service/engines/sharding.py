@@ -203,7 +203,9 @@ def slice_state(state: BatchState, start: int, stop: int) -> BatchState:
 
 
 def join_states(
-    parts: Sequence[BatchState], targets: np.ndarray, model: dict[str, np.ndarray]
+    parts: Sequence[BatchState],
+    targets: np.ndarray,
+    model: dict[str, np.ndarray] | None = None,
 ) -> BatchState:
     """One state from the shards' states, in shard order; `targets` and the per-world model
     fields (`MODEL_PREFIX` entries) are the caller's, which knows every world's."""
@@ -217,7 +219,7 @@ def join_states(
         world_ticks=np.concatenate([p.world_ticks for p in parts]),
         faults=np.concatenate([p.faults for p in parts]),
         targets=targets.copy(),
-        physics={**physics, **model},
+        physics={**physics, **(model or {})},
     )
 
 

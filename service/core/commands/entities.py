@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from service.core.batch import Batch, StateWrite
 from service.core.commands import rules
@@ -130,6 +130,15 @@ class EntityValues(Strict):
         None, min_length=3, max_length=3, description="angular velocity [rad/s], body frame"
     )
 
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"position": [0.7, 0.1, 0.9], "orientation": [1, 0, 0, 0], "linear": [0, 0, 0]}
+            ]
+        },
+    )
+
 
 class EntityWrite(EntityValues):
     """One entity of one world, in a batch write."""
@@ -137,11 +146,30 @@ class EntityWrite(EntityValues):
     world: WorldId
     name: str
 
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]}]},
+    )
+
 
 class EntityWrites(Strict):
     """Entity writes for any worlds, all applied at one tick boundary (or none of them)."""
 
     writes: list[EntityWrite] = Field(min_length=1, max_length=MAX_WRITES)
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "writes": [
+                        {"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]},
+                        {"world": 1, "name": "cube", "angular": [0, 0, 2]},
+                    ]
+                }
+            ]
+        },
+    )
 
 
 class EntityAck(Strict):

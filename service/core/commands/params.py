@@ -33,7 +33,7 @@ from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from service.core.batch import Batch, ModelWrite
 from service.core.commands import rules
@@ -231,13 +231,40 @@ class ParamValues(Strict):
         min_length=1, description="parameter name → value ([mass, x, y, z] for payload)"
     )
 
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"params": {"cube.mass": 0.3, "cube.friction": 0.5, "payload": [1.5, 0, 0, 0.08]}}
+            ]
+        },
+    )
+
 
 class ParamWrite(ParamValues):
     world: WorldId
 
+    model_config = ConfigDict(
+        extra="forbid", json_schema_extra={"examples": [{"world": 0, "params": {"cube.mass": 0.3}}]}
+    )
+
 
 class ParamWrites(Strict):
     writes: list[ParamWrite] = Field(min_length=1, max_length=MAX_WRITES)
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "writes": [
+                        {"world": 0, "params": {"cube.mass": 0.3}},
+                        {"world": 1, "params": {"elbow_joint.damping": 5}},
+                    ]
+                }
+            ]
+        },
+    )
 
 
 class ParamsAck(Strict):

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from service.core.commands import rules
 from service.core.commands.base import Announcement, Command, Door
@@ -44,6 +44,26 @@ class RandomizeRequest(Strict):
         '"params": {name: [lo, hi]}}'
     )
     worlds: list[WorldId] | None = Field(default=None, description="omit for all worlds")
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "seed": 42,
+                    "spec": {
+                        "entities": {
+                            "cube": {
+                                "position": [[0.6, 0.8], [0.0, 0.3], [0.78, 0.8]],
+                                "yaw": [-3.14, 3.14],
+                            }
+                        },
+                        "params": {"cube.mass": [0.05, 0.5]},
+                    },
+                }
+            ]
+        },
+    )
 
 
 class RandomizeAck(Strict):
