@@ -18,6 +18,7 @@ when it is not unit already (the ack lists it under `normalised`); |linear| <= 5
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -89,12 +90,14 @@ def scene_bounds(mjm: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
     return centre - extent, centre + extent
 
 
-_TABLES: dict[int, EntityTable] = {}
+# Per model object, for as long as it lives (a model freed and another made at its address must
+# not find the first one's table).
+_TABLES: weakref.WeakKeyDictionary[mujoco.MjModel, EntityTable] = weakref.WeakKeyDictionary()
 
 
 def entity_table(mjm: mujoco.MjModel) -> EntityTable:
     """The entity table of a compiled model (built once per model object)."""
-    table = _TABLES.get(id(mjm))
+    table = _TABLES.get(mjm)
     if table is None:
         found = free_bodies(mjm)
         names = tuple(mujoco.mj_id2name(mjm, mujoco.mjtObj.mjOBJ_BODY, b) or "" for b, _ in found)
@@ -107,7 +110,7 @@ def entity_table(mjm: mujoco.MjModel) -> EntityTable:
             lower=lower,
             upper=upper,
         )
-        _TABLES[id(mjm)] = table
+        _TABLES[mjm] = table
     return table
 
 

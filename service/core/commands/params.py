@@ -27,6 +27,7 @@ through resets (they describe the world, not its state).
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -173,13 +174,14 @@ def _payload(mjm: mujoco.MjModel) -> Param:
     )
 
 
-_TABLES: dict[int, dict[str, Param]] = {}
+# Per model object, for as long as it lives (see entities._TABLES).
+_TABLES: weakref.WeakKeyDictionary[mujoco.MjModel, dict[str, Param]] = weakref.WeakKeyDictionary()
 
 
 def param_table(mjm: mujoco.MjModel, commanded: Sequence[str]) -> dict[str, Param]:
     """Every parameter of a compiled model by name (built once per model object);
     `commanded`: the commanded joints (the last is the gripper's, without damping/armature)."""
-    table = _TABLES.get(id(mjm))
+    table = _TABLES.get(mjm)
     if table is not None:
         return table
     params: list[Param] = []
@@ -215,7 +217,7 @@ def param_table(mjm: mujoco.MjModel, commanded: Sequence[str]) -> dict[str, Para
         params.append(
             _scalar(f"{joint}.kv", "N·m·s/rad", 0, 1e4, "actuator_biasprm", [(act, 2)], -1.0)
         )
-    table = _TABLES[id(mjm)] = {p.name: p for p in params}
+    table = _TABLES[mjm] = {p.name: p for p in params}
     return table
 
 
