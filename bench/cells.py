@@ -7,6 +7,8 @@
 * one request setting the poses (then the parameters) of every world of a served batch
   (native, realtime): the time from sending it to the first state read that carries it
   (read-your-writes waits for the acknowledged tick), with the request's own time beside it;
+* the example bin-picking cell (three parts) and the default scene at 256 worlds, native,
+  real time, with one 30 Hz subscriber of every world: the real-time factor of each;
 * drawing a randomisation for 10,000 worlds (the spec of the docs' guide): the time to draw
   and validate it (what `POST /v1/randomize` spends before anything is staged).
 
@@ -137,6 +139,21 @@ def first_tick(n: int) -> dict[str, Any]:
     return out
 
 
+def cell_rtf(n: int, scene: str | None, window: float) -> dict[str, Any]:
+    """Real-time factor of a served native batch of `scene` (None: the default one) with ONE
+    30 Hz subscriber of every world, as the capacity section measures it."""
+    import asyncio
+
+    from bench import common
+    from bench.service_bench import _measure_realtime
+
+    env = {"ARMFLEET_ENGINE": "mujoco", **({"ARMFLEET_SCENE": scene} if scene else {})}
+    with common.served(n, "realtime", "cpu", env) as srv:
+        got = asyncio.run(_measure_realtime(srv, window, warmup=2.0, per_subscriber=n))
+    keep = ("realtime_factor", "min_loop_rtf_1s", "frames_per_s_per_subscriber_min")
+    return {"nworld": n, "scene": scene or "default", **{k: got[k] for k in keep}}
+
+
 def randomize_draw(n: int) -> dict[str, Any]:
     """Draw and validate a randomisation of `n` worlds (no engine stepped: the command alone)."""
     from service.core.commands.randomize import Randomize
@@ -184,6 +201,25 @@ def cells(ctx: Context) -> Result:
             )
     except Exception as exc:
         data["errors"]["first_tick"] = f"{type(exc).__name__}: {exc}"
+    from mjcf import MJCF_DIR
+
+    example = str(MJCF_DIR / "examples" / "bin_picking.xml")
+    data["cell_rtf"] = []
+    for scene in (None, example):
+        try:
+            r = cell_rtf(256, scene, ctx.pick(15.0, 6.0))
+        except Exception as exc:
+            data["errors"][f"rtf {scene}"] = f"{type(exc).__name__}: {exc}"
+            continue
+        data["cell_rtf"].append(r)
+        what = "bin-picking cell (3 parts)" if scene else "default scene (1 cube)"
+        rows.append(
+            {
+                "measure": f"{what}, 256 worlds, native, one 30 Hz subscriber: RTF",
+                "value": f"{r['realtime_factor']:.3f}",
+                "ratio": "",
+            }
+        )
     data["randomize"] = rz = randomize_draw(10_000)
     rows.append(
         {
