@@ -21,7 +21,7 @@ from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import InvalidURI
 
-from clients import _http, _stream, models
+from clients import _http, _stream, cell, models
 from clients import trajectory as tj
 from clients._http import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable, unreachable
@@ -90,6 +90,34 @@ class AsyncArmfleetClient(_Closes):
 
     async def reset(self, world: int | Iterable[int] | None = None) -> models.ResetResult:
         return await self._call(_http.reset_call(world))
+
+    # -- entities and physics parameters (as ArmfleetClient's ----------------------------
+
+    async def entities(self, world: int) -> dict[str, Any]:
+        return await self._call(cell.entities_call(world))
+
+    async def entity(self, world: int, name: str) -> dict[str, Any]:
+        return await self._call(cell.entity_call(world, name))
+
+    async def set_entity(self, world: int, name: str, **values: Any) -> dict[str, Any]:
+        return await self._call(cell.set_entity_call(world, name, **values))
+
+    async def set_entities(self, writes: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
+        return await self._call(cell.set_entities_call(writes))
+
+    async def param_table(self) -> dict[str, Any]:
+        return await self._call(cell.param_table_call())
+
+    async def params(self, world: int) -> dict[str, Any]:
+        return await self._call(cell.params_call(world))
+
+    async def set_params(self, world: int, params: Mapping[str, Any]) -> dict[str, Any]:
+        return await self._call(cell.set_params_call(world, params))
+
+    async def set_params_many(
+        self, writes: Iterable[tuple[int, Mapping[str, Any]]]
+    ) -> dict[str, Any]:
+        return await self._call(cell.set_params_many_call(writes))
 
     # -- trajectories: as ArmfleetClient's -------------------------------------------------
 

@@ -30,7 +30,7 @@ from websockets.exceptions import InvalidURI
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as ws_connect
 
-from clients import _http, _stream, models
+from clients import _http, _stream, cell, models
 from clients import trajectory as tj
 from clients._http import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable
@@ -104,6 +104,38 @@ class ArmfleetClient(_Closes):
     def reset(self, world: int | Iterable[int] | None = None) -> models.ResetResult:
         """Reset one world, a list of worlds, or (None) all worlds to home."""
         return self._call(_http.reset_call(world))
+
+    # -- entities and physics parameters (calls: clients.cell) -----------------------------
+
+    def entities(self, world: int) -> dict[str, Any]:
+        """Pose and twist of every entity (named free body) of one world, and the tick."""
+        return self._call(cell.entities_call(world))
+
+    def entity(self, world: int, name: str) -> dict[str, Any]:
+        return self._call(cell.entity_call(world, name))
+
+    def set_entity(self, world: int, name: str, **values: Any) -> dict[str, Any]:
+        """Any of position, orientation (w x y z), linear, angular; from the next tick."""
+        return self._call(cell.set_entity_call(world, name, **values))
+
+    def set_entities(self, writes: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
+        """Entity writes of many worlds ({"world", "name", ...}), all at one tick."""
+        return self._call(cell.set_entities_call(writes))
+
+    def param_table(self) -> dict[str, Any]:
+        """The parameters a world may have of its own, with units and ranges."""
+        return self._call(cell.param_table_call())
+
+    def params(self, world: int) -> dict[str, Any]:
+        return self._call(cell.params_call(world))
+
+    def set_params(self, world: int, params: Mapping[str, Any]) -> dict[str, Any]:
+        """E.g. {"cube.mass": 0.3, "payload": [1.0, 0, 0, 0.05]}; from the next tick."""
+        return self._call(cell.set_params_call(world, params))
+
+    def set_params_many(self, writes: Iterable[tuple[int, Mapping[str, Any]]]) -> dict[str, Any]:
+        """(world, params) pairs, all at one tick."""
+        return self._call(cell.set_params_many_call(writes))
 
     # -- trajectories (bodies and calls: clients.trajectory) ---------------------------------
 

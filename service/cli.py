@@ -141,6 +141,9 @@ def replay(
             "(rad), velocity (rad/s), effort (N·m)"
         ),
     ] = "auto",
+    scene: Annotated[
+        str | None, typer.Option(help="the cell the recording was made with (serve --scene)")
+    ] = None,
 ) -> None:
     """Re-run a recording's commands at their ticks (fast) and compare every recorded state;
     exit 1 naming the first tick, world and joint that differ.
@@ -159,7 +162,7 @@ def replay(
 
     try:
         judge = tolerance if tolerance in ("auto", "exact") else Tolerance.parse(tolerance)
-        report = run_replay(recording, out, device, judge)  # type: ignore[arg-type]
+        report = run_replay(recording, out, device, judge, scene)  # type: ignore[arg-type]
     except (ReplayError, ValueError, ArmfleetError) as exc:  # ArmfleetError: --out unwritable
         typer.echo(f"armfleet replay: {exc}", err=True)
         raise typer.Exit(2) from None

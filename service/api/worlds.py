@@ -15,6 +15,7 @@ from fastapi.responses import Response
 
 from service.api.deps import CommandWorld, Ctl, Loop, World
 from service.core import wire
+from service.core.commands import entities, params, randomize
 from service.core.commands.base import HTTP
 from service.core.errors import Unavailable
 from service.core.loop import SimLoop
@@ -151,3 +152,105 @@ async def reset_many(
     worlds = body.worlds if body is not None else None
     done = control.reset(worlds, HTTP)
     return ResetReply(worlds=done.worlds, tick=done.tick)
+
+
+# -- entities: the scene's named free bodies (service/core/commands/entities.py) -----------
+
+
+async def _entities(loop: SimLoop, worlds: list[int]) -> dict[str, Any]:
+    """Read-your-writes: wait for the tick every accepted write of `worlds` is in, then read
+    the entities on the sim thread between two ticks."""
+    await _read(loop, worlds)
+    return await asyncio.wrap_future(loop.call(lambda batch: entities.read(batch, worlds)))
+
+
+@router.get(
+    "/worlds/{world}/entities",
+    summary="Pose and twist of every entity (named free body) of one world",
+)
+async def get_entities(loop: Loop, world: World) -> Response:
+    got = await _entities(loop, [world])
+    return _json({"tick": got["tick"], **got["worlds"][0]})
+
+
+@router.get(
+    "/worlds/{world}/entities/{name}",
+    summary="Pose and twist of one entity of one world",
+)
+async def get_entity(loop: Loop, world: World, name: str) -> Response:
+    index = entities.entity_table(loop.batch.robot.mjm).index(name)
+    got = await _entities(loop, [world])
+    return _json({"tick": got["tick"], "world": world, **got["worlds"][0]["entities"][index]})
+
+
+@router.put(
+    "/worlds/{world}/entities/{name}",
+    response_model=entities.EntityAck,
+    summary="Set an entity's pose and/or twist in one world, at the next tick boundary",
+)
+async def put_entity(
+    control: Ctl, world: World, name: str, body: entities.EntityValues
+) -> Response:
+    item = {**body.model_dump(exclude_none=True), "world": world, "name": name}
+    done = control.run(entities.SetEntities.create(control.door, [item]), HTTP)
+    return _json({"tick": done.tick, "worlds": done.worlds, "normalised": done.normalised})
+
+
+@router.post(
+    "/entities",
+    response_model=entities.EntityAck,
+    summary="Set entities of many worlds, all at one tick boundary (or none, if one is bad)",
+)
+async def post_entities(control: Ctl, body: entities.EntityWrites) -> Response:
+    items = [w.model_dump(exclude_none=True) for w in body.writes]
+    done = control.run(entities.SetEntities.create(control.door, items), HTTP)
+    return _json({"tick": done.tick, "worlds": done.worlds, "normalised": done.normalised})
+
+
+# -- per-world physics parameters (service/core/commands/params.py) ------------------------
+
+
+@router.get("/params", summary="The parameters a world may have of its own: names, units, ranges")
+async def get_param_table(loop: Loop) -> Response:
+    table = params.param_table(loop.batch.robot.mjm, loop.spec.names)
+    return _json({"params": [p.describe() for p in table.values()]})
+
+
+@router.get("/worlds/{world}/params", summary="One world's physics parameters")
+async def get_params(loop: Loop, world: World) -> Response:
+    await _read(loop, [world])
+    got = await asyncio.wrap_future(loop.call(lambda batch: params.read(batch, [world])))
+    return _json({"tick": got["tick"], **got["worlds"][0]})
+
+
+@router.put(
+    "/worlds/{world}/params",
+    response_model=params.ParamsAck,
+    summary="Give one world its own physics parameters, from the next tick boundary",
+)
+async def put_params(control: Ctl, world: World, body: params.ParamValues) -> Response:
+    item = {"world": world, "params": body.params}
+    done = control.run(params.SetParams.create(control.door, [item]), HTTP)
+    return _json({"tick": done.tick, "worlds": done.worlds})
+
+
+@router.post(
+    "/params",
+    response_model=params.ParamsAck,
+    summary="Physics parameters of many worlds, all from one tick boundary (or none)",
+)
+async def post_params(control: Ctl, body: params.ParamWrites) -> Response:
+    items = [w.model_dump() for w in body.writes]
+    done = control.run(params.SetParams.create(control.door, items), HTTP)
+    return _json({"tick": done.tick, "worlds": done.worlds})
+
+
+@router.post(
+    "/randomize",
+    response_model=randomize.RandomizeAck,
+    summary="Reset worlds (default: all) with entity poses and parameters drawn with a seed",
+)
+async def post_randomize(control: Ctl, body: randomize.RandomizeRequest) -> Response:
+    command = randomize.Randomize.create(control.door, body.worlds, body.seed, body.spec)
+    done = control.run(command, HTTP)
+    return _json({"tick": done.tick, "worlds": done.worlds, "seed": body.seed, "spec": body.spec})

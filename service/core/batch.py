@@ -13,6 +13,7 @@ Lives in the core with the types it speaks in; imports nothing above the core.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
@@ -46,15 +47,37 @@ class StateWrite:
 
 
 @dataclass(frozen=True)
+class ModelWrite:
+    """Values for some entries of one world's copy of one MjModel array field (a per-world
+    physics parameter: a body's mass, a geom's friction, a joint's damping, a servo's gain).
+
+    field: the MjModel field, e.g. "body_mass"; world: its id; index: flat addresses into that
+    world's row of the field (m,) int64; values: (m,) float64. Built by a command that
+    validated it. Model values stay through resets: they describe the world, not its state.
+    """
+
+    field: str
+    world: int
+    index: np.ndarray
+    values: np.ndarray
+
+    def moved(self, world: int) -> ModelWrite:
+        """The same write for world id `world` (a shard's local id)."""
+        return ModelWrite(self.field, world, self.index, self.values)
+
+
+@dataclass(frozen=True)
 class TickWrites:
     """Everything the commands of one tick boundary write into an engine, applied in this
-    order: `resets` (worlds back at home), then `state` (in the order staged), then targets.
+    order: `resets` (worlds back at home), then `model` and `state` (in the order staged), then
+    targets.
 
     resets: worlds reset to home                                        (r,) int64
     worlds: worlds whose targets changed                                (k,) int64
     targets: their targets, already clamped by the command [rad]        (k, 7) float64
     velocities: their velocity feed-forward [rad/s], None = zero        (k, 7) float64
     state: qpos/qvel slices, applied after the resets
+    model: per-world model field values, applied after the resets, before `state`
     """
 
     resets: np.ndarray = field(default_factory=lambda: _NO_WORLDS)
@@ -62,9 +85,10 @@ class TickWrites:
     targets: np.ndarray = field(default_factory=lambda: np.zeros((0, NJOINT)))
     velocities: np.ndarray | None = None
     state: tuple[StateWrite, ...] = ()
+    model: tuple[ModelWrite, ...] = ()
 
     def __bool__(self) -> bool:
-        return bool(self.resets.size or self.worlds.size or self.state)
+        return bool(self.resets.size or self.worlds.size or self.state or self.model)
 
 
 @runtime_checkable
@@ -113,6 +137,16 @@ class Batch(Protocol):
 
     def write_state(self, write: StateWrite) -> None:
         """Overwrite some qpos/qvel addresses of one world now (part of `write`)."""
+        ...
+
+    def write_models(self, writes: Sequence[ModelWrite]) -> None:
+        """Give worlds their own values of some model field entries now (part of `write`), and
+        recompute what MuJoCo derives from them (mj_setConst) per world."""
+        ...
+
+    def model_values(self, field: str) -> np.ndarray:
+        """Every world's values of an MjModel field (nworld, ...), float64, a host copy: the
+        scene's own where no command wrote it."""
         ...
 
     def apply_targets(

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from service.core.batch import Batch, StateWrite, TickWrites
+from service.core.batch import Batch, ModelWrite, StateWrite, TickWrites
 from service.core.commands.arithmetic import TargetUpdate
 from service.core.errors import NotPaused
 from service.core.loop_boundary import TickBoundary
@@ -137,9 +137,9 @@ class SimLoop(TickBoundary):
                 self._traj.overridden(idx, Override.RESET)
             return tick
 
-    def stage_state(self, writes: Sequence[StateWrite]) -> int:
-        """Stage qpos/qvel slices (validated by their command) for the next tick boundary,
-        after that boundary's resets; returns the tick they take effect at."""
+    def stage_state(self, writes: Sequence[StateWrite | ModelWrite]) -> int:
+        """Stage qpos/qvel slices or per-world model values (validated by their command) for
+        the next tick boundary, after that boundary's resets; the tick they take effect at."""
         with self._lock:
             tick = self._accept_tick()
             self._table.stage_state(writes, tick)

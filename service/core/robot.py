@@ -13,7 +13,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mjcf import SCENE_XML
+from mjcf import ROBOT_XML, SCENE_XML
 from service.core.types import NJOINT, JointSpec, RobotSpec
 
 ROBOT_NAME = "UR10e + Robotiq 2F-140"
@@ -34,9 +34,16 @@ class LoadedRobot:
     home_key: int
 
 
+def compile_scene(path: Path | str) -> mujoco.MjModel:
+    """Compile a scene. `<include file="ur10e_2f140.xml"/>` finds armfleet's arm wherever the
+    scene lives (the file is handed to MuJoCo by name), so a user's cell needs no copy of it."""
+    assets = {ROBOT_XML.name: ROBOT_XML.read_bytes()}
+    return mujoco.MjModel.from_xml_path(str(path), assets=assets)
+
+
 def load_robot(path: Path | str = SCENE_XML) -> LoadedRobot:
     """Compile the scene and check it honours the contract the rest of the service relies on."""
-    mjm = mujoco.MjModel.from_xml_path(str(path))
+    mjm = compile_scene(path)
     # The commanded joints are the actuated ones, in actuator order (the MJCF lists the six arm
     # joints, then finger_joint): the model is the one place that names them.
     names: list[str] = []

@@ -12,6 +12,7 @@ from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.core.physics import DEFAULT_PHYSICS_DT
+from service.core.scene_check import check_scene
 from service.core.types import Mode
 from service.core.worlds import world_list
 
@@ -47,6 +48,11 @@ class Settings(BaseSettings):
         gt=0,
         description="--ray: seconds between copies of each shard's state into this process; a "
         "shard whose node is lost is rebuilt elsewhere from its last copy",
+    )
+    scene: Path | None = Field(
+        None,
+        description="your cell's MJCF, which brings the arm in with <include "
+        'file="ur10e_2f140.xml"/> (default: the table and cube); checked before serving',
     )
     mode: Mode = Field(Mode.REALTIME, description="how time advances: realtime, fast or paused")
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
@@ -223,9 +229,15 @@ class Settings(BaseSettings):
     def _leases_need_token_carrying_surfaces(self) -> Settings:
         if self.leases != "off" and self.ros2:
             raise ValueError(
-                "leases: the in-process ROS 2 surface (--ros2) carries no token and could move "
-                "leased worlds; drive ROS through the ROS node (HTTP/WebSocket, a lease token)"
+                "leases: the ROS 2 node (--ros2) cannot present a token yet and so could not "
+                "command leased worlds; serve ROS without leases, or leases without --ros2"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _scene_can_be_served(self) -> Settings:
+        if self.scene is not None:
+            check_scene(self.scene)  # SceneError (a ValueError) says what is wrong
         return self
 
     @model_validator(mode="after")

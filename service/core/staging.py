@@ -15,7 +15,7 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from service.core.batch import StateWrite, TickWrites
+from service.core.batch import ModelWrite, StateWrite, TickWrites
 from service.core.commands.arithmetic import TargetUpdate
 from service.core.loop_types import CommandResult
 from service.core.types import Snapshot
@@ -75,7 +75,7 @@ class CommandTable:
     pending: targets as of all accepted commands [rad]              (nworld, 7) float64
     velocity: feed-forward staged with them [rad/s]                  (nworld, 7) float64
     dirty / reset: worlds whose targets / reset go to the engine next      (nworld,) bool
-    state: qpos/qvel slices in the order staged
+    state: qpos/qvel slices and per-world model values, in the order staged
     effective: per world, the tick its latest accepted command takes effect at   (nworld,)
     """
 
@@ -85,7 +85,7 @@ class CommandTable:
         self.velocity = np.zeros_like(self.pending)
         self.dirty = np.zeros(len(targets), dtype=bool)
         self.reset = np.zeros(len(targets), dtype=bool)
-        self.state: list[StateWrite] = []
+        self.state: list[StateWrite | ModelWrite] = []
         self.effective = np.zeros(len(targets), dtype=np.int64)
 
     def view(self, tick: int) -> Staging:
@@ -111,17 +111,17 @@ class CommandTable:
 
     def stage_reset(self, worlds: np.ndarray, tick: int) -> None:
         """Worlds back at home; a reset staged later wins over their earlier target and state
-        writes of the same tick boundary."""
+        writes of the same tick boundary (model values stay: they are not state)."""
         self.reset[worlds] = True
         self.dirty[worlds] = False
         if self.state:
             gone = set(worlds.tolist())
-            self.state = [w for w in self.state if w.world not in gone]
+            self.state = [w for w in self.state if isinstance(w, ModelWrite) or w.world not in gone]
         self.pending[worlds] = self.home
         self.velocity[worlds] = 0.0
         self.effective[worlds] = tick
 
-    def stage_state(self, writes: Sequence[StateWrite], tick: int) -> None:
+    def stage_state(self, writes: Sequence[StateWrite | ModelWrite], tick: int) -> None:
         self.state.extend(writes)
         for w in writes:
             self.effective[w.world] = tick
@@ -135,7 +135,8 @@ class CommandTable:
             worlds=dirty,
             targets=self.pending[dirty].copy(),
             velocities=velocity if velocity.any() else None,
-            state=tuple(self.state),
+            state=tuple(w for w in self.state if isinstance(w, StateWrite)),
+            model=tuple(w for w in self.state if isinstance(w, ModelWrite)),
         )
         self.reset[:] = False
         self.dirty[:] = False

@@ -177,6 +177,10 @@ PHYSICS_FIELDS = (
 )
 
 
+# Keys of `BatchState.physics` that hold per-world model fields rather than mjData state.
+MODEL_PREFIX = "model."
+
+
 @dataclass(frozen=True)
 class BatchState:
     """Everything a batch needs to continue exactly where it was, at a tick boundary.
@@ -196,7 +200,9 @@ class BatchState:
         (nworld, nu), qfrc_applied (nworld, nv), xfrc_applied (nworld, nbody, 6), eq_active
         (nworld, neq) bool, mocap_pos (nworld, nmocap, 3), mocap_quat (nworld, nmocap, 4),
         userdata (nworld, nuserdata); and qfrc_actuator (nworld, nv) [N·m], the last step's
-        actuator forces, so that the restored tick's snapshot shows the same effort
+        actuator forces, so that the restored tick's snapshot shows the same effort;
+        besides, "model.<field>" (nworld, ...) float64 for every MjModel field a command gave
+        per-world values (`MODEL_PREFIX`; a field absent here has the scene's values)
     """
 
     tick: int

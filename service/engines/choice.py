@@ -13,6 +13,7 @@ from service.core.settings import Settings
 def build_batch(s: Settings) -> Batch:
     """Native MuJoCo on every core (`--engine mujoco`), or MuJoCo Warp: on Ray actors
     (`--ray`), split over CPU worker processes when it pays, or one batch."""
+    scene = {"model_path": s.scene} if s.scene is not None else {}
     if s.engine == "mujoco":
         from service.engines.native import NativeBatch
 
@@ -22,12 +23,13 @@ def build_batch(s: Settings) -> Batch:
             physics_dt=s.physics_dt,
             nthread=s.shards,
             device=s.device,
+            **scene,
         )
     from service.engines.shards import ShardedBatch, auto_shards
     from service.engines.warp import WorldBatch
 
     shards = s.shards or auto_shards(s.worlds, s.device)
-    kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt}
+    kwargs = {"device": s.device, "control_hz": s.control_hz, "physics_dt": s.physics_dt, **scene}
     if s.ray:
         from service.engines import ray_local
         from service.engines.ray_shards import RayBatch  # imports Ray only when asked for

@@ -316,6 +316,8 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
     def set_state(self, state: BatchState) -> None:
         """Continue from `state`; checked fully first (ValueError, nothing changed)."""
         state.check_compatible(self.nworld, self.physics_shapes())
+        model = self._check_model_state(state)
+        self._restore_model(model)
         for f in PHYSICS_FIELDS:
             if f != "qfrc_actuator" and state.physics[f].size:
                 self._state_field(f)[:] = state.physics[f]
@@ -344,6 +346,14 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         """A qpos/qvel slice of one world, into its row of the live state."""
         rows = self._qpos if write.field == "qpos" else self._qvel
         rows[write.world, write.index] = write.values
+
+    def push_model(self, field: str, worlds: np.ndarray) -> None:
+        """Per-world values of an MjModel field (`mujoco.batch` expands it on first use)."""
+        self._b.expand(field)[worlds] = self._model_rows(field, worlds)
+
+    def derive_model(self) -> None:
+        """mj_setConst per world, as after editing an MjModel's masses or armature by hand."""
+        self._b.set_const()
 
     def capacity_usage(self) -> tuple[int, int]:
         """(contacts in all worlds together, largest constraint count of any world) as of the

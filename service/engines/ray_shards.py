@@ -1,21 +1,18 @@
 """RayBatch: the batch's shards on Ray actors, on one machine or many, behind the Batch protocol.
 
 One machine's GPUs (or cores) are the ceiling of WorldBatch and ShardedBatch. Here every shard is
-a Ray actor holding a WorldBatch of its block of worlds: one actor per GPU (`num_gpus=1`) when the
-batch runs on CUDA, else one per CPU core (warp runs CPU kernels on one core, so a core is the
-unit of parallelism there, as in ShardedBatch). The API process keeps the loop, the target table
-and the lockstep tick: every tick it sends each shard its staged commands with the step (all
-`step.remote` calls are fired before any result is awaited, so the shards step in parallel), then
-gathers the faulted worlds. Worlds are independent, so the result is bit-identical to one
+a Ray actor holding a WorldBatch of its block of worlds: one per GPU on CUDA, else one per CPU core
+(warp's CPU kernels run on one core). The API process keeps the loop, the target table and the
+lockstep tick: each tick every shard gets its staged commands with the step (all `step.remote`
+fired before any result is awaited), then the faulted worlds are gathered: bit-identical to one
 WorldBatch of the same worlds (tests/test_ray_shards.py).
 
 A shard whose actor dies (node lost, process killed) is noticed by the next call that reaches it
-(`RayActorError`), and a new actor is started at once. The other shards keep stepping meanwhile;
-the lost shard's worlds keep their last reported state in snapshots until the new actor is ready.
-Every `checkpoint_s` (10 s) each shard's full state (`BatchState`) is copied into this process;
-the new actor resumes from the last copy, with the targets commanded since. Without a copy the
-worlds come back at `home` (state and targets) and are returned by `step` as faulted worlds, the
-same way a NaN world comes back, so the loop and its clients treat them alike.
+(`RayActorError`), and a new actor is started at once; the others keep stepping, the lost worlds
+show their last state until it is ready. Every `checkpoint_s` (10 s) each shard's `BatchState` is
+copied here; the new actor resumes from the last copy with the targets (and model values)
+commanded since; without one, its worlds come back at `home` and `step` returns them as faulted,
+as a NaN world comes back, so the loop and its clients treat them alike.
 """
 
 from __future__ import annotations
@@ -44,6 +41,8 @@ from service.engines.sharding import (
     StagedCommands,
     join_states,
     slice_state,
+    stage_model,
+    with_model,
 )
 from service.engines.warp import SnapshotArrays, snapshot_from
 
@@ -81,9 +80,7 @@ class RayBatch(HostMirror, Batch, Restorable):
         self._kwargs = {"device": "cuda" if self.gpu else device, **kwargs}
         # SPREAD: shards on different nodes where there are several (a lost node costs fewest)
         self._options: dict[str, Any] = {"num_cpus": 1, "max_restarts": 0}
-        self._options["scheduling_strategy"] = "SPREAD"
-        if self.gpu:
-            self._options["num_gpus"] = 1
+        self._options |= {"scheduling_strategy": "SPREAD", **({"num_gpus": 1} if self.gpu else {})}
         self._shards = [Shard(actor=self._spawn(i)) for i in range(shards)]
         try:
             infos = ray.get([s.actor.info.remote() for s in self._shards])
@@ -108,8 +105,7 @@ class RayBatch(HostMirror, Batch, Restorable):
         self.capture_s = max(i["capture_s"] for i in infos)
         self.rebuilds = 0
         self._physics_shapes = info["physics_shapes"]
-        # Seconds between copies of every shard's state into this process (0: after every
-        # step, for tests; inf: never, lost worlds come back at home).
+        # Seconds between copies of the shards' states here (0: every step; inf: never).
         self.checkpoint_s = checkpoint_s
         self._checkpoint_at = time.monotonic()  # when the last copies were asked for
         self._checkpoint_refs: tuple[int, dict[int, Any]] | None = None  # (tick, shard → ref)
@@ -217,7 +213,7 @@ class RayBatch(HostMirror, Batch, Restorable):
         lo = int(self._plan.starts[shard])
         hi = lo + int(self._plan.sizes[shard])
         targets = self._targets[lo:hi].copy()
-        physics = dict(s.checkpoint.physics)
+        physics = with_model(s.checkpoint.physics, self._model_state(), lo, hi)
         physics["ctrl"] = targets.astype(physics["ctrl"].dtype)  # what apply_targets would push
         resumed = dataclasses.replace(s.checkpoint, targets=targets, physics=physics)
         ray.get(s.actor.set_state.remote(resumed))
@@ -351,12 +347,13 @@ class RayBatch(HostMirror, Batch, Restorable):
             parts = ray.get(refs)
         except RayActorError as exc:
             raise Unavailable(f"get_state: a Ray shard was lost ({exc}); try again") from exc
-        joined = join_states(parts, self._targets)
+        joined = join_states(parts, self._targets, self._model_state())
         return dataclasses.replace(joined, tick=self._tick, faults=self._faults.copy())
 
     def set_state(self, state: BatchState) -> None:
         """Split `state` over the shards; checked whole first so no shard is half-restored."""
         state.check_compatible(self.nworld, self._physics_shapes)
+        model = self._check_model_state(state)
         self._all_live("set_state")
         for i in range(self.shards):
             self._staged.take(i)  # staged commands belonged to the state being replaced
@@ -369,7 +366,7 @@ class RayBatch(HostMirror, Batch, Restorable):
             ray.get(refs)
         except RayActorError as exc:
             raise Unavailable(f"set_state: a Ray shard was lost ({exc}); try again") from exc
-        self._restore_mirror(state)
+        self._restore_mirror(state, model)  # the shards took their slices of `model`
         self._prefetch, self._asked = None, (-1, -1)
         self._checkpoint_refs = None  # copies of the replaced state
         parts = ray.get([s.actor.snapshot.remote() for s in self._shards])
@@ -380,6 +377,11 @@ class RayBatch(HostMirror, Batch, Restorable):
         """Staged for the shard that holds the world, sent with its next step."""
         shard, local = self._plan.locate(write.world)
         self._staged.state(shard, write.moved(local))
+
+    def push_model(self, field: str, worlds: np.ndarray) -> None:
+        """Staged for the shards holding the worlds, sent with their next step."""
+        rows = self._model_rows(field, worlds)
+        stage_model(self._plan, self._staged, field, rows, worlds)
 
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos now (fault-injection tests), on the shard that holds it."""

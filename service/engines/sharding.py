@@ -14,8 +14,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from service.core.batch import StateWrite
-from service.core.types import BatchState, Poses, Snapshot
+from service.core.batch import ModelWrite, StateWrite
+from service.core.types import MODEL_PREFIX, BatchState, Poses, Snapshot
 from service.engines.warp import WorldBatch
 
 _EMPTY = np.zeros(0, dtype=np.int64)
@@ -69,17 +69,21 @@ class ShardPlan:
 
 
 class Shipment(NamedTuple):
-    """What one shard's next step carries (local ids): resets, then state slices, then the
-    dirty worlds' command rows (`command_rows`), applied in that order (`apply`)."""
+    """What one shard's next step carries (local ids): resets, then model values, then state
+    slices, then the dirty worlds' command rows (`command_rows`), applied in that order
+    (`apply`)."""
 
     resets: np.ndarray
     dirty: np.ndarray
     rows: np.ndarray
     state: tuple[StateWrite, ...] = ()
+    model: tuple[ModelWrite, ...] = ()
 
     def apply(self, batch: WorldBatch) -> None:
         """A shard's side: the loop's order, so a shard behaves like one WorldBatch."""
         batch.reset(self.resets)
+        if self.model:
+            batch.write_models(self.model)
         for write in self.state:
             batch.write_state(write)
         apply_rows(batch, self.dirty, self.rows)
@@ -100,6 +104,7 @@ class StagedCommands:
         self._resets: list[np.ndarray] = [_EMPTY] * shards
         self._dirty: list[np.ndarray] = [_EMPTY] * shards
         self._state: list[list[StateWrite]] = [[] for _ in range(shards)]
+        self._model: list[list[ModelWrite]] = [[] for _ in range(shards)]
 
     def targets(self, shard: int, local_ids: np.ndarray) -> None:
         if local_ids.size:
@@ -115,6 +120,10 @@ class StagedCommands:
     def state(self, shard: int, write: StateWrite) -> None:
         """A state slice (its world a local id), applied after the shard's resets."""
         self._state[shard].append(write)
+
+    def model(self, shard: int, write: ModelWrite) -> None:
+        """Model values (their world a local id); a reset does not undo them."""
+        self._model[shard].append(write)
 
     def targets_of(self, parts: Sequence[np.ndarray], first: int = 0) -> None:
         """`targets` for each shard's part of a command (`ShardPlan.split`), from shard `first`."""
@@ -132,14 +141,16 @@ class StagedCommands:
         self._resets[shard] = _EMPTY
         self._dirty[shard] = _EMPTY
         self._state[shard] = []
+        self._model[shard] = []
         return out
 
     def ship(self, shard: int, targets: np.ndarray, velocity: np.ndarray, start: int) -> Shipment:
         """The shard's next step's `Shipment` (rows read from the caller's one target table,
         `start` its first global world); the shard's stage is emptied."""
-        state = tuple(self._state[shard])
+        state, model = tuple(self._state[shard]), tuple(self._model[shard])
         resets, dirty = self.take(shard)
-        return Shipment(resets, dirty, command_rows(targets, velocity, dirty + start), state)
+        rows = command_rows(targets, velocity, dirty + start)
+        return Shipment(resets, dirty, rows, state, model)
 
 
 def command_rows(targets: np.ndarray, velocity: np.ndarray, worlds: np.ndarray) -> np.ndarray:
@@ -191,12 +202,54 @@ def slice_state(state: BatchState, start: int, stop: int) -> BatchState:
     )
 
 
-def join_states(parts: Sequence[BatchState], targets: np.ndarray) -> BatchState:
-    """One state from the shards' states, in shard order; `targets` is the caller's table."""
+def join_states(
+    parts: Sequence[BatchState],
+    targets: np.ndarray,
+    model: dict[str, np.ndarray] | None = None,
+) -> BatchState:
+    """One state from the shards' states, in shard order; `targets` and the per-world model
+    fields (`MODEL_PREFIX` entries) are the caller's, which knows every world's."""
+    physics = {
+        k: np.concatenate([p.physics[k] for p in parts])
+        for k in parts[0].physics
+        if not k.startswith(MODEL_PREFIX)
+    }
     return BatchState(
         tick=parts[0].tick,
         world_ticks=np.concatenate([p.world_ticks for p in parts]),
         faults=np.concatenate([p.faults for p in parts]),
         targets=targets.copy(),
-        physics={k: np.concatenate([p.physics[k] for p in parts]) for k in parts[0].physics},
+        physics={**physics, **(model or {})},
     )
+
+
+def stage_model(
+    plan: ShardPlan,
+    staged: StagedCommands,
+    field: str,
+    rows: np.ndarray,
+    worlds: np.ndarray,
+    local: WorldBatch | None = None,
+) -> None:
+    """Whole rows of model field `field` (k, ...) for global `worlds`: staged for the shard
+    holding each, or written now into `local` (shard 0 in this process) when given."""
+    flat = rows.reshape(len(worlds), -1)
+    index = np.arange(flat.shape[1], dtype=np.int64)
+    now: list[ModelWrite] = []
+    for i, w in enumerate(worlds):
+        shard, local_id = plan.locate(int(w))
+        write = ModelWrite(field, local_id, index, flat[i])
+        if shard == 0 and local is not None:
+            now.append(write)
+        else:
+            staged.model(shard, write)
+    if now and local is not None:
+        local.write_models(now)
+
+
+def with_model(
+    physics: dict[str, np.ndarray], model: dict[str, np.ndarray], lo: int, hi: int
+) -> dict[str, np.ndarray]:
+    """A shard's saved `physics` with the model fields of worlds lo..hi as they are now."""
+    out = {k: v for k, v in physics.items() if not k.startswith(MODEL_PREFIX)}
+    return out | {k: v[lo:hi] for k, v in model.items()}

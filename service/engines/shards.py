@@ -31,6 +31,8 @@ from service.engines.sharding import (
     join_snapshots,
     join_states,
     slice_state,
+    stage_model,
+    with_model,
 )
 from service.engines.warp import WorldBatch
 
@@ -198,11 +200,12 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
             shipment = self._staged.ship(i, self._targets, self._velocity, self._starts[i])
             conn.send(("get_state", shipment))
         parts = [self._local.get_state()] + [conn.recv() for conn in self._conns]
-        return join_states(parts, self._targets)
+        return join_states(parts, self._targets, self._model_state())
 
     def set_state(self, state: BatchState) -> None:
         """Split `state` over the shards; checked whole first so no shard is half-restored."""
         state.check_compatible(self.nworld, self.physics_shapes())
+        model = self._check_model_state(state)
         self._copies.clear()  # copies of the replaced timeline must not come back after a loss
         for i in range(1, self.shards):
             self._staged.take(i)  # staged commands belonged to the state being replaced
@@ -213,7 +216,7 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
         errors = [err for err in (conn.recv() for conn in self._conns) if err]
         if errors:  # cannot happen after the check above; say so loudly if it does
             raise RuntimeError(f"shard refused a checked state: {errors[0]}")
-        self._restore_mirror(state)
+        self._restore_mirror(state, model)  # the shards took their slices of `model`
 
     def qpos(self) -> np.ndarray:
         return self._gather_qpos()[0]
@@ -238,6 +241,11 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
     def render_state(self, worlds: np.ndarray) -> np.ndarray:
         """Renderable: the asked rows of every shard's qpos (one round trip to each worker)."""
         return self._gather_qpos()[0][np.asarray(worlds, dtype=np.int64)]
+
+    def push_model(self, field: str, worlds: np.ndarray) -> None:
+        """Staged for the shards holding the worlds, sent with their next step."""
+        rows = self._model_rows(field, worlds)
+        stage_model(self._plan, self._staged, field, rows, worlds, self._local)
 
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         shard, local = self._plan.locate(world)
@@ -313,7 +321,8 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
         if copy is None:
             return False
         lo, hi = int(self._starts[i]), int(self._starts[i] + self._sizes[i])
-        state = dataclasses.replace(copy[1], targets=self._targets[lo:hi].copy())
+        physics = with_model(copy[1].physics, self._model_state(), lo, hi)
+        state = dataclasses.replace(copy[1], targets=self._targets[lo:hi].copy(), physics=physics)
         conn.send(("set_state", state))
         error = conn.recv()
         if error:

@@ -29,6 +29,7 @@ from service.core.types import PHYSICS_FIELDS, BatchState, Poses, Snapshot
 from service.engines import warp_frames as frames
 from service.engines.mirror import HostMirror
 from service.engines.warp_kernels import gather_bodies, gather_state
+from service.engines.warp_model import DERIVED, batched, host_layout, write_rows
 
 log = logging.getLogger("armfleet.engine")
 
@@ -58,13 +59,6 @@ CAPACITY_OVERFLOWS = int(
 # the table, arm near the table): see tests/test_engine.py::test_grasp_never_overflows_capacity.
 NCONMAX = 32
 NJMAX = 128
-
-
-def _host_layout(arr: wp.array) -> tuple[tuple[int, ...], type]:
-    """(shape, numpy dtype) of `arr.numpy()` without copying a device array to find out."""
-    scalar = getattr(arr.dtype, "_wp_scalar_type_", arr.dtype)
-    inner = tuple(getattr(arr.dtype, "_shape_", ()))
-    return (*arr.shape, *inner), wp.dtype_to_numpy(scalar)
 
 
 class SnapshotArrays(NamedTuple):
@@ -318,7 +312,7 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
 
     def physics_shapes(self) -> dict[str, tuple[int, ...]]:
         """Per-world shape of each physics field of `BatchState` for this model."""
-        return {f: _host_layout(getattr(self._d, f))[0][1:] for f in PHYSICS_FIELDS}
+        return {f: host_layout(getattr(self._d, f))[0][1:] for f in PHYSICS_FIELDS}
 
     def get_state(self) -> BatchState:
         """Every world's full state at the last tick boundary (host copies), see `BatchState`."""
@@ -331,12 +325,14 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         Raises ValueError naming the first mismatch; the batch is then untouched.
         """
         state.check_compatible(self.nworld, self.physics_shapes())
+        model = self._check_model_state(state)
         with wp.ScopedDevice(self.device):
+            self._restore_model(model)
             for f in PHYSICS_FIELDS:
                 arr = state.physics[f]
                 if arr.size:
                     dst = getattr(self._d, f)
-                    dst.assign(arr.astype(_host_layout(dst)[1], copy=False))
+                    dst.assign(arr.astype(host_layout(dst)[1], copy=False))
             # Overflow flags are sticky until a reset; at a tick boundary no world has a
             # capacity overflow (it would have been reset), so the restored batch starts clean.
             self._d.overflow.zero_()
@@ -377,6 +373,29 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         host = row.numpy()
         host[0, write.index] = write.values
         row.assign(host)
+
+    def push_model(self, field: str, worlds: np.ndarray) -> None:
+        """Per-world values of a Model field for `worlds` (see warp_model); the first write to
+        a field makes it batched and captures the tick again (the graph holds the old array)."""
+        with wp.ScopedDevice(self.device):
+            if batched(self._m, field, self.nworld, self.device) and self._graph is not None:
+                self._capture()
+            rows = self._model_rows(field, worlds)
+            write_rows(getattr(self._m, field), worlds, rows, self.device.is_cpu)
+
+    def derive_model(self) -> None:
+        """mjw.set_const: what mj_setConst derives (subtree masses, inverse weights at qpos0,
+        actuator_acc0), per world; those outputs are made batched first, or every world would
+        write the one shared row."""
+        with wp.ScopedDevice(self.device):
+            fresh = [batched(self._m, f, self.nworld, self.device) for f in DERIVED]
+            if any(fresh) and self._graph is not None:
+                self._capture()
+            mjw.set_const(self._m, self._d)
+
+    def batched_fields(self) -> list[str]:
+        """The Model fields that hold one row per world (bench and tests)."""
+        return [f for f in self._model if getattr(self._m, f).shape[0] == self.nworld]
 
     def close(self) -> None:
         """Nothing to release (device memory goes with the object); ShardedBatch stops workers."""

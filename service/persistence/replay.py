@@ -173,14 +173,16 @@ def replay(
     out: Path | str | None = None,
     device: str | None = None,
     tolerance: Judgement = "auto",
+    scene: Path | str | None = None,
 ) -> ReplayReport:
-    """Replay `path` (see the module doc); `out` also writes the replayed run as a recording.
+    """Replay `path` (see the module doc); `out` also writes the replayed run as a recording;
+    `scene`: the cell it was recorded with (`serve --scene`), None for the default one.
 
     tolerance: "auto" compares bit for bit where the replay can be bit-exact (recorded and
     replayed on the CPU) and within `replay_check.TOLERANCE` elsewhere; "exact" always bit for
     bit; a Tolerance, within it.
     """
-    return replay_recording(read_recording(path), out, device, tolerance)
+    return replay_recording(read_recording(path), out, device, tolerance, scene)
 
 
 def replay_recording(
@@ -188,6 +190,7 @@ def replay_recording(
     out: Path | str | None = None,
     device: str | None = None,
     tolerance: Judgement = "auto",
+    scene: Path | str | None = None,
 ) -> ReplayReport:
     """Replay a parsed recording (tests change one on purpose to see divergence named)."""
     from service.engines.warp import WorldBatch
@@ -199,6 +202,7 @@ def replay_recording(
         device=device or "cpu",
         control_hz=float(h["control_hz"]),
         physics_dt=float(h["physics_dt"]),
+        **({} if scene is None else {"model_path": scene}),
     )
     if why := mismatch(h, batch_header(batch)):
         batch.close()

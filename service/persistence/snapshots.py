@@ -129,7 +129,8 @@ def decode_state(data: bytes, current: dict[str, Any] | None = None) -> BatchSta
         world_ticks=arrays["world_ticks"],
         faults=arrays["faults"],
         targets=arrays["targets"],
-        physics={f: arrays[f"physics.{f}"] for f in PHYSICS_FIELDS},
+        # the state's fields, and per-world model fields (`MODEL_PREFIX`) where there are any
+        physics={k.removeprefix("physics."): v for k, v in arrays.items() if "." in k},
     )
 
 

@@ -48,7 +48,6 @@ from foxglove.messages import (
 
 from service.core.callers import book_of
 from service.core.errors import ArmfleetError
-from service.core.robot import load_robot
 from service.core.worlds import pick_worlds
 from service.surfaces.foxglove_callers import TOKEN_PARAMETER, ClientCallers
 from service.surfaces.foxglove_scene import geom_entities, quat_msg, vec_msg, world_offset
@@ -123,7 +122,7 @@ class FoxgloveLive:
         self.worlds = pick_worlds(self._worlds_spec, loop.batch.nworld)
         self._names = list(loop.batch.spec.names)
         self._hz = float(loop.batch.control_hz)
-        self._mjm = load_robot().mjm
+        self._mjm = loop.batch.robot.mjm  # the scene served, the user's cell included
         self._data = mujoco.MjData(self._mjm)
         self._ctx = foxglove.Context()  # our own: channels of other servers stay apart
         self._joint_channels = {

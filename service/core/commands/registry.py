@@ -9,6 +9,9 @@ its module plus one line below.
 from __future__ import annotations
 
 from service.core.commands.base import Command
+from service.core.commands.entities import SetEntities
+from service.core.commands.params import SetParams
+from service.core.commands.randomize import Randomize
 from service.core.commands.targets import Increment, SetMany, SetTargets
 from service.core.commands.trajectory import CancelTrajectory, ResumeTrajectory, StartTrajectory
 from service.core.commands.world import Reset, SetMode, Step
@@ -23,6 +26,9 @@ COMMANDS: tuple[type[Command], ...] = (
     StartTrajectory,
     CancelTrajectory,
     ResumeTrajectory,
+    SetEntities,
+    SetParams,
+    Randomize,
 )
 
 BY_KIND: dict[str, type[Command]] = {c.kind: c for c in COMMANDS}

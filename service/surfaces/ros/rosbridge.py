@@ -33,7 +33,7 @@ from service.core.errors import ArmfleetError
 from service.core.hub import StreamHub, Subscription
 from service.core.surface import SurfaceContext
 from service.core.types import Snapshot
-from service.surfaces.ros import rosapi, rosbridge_actions, topics
+from service.surfaces.ros import rosapi, rosbridge_actions, sim_entities, topics
 from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, same_type, topic_name
 from service.surfaces.ros.rosbridge_frames import (
     KINDS,
@@ -271,6 +271,17 @@ class Session:
         reply: dict[str, Any] = {"op": "service_response", "service": name}
         if msg.get("id") is not None:
             reply["id"] = msg["id"]
+        entity = sim_entities.match(name, self.loop.batch.nworld)
+        if entity is not None:  # simulation_interfaces: a get replies once the engine is read
+            kind, world = entity
+            if kind == "set":
+                values = sim_entities.set_state(self, world, args)
+                self._reply({**reply, "values": values, "result": True})
+            else:
+                sim_entities.get_state(
+                    self, world, args, lambda v: self._reply({**reply, "values": v, "result": True})
+                )
+            return
         service = rosapi.find(name)
         if service is None:
             self.server.bad.report("unknown_service", name, "no such service")

@@ -1,0 +1,340 @@
+"""Entities: every named free body of the scene, in every world; `set_entity` writes their pose
+and twist at one tick boundary, and `read` reads them back.
+
+An entity is a body whose joint is a MuJoCo free joint: its pose is 7 numbers of the world's
+qpos (position x y z [m], orientation w x y z) and its twist 6 of qvel (linear velocity [m/s] in
+the world frame, angular velocity [rad/s] in the body's own frame, as MuJoCo stores a free
+joint's). The writes are `StateWrite`s (service.core.batch): every engine applies them already,
+after the tick boundary's resets and before its targets, so this module needs no engine code.
+
+Rules (each refusal names the field and the limit; one bad write refuses the whole command,
+nothing is staged): `name` is an entity of the scene; every number finite; `position` inside the
+scene's bounds (the model's custom numeric `armfleet_bounds`, x y z min then max, else the
+model's statistic centre ± extent); `orientation` a quaternion with |norm − 1| <= 0.1, normalised
+when it is not unit already (the ack lists it under `normalised`); |linear| <= 50 m/s,
+|angular| <= 500 rad/s; at least one of the four fields.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import mujoco
+import numpy as np
+from pydantic import ConfigDict, Field
+
+from service.core.batch import Batch, StateWrite
+from service.core.commands import rules
+from service.core.commands.base import Announcement, Command, Door
+from service.core.errors import BadCommand
+from service.core.schema_fields import FiniteFloat, Strict, WorldId
+
+__all__ = ["EntityTable", "SetEntities", "entity_table", "read"]
+
+MAX_LINEAR = 50.0  # m/s
+MAX_ANGULAR = 500.0  # rad/s
+QUAT_TOLERANCE = 0.1  # |norm - 1| above this: refused; below: normalised
+_UNIT = 1e-12  # a norm this close to 1 is taken as given
+BOUNDS_NUMERIC = "armfleet_bounds"
+MAX_WRITES = 100_000  # writes per command
+_FIELDS = ("position", "orientation", "linear", "angular")
+
+
+@dataclass(frozen=True)
+class EntityTable:
+    """The scene's entities: names, each one's qpos and qvel address, the scene's bounds.
+
+    names: entity names in body order; body: their body ids; qpos: first qpos address of each
+    free joint (7 values follow); qvel: first dof address (6 follow); lower / upper: (3,) [m]
+    """
+
+    names: tuple[str, ...]
+    body: np.ndarray
+    qpos: np.ndarray
+    qvel: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+    def index(self, name: object, field: str = "name") -> int:
+        if not isinstance(name, str) or name not in self.names:
+            raise BadCommand(field, f"unknown entity {name!r}; entities are {list(self.names)}")
+        return self.names.index(name)
+
+    def bounds_text(self) -> str:
+        return ", ".join(
+            f"{a} {lo:g}..{hi:g} m" for a, lo, hi in zip("xyz", self.lower, self.upper, strict=True)
+        )
+
+
+def free_bodies(mjm: mujoco.MjModel) -> list[tuple[int, int]]:
+    """(body id, free joint id) of every free body, in body order."""
+    return [
+        (int(mjm.jnt_bodyid[j]), j)
+        for j in range(mjm.njnt)
+        if mjm.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE
+    ]
+
+
+def scene_bounds(mjm: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+    """Where an entity may be put: `armfleet_bounds` if the model has it, else centre ± extent."""
+    nid = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_NUMERIC, BOUNDS_NUMERIC)
+    if nid >= 0 and mjm.numeric_size[nid] == 6:
+        adr = mjm.numeric_adr[nid]
+        values = np.array(mjm.numeric_data[adr : adr + 6], dtype=np.float64)
+        return values[:3], values[3:]
+    centre, extent = np.array(mjm.stat.center, dtype=np.float64), float(mjm.stat.extent)
+    return centre - extent, centre + extent
+
+
+# Per model object, for as long as it lives (a model freed and another made at its address must
+# not find the first one's table).
+_TABLES: weakref.WeakKeyDictionary[mujoco.MjModel, EntityTable] = weakref.WeakKeyDictionary()
+
+
+def entity_table(mjm: mujoco.MjModel) -> EntityTable:
+    """The entity table of a compiled model (built once per model object)."""
+    table = _TABLES.get(mjm)
+    if table is None:
+        found = free_bodies(mjm)
+        names = tuple(mujoco.mj_id2name(mjm, mujoco.mjtObj.mjOBJ_BODY, b) or "" for b, _ in found)
+        lower, upper = scene_bounds(mjm)
+        table = EntityTable(
+            names=names,
+            body=np.array([b for b, _ in found], dtype=np.int64),
+            qpos=np.array([mjm.jnt_qposadr[j] for _, j in found], dtype=np.int64),
+            qvel=np.array([mjm.jnt_dofadr[j] for _, j in found], dtype=np.int64),
+            lower=lower,
+            upper=upper,
+        )
+        _TABLES[mjm] = table
+    return table
+
+
+# -- the wire form ------------------------------------------------------------------------
+
+
+class EntityValues(Strict):
+    """What to write of one entity: any of its pose and twist (at least one field)."""
+
+    position: list[FiniteFloat] | None = Field(
+        None, min_length=3, max_length=3, description="x y z [m], world frame"
+    )
+    orientation: list[FiniteFloat] | None = Field(
+        None, min_length=4, max_length=4, description="quaternion w x y z (normalised if near)"
+    )
+    linear: list[FiniteFloat] | None = Field(
+        None, min_length=3, max_length=3, description="linear velocity [m/s], world frame"
+    )
+    angular: list[FiniteFloat] | None = Field(
+        None, min_length=3, max_length=3, description="angular velocity [rad/s], body frame"
+    )
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {"position": [0.7, 0.1, 0.9], "orientation": [1, 0, 0, 0], "linear": [0, 0, 0]}
+            ]
+        },
+    )
+
+
+class EntityWrite(EntityValues):
+    """One entity of one world, in a batch write."""
+
+    world: WorldId
+    name: str
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]}]},
+    )
+
+
+class EntityWrites(Strict):
+    """Entity writes for any worlds, all applied at one tick boundary (or none of them)."""
+
+    writes: list[EntityWrite] = Field(min_length=1, max_length=MAX_WRITES)
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={
+            "examples": [
+                {
+                    "writes": [
+                        {"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]},
+                        {"world": 1, "name": "cube", "angular": [0, 0, 2]},
+                    ]
+                }
+            ]
+        },
+    )
+
+
+class EntityAck(Strict):
+    tick: int = Field(description="the first tick stepped from the written state")
+    worlds: list[int]
+    normalised: list[str] = Field(description="orientations that were normalised, by field")
+
+
+@dataclass(frozen=True)
+class EntityResult:
+    """The tick the writes take effect at, the worlds written, what was normalised."""
+
+    tick: int
+    worlds: list[int]
+    normalised: list[str]
+
+
+# -- validation ---------------------------------------------------------------------------
+
+
+def _vector(value: Any, n: int, field: str) -> np.ndarray:
+    if not isinstance(value, list | tuple) or len(value) != n:
+        raise BadCommand(field, f"must be a list of {n} numbers, got {value!r}")
+    for v in value:
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise BadCommand(field, f"must be a list of {n} numbers, got {value!r}")
+        if not math.isfinite(v):
+            raise BadCommand(field, f"{v} is not finite (no NaN or Inf)")
+    return np.array(value, dtype=np.float64)
+
+
+def _checked(
+    table: EntityTable, nworld: int, item: Mapping[str, Any], where: str, notes: list[str]
+) -> list[StateWrite]:
+    """One entity write → its StateWrites; BadCommand naming `where`.field otherwise."""
+    if not isinstance(item, Mapping):
+        raise BadCommand(where or "writes", "an entity write is an object")
+    extra = set(item) - {"world", "name", *_FIELDS}
+    if extra:
+        raise BadCommand(f"{where}{sorted(extra)[0]}", f"unknown field; fields are {_FIELDS}")
+    world = rules.world_id(item.get("world"), nworld, f"{where}world")
+    e = table.index(item.get("name"), f"{where}name")
+    out: list[StateWrite] = []
+    if not any(item.get(f) is not None for f in _FIELDS):
+        raise BadCommand(f"{where}position", f"nothing to write: give any of {_FIELDS}")
+    if (p := item.get("position")) is not None:
+        pos = _vector(p, 3, f"{where}position")
+        outside = (pos < table.lower) | (pos > table.upper)
+        if outside.any():
+            axis = "xyz"[int(np.flatnonzero(outside)[0])]
+            raise BadCommand(
+                f"{where}position",
+                f"{pos.tolist()} is outside the scene's bounds at {axis} ({table.bounds_text()})",
+            )
+        out.append(StateWrite("qpos", world, table.qpos[e] + np.arange(3), pos))
+    if (q := item.get("orientation")) is not None:
+        quat = _vector(q, 4, f"{where}orientation")
+        norm = float(np.linalg.norm(quat))
+        if abs(norm - 1.0) > QUAT_TOLERANCE:
+            raise BadCommand(
+                f"{where}orientation",
+                f"quaternion norm {norm:.6g} is too far from 1 (|norm - 1| <= {QUAT_TOLERANCE})",
+            )
+        if abs(norm - 1.0) > _UNIT:
+            quat = quat / norm
+            notes.append(f"{where}orientation (norm {norm:.6g})")
+        out.append(StateWrite("qpos", world, table.qpos[e] + 3 + np.arange(4), quat))
+    for f, off, limit, unit in (
+        ("linear", 0, MAX_LINEAR, "m/s"),
+        ("angular", 3, MAX_ANGULAR, "rad/s"),
+    ):
+        if (v := item.get(f)) is not None:
+            vec = _vector(v, 3, f"{where}{f}")
+            speed = float(np.linalg.norm(vec))
+            if speed > limit:
+                raise BadCommand(
+                    f"{where}{f}", f"|{f}| = {speed:.6g} {unit} exceeds {limit:g} {unit}"
+                )
+            out.append(StateWrite("qvel", world, table.qvel[e] + off + np.arange(3), vec))
+    return out
+
+
+@dataclass(frozen=True)
+class SetEntities(Command[EntityResult]):
+    """Poses and twists of entities in any worlds, written together at one tick boundary."""
+
+    kind: ClassVar[str] = "set_entity"
+    op: ClassVar[str | None] = "set_entity"
+    http: ClassVar[tuple[str, ...]] = ("entities",)
+
+    writes: tuple[StateWrite, ...]
+    items: tuple[dict[str, Any], ...]  # as given, for the recording
+    normalised: tuple[str, ...]
+
+    @classmethod
+    def create(cls, door: Door, items: Sequence[Mapping[str, Any]]) -> SetEntities:
+        if not isinstance(items, list | tuple) or not 1 <= len(items) <= MAX_WRITES:
+            raise BadCommand("writes", f"give 1..{MAX_WRITES} entity writes")
+        table = entity_table(door.loop.batch.robot.mjm)
+        notes: list[str] = []
+        writes: list[StateWrite] = []
+        many = len(items) > 1
+        for i, item in enumerate(items):
+            writes += _checked(table, door.nworld, item, f"writes.{i}." if many else "", notes)
+        kept = tuple({k: v for k, v in dict(it).items() if v is not None} for it in items)
+        return cls(tuple(writes), kept, tuple(notes))
+
+    @classmethod
+    def from_wire(cls, door: Door, world: int, body: dict[str, Any]) -> SetEntities:
+        return cls.create(door, [{**body, "world": world}])
+
+    def stage(self, door: Door, source: str) -> EntityResult:
+        tick = door.loop.stage_state(self.writes)
+        worlds = sorted({w.world for w in self.writes})
+        return EntityResult(tick, worlds, list(self.normalised))
+
+    def announce(self, door: Door, result: EntityResult) -> Announcement:
+        worlds = np.array(result.worlds, dtype=np.int64)
+        targets = door.loop.pending_targets(worlds)
+        return Announcement(worlds, targets, result.tick, {"writes": list(self.items)})
+
+    def ack(self, door: Door, msg_id: Any, world: int, result: EntityResult) -> dict[str, Any]:
+        return {
+            "op": "ack",
+            "id": msg_id,
+            "world": world,
+            "tick": result.tick,
+            "normalised": result.normalised,
+        }
+
+    @classmethod
+    def from_record(cls, door: Door, rec: dict[str, Any]) -> SetEntities:
+        return cls.create(door, rec["writes"])
+
+
+# -- reading ------------------------------------------------------------------------------
+
+
+def read(batch: Batch, worlds: Sequence[int]) -> dict[str, Any]:
+    """Entities of `worlds` at the batch's last tick (call on the sim thread: `SimLoop.call`).
+
+    Values are the engine's own state (float32 on MuJoCo Warp, float64 on native MuJoCo), so
+    a written value reads back as the engine holds it.
+    """
+    table = entity_table(batch.robot.mjm)
+    qpos, qvel = batch.qpos(), batch.qvel()
+    rows = []
+    for w in worlds:
+        entities = []
+        for e, name in enumerate(table.names):
+            p, v = (
+                qpos[w, table.qpos[e] : table.qpos[e] + 7],
+                qvel[w, table.qvel[e] : table.qvel[e] + 6],
+            )
+            entities.append(
+                {
+                    "name": name,
+                    "position": p[:3].tolist(),
+                    "orientation": p[3:].tolist(),
+                    "linear": v[:3].tolist(),
+                    "angular": v[3:].tolist(),
+                }
+            )
+        rows.append({"world": int(w), "entities": entities})
+    return {"tick": batch.tick, "worlds": rows}
