@@ -363,16 +363,11 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         self._d.qpos.assign(full)
 
     def write_state(self, write: StateWrite) -> None:
-        """A qpos/qvel slice of one world: in place on the CPU (`.numpy()` is a view there), one
-        row's round trip on a GPU (commands that move bodies are rare next to ticks)."""
+        """A qpos/qvel slice of one world (commands that move bodies are rare next to ticks)."""
         array = self._d.qpos if write.field == "qpos" else self._d.qvel
-        if self.device.is_cpu:
-            array.numpy()[write.world, write.index] = write.values
-            return
-        row = array[write.world : write.world + 1]
-        host = row.numpy()
-        host[0, write.index] = write.values
-        row.assign(host)
+        row = array.numpy()[write.world : write.world + 1].copy()
+        row[0, write.index] = write.values
+        write_rows(array, np.array([write.world]), row, self.device.is_cpu)
 
     def push_model(self, field: str, worlds: np.ndarray) -> None:
         """Per-world values of a Model field for `worlds` (see warp_model); the first write to

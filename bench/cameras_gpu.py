@@ -1,0 +1,397 @@
+"""Section 30: cameras on a GPU: every world's wrist camera streamed at 30 Hz, beside the renderer.
+
+On one CUDA device, in one run: (1) the renderer alone: MuJoCo Warp's batch renderer, N = 16,384
+worlds' wrist camera at 64x64 RGB, timed to completion on the device (BVH refit + render; also with
+the kinematics and camera poses the service recomputes), then the service's `BatchRenderer.render`
+(state in, pixels out to the host); (2) `armfleet serve` with N worlds, the wrist camera at 64x64
+RGB, `--camera-batch N` (one render draws every world) and one client of
+`/v1/ws/cameras?worlds=0-(N-1)&rate=30&format=raw` (every world's image in each message; the client
+asks for no compression), in realtime mode then fast mode: ticks/s and real-time factor with nobody
+looking, then while the stream runs, messages/s delivered and their ratio to min(30, the renderer
+alone's batches/s); (3) the largest batch that fits: per resolution, the worlds doubled from N
+until building or drawing the render batch fails (a child process per resolution).
+
+Run it: ``armfleet bench --section 30 --device cuda`` (``--quick``: 1,024 worlds, shorter).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import json
+import math
+import subprocess
+import sys
+import threading
+import time
+from typing import Any
+
+import httpx
+
+from bench import common
+from bench.registry import Context, Result, section
+
+RATE = 30.0  # messages a second asked of the stream
+SIZE = (64, 64)  # the wrist camera's size for the stream and the renderer alone
+CAMERA = "wrist"
+FIT_SIZES = ((64, 64), (128, 128), (256, 256))
+FIT_MAX_WORLDS = 1 << 22  # the doubling stops here even when memory is left
+
+
+def _mjm_and_spec(width: int, height: int) -> tuple[Any, Any]:
+    """The service's scene model and its wrist camera at width x height, RGB only."""
+    from service.core.cameras import camera_specs
+    from service.core.robot import load_robot
+
+    mjm = load_robot().mjm
+    specs = camera_specs(mjm, f"{width}x{height}", "rgb")
+    return mjm, next(s for s in specs if s.name == CAMERA)
+
+
+def _used_gib(device: str) -> float | None:
+    """Memory in use on the device (every process), GiB; None where it cannot be read."""
+    import warp as wp
+
+    with contextlib.suppress(Exception):
+        dev = wp.get_device(device)
+        if dev.is_cuda:
+            return (dev.total_memory - dev.free_memory) / 2**30
+    return None
+
+
+def _build(mjm: Any, spec: Any, n: int, device: str) -> tuple[Any, Any, Any]:
+    """An mjwarp Model, Data of `n` worlds and render context, as the service's renderer builds."""
+    import mujoco
+    import mujoco_warp as mjw
+    import warp as wp
+
+    with wp.ScopedDevice(device):
+        m = mjw.put_model(mjm)
+        data = mujoco.MjData(mjm)
+        mujoco.mj_kinematics(mjm, data)
+        d = mjw.put_data(mjm, data, nworld=n, nconmax=1, njmax=1)
+        outputs = {"render_rgb": [True], "render_depth": [False], "render_seg": [False]}
+        rc = mjw.create_render_context(
+            mjm, nworld=n, cam_res=[(spec.width, spec.height)], cam_active=[spec.id], **outputs
+        )
+    return m, d, rc
+
+
+def _rate(t: common.Timing) -> dict[str, float]:
+    return {"batches_per_s": 1 / t.per_call, "ms_per_batch": 1e3 * t.per_call}
+
+
+def _device_rates(mjm: Any, spec: Any, n: int, device: str, seconds: float) -> dict[str, Any]:
+    """Batches a second on the device alone: refit + render, and the service's whole picture."""
+    import mujoco_warp as mjw
+    import numpy as np
+    import warp as wp
+
+    t0 = time.perf_counter()
+    m, d, rc = _build(mjm, spec, n, device)
+    out: dict[str, Any] = {"build_s": time.perf_counter() - t0}
+
+    def render() -> None:
+        mjw.refit_bvh(m, d, rc)
+        mjw.render(m, d, rc)
+
+    def picture() -> None:
+        mjw.kinematics(m, d)
+        mjw.camlight(m, d)
+        render()
+
+    with wp.ScopedDevice(device):
+        t0 = time.perf_counter()
+        picture()
+        wp.synchronize_device()
+        out["first_draw_s"] = time.perf_counter() - t0  # compiles or loads the kernels
+        for name, fn in (("render", render), ("picture", picture)):
+            out[name] = _rate(common.time_calls(fn, seconds, 0, 3, 2, wp.synchronize_device))
+        out["distinct_colours_world0"] = len(np.unique(rc.rgb_data.numpy()[0]))  # not blank
+    out["gpu_used_gib"] = _used_gib(device)
+    return out
+
+
+def _service_renderer_rate(mjm: Any, spec: Any, n: int, device: str, seconds: float) -> dict:
+    """Batches a second of the service's BatchRenderer.render: state in, pixels out to host."""
+    import numpy as np
+
+    from service.engines.camera_render import BatchRenderer
+
+    renderer = BatchRenderer(mjm, [spec], n, device)
+    qpos = np.tile(mjm.qpos0, (n, 1))
+    renderer.render(qpos, CAMERA)
+    return _rate(common.time_calls(lambda: renderer.render(qpos, CAMERA), seconds))
+
+
+def renderer_alone(device: str, n: int, seconds: float) -> dict[str, Any]:
+    """The renderer on the device alone, then the service's renderer, N worlds at SIZE."""
+    import warp as wp
+
+    mjm, spec = _mjm_and_spec(*SIZE)
+    with contextlib.suppress(Exception):
+        wp.set_mempool_release_threshold(device, 0)  # freed memory goes back to the device
+    out: dict[str, Any] = {"worlds": n, "size": f"{spec.width}x{spec.height}"}
+    out["gpu_used_before_gib"] = _used_gib(device)
+    out.update(_device_rates(mjm, spec, n, device, seconds))
+    gc.collect()
+    out["service"] = _service_renderer_rate(mjm, spec, n, device, seconds)
+    gc.collect()
+    wp.synchronize_device(device)
+    return out
+
+
+# -- the service, streaming ------------------------------------------------------------------
+
+
+def _metrics(url: str) -> dict[str, float]:
+    lines = httpx.get(f"{url}/metrics", timeout=60).text.splitlines()
+    return {x.split()[0]: float(x.split()[1]) for x in lines if x.startswith("armfleet_camera")}
+
+
+def _read(url: str, n: int, got: dict[str, Any], stop: threading.Event) -> None:
+    """A camera-stream client: counts whole messages into `got`, checks the first one."""
+    from websockets.sync.client import connect
+
+    try:
+        with connect(url, max_size=None, compression=None, open_timeout=60) as ws:
+            while not stop.is_set():
+                with contextlib.suppress(TimeoutError):
+                    msg = ws.recv(timeout=5)
+                    if "first" not in got:
+                        hlen = int.from_bytes(msg[4:8], "little")
+                        head = json.loads(msg[8 : 8 + hlen])
+                        got["first"] = {
+                            "every_world": head["worlds"] == list(range(n)),
+                            "image_bytes": sorted(set(head["sizes"])),
+                            "message_bytes": len(msg),
+                        }
+                    got["messages"] += 1
+                    got["bytes"] += len(msg)
+    except Exception as exc:
+        got["error"] = f"{type(exc).__name__}: {exc}"
+
+
+def _window(srv: common.Served, seconds: float, got: dict, srv_device: str) -> dict[str, Any]:
+    """Ticks/s, RTF, messages/s and the cameras' metrics over one window."""
+    m0, f0, a = _metrics(srv.url), got["messages"], srv.get_info()
+    time.sleep(seconds)
+    m1, f1, b = _metrics(srv.url), got["messages"], srv.get_info()
+    wall = b[0] - a[0]
+    d = {k.removeprefix("armfleet_camera_"): m1[k] - m0.get(k, 0.0) for k in m1}
+    renders = d.get("renders_total") or math.nan
+    return {
+        "wall_s": wall,
+        "ticks_per_s": (b[1]["tick"] - a[1]["tick"]) / wall,
+        "rtf": common.rtf_between(a, b),
+        "messages_per_s": (f1 - f0) / wall,
+        "renders_per_s": d.get("renders_total", 0.0) / wall,
+        "render_ms": 1e3 * d.get("render_seconds_total", 0.0) / renders,
+        "state_ms": 1e3 * d.get("state_seconds_total", 0.0) / renders,
+        "gpu_used_gib": _used_gib(srv_device),
+    }
+
+
+def _ready(url: str) -> float:
+    """Wait until the service's cameras are warm; the seconds their warm-up took."""
+    for _ in range(1800):
+        if (got := httpx.get(f"{url}/v1/cameras", timeout=60).json())["ready"]:
+            return float(got.get("warm_s") or 0.0)
+        time.sleep(0.5)
+    raise TimeoutError("cameras not ready in 900 s")
+
+
+def stream(ctx: Context, n: int, mode: str, window: float) -> dict[str, Any]:
+    """`armfleet serve --mode MODE`, N worlds: a window idle, then one while every world streams."""
+    w, h = SIZE
+    env = {f"ARMFLEET_{k}": v for k, v in (("CAMERA_SIZE", f"{w}x{h}"), ("CAMERA_BATCH", str(n)))}
+    env |= {"ARMFLEET_CAMERA_OUTPUTS": "rgb", "ARMFLEET_CAMERAS": "overview=off"}
+    out: dict[str, Any] = {"mode": mode, "worlds": n}
+    with ctx.serve(n, mode, env) as srv:
+        out["ready_s"], out["cameras_warm_s"] = srv.ready_s, _ready(srv.url)
+        time.sleep(2.0)
+        got: dict[str, Any] = {"messages": 0, "bytes": 0}
+        out["idle"] = _window(srv, window, got, ctx.device)
+        q = f"camera={CAMERA}&worlds=0-{n - 1}&rate={RATE:g}&image=rgb&format=raw"
+        stop = threading.Event()
+        args = (f"{srv.ws_url}/v1/ws/cameras?{q}", n, got, stop)
+        reader = threading.Thread(target=_read, args=args, daemon=True)
+        reader.start()
+        deadline = time.monotonic() + 120
+        while got["messages"] < 2 and "error" not in got and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(1.0)
+        out["streaming"] = _window(srv, window, got, ctx.device)
+        stop.set()
+        reader.join(timeout=30)
+    out["client"] = got
+    out["whole_messages"] = got.get("first", {}).get("image_bytes") == [w * h * 3]
+    return out
+
+
+# -- the largest batch that fits (child processes) ----------------------------------------
+
+
+def fit_child(device: str, width: int, height: int, start: int, cap: int) -> None:
+    """The largest `start` x 2^k worlds (<= cap) whose render batch builds and draws, a JSON line
+    per try. Memory grows with the worlds: after the first try the search jumps to the largest
+    doubling the memory used predicts to fit, then halves back or doubles on from there: a plain
+    doubling search's answer in fewer builds."""
+    import mujoco_warp as mjw
+    import warp as wp
+
+    import service.engines.warp  # noqa: F401  (Warp's log level)
+
+    mjm, spec = _mjm_and_spec(width, height)
+    with contextlib.suppress(Exception):
+        wp.set_mempool_release_threshold(device, 0)  # what is freed goes back: fair readings
+    base = _used_gib(device)
+
+    def attempt(n: int) -> dict[str, Any]:
+        print(json.dumps({"worlds": n}), flush=True)
+        try:
+            m, d, rc = _build(mjm, spec, n, device)
+            with wp.ScopedDevice(device):
+                t0 = time.perf_counter()
+                mjw.refit_bvh(m, d, rc)
+                mjw.render(m, d, rc)
+                wp.synchronize_device()
+            got = {"ok": True, "gpu_used_gib": _used_gib(device)}
+            got["draw_s"] = time.perf_counter() - t0
+            del m, d, rc
+        except Exception as exc:
+            got = {"ok": False, "error": f"{type(exc).__name__}: {exc}"[:400]}
+        gc.collect()
+        with contextlib.suppress(Exception):
+            wp.synchronize_device()
+        print(json.dumps({"worlds": n, **got}), flush=True)
+        return got
+
+    first = attempt(start)
+    if not first["ok"]:
+        return
+    n, bad, used = start, 2 * cap, first["gpu_used_gib"]
+    if base is not None and used is not None and used > base:
+        total, per_world = wp.get_device(device).total_memory / 2**30, (used - base) / start
+        while n * 2 <= cap and base + per_world * n * 2 <= 0.95 * total:
+            n *= 2
+        while n > start and not attempt(n)["ok"]:
+            bad, n = n, n // 2
+    while n * 2 <= cap and n * 2 < bad and attempt(n * 2)["ok"]:
+        n *= 2
+
+
+def largest_fit(
+    device: str, width: int, height: int, start: int, cap: int, timeout: float
+) -> dict[str, Any]:
+    """The largest worlds that fitted at width x height, and how the next doubling failed."""
+    code = (
+        "from bench.cameras_gpu import fit_child; "
+        f"fit_child({device!r}, {width}, {height}, {start}, {cap})"
+    )
+    try:
+        p = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout
+        )
+        text, err, rc = p.stdout, p.stderr, p.returncode
+    except subprocess.TimeoutExpired as exc:
+        text = exc.stdout.decode() if isinstance(exc.stdout, bytes) else exc.stdout or ""
+        err, rc = f"stopped after {timeout:.0f} s", None
+    lines = [json.loads(x) for x in text.splitlines() if x.startswith("{")]
+    tries = [x for x in lines if "ok" in x]
+    if lines and "ok" not in lines[-1]:  # the child died or ran out of time on this one
+        tries.append({**lines[-1], "ok": False, "error": f"exit {rc}: {(err or '')[-300:]}"})
+    best = max((x for x in tries if x["ok"]), key=lambda x: x["worlds"], default={})
+    above = [x for x in tries if not x["ok"] and x["worlds"] > best.get("worlds", 0)]
+    return {
+        "size": f"{width}x{height}",
+        "largest_worlds": best.get("worlds"),
+        "gpu_used_gib": best.get("gpu_used_gib"),
+        "megapixels": best["worlds"] * width * height / 1e6 if best else None,
+        "next_failed": min(above, key=lambda x: x["worlds"]) if above else None,
+        "capped": bool(best) and best["worlds"] * 2 > cap and not above,
+        "tries": tries,
+    }
+
+
+# -- the section -----------------------------------------------------------------------------
+
+
+def _rows(alone: dict, streams: list[dict], fits: list[dict], n: int) -> list[dict[str, Any]]:
+    shape = f"{n:,} worlds x {SIZE[0]}x{SIZE[1]} RGB"
+    got: list[tuple[str, Any]] = []
+    if alone:
+        per_s = {k: alone[k]["batches_per_s"] for k in ("render", "picture", "service")}
+        got += [
+            (f"renderer alone: batches/s ({shape}; refit + render)", per_s["render"]),
+            ("renderer alone: images/s", per_s["render"] * n),
+            ("renderer + kinematics, camera poses: batches/s", per_s["picture"]),
+            ("service's renderer (state in, pixels out): batches/s", per_s["service"]),
+        ]
+    for s in streams:
+        mode, st = s["mode"], s["streaming"]
+        got += [
+            (f"{mode}: stream messages/s asked at 30 (every world in each)", st["messages_per_s"]),
+            (f"{mode}: stream ratio to the renderer alone, min(30, batches/s)", s.get("ratio")),
+            (f"{mode}: ticks/s, nobody looking", s["idle"]["ticks_per_s"]),
+            (f"{mode}: ticks/s, while streaming", st["ticks_per_s"]),
+            (f"{mode}: ms per render in the service (draw, pixels to host)", st["render_ms"]),
+        ]  # fmt: skip
+    for f in fits:
+        capped = " (search capped)" if f["capped"] else ""
+        got.append((f"largest batch that fits at {f['size']}: worlds{capped}", f["largest_worlds"]))
+    return [{"measure": k, "value": v} for k, v in got]
+
+
+@section(
+    30,
+    "cameras_gpu",
+    "Cameras on the GPU: 16,384 wrist cameras streamed at 30 Hz vs the renderer alone",
+    devices=("cuda",),
+    default_on=("cuda",),
+)
+def cameras_gpu(ctx: Context) -> Result:
+    n = ctx.sizes((16384,), quick=(1024,))[0]
+    seconds, window = ctx.pick((5.0, 10.0), (2.0, 3.0))
+    errors: dict[str, str] = {}
+    alone: dict[str, Any] = {}
+    try:
+        alone = renderer_alone(ctx.device, n, seconds)
+        ctx.say(f"  renderer alone: {alone['render']['batches_per_s']:.1f} batches/s of {n}")
+    except Exception as exc:
+        errors["renderer_alone"] = f"{type(exc).__name__}: {exc}"
+        ctx.say(f"  renderer alone FAILED: {errors['renderer_alone']}")
+    best = min(RATE, alone["render"]["batches_per_s"]) if alone else None
+    streams = []
+    for mode in ("realtime", "fast"):
+        try:
+            s = stream(ctx, n, mode, window)
+            s["ratio"] = s["streaming"]["messages_per_s"] / best if best else None
+            streams.append(s)
+            idle, st = s["idle"]["ticks_per_s"], s["streaming"]["ticks_per_s"]
+            ctx.say(f"  {mode}: {s['streaming']['messages_per_s']:.2f} messages/s, ticks/s ")
+            ctx.say(f"    {idle:.1f} nobody looking, {st:.1f} streaming")
+        except Exception as exc:
+            errors[f"stream {mode}"] = f"{type(exc).__name__}: {exc}"
+            ctx.say(f"  {mode} stream FAILED: {errors[f'stream {mode}']}")
+    fits = []
+    for w, h in ctx.pick(FIT_SIZES, FIT_SIZES[:1]):
+        f = largest_fit(ctx.device, w, h, n, ctx.pick(FIT_MAX_WORLDS, 2 * n), ctx.pick(150, 90))
+        fits.append(f)
+        ctx.say(f"  fits at {w}x{h}: {f['largest_worlds']} worlds ({f['gpu_used_gib']} GiB)")
+    gpu = common.gpu_name(ctx.device) or ""
+    card = "H200" if "H200" in gpu else "H100" if "H100" in gpu else gpu or "none"
+    notes = [
+        f"card: {card} ({gpu or 'no GPU'}); one WebSocket client on the same machine, raw "
+        "pixels, no compression; ratio: messages/s over min(30, the renderer's batches/s); "
+        "largest fit: the renderer alone (the service draws at most 2^26 pixels a render)"
+    ]
+    data = dict(card=card, gpu=gpu, worlds=n, size=f"{SIZE[0]}x{SIZE[1]}", rate=RATE)
+    data.update(renderer_alone=alone, streams=streams, fits=fits, errors=errors)
+    return Result(_rows(alone, streams, fits, n), data, notes)
+
+
+if __name__ == "__main__":
+    from bench.runner import main
+
+    raise SystemExit(main(module=__name__))
