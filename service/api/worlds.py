@@ -192,7 +192,7 @@ async def put_entity(
     control: Ctl, world: World, name: str, body: entities.EntityValues
 ) -> Response:
     item = {**body.model_dump(exclude_none=True), "world": world, "name": name}
-    done = control.run(entities.SetEntities.create(control.door, [item]), HTTP)
+    done = control.run(entities.SetEntities.create(control, [item]), HTTP)
     return _json({"tick": done.tick, "worlds": done.worlds, "normalised": done.normalised})
 
 
@@ -203,7 +203,7 @@ async def put_entity(
 )
 async def post_entities(control: Ctl, body: entities.EntityWrites) -> Response:
     items = [w.model_dump(exclude_none=True) for w in body.writes]
-    done = control.run(entities.SetEntities.create(control.door, items), HTTP)
+    done = control.run(entities.SetEntities.create(control, items), HTTP)
     return _json({"tick": done.tick, "worlds": done.worlds, "normalised": done.normalised})
 
 
@@ -230,7 +230,7 @@ async def get_params(loop: Loop, world: World) -> Response:
 )
 async def put_params(control: Ctl, world: World, body: params.ParamValues) -> Response:
     item = {"world": world, "params": body.params}
-    done = control.run(params.SetParams.create(control.door, [item]), HTTP)
+    done = control.run(params.SetParams.create(control, [item]), HTTP)
     return _json({"tick": done.tick, "worlds": done.worlds})
 
 
@@ -241,7 +241,7 @@ async def put_params(control: Ctl, world: World, body: params.ParamValues) -> Re
 )
 async def post_params(control: Ctl, body: params.ParamWrites) -> Response:
     items = [w.model_dump() for w in body.writes]
-    done = control.run(params.SetParams.create(control.door, items), HTTP)
+    done = control.run(params.SetParams.create(control, items), HTTP)
     return _json({"tick": done.tick, "worlds": done.worlds})
 
 
@@ -251,6 +251,6 @@ async def post_params(control: Ctl, body: params.ParamWrites) -> Response:
     summary="Reset worlds (default: all) with entity poses and parameters drawn with a seed",
 )
 async def post_randomize(control: Ctl, body: randomize.RandomizeRequest) -> Response:
-    command = randomize.Randomize.create(control.door, body.worlds, body.seed, body.spec)
+    command = randomize.Randomize.create(control, body.worlds, body.seed, body.spec)
     done = control.run(command, HTTP)
     return _json({"tick": done.tick, "worlds": done.worlds, "seed": body.seed, "spec": body.spec})
