@@ -24,6 +24,7 @@ import rclpy
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
+from armfleet_ros import auth
 from armfleet_ros.convert import Counter, stamp
 from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
@@ -58,7 +59,7 @@ class ArmfleetNode:
         self.url = str(param(node, "url", "http://127.0.0.1:8000"))
         spec = str(param(node, "worlds", ""))  # `worlds:=3` arrives as an integer
         self.rate = float(param(node, "rate", 60.0))  # `rate:=100` too
-        self.http = ArmfleetClient(self.url, timeout=10.0)
+        self.http = ArmfleetClient(self.url, timeout=10.0, token=auth.token())
         self._wait_for_armfleet(log)
         info = self.http.info()
         self.joints = info.names
