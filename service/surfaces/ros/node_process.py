@@ -2,14 +2,14 @@
 
 The node (packaging/armfleet-ros) runs on the ROS installation's Python, found and prepared by
 node_env.py when the service is built (a missing ROS is one line at start, not a crash later).
-Once the loop runs it is started with the service's URL and `--ros2-worlds` / `--ros2-rate` as
-ROS parameters, and the administrator's `--token` (if any) in its environment as ARMFLEET_TOKEN
-(never on its command line, which `ps` shows to everyone, and never logged), in a process group
-of its own (a terminal's Ctrl-C reaches armfleet, which stops the node itself: SIGINT to its
-group, SIGKILL after 10 s), and killed with armfleet if armfleet dies (PR_SET_PDEATHSIG). If
-it exits on its own it is started again after a backoff (1 s, doubling to 10 s while it keeps
-failing within 30 s); while it is down `/readyz` names the problem, and the restarts are
-logged and counted in `GET /v1/ros`.
+Once the loop runs it is started with the service's URL, `--ros2-worlds`, `--ros2-rate`,
+`--ros2-cameras` and `--camera-rate` as ROS parameters, and the administrator's `--token` (if
+any) in its environment as ARMFLEET_TOKEN (never on its command line, which `ps` shows to
+everyone, and never logged). It runs in a process group of its own (a terminal's Ctrl-C reaches
+armfleet, which stops the node itself: SIGINT to its group, SIGKILL after 10 s), and is killed
+with armfleet if armfleet dies (PR_SET_PDEATHSIG). If it exits on its own it is started again
+after a backoff (1 s, doubling to 10 s while it keeps failing within 30 s); while it is down
+`/readyz` names the problem, and the restarts are logged and counted in `GET /v1/ros`.
 """
 
 from __future__ import annotations
@@ -61,6 +61,9 @@ class RosNode:
         host = "127.0.0.1" if s.host in ("0.0.0.0", "::", "") else s.host
         url = f"http://{host}:{s.port}"
         params = [f"url:={url}", f"worlds:={s.ros2_worlds}", f"rate:={float(s.ros2_rate)}"]
+        cameras = ",".join(c.strip() for c in s.ros2_cameras.split(",") if c.strip())
+        if cameras:
+            params += [f"cameras:={cameras}", f"camera_rate:={float(s.camera_rate)}"]
         args = [self.node.python, "-m", "armfleet_ros.node", "--ros-args"]
         for p in params:
             args += ["-p", p]
