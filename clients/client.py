@@ -322,6 +322,8 @@ class WorldSession(_Closes):
     def _recv(self, timeout: float | None) -> Any:
         try:
             msg = _stream.parse(self._ws.recv(timeout))
+        except TimeoutError:  # nothing came in time; the socket is fine (LOST has it too)
+            raise TimeoutError(f"no message from {self.url} in {timeout:g} s") from None
         except _stream.LOST as exc:
             raise _stream.lost(self.url, exc) from exc
         if isinstance(msg, models.WorldState):

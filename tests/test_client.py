@@ -312,6 +312,16 @@ def test_websocket_commands_get_their_acks(client: ArmfleetClient) -> None:
     assert state_at(client, 3, home.tick).target == pytest.approx(HOME)
 
 
+def test_recv_state_times_out_with_timeout_error_and_the_socket_stays_usable(
+    client: ArmfleetClient,
+) -> None:
+    with client.connect(1, rate=0.2) as session:  # a frame at connect, the next in 5 s
+        session.recv_state(10)
+        with pytest.raises(TimeoutError, match="no message"):
+            session.recv_state(0.3)
+        assert session.increment(FINGER, 0.0).world == 1  # not Unreachable: still connected
+
+
 def test_async_websocket_commands_in_parallel_get_their_own_acks(server: Server) -> None:
     async def drive() -> list[float]:
         async with AsyncArmfleetClient(server.url) as c:

@@ -48,6 +48,7 @@ class Subscription:
         self.packed = packed
         self.names = names or []
         self.frame: bytes | None = None  # the newest packed frame not yet sent
+        self.claimed_tick = -1  # the tick of the last packed frame asked for (sim thread)
         # JSON frames' fields after the state columns, taken when a frame is packed
         # (the trajectories of the worlds); None: frames.DEFAULT_EXTRA.
         self.extra: Callable[[], dict[str, Any]] | None = None
@@ -100,6 +101,16 @@ class Subscription:
         if not (owed or self.due(now)):
             return False
         self._keep_cadence(now)
+        self.claimed_tick = tick
+        return True
+
+    def catch_up(self, tick: int) -> bool:
+        """Packed subscriptions, where time stopped at `tick`: is their last frame older? (The
+        frame sent for it leaves the cadence as it is, like an owed one.)"""
+        if self.claimed_tick >= tick:
+            return False
+        self._pay(tick)
+        self.claimed_tick = tick
         return True
 
     def wants(self, snap: Snapshot, now: float) -> bool:
@@ -161,10 +172,17 @@ class StreamHub(SnapshotSink):
 
     def on_tick(self, batch: Batch, now: float) -> None:
         """Pack the frames packed subscriptions want of this tick, one per world selection."""
+        self._pack(batch, [s for s in self._subs if s.packed and s.claim(batch.tick, now)])
+
+    def at_rest(self, batch: Batch, now: float) -> None:
+        """Time stopped: packed subscriptions whose last frame is older get this tick's now,
+        whatever their cadence (a burst of steps ends between two frames of a slow one)."""
+        self._pack(batch, [s for s in self._subs if s.packed and s.catch_up(batch.tick)])
+
+    def _pack(self, batch: Batch, subs: list[Subscription]) -> None:
         groups: dict[bytes, list[Subscription]] = {}
-        for sub in self._subs:
-            if sub.packed and sub.claim(batch.tick, now):
-                groups.setdefault(sub.key[1], []).append(sub)
+        for sub in subs:
+            groups.setdefault(sub.key[1], []).append(sub)
         for group in groups.values():
             formats = sorted({s.packed for s in group if s.packed})
             data = frames.pack(batch, group[0].worlds, "json" in formats)
@@ -179,6 +197,8 @@ class StreamHub(SnapshotSink):
     def restored(self) -> None:
         """The batch was restored: the next snapshot goes to packed subscriptions as well."""
         self._resync = True
+        for sub in self._subs:  # ticks may start lower: any tick now is news to them
+            sub.claimed_tick = -1
 
     def publish(self, snapshot: Snapshot) -> None:
         if not self._subs:

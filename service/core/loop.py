@@ -237,6 +237,7 @@ class SimLoop(TickBoundary):
                         continue
             if idle:  # paused after a tick that took no snapshot: show where time stopped
                 self._publish(time.monotonic())
+                self._at_rest(time.monotonic())
                 continue
             try:
                 self._tick_once(mode)
@@ -284,6 +285,8 @@ class SimLoop(TickBoundary):
         for sink in self._sinks:  # sinks need not subclass SnapshotSink: on_tick is optional
             if (on_tick := getattr(sink, "on_tick", None)) is not None:
                 on_tick(self.batch, now)
+        if mode is Mode.PAUSED and self._tick >= self._step_goal:  # a step burst's last tick
+            self._at_rest(now)
         self._release_step_waiters()
         self._update_stats(now)
         seconds = time.perf_counter() - t0
@@ -342,6 +345,13 @@ class SimLoop(TickBoundary):
             resolve(fut, snap)
         for sink in self._sinks:
             sink.publish(snap)
+
+    def _at_rest(self, now: float) -> None:
+        """Tell the sinks that time stopped here (they may stream at a cadence of their own,
+        which a burst of steps ends between)."""
+        for sink in self._sinks:
+            if (at_rest := getattr(sink, "at_rest", None)) is not None:
+                at_rest(self.batch, now)
 
     def _update_stats(self, now: float) -> None:
         t0, tick0 = self._window

@@ -56,6 +56,10 @@ class SnapshotSink:
 
     def on_tick(self, batch: Batch, now: float) -> None: ...
 
+    def at_rest(self, batch: Batch, now: float) -> None:
+        """Time stopped at the batch's tick (paused: the last tick of a step burst, or where a
+        pause found it): no later tick will carry its state, so show it now."""
+
 
 def resolve(fut: concurrent.futures.Future[Snapshot], snap: Snapshot) -> None:
     if not fut.done():  # a reader that gave up may have cancelled it

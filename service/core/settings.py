@@ -226,15 +226,6 @@ class Settings(BaseSettings):
         return self
 
     @model_validator(mode="after")
-    def _leases_need_token_carrying_surfaces(self) -> Settings:
-        if self.leases != "off" and self.ros2:
-            raise ValueError(
-                "leases: the ROS 2 node (--ros2) cannot present a token yet and so could not "
-                "command leased worlds; serve ROS without leases, or leases without --ros2"
-            )
-        return self
-
-    @model_validator(mode="after")
     def _scene_can_be_served(self) -> Settings:
         if self.scene is not None:
             check_scene(self.scene)  # SceneError (a ValueError) says what is wrong

@@ -24,6 +24,7 @@ from typing import Any
 
 from websockets.asyncio.client import connect
 
+from armfleet_ros import auth
 from clients import _stream
 from clients.errors import CommandRejected, Unreachable
 from clients.models import BatchStates, CommandAck, WsError
@@ -121,7 +122,12 @@ class Lane:
         try:
             while not stopping():
                 try:
-                    async with connect(url, max_size=_stream.MAX_SIZE, proxy=None) as ws:
+                    async with connect(
+                        url,
+                        max_size=_stream.MAX_SIZE,
+                        proxy=None,
+                        additional_headers=auth.headers(),
+                    ) as ws:
                         self._ws = ws
                         backoff.reset()
                         async for data in ws:

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from websockets.asyncio.client import connect
 
+from armfleet_ros import auth
 from armfleet_ros.lanes import lanes_for
 from clients import _stream
 from clients.models import BatchStates
@@ -127,7 +128,9 @@ class FleetLink:
         backoff = _stream.Backoff(maximum=1.0)
         while not self._stopping:
             try:
-                async with connect(url, max_size=_stream.MAX_SIZE, proxy=None) as ws:
+                async with connect(
+                    url, max_size=_stream.MAX_SIZE, proxy=None, additional_headers=auth.headers()
+                ) as ws:
                     async for data in ws:
                         self._frame(data, backoff)
                     reason = _stream.close_reason(ws.close_code, ws.close_reason)
@@ -168,7 +171,9 @@ class FleetLink:
             url = _stream.ws_url(self.url, None).replace("/v1/ws", "/v1/ws/view", 1)
             url += ("&" if "?" in url else "?") + f"worlds={spec}&rate={self.rate:g}"
             try:
-                async with connect(url, max_size=_stream.MAX_SIZE, proxy=None) as ws:
+                async with connect(
+                    url, max_size=_stream.MAX_SIZE, proxy=None, additional_headers=auth.headers()
+                ) as ws:
                     reader = asyncio.ensure_future(self._read_poses(ws))
                     changed = asyncio.ensure_future(self._pose_changed.wait())
                     await asyncio.wait({reader, changed}, return_when=asyncio.FIRST_COMPLETED)

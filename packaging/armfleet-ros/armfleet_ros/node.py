@@ -7,7 +7,8 @@ run on another machine; everything ROS (middleware, QoS, graph, type hashes, ser
 is the installation's own. Parameters: `url`, `worlds` (worlds with `/world_N/...`; world 0 is
 also at the root, the seed's names), `rate` (Hz of `/joint_states`, `/clock`, `/tf`),
 `play_mode` (what simulation_interfaces' PLAYING means: realtime or fast), `command_rate`
-(armfleet's `--command-rate`, the budget of each of the node's command lanes: lanes.py).
+(armfleet's `--command-rate`, the budget of each of the node's command lanes: lanes.py),
+`cameras` and `camera_rate` (camera images per namespace: cameras.py).
 Written for Python 3.10 and rclpy 3.3 (Humble) on: no newer API is used.
 """
 
@@ -24,6 +25,8 @@ import rclpy
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
+from armfleet_ros import auth
+from armfleet_ros.cameras import camera_topics
 from armfleet_ros.convert import Counter, stamp
 from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
@@ -58,7 +61,7 @@ class ArmfleetNode:
         self.url = str(param(node, "url", "http://127.0.0.1:8000"))
         spec = str(param(node, "worlds", ""))  # `worlds:=3` arrives as an integer
         self.rate = float(param(node, "rate", 60.0))  # `rate:=100` too
-        self.http = ArmfleetClient(self.url, timeout=10.0)
+        self.http = ArmfleetClient(self.url, timeout=10.0, token=auth.token())
         self._wait_for_armfleet(log)
         info = self.http.info()
         self.joints = info.names
@@ -80,6 +83,8 @@ class ArmfleetNode:
         self.parts = slices(spaces, NODE_NAME, node)
         self.spaces = [WorldTopics(self, w, ns, part) for part, sl in self.parts for ns, w in sl]
         self._simulation_interfaces(log)
+        names = [c.strip() for c in str(param(node, "cameras", "")).split(",") if c.strip()]
+        self.cameras = camera_topics(self, names, float(param(node, "camera_rate", 10.0)))
         served = sorted({w for _, w in spaces})
         command_rate = float(param(node, "command_rate", 200.0))
         self.link = FleetLink(self.url, served, self.rate, self._publish, command_rate)
@@ -121,6 +126,8 @@ class ArmfleetNode:
     def _refresh(self) -> None:
         for space in self.spaces:
             space.refresh()
+        for camera in self.cameras:
+            camera.refresh()
         self.link.watch_poses(sorted({s.world for s in self.spaces if s.listened_tf}))
         self._report()
 
@@ -134,6 +141,7 @@ class ArmfleetNode:
             "accepted": self.accepted,
             "merged": sum(lane.merged for lane in self.link.lanes),
             "rejected": self.bad.counts(),
+            "images": {camera.name: camera.published for camera in self.cameras},
         }
         now = time.monotonic()
         if body == self._reported and now - self._reported_at < 10.0:
@@ -190,6 +198,8 @@ class ArmfleetNode:
 
     def close(self) -> None:
         self._stop.set()
+        for camera in self.cameras:
+            camera.stop()
         self.link.stop()
         self.http.close()
 

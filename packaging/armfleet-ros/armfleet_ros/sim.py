@@ -32,6 +32,7 @@ from simulation_interfaces.srv import (
 )
 from websockets.sync.client import connect
 
+from armfleet_ros import auth
 from armfleet_ros.convert import stamp
 from armfleet_ros.link import POSE_MAGIC, Poses
 from armfleet_ros.params import param
@@ -217,7 +218,13 @@ class WorldSim:
         """This world's body poses now: one frame of the pose socket."""
         url = _stream.ws_url(self.owner.url, None).replace("/v1/ws", "/v1/ws/view", 1)
         url += ("&" if "?" in url else "?") + f"worlds={self.world}"
-        with connect(url, max_size=_stream.MAX_SIZE, proxy=None, open_timeout=10) as ws:
+        with connect(
+            url,
+            max_size=_stream.MAX_SIZE,
+            proxy=None,
+            open_timeout=10,
+            additional_headers=auth.headers(),
+        ) as ws:
             while True:
                 data = ws.recv(timeout=10)
                 if isinstance(data, bytes) and data[:4] == POSE_MAGIC:

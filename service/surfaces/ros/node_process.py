@@ -2,12 +2,14 @@
 
 The node (packaging/armfleet-ros) runs on the ROS installation's Python, found and prepared by
 node_env.py when the service is built (a missing ROS is one line at start, not a crash later).
-Once the loop runs it is started with the service's URL and `--ros2-worlds` / `--ros2-rate` as
-ROS parameters, in a process group of its own (a terminal's Ctrl-C reaches armfleet, which
-stops the node itself: SIGINT to its group, SIGKILL after 10 s), and killed with armfleet if
-armfleet dies (PR_SET_PDEATHSIG). If it exits on its own it is started again after a backoff
-(1 s, doubling to 10 s while it keeps failing within 30 s); while it is down `/readyz`
-names the problem, and the restarts are logged and counted in `GET /v1/ros`.
+Once the loop runs it is started with the service's URL, `--ros2-worlds`, `--ros2-rate`,
+`--ros2-cameras` and `--camera-rate` as ROS parameters, and the administrator's `--token` (if
+any) in its environment as ARMFLEET_TOKEN (never on its command line, which `ps` shows to
+everyone, and never logged). It runs in a process group of its own (a terminal's Ctrl-C reaches
+armfleet, which stops the node itself: SIGINT to its group, SIGKILL after 10 s), and is killed
+with armfleet if armfleet dies (PR_SET_PDEATHSIG). If it exits on its own it is started again
+after a backoff (1 s, doubling to 10 s while it keeps failing within 30 s); while it is down
+`/readyz` names the problem, and the restarts are logged and counted in `GET /v1/ros`.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from service.surfaces.ros.node_env import NodeEnv, node_env
 log = logging.getLogger("armfleet.ros")
 
 STOP_TIMEOUT_S = 10.0
+TOKEN_ENV = "ARMFLEET_TOKEN"  # what armfleet_ros/auth.py reads
 _PR_SET_PDEATHSIG = 1
 
 
@@ -44,8 +47,6 @@ class RosNode:
     name = "ros2"
 
     def __init__(self, settings: Settings, prepared: NodeEnv | None = None) -> None:
-        if settings.token:
-            raise ValueError("--ros2 with --token: the node's client cannot present a token yet")
         self.settings = settings
         self.node = prepared or node_env(settings.ros2_python)
         self.process: subprocess.Popen[bytes] | None = None
@@ -60,6 +61,9 @@ class RosNode:
         host = "127.0.0.1" if s.host in ("0.0.0.0", "::", "") else s.host
         url = f"http://{host}:{s.port}"
         params = [f"url:={url}", f"worlds:={s.ros2_worlds}", f"rate:={float(s.ros2_rate)}"]
+        cameras = ",".join(c.strip() for c in s.ros2_cameras.split(",") if c.strip())
+        if cameras:
+            params += [f"cameras:={cameras}", f"camera_rate:={float(s.camera_rate)}"]
         args = [self.node.python, "-m", "armfleet_ros.node", "--ros-args"]
         for p in params:
             args += ["-p", p]
@@ -71,10 +75,18 @@ class RosNode:
         self._thread = threading.Thread(target=self._watch, name="armfleet-ros-node", daemon=True)
         self._thread.start()
 
+    def child_env(self) -> dict[str, str]:
+        """The node's environment: the ROS one, and the token it presents (or none at all)."""
+        env = dict(self.node.env)
+        env.pop(TOKEN_ENV, None)
+        if self.settings.token:
+            env[TOKEN_ENV] = self.settings.token
+        return env
+
     def _spawn(self) -> None:
         self.process = subprocess.Popen(
             self.command(),
-            env=self.node.env,
+            env=self.child_env(),
             start_new_session=True,
             preexec_fn=_die_with_parent,
         )

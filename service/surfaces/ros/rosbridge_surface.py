@@ -64,6 +64,8 @@ class NodeReport(BaseModel):
     accepted: _COUNT  # type: ignore[valid-type]
     merged: _COUNT = 0  # type: ignore[valid-type]  # sent merged with a later one (lanes.py)
     rejected: dict[str, _COUNT] = Field(max_length=64)  # type: ignore[valid-type]
+    # images published per camera (--ros2-cameras; armfleet_ros/cameras.py)
+    images: dict[str, _COUNT] = Field(default_factory=dict, max_length=64)  # type: ignore[valid-type]
 
 
 class RosbridgeSurface:
