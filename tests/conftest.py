@@ -19,6 +19,7 @@ from typing import Any
 
 import httpx
 import pytest
+import roslibpy
 
 from clients import ArmfleetClient, WorldState
 from clients import pytest_plugin as armfleet_plugin
@@ -101,6 +102,18 @@ def http(server: Server) -> Iterator[httpx.Client]:
     """An HTTP client on the module's server."""
     with httpx.Client(base_url=server.url, timeout=10) as client:
         yield client
+
+
+@pytest.fixture(scope="module")
+def ros(server: Server) -> Iterator[roslibpy.Ros]:
+    """roslibpy (a real rosbridge client) connected to the module's server, as rosbridge
+    clients dial it (`ws://host:port/`); closed when the module is done."""
+    client = roslibpy.Ros("127.0.0.1", server.port)
+    client.run(timeout=20)
+    try:
+        yield client
+    finally:
+        client.close()
 
 
 # -- roslib.js (tests/js: Node scripts that drive the rosbridge endpoint) ---------------------
