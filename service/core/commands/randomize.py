@@ -26,7 +26,7 @@ import numpy as np
 from pydantic import ConfigDict, Field
 
 from service.core.commands import rules
-from service.core.commands.base import Announcement, Command, Door
+from service.core.commands.base import Announcement, Command, Door, world_ack
 from service.core.commands.entities import SetEntities, entity_table
 from service.core.commands.params import SetParams, param_table
 from service.core.errors import BadCommand
@@ -228,14 +228,7 @@ class Randomize(Command[RandomizeResult]):
         return Announcement(worlds, targets, result.tick, {"seed": self.seed, "spec": self.spec})
 
     def ack(self, door: Door, msg_id: Any, world: int, result: RandomizeResult) -> dict[str, Any]:
-        return {
-            "op": "ack",
-            "id": msg_id,
-            "world": world,
-            "tick": result.tick,
-            "seed": self.seed,
-            "spec": self.spec,
-        }
+        return world_ack(msg_id, world, tick=result.tick, seed=self.seed, spec=self.spec)
 
     @classmethod
     def from_record(cls, door: Door, rec: dict[str, Any]) -> Randomize:

@@ -87,7 +87,7 @@ def set_state(session: Any, world: int, args: Any) -> dict[str, Any]:
             if all(isinstance(v, int | float) for v in (*angular, *quat)):
                 angular = (_rotation(np.array(quat, dtype=float)).T @ angular).tolist()
             item["angular"] = angular
-        session.control.run(entities.SetEntities.create(session.control.door, [item]), ROSBRIDGE)
+        session.control.run(entities.SetEntities.create(session.control, [item]), ROSBRIDGE)
     except BadCommand as exc:
         code = NOT_FOUND if exc.field == "entity" else FAILED
         return _result(code, str(exc))
