@@ -25,14 +25,14 @@ from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
-from pydantic import ConfigDict, Field
+from pydantic import Field
 
 from service.core.batch import Batch, StateWrite
 from service.core.commands import rules
 from service.core.commands.base import Door, world_ack
 from service.core.commands.writes import MAX_WRITES, ManyWrites, batch_config
 from service.core.errors import BadCommand
-from service.core.schema_fields import FiniteFloat, Strict, WorldId
+from service.core.schema_fields import FiniteFloat, Strict, WorldId, example_config
 
 __all__ = ["EntityTable", "SetEntities", "entity_table", "read"]
 
@@ -133,13 +133,8 @@ class EntityValues(Strict):
         None, min_length=3, max_length=3, description="angular velocity [rad/s], body frame"
     )
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {"position": [0.7, 0.1, 0.9], "orientation": [1, 0, 0, 0], "linear": [0, 0, 0]}
-            ]
-        },
+    model_config = example_config(
+        {"position": [0.7, 0.1, 0.9], "orientation": [1, 0, 0, 0], "linear": [0, 0, 0]}
     )
 
 
@@ -149,10 +144,7 @@ class EntityWrite(EntityValues):
     world: WorldId
     name: str
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={"examples": [{"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]}]},
-    )
+    model_config = example_config({"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]})
 
 
 class EntityWrites(Strict):

@@ -34,7 +34,7 @@ from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
-from pydantic import ConfigDict, Field
+from pydantic import Field
 
 from service.core.batch import Batch, ModelWrite
 from service.core.commands import rules
@@ -43,7 +43,7 @@ from service.core.commands.entities import entity_table
 from service.core.commands.writes import MAX_WRITES, ManyWrites, batch_config
 from service.core.errors import BadCommand
 from service.core.robot import FLANGE_SITE
-from service.core.schema_fields import FiniteFloat, Strict, WorldId
+from service.core.schema_fields import FiniteFloat, Strict, WorldId, example_config
 
 __all__ = ["Param", "SetParams", "param_table", "read"]
 
@@ -233,22 +233,15 @@ class ParamValues(Strict):
         min_length=1, description="parameter name → value ([mass, x, y, z] for payload)"
     )
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {"params": {"cube.mass": 0.3, "cube.friction": 0.5, "payload": [1.5, 0, 0, 0.08]}}
-            ]
-        },
+    model_config = example_config(
+        {"params": {"cube.mass": 0.3, "cube.friction": 0.5, "payload": [1.5, 0, 0, 0.08]}}
     )
 
 
 class ParamWrite(ParamValues):
     world: WorldId
 
-    model_config = ConfigDict(
-        extra="forbid", json_schema_extra={"examples": [{"world": 0, "params": {"cube.mass": 0.3}}]}
-    )
+    model_config = example_config({"world": 0, "params": {"cube.mass": 0.3}})
 
 
 class ParamWrites(Strict):

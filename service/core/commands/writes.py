@@ -18,6 +18,7 @@ from pydantic import ConfigDict
 from service.core.batch import ModelWrite, StateWrite
 from service.core.commands.base import Announcement, Command, Door
 from service.core.errors import BadCommand
+from service.core.schema_fields import example_config
 
 __all__ = ["MAX_WRITES", "ManyWrites", "Written", "batch_config"]
 
@@ -26,7 +27,7 @@ MAX_WRITES = 100_000  # writes per command
 
 def batch_config(*writes: dict[str, Any]) -> ConfigDict:
     """The config of a batch body `{"writes": [...]}`: no other field, `writes` its example."""
-    return ConfigDict(extra="forbid", json_schema_extra={"examples": [{"writes": list(writes)}]})
+    return example_config({"writes": list(writes)})
 
 
 class Written(Protocol):
