@@ -19,6 +19,7 @@ from __future__ import annotations
 import statistics
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import httpx
@@ -132,29 +133,47 @@ def _stream(ctx: Context, engine: str, window_s: float) -> dict[str, Any]:
 def cameras(ctx: Context) -> Result:
     requests = ctx.pick(20, 5)
     window = ctx.pick(10.0, 5.0)
-    per_image, streams, errors = [], [], {}
+    per_image: list[dict[str, Any]] = []
+    streams: list[dict[str, Any]] = []
+    errors: dict[str, str] = {}
+
+    def attempt(
+        what: str,
+        measure: Callable[[], dict[str, Any]],
+        describe: Callable[[dict[str, Any]], str],
+        into: list[dict[str, Any]],
+    ) -> None:
+        """One measurement into `into`, said (as `Context.each` does for sizes); a failure is
+        kept in `errors` and loses only this one."""
+        try:
+            r = measure()
+        except Exception as exc:
+            errors[what] = f"{type(exc).__name__}: {exc}"
+            ctx.say(f"  {what} FAILED: {exc}")
+            return
+        into.append(r)
+        ctx.say(f"  {what}: {describe(r)}")
+
     for engine in ENGINES:
         for size in SIZES:
-            try:
-                r = _per_image(ctx, engine, size, requests)
-                per_image.append(r)
-                ctx.say(
-                    f"  {engine} {size}: {r['one']['ms_per_image']:.1f} ms/image alone, "
+            attempt(
+                f"{engine} {size}",
+                lambda e=engine, s=size: _per_image(ctx, e, s, requests),
+                lambda r: (
+                    f"{r['one']['ms_per_image']:.1f} ms/image alone, "
                     f"{r['sixteen']['ms_per_image']:.1f} ms/image 16 at once"
-                )
-            except Exception as exc:
-                errors[f"{engine} {size}"] = f"{type(exc).__name__}: {exc}"
-                ctx.say(f"  {engine} {size} FAILED: {exc}")
-        try:
-            s = _stream(ctx, engine, window)
-            streams.append(s)
-            ctx.say(
-                f"  {engine} stream: RTF {s['rtf_idle']:.3f} idle, {s['rtf_streaming']:.3f} "
-                f"streaming, {s['frames_per_s']:.1f} frames/s"
+                ),
+                per_image,
             )
-        except Exception as exc:
-            errors[f"{engine} stream"] = f"{type(exc).__name__}: {exc}"
-            ctx.say(f"  {engine} stream FAILED: {exc}")
+        attempt(
+            f"{engine} stream",
+            lambda e=engine: _stream(ctx, e, window),
+            lambda s: (
+                f"RTF {s['rtf_idle']:.3f} idle, {s['rtf_streaming']:.3f} streaming, "
+                f"{s['frames_per_s']:.1f} frames/s"
+            ),
+            streams,
+        )
     rows = [
         {
             "engine": r["engine"],

@@ -19,8 +19,9 @@ from typing import Any
 
 import httpx
 import pytest
+import roslibpy
 
-from clients import ArmfleetClient, WorldState
+from clients import ArmfleetClient, WorldState, headless
 from clients import pytest_plugin as armfleet_plugin
 from clients.testing import Server, free_port, serve
 from service.core.robot import load_robot
@@ -97,10 +98,62 @@ def server(armfleet_server: Server) -> Iterator[Server]:
 
 
 @pytest.fixture(scope="module")
+def paused(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """A paused 4-world server on native MuJoCo (ticks advance only when a test steps them),
+    shared by the tests of one module; a module that needs more of it defines its own."""
+    log = tmp_path_factory.mktemp("paused")
+    with serve(worlds=4, mode="paused", extra_args=("--engine", "mujoco"), log_dir=log) as srv:
+        yield srv
+
+
+@pytest.fixture(scope="module")
 def http(server: Server) -> Iterator[httpx.Client]:
     """An HTTP client on the module's server."""
     with httpx.Client(base_url=server.url, timeout=10) as client:
         yield client
+
+
+@pytest.fixture(scope="module")
+def ros(server: Server) -> Iterator[roslibpy.Ros]:
+    """roslibpy (a real rosbridge client) connected to the module's server, as rosbridge
+    clients dial it (`ws://host:port/`); closed when the module is done."""
+    client = roslibpy.Ros("127.0.0.1", server.port)
+    client.run(timeout=20)
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+# -- Chromium (Playwright), the judge of the browser page ------------------------------------
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    """Debian's Chromium through Playwright, one for the module (skipped, saying why, where
+    it cannot run)."""
+    reason = headless.why_unavailable()
+    if reason:
+        pytest.skip(reason)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        chromium = headless.launch(p)
+        yield chromium
+        chromium.close()
+
+
+@contextlib.contextmanager
+def page_of(browser: Any, width: int, height: int) -> Iterator[Any]:
+    """A page in a fresh context of `browser` with a `width` x `height` viewport; a JavaScript
+    error the page threw fails the test once it is done with the page."""
+    context = browser.new_context(viewport={"width": width, "height": height})
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    yield page
+    context.close()
+    assert not errors, f"JavaScript errors in the page: {errors}"
 
 
 # -- roslib.js (tests/js: Node scripts that drive the rosbridge endpoint) ---------------------

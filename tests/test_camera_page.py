@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from clients import headless
 from clients.testing import Server, serve
-from tests.conftest import wait_for
+from tests.conftest import page_of, wait_for
 
 
 @pytest.fixture(scope="module")
@@ -24,21 +23,9 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
 
 
 @pytest.fixture
-def page(server: Server):
-    reason = headless.why_unavailable()
-    if reason:
-        pytest.skip(reason)
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        browser = headless.launch(p)
-        context = browser.new_context(viewport={"width": 1000, "height": 900})
-        page = context.new_page()
-        errors: list[str] = []
-        page.on("pageerror", lambda exc: errors.append(str(exc)))
+def page(server: Server, browser):
+    with page_of(browser, width=1000, height=900) as page:
         yield page
-        browser.close()
-    assert not errors, f"JavaScript errors in the page: {errors}"
 
 
 def _pictures(page) -> int:

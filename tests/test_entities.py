@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from websockets.sync.client import connect
 
-from clients.testing import serve
 from service.core.batch import TickWrites
 from service.core.commands.entities import SetEntities, entity_table
 from service.core.robot import load_robot
@@ -24,13 +23,6 @@ ROBOT = load_robot()
 TABLE = entity_table(ROBOT.mjm)
 HOME_CUBE = ROBOT.mjm.key_qpos[ROBOT.home_key][TABLE.qpos[0] : TABLE.qpos[0] + 7]
 DT = 1 / 60
-
-
-@pytest.fixture(scope="module")
-def paused(tmp_path_factory):
-    log = tmp_path_factory.mktemp("entities")
-    with serve(worlds=4, mode="paused", extra_args=("--engine", "mujoco"), log_dir=log) as srv:
-        yield srv
 
 
 def test_the_default_scene_has_one_entity_and_bounds():

@@ -17,19 +17,13 @@ if str(REPO) not in sys.path:
 
 from mjcf import MJCF_DIR, ROBOT_XML, SCENE_XML  # noqa: E402
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, tick_timing  # noqa: E402
+from tests.rclpy import ur_joints  # noqa: E402
 
 ENGINE_DT = tick_timing(60.0, DEFAULT_PHYSICS_DT)[1]
 TWO_PI = 2.0 * np.pi
 
-ARM_JOINTS = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
-DRIVEN_JOINTS = (*ARM_JOINTS, "finger_joint")
+ARM_JOINTS = ur_joints.ARM
+DRIVEN_JOINTS = (*ARM_JOINTS, ur_joints.GRIPPER)
 JOINT_RANGES = {name: (-TWO_PI, TWO_PI) for name in ARM_JOINTS}
 JOINT_RANGES["elbow_joint"] = (-np.pi, np.pi)
 JOINT_RANGES["finger_joint"] = (0.0, 0.7)

@@ -16,12 +16,10 @@ import time
 import httpx
 import numpy as np
 import pytest
-from conftest import HOME, JOINTS, free_port, serve, wait_for
+from conftest import HOME, JOINTS, free_port, page_of, serve, wait_for
 from PIL import Image
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
-
-from clients import headless
 
 try:
     from playwright.sync_api import expect
@@ -178,28 +176,10 @@ def test_view_socket_refuses_what_does_not_exist_with_a_reason(srv, query, needl
 # ------------------------------------------------------------------- the page in Chromium
 
 
-@pytest.fixture(scope="module")
-def browser():
-    reason = headless.why_unavailable()
-    if reason:
-        pytest.skip(reason)
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        chromium = headless.launch(p)
-        yield chromium
-        chromium.close()
-
-
 @pytest.fixture
 def page(browser):
-    context = browser.new_context(viewport={"width": 1000, "height": 640})
-    page = context.new_page()
-    errors: list[str] = []
-    page.on("pageerror", lambda exc: errors.append(str(exc)))
-    yield page
-    context.close()
-    assert not errors, f"JavaScript errors in the page: {errors}"
+    with page_of(browser, width=1000, height=640) as page:
+        yield page
 
 
 def open_page(page, srv, query: str) -> None:

@@ -20,7 +20,6 @@ import pytest
 from test_model import solve_ik
 from websockets.sync.client import connect
 
-from clients.testing import serve
 from service.core.batch import TickWrites
 from service.core.commands.entities import SetEntities
 from service.core.commands.params import SetParams, param_table, read
@@ -186,13 +185,6 @@ def test_state_carries_the_parameters_and_a_restore_is_bit_exact(engine):
     got = read(batch, [2])["worlds"][0]["params"]
     assert got["payload"] == pytest.approx([2.0, 0.0, 0.05, 0.1], abs=1e-6)
     assert got["elbow_joint.kv"] == pytest.approx(90)
-
-
-@pytest.fixture(scope="module")
-def paused(tmp_path_factory):
-    log = tmp_path_factory.mktemp("params")
-    with serve(worlds=4, mode="paused", extra_args=("--engine", "mujoco"), log_dir=log) as srv:
-        yield srv
 
 
 def test_http_and_websocket_set_read_and_refuse(paused):

@@ -12,18 +12,10 @@ import numpy as np
 import pytest
 from websockets.sync.client import connect
 
+from bench.cells import SPEC  # the spec the cells bench draws for 10,000 worlds
 from clients.testing import serve
 from service.core.batch import TickWrites
 from service.core.commands.randomize import Randomize
-
-SPEC = {
-    "entities": {"cube": {"position": [[0.6, 0.8], [0.0, 0.3], [0.78, 0.8]], "yaw": [-3, 3]}},
-    "params": {
-        "cube.mass": [0.05, 0.5],
-        "cube.friction": [0.3, 1.2],
-        "elbow_joint.kp": [800, 1200],
-    },
-}
 
 
 def _batch(engine: str, nworld: int):
@@ -64,13 +56,6 @@ def test_the_same_seed_gives_bit_identical_worlds(engine):
     d = _batch(engine, 4)
     _apply(d, 7, [2])
     np.testing.assert_array_equal(d.qpos()[2], a.qpos()[2])
-
-
-@pytest.fixture(scope="module")
-def paused(tmp_path_factory):
-    log = tmp_path_factory.mktemp("randomize")
-    with serve(worlds=4, mode="paused", extra_args=("--engine", "mujoco"), log_dir=log) as srv:
-        yield srv
 
 
 def test_http_and_websocket_randomize_with_the_seed_and_spec_in_the_ack(paused):

@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from typing import Any
 
 import httpx
+import mujoco
 import numpy as np
 import orjson
 import pytest
@@ -180,32 +181,17 @@ def _poses(srv: Server, world: int) -> np.ndarray:
     return np.frombuffer(data, "<f4", nbody * 7, 8 + hlen + 8).reshape(nbody, 7).astype(float)
 
 
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.array(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ]
-    )
-
-
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    u, w = q[1:], q[0]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
-
-
 def compose(edges: dict[str, Any], frame: str) -> tuple[np.ndarray, np.ndarray]:
-    """A frame's pose in `world`, chaining parent transforms as tf2's lookupTransform does."""
+    """A frame's pose in `world`, chaining parent transforms as tf2's lookupTransform does; the
+    quaternion arithmetic is MuJoCo's own (`mju_rotVecQuat`, `mju_mulQuat`), not armfleet's."""
     pos, quat = np.zeros(3), np.array([1.0, 0, 0, 0])
     while frame != "world":
         parent, p, q = edges[frame]
-        pos = _rotate(np.array(q), pos) + np.array(p)
-        quat = _mul(np.array(q), quat)
+        q = np.array(q, dtype=np.float64)
+        rotated, product = np.zeros(3), np.zeros(4)
+        mujoco.mju_rotVecQuat(rotated, pos, q)
+        mujoco.mju_mulQuat(product, q, quat)
+        pos, quat = rotated + np.array(p), product
         frame = parent
     return pos, quat
 

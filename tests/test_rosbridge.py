@@ -29,17 +29,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
         yield srv
 
 
-@pytest.fixture(scope="module")
-def ros(server: Server) -> Iterator[roslibpy.Ros]:
-    port = int(server.url.rsplit(":", 1)[1])
-    client = roslibpy.Ros("127.0.0.1", port)
-    client.run(timeout=20)
-    try:
-        yield client
-    finally:
-        client.close()
-
-
 def _target(server: Server, world: int) -> list[float]:
     return httpx.get(f"{server.url}/v1/worlds/{world}/state").json()["target"]
 

@@ -29,16 +29,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
         yield srv
 
 
-@pytest.fixture(scope="module")
-def ros(server: Server) -> Iterator[roslibpy.Ros]:
-    client = roslibpy.Ros("127.0.0.1", int(server.url.rsplit(":", 1)[1]))
-    client.run(timeout=20)
-    try:
-        yield client
-    finally:
-        client.close()
-
-
 def _goal(positions: list[float], seconds: float) -> roslibpy.Goal:
     stamp = {"sec": int(seconds), "nanosec": round((seconds % 1) * 1e9)}
     point = {"positions": positions, "time_from_start": stamp}

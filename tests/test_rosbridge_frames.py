@@ -24,16 +24,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
         yield srv
 
 
-@pytest.fixture(scope="module")
-def ros(server: Server) -> Iterator[roslibpy.Ros]:
-    client = roslibpy.Ros("127.0.0.1", int(server.url.rsplit(":", 1)[1]))
-    client.run(timeout=20)
-    try:
-        yield client
-    finally:
-        client.close()
-
-
 def _collect(ros: roslibpy.Ros, topic: str, kind: str) -> tuple[list[dict[str, Any]], Any]:
     got: list[dict[str, Any]] = []
     lock = threading.Lock()

@@ -21,16 +21,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
         yield srv
 
 
-@pytest.fixture(scope="module")
-def ros(server: Server) -> Iterator[roslibpy.Ros]:
-    client = roslibpy.Ros("127.0.0.1", int(server.url.rsplit(":", 1)[1]))
-    client.run(timeout=20)
-    try:
-        yield client
-    finally:
-        client.close()
-
-
 def _call(ros: roslibpy.Ros, name: str, kind: str, args: dict) -> dict:
     service = roslibpy.Service(ros, name, f"simulation_interfaces/srv/{kind}")
     return dict(service.call(roslibpy.ServiceRequest(args), timeout=10))

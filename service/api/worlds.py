@@ -7,6 +7,7 @@ shape live in service/core/control.py and service/core/wire.py, errors are mappe
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 from typing import Annotated, Any
 
 import numpy as np
@@ -17,6 +18,8 @@ from service.api.deps import CommandWorld, Ctl, Loop, World
 from service.core import wire
 from service.core.commands import entities, params, randomize
 from service.core.commands.base import HTTP
+from service.core.commands.writes import ManyWrites
+from service.core.control import Control
 from service.core.errors import Unavailable
 from service.core.loop import SimLoop
 from service.core.schemas import (
@@ -164,6 +167,12 @@ async def _entities(loop: SimLoop, worlds: list[int]) -> dict[str, Any]:
     return await asyncio.wrap_future(loop.call(lambda batch: entities.read(batch, worlds)))
 
 
+def _written(control: Control, command: type[ManyWrites[Any]], items: list[Any]) -> Response:
+    """Run an entity or parameter write command; the reply is its result's fields (the tick
+    the writes take effect at, the worlds written, and what the command adds)."""
+    return _json(dataclasses.asdict(control.run(command.create(control, items), HTTP)))
+
+
 @router.get(
     "/worlds/{world}/entities",
     summary="Pose and twist of every entity (named free body) of one world",
@@ -192,8 +201,7 @@ async def put_entity(
     control: Ctl, world: World, name: str, body: entities.EntityValues
 ) -> Response:
     item = {**body.model_dump(exclude_none=True), "world": world, "name": name}
-    done = control.run(entities.SetEntities.create(control, [item]), HTTP)
-    return _json({"tick": done.tick, "worlds": done.worlds, "normalised": done.normalised})
+    return _written(control, entities.SetEntities, [item])
 
 
 @router.post(
@@ -202,9 +210,9 @@ async def put_entity(
     summary="Set entities of many worlds, all at one tick boundary (or none, if one is bad)",
 )
 async def post_entities(control: Ctl, body: entities.EntityWrites) -> Response:
-    items = [w.model_dump(exclude_none=True) for w in body.writes]
-    done = control.run(entities.SetEntities.create(control, items), HTTP)
-    return _json({"tick": done.tick, "worlds": done.worlds, "normalised": done.normalised})
+    return _written(
+        control, entities.SetEntities, [w.model_dump(exclude_none=True) for w in body.writes]
+    )
 
 
 # -- per-world physics parameters (service/core/commands/params.py) ------------------------
@@ -229,9 +237,7 @@ async def get_params(loop: Loop, world: World) -> Response:
     summary="Give one world its own physics parameters, from the next tick boundary",
 )
 async def put_params(control: Ctl, world: World, body: params.ParamValues) -> Response:
-    item = {"world": world, "params": body.params}
-    done = control.run(params.SetParams.create(control, [item]), HTTP)
-    return _json({"tick": done.tick, "worlds": done.worlds})
+    return _written(control, params.SetParams, [{"world": world, "params": body.params}])
 
 
 @router.post(
@@ -240,9 +246,7 @@ async def put_params(control: Ctl, world: World, body: params.ParamValues) -> Re
     summary="Physics parameters of many worlds, all from one tick boundary (or none)",
 )
 async def post_params(control: Ctl, body: params.ParamWrites) -> Response:
-    items = [w.model_dump() for w in body.writes]
-    done = control.run(params.SetParams.create(control, items), HTTP)
-    return _json({"tick": done.tick, "worlds": done.worlds})
+    return _written(control, params.SetParams, [w.model_dump() for w in body.writes])
 
 
 @router.post(

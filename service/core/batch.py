@@ -13,9 +13,10 @@ Lives in the core with the types it speaks in; imports nothing above the core.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Literal, Protocol, Self, runtime_checkable
 
 import numpy as np
 
@@ -29,41 +30,36 @@ _NO_WORLDS = np.zeros(0, dtype=np.int64)
 
 
 @dataclass(frozen=True)
-class StateWrite:
-    """Values for some addresses of one world's qpos or qvel (a free body's pose or twist).
-
-    field: "qpos" or "qvel"; world: its id; index: addresses in that world's row (m,) int64;
-    values: (m,) float64. Built by a command that validated it (addresses of its entity).
-    """
-
-    field: Literal["qpos", "qvel"]
-    world: int
-    index: np.ndarray
-    values: np.ndarray
-
-    def moved(self, world: int) -> StateWrite:
-        """The same write for world id `world` (a shard's local id)."""
-        return StateWrite(self.field, world, self.index, self.values)
-
-
-@dataclass(frozen=True)
-class ModelWrite:
-    """Values for some entries of one world's copy of one MjModel array field (a per-world
-    physics parameter: a body's mass, a geom's friction, a joint's damping, a servo's gain).
-
-    field: the MjModel field, e.g. "body_mass"; world: its id; index: flat addresses into that
-    world's row of the field (m,) int64; values: (m,) float64. Built by a command that
-    validated it. Model values stay through resets: they describe the world, not its state.
-    """
+class WorldWrite:
+    """Values for some addresses of one world's row of one engine array (`StateWrite`,
+    `ModelWrite`): field: the array; world: its id; index: addresses in that world's row
+    (m,) int64; values: (m,) float64. Built by a command that validated it."""
 
     field: str
     world: int
     index: np.ndarray
     values: np.ndarray
 
-    def moved(self, world: int) -> ModelWrite:
+    def moved(self, world: int) -> Self:
         """The same write for world id `world` (a shard's local id)."""
-        return ModelWrite(self.field, world, self.index, self.values)
+        return dataclasses.replace(self, world=world)
+
+
+@dataclass(frozen=True)
+class StateWrite(WorldWrite):
+    """Values for some addresses of one world's qpos or qvel (a free body's pose or twist);
+    the addresses are its entity's."""
+
+    field: Literal["qpos", "qvel"]
+
+
+@dataclass(frozen=True)
+class ModelWrite(WorldWrite):
+    """Values for some entries of one world's copy of one MjModel array field (a per-world
+    physics parameter: a body's mass, a geom's friction, a joint's damping, a servo's gain);
+    `field` is the MjModel field, e.g. "body_mass", and `index` flat addresses into that
+    world's row of it. Model values stay through resets: they describe the world, not its
+    state."""
 
 
 @dataclass(frozen=True)

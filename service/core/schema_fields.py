@@ -75,6 +75,11 @@ def paired_config(
     return ConfigDict(extra=extra, json_schema_extra={"examples": [example], "oneOf": lengths})
 
 
+def example_config(example: dict[str, Any]) -> ConfigDict:
+    """A `Strict` model's config (no field besides its own) with `example` in its schema."""
+    return ConfigDict(extra="forbid", json_schema_extra={"examples": [example]})
+
+
 # The joint names come from the model (service/core/robot.py), read when a request is first
 # validated or the OpenAPI document first built, not when this module is imported: importing
 # the contract must not compile the MJCF.

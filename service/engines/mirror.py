@@ -71,13 +71,21 @@ class HostMirror:
 
     def write(self, writes: TickWrites) -> None:
         """The engines' one door (service.core.batch): resets, then state, then targets."""
-        self.reset(writes.resets)
-        if writes.model:
-            self.write_models(writes.model)
-        for state in writes.state:
-            self.write_state(state)
+        self.write_before_targets(writes.resets, writes.model, writes.state)
         if writes.worlds.size:
             self.apply_targets(writes.worlds, writes.targets, writes.velocities)
+
+    def write_before_targets(
+        self, resets: np.ndarray, model: Sequence[ModelWrite], state: Sequence[StateWrite]
+    ) -> None:
+        """The door's order up to the targets: resets, then model values, then state slices
+        (in the order staged). A shard applies its shipment with it too (engines/sharding.py),
+        so that a sharded batch behaves like one."""
+        self.reset(resets)
+        if model:
+            self.write_models(model)
+        for write in state:
+            self.write_state(write)
 
     def write_models(self, writes: Sequence[ModelWrite]) -> None:
         """Worlds' values of some model field entries: kept here, then each field pushed to

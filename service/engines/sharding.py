@@ -81,11 +81,7 @@ class Shipment(NamedTuple):
 
     def apply(self, batch: WorldBatch) -> None:
         """A shard's side: the loop's order, so a shard behaves like one WorldBatch."""
-        batch.reset(self.resets)
-        if self.model:
-            batch.write_models(self.model)
-        for write in self.state:
-            batch.write_state(write)
+        batch.write_before_targets(self.resets, self.model, self.state)
         apply_rows(batch, self.dirty, self.rows)
 
 

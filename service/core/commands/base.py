@@ -121,12 +121,18 @@ class Command(ABC, Generic[R]):
 
     def ack(self, door: Door, msg_id: Any, world: int, result: R) -> dict[str, Any]:
         """The WebSocket ack frame of a staged command."""
-        return {"op": "ack", "id": msg_id, "world": world}
+        return world_ack(msg_id, world)
 
     @classmethod
     def from_record(cls, door: Door, rec: dict[str, Any]) -> Command[Any]:
         """The command replay applies for a recorded one (`Accepted` as the recorder wrote it)."""
         raise BadCommand("kind", f"{cls.kind} commands are not replayed")
+
+
+def world_ack(msg_id: Any, world: int, **fields: Any) -> dict[str, Any]:
+    """A command's WebSocket ack frame: the client's `id`, the world, then the command's own
+    `fields` (a tick, what was normalised, ...)."""
+    return {"op": "ack", "id": msg_id, "world": world, **fields}
 
 
 def no_fields(kind: str, body: dict[str, Any]) -> None:

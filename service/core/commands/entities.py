@@ -25,13 +25,14 @@ from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
-from pydantic import ConfigDict, Field
+from pydantic import Field
 
 from service.core.batch import Batch, StateWrite
 from service.core.commands import rules
-from service.core.commands.base import Announcement, Command, Door
+from service.core.commands.base import Door, world_ack
+from service.core.commands.writes import MAX_WRITES, ManyWrites, batch_config
 from service.core.errors import BadCommand
-from service.core.schema_fields import FiniteFloat, Strict, WorldId
+from service.core.schema_fields import FiniteFloat, Strict, WorldId, example_config
 
 __all__ = ["EntityTable", "SetEntities", "entity_table", "read"]
 
@@ -40,7 +41,6 @@ MAX_ANGULAR = 500.0  # rad/s
 QUAT_TOLERANCE = 0.1  # |norm - 1| above this: refused; below: normalised
 _UNIT = 1e-12  # a norm this close to 1 is taken as given
 BOUNDS_NUMERIC = "armfleet_bounds"
-MAX_WRITES = 100_000  # writes per command
 _FIELDS = ("position", "orientation", "linear", "angular")
 
 
@@ -133,13 +133,8 @@ class EntityValues(Strict):
         None, min_length=3, max_length=3, description="angular velocity [rad/s], body frame"
     )
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {"position": [0.7, 0.1, 0.9], "orientation": [1, 0, 0, 0], "linear": [0, 0, 0]}
-            ]
-        },
+    model_config = example_config(
+        {"position": [0.7, 0.1, 0.9], "orientation": [1, 0, 0, 0], "linear": [0, 0, 0]}
     )
 
 
@@ -149,10 +144,7 @@ class EntityWrite(EntityValues):
     world: WorldId
     name: str
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={"examples": [{"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]}]},
-    )
+    model_config = example_config({"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]})
 
 
 class EntityWrites(Strict):
@@ -160,18 +152,9 @@ class EntityWrites(Strict):
 
     writes: list[EntityWrite] = Field(min_length=1, max_length=MAX_WRITES)
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {
-                    "writes": [
-                        {"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]},
-                        {"world": 1, "name": "cube", "angular": [0, 0, 2]},
-                    ]
-                }
-            ]
-        },
+    model_config = batch_config(
+        {"world": 0, "name": "cube", "position": [0.7, 0.1, 0.9]},
+        {"world": 1, "name": "cube", "angular": [0, 0, 2]},
     )
 
 
@@ -256,21 +239,18 @@ def _checked(
 
 
 @dataclass(frozen=True)
-class SetEntities(Command[EntityResult]):
+class SetEntities(ManyWrites[EntityResult]):
     """Poses and twists of entities in any worlds, written together at one tick boundary."""
 
     kind: ClassVar[str] = "set_entity"
     op: ClassVar[str | None] = "set_entity"
     http: ClassVar[tuple[str, ...]] = ("entities",)
 
-    writes: tuple[StateWrite, ...]
-    items: tuple[dict[str, Any], ...]  # as given, for the recording
-    normalised: tuple[str, ...]
+    normalised: tuple[str, ...]  # the orientations normalised, by field
 
     @classmethod
     def create(cls, door: Door, items: Sequence[Mapping[str, Any]]) -> SetEntities:
-        if not isinstance(items, list | tuple) or not 1 <= len(items) <= MAX_WRITES:
-            raise BadCommand("writes", f"give 1..{MAX_WRITES} entity writes")
+        cls.counted(items, "entity")
         table = entity_table(door.loop.batch.robot.mjm)
         notes: list[str] = []
         writes: list[StateWrite] = []
@@ -280,32 +260,11 @@ class SetEntities(Command[EntityResult]):
         kept = tuple({k: v for k, v in dict(it).items() if v is not None} for it in items)
         return cls(tuple(writes), kept, tuple(notes))
 
-    @classmethod
-    def from_wire(cls, door: Door, world: int, body: dict[str, Any]) -> SetEntities:
-        return cls.create(door, [{**body, "world": world}])
-
     def stage(self, door: Door, source: str) -> EntityResult:
-        tick = door.loop.stage_state(self.writes)
-        worlds = sorted({w.world for w in self.writes})
-        return EntityResult(tick, worlds, list(self.normalised))
-
-    def announce(self, door: Door, result: EntityResult) -> Announcement:
-        worlds = np.array(result.worlds, dtype=np.int64)
-        targets = door.loop.pending_targets(worlds)
-        return Announcement(worlds, targets, result.tick, {"writes": list(self.items)})
+        return EntityResult(*self.staged(door), list(self.normalised))
 
     def ack(self, door: Door, msg_id: Any, world: int, result: EntityResult) -> dict[str, Any]:
-        return {
-            "op": "ack",
-            "id": msg_id,
-            "world": world,
-            "tick": result.tick,
-            "normalised": result.normalised,
-        }
-
-    @classmethod
-    def from_record(cls, door: Door, rec: dict[str, Any]) -> SetEntities:
-        return cls.create(door, rec["writes"])
+        return world_ack(msg_id, world, tick=result.tick, normalised=result.normalised)
 
 
 # -- reading ------------------------------------------------------------------------------

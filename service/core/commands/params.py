@@ -34,21 +34,21 @@ from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
-from pydantic import ConfigDict, Field
+from pydantic import Field
 
 from service.core.batch import Batch, ModelWrite
 from service.core.commands import rules
-from service.core.commands.base import Announcement, Command, Door
+from service.core.commands.base import Door, world_ack
 from service.core.commands.entities import entity_table
+from service.core.commands.writes import MAX_WRITES, ManyWrites, batch_config
 from service.core.errors import BadCommand
 from service.core.robot import FLANGE_SITE
-from service.core.schema_fields import FiniteFloat, Strict, WorldId
+from service.core.schema_fields import FiniteFloat, Strict, WorldId, example_config
 
 __all__ = ["Param", "SetParams", "param_table", "read"]
 
 PAYLOAD_MASS = 12.5  # kg, the UR10e's rated payload
 PAYLOAD_REACH = 0.3  # m, |x|, |y|, |z| of the payload's centre from the flange
-MAX_WRITES = 100_000
 
 Edit = tuple[str, tuple[int, ...], float]  # (MjModel field, entry, value)
 
@@ -233,39 +233,23 @@ class ParamValues(Strict):
         min_length=1, description="parameter name → value ([mass, x, y, z] for payload)"
     )
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {"params": {"cube.mass": 0.3, "cube.friction": 0.5, "payload": [1.5, 0, 0, 0.08]}}
-            ]
-        },
+    model_config = example_config(
+        {"params": {"cube.mass": 0.3, "cube.friction": 0.5, "payload": [1.5, 0, 0, 0.08]}}
     )
 
 
 class ParamWrite(ParamValues):
     world: WorldId
 
-    model_config = ConfigDict(
-        extra="forbid", json_schema_extra={"examples": [{"world": 0, "params": {"cube.mass": 0.3}}]}
-    )
+    model_config = example_config({"world": 0, "params": {"cube.mass": 0.3}})
 
 
 class ParamWrites(Strict):
     writes: list[ParamWrite] = Field(min_length=1, max_length=MAX_WRITES)
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {
-                    "writes": [
-                        {"world": 0, "params": {"cube.mass": 0.3}},
-                        {"world": 1, "params": {"elbow_joint.damping": 5}},
-                    ]
-                }
-            ]
-        },
+    model_config = batch_config(
+        {"world": 0, "params": {"cube.mass": 0.3}},
+        {"world": 1, "params": {"elbow_joint.damping": 5}},
     )
 
 
@@ -309,20 +293,16 @@ def _writes(mjm: mujoco.MjModel, world: int, edits: list[Edit]) -> list[ModelWri
 
 
 @dataclass(frozen=True)
-class SetParams(Command[ParamsResult]):
+class SetParams(ManyWrites[ParamsResult]):
     """Per-world physics parameters of any worlds, written together at one tick boundary."""
 
     kind: ClassVar[str] = "set_params"
     op: ClassVar[str | None] = "set_params"
     http: ClassVar[tuple[str, ...]] = ("params",)
 
-    writes: tuple[ModelWrite, ...]
-    items: tuple[dict[str, Any], ...]  # as given (validated), for the recording
-
     @classmethod
     def create(cls, door: Door, items: Sequence[Mapping[str, Any]]) -> SetParams:
-        if not isinstance(items, list | tuple) or not 1 <= len(items) <= MAX_WRITES:
-            raise BadCommand("writes", f"give 1..{MAX_WRITES} parameter writes")
+        cls.counted(items, "parameter")
         batch = door.loop.batch
         table, mjm = _table(batch), batch.robot.mjm
         out: list[ModelWrite] = []
@@ -347,25 +327,11 @@ class SetParams(Command[ParamsResult]):
         kept = tuple({"world": it["world"], "params": dict(it["params"])} for it in items)
         return cls(tuple(out), kept)
 
-    @classmethod
-    def from_wire(cls, door: Door, world: int, body: dict[str, Any]) -> SetParams:
-        return cls.create(door, [{**body, "world": world}])
-
     def stage(self, door: Door, source: str) -> ParamsResult:
-        tick = door.loop.stage_state(self.writes)
-        return ParamsResult(tick, sorted({w.world for w in self.writes}))
-
-    def announce(self, door: Door, result: ParamsResult) -> Announcement:
-        worlds = np.array(result.worlds, dtype=np.int64)
-        targets = door.loop.pending_targets(worlds)
-        return Announcement(worlds, targets, result.tick, {"writes": list(self.items)})
+        return ParamsResult(*self.staged(door))
 
     def ack(self, door: Door, msg_id: Any, world: int, result: ParamsResult) -> dict[str, Any]:
-        return {"op": "ack", "id": msg_id, "world": world, "tick": result.tick}
-
-    @classmethod
-    def from_record(cls, door: Door, rec: dict[str, Any]) -> SetParams:
-        return cls.create(door, rec["writes"])
+        return world_ack(msg_id, world, tick=result.tick)
 
 
 def read(batch: Batch, worlds: Sequence[int]) -> dict[str, Any]:

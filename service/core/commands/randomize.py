@@ -23,14 +23,14 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import ConfigDict, Field
+from pydantic import Field
 
 from service.core.commands import rules
-from service.core.commands.base import Announcement, Command, Door
+from service.core.commands.base import Announcement, Command, Door, world_ack
 from service.core.commands.entities import SetEntities, entity_table
 from service.core.commands.params import SetParams, param_table
 from service.core.errors import BadCommand
-from service.core.schema_fields import Strict, WorldId
+from service.core.schema_fields import Strict, WorldId, example_config
 
 __all__ = ["Randomize", "RandomizeAck", "RandomizeRequest"]
 
@@ -45,24 +45,19 @@ class RandomizeRequest(Strict):
     )
     worlds: list[WorldId] | None = Field(default=None, description="omit for all worlds")
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {
-                    "seed": 42,
-                    "spec": {
-                        "entities": {
-                            "cube": {
-                                "position": [[0.6, 0.8], [0.0, 0.3], [0.78, 0.8]],
-                                "yaw": [-3.14, 3.14],
-                            }
-                        },
-                        "params": {"cube.mass": [0.05, 0.5]},
-                    },
-                }
-            ]
-        },
+    model_config = example_config(
+        {
+            "seed": 42,
+            "spec": {
+                "entities": {
+                    "cube": {
+                        "position": [[0.6, 0.8], [0.0, 0.3], [0.78, 0.8]],
+                        "yaw": [-3.14, 3.14],
+                    }
+                },
+                "params": {"cube.mass": [0.05, 0.5]},
+            },
+        }
     )
 
 
@@ -228,14 +223,7 @@ class Randomize(Command[RandomizeResult]):
         return Announcement(worlds, targets, result.tick, {"seed": self.seed, "spec": self.spec})
 
     def ack(self, door: Door, msg_id: Any, world: int, result: RandomizeResult) -> dict[str, Any]:
-        return {
-            "op": "ack",
-            "id": msg_id,
-            "world": world,
-            "tick": result.tick,
-            "seed": self.seed,
-            "spec": self.spec,
-        }
+        return world_ack(msg_id, world, tick=result.tick, seed=self.seed, spec=self.spec)
 
     @classmethod
     def from_record(cls, door: Door, rec: dict[str, Any]) -> Randomize:

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from service.core.commands import rules
-from service.core.commands.base import Announcement, Command, Door, no_fields
+from service.core.commands.base import Announcement, Command, Door, no_fields, world_ack
 from service.core.commands.targets import _model
 from service.core.trajectory.schemas import TrajectoryBody
 from service.core.trajectory.spec import JointTrajectorySpec, parse
@@ -64,7 +64,7 @@ class StartTrajectory(Command[list[Started]]):
     def ack(self, door: Door, msg_id: Any, world: int, result: list[Started]) -> dict[str, Any]:
         started = result[0]
         tick, json = started.start_tick, started.as_json()
-        return {"op": "ack", "id": msg_id, "world": world, "tick": tick, "trajectory": json}
+        return world_ack(msg_id, world, tick=tick, trajectory=json)
 
     @classmethod
     def from_record(cls, door: Door, rec: dict[str, Any]) -> StartTrajectory:
@@ -110,13 +110,9 @@ class CancelTrajectory(Command[list[TrajectoryStatus]]):
         status = result[0] if result else None
         done = status is not None and status.finished_tick is not None
         tick = status.finished_tick + 1 if done else door.loop.tick + 1  # type: ignore[union-attr,operator]
-        return {
-            "op": "ack",
-            "id": msg_id,
-            "world": world,
-            "tick": tick,
-            "trajectory": None if status is None else status.as_json(),
-        }
+        return world_ack(
+            msg_id, world, tick=tick, trajectory=None if status is None else status.as_json()
+        )
 
     @classmethod
     def from_record(cls, door: Door, rec: dict[str, Any]) -> CancelTrajectory:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, Field
 
 from service.core.schema_fields import (
     FiniteFloat,
@@ -19,6 +19,7 @@ from service.core.schema_fields import (
     Strict,
     WorldId,
     bounded_float,
+    example_config,
     joint_names,
     json_int,
 )
@@ -78,19 +79,14 @@ class TrajectoryBody(_Strict):
     goal_tolerance: list[JointToleranceBody] = Field(default=[], max_length=_N)
     goal_time_tolerance: Seconds | Duration = 0.0
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {
-                    "joint_names": ["shoulder_pan_joint", "elbow_joint"],
-                    "points": [
-                        {"positions": [0.5, 1.2], "time_from_start": 1.0},
-                        {"positions": [0.0, 1.57], "time_from_start": 2.0},
-                    ],
-                }
-            ]
-        },
+    model_config = example_config(
+        {
+            "joint_names": ["shoulder_pan_joint", "elbow_joint"],
+            "points": [
+                {"positions": [0.5, 1.2], "time_from_start": 1.0},
+                {"positions": [0.0, 1.57], "time_from_start": 2.0},
+            ],
+        }
     )
 
     def as_json(self) -> dict[str, Any]:
@@ -101,19 +97,14 @@ class TrajectoryBody(_Strict):
 class BatchTrajectoryBody(_Strict):
     """One trajectory for many worlds, started at the same tick."""
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {
-                    "worlds": "0-3",
-                    "trajectory": {
-                        "joint_names": ["elbow_joint"],
-                        "points": [{"positions": [1.2], "time_from_start": 2.0}],
-                    },
-                }
-            ]
-        },
+    model_config = example_config(
+        {
+            "worlds": "0-3",
+            "trajectory": {
+                "joint_names": ["elbow_joint"],
+                "points": [{"positions": [1.2], "time_from_start": 2.0}],
+            },
+        }
     )
 
     worlds: (

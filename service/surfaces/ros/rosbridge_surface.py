@@ -16,10 +16,10 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from fastapi import APIRouter, HTTPException, WebSocket, WebSocketDisconnect
-from pydantic import BaseModel, ConfigDict, Field, StrictBool
+from pydantic import BaseModel, Field, StrictBool
 
 from service.core import access
-from service.core.schema_fields import json_int
+from service.core.schema_fields import example_config, json_int
 from service.core.settings import Settings
 from service.core.surface import SurfaceContext
 from service.core.worlds import world_list
@@ -42,20 +42,15 @@ _COUNT = json_int(minimum=0)
 class NodeReport(BaseModel):
     """What the armfleet_ros node says of itself: connected, namespaces, messages by fate."""
 
-    model_config = ConfigDict(
-        extra="forbid",
-        json_schema_extra={
-            "examples": [
-                {
-                    "name": "/armfleet",
-                    "connected": True,
-                    "worlds": 9,
-                    "accepted": 120,
-                    "merged": 0,
-                    "rejected": {"unknown_joint": 1},
-                }
-            ]
-        },
+    model_config = example_config(
+        {
+            "name": "/armfleet",
+            "connected": True,
+            "worlds": 9,
+            "accepted": 120,
+            "merged": 0,
+            "rejected": {"unknown_joint": 1},
+        }
     )
 
     name: str = Field(max_length=200)
