@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from clients.images import unpack
 from clients.testing import Server, serve
-from service.core.camera_wire import unpack
 from service.core.robot import load_robot
 from tests.conftest import ROOT, wait_for
 

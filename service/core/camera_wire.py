@@ -24,10 +24,10 @@ import numpy as np
 import orjson
 from PIL import Image
 
+from clients.images import MAGIC
 from service.core.camera_feed import Shot
 from service.core.errors import BadCommand
 
-MAGIC = b"AFIM"
 IMAGES = ("rgb", "depth", "seg")
 FORMATS = {"rgb": ("png", "jpeg", "raw"), "depth": ("png", "raw"), "seg": ("png", "raw")}
 CONTENT_TYPES = {"png": "image/png", "jpeg": "image/jpeg", "raw": "application/octet-stream"}
@@ -92,16 +92,3 @@ def pack(shot: Shot, image: str, fmt: str, quality: int = 90) -> bytes:
     }
     head = orjson.dumps(header)
     return b"".join([MAGIC, struct.pack("<I", len(head)), head, *parts])
-
-
-def unpack(message: bytes) -> tuple[dict, list[bytes]]:
-    """(header, images) of a `pack` message (clients and tests read it with this)."""
-    if message[:4] != MAGIC:
-        raise ValueError("not an armfleet images message")
-    (n,) = struct.unpack_from("<I", message, 4)
-    header = orjson.loads(message[8 : 8 + n])
-    out, at = [], 8 + n
-    for size in header["sizes"]:
-        out.append(message[at : at + size])
-        at += size
-    return header, out

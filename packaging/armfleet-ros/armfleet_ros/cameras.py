@@ -26,26 +26,11 @@ from armfleet_ros import auth
 from armfleet_ros.convert import stamp
 from clients import _stream
 from clients._http import Call
+from clients.images import unpack
 
 log = logging.getLogger("armfleet_ros")
 
-MAGIC = b"AFIM"  # armfleet's images message (service/core/camera_wire.py)
 QOS_DEPTH = 2  # images are big: a slow subscriber gets the newest, not a backlog
-
-
-def unpack(message: bytes) -> tuple[dict, list[bytes]]:
-    """(header, images) of one camera stream message."""
-    import orjson
-
-    if message[:4] != MAGIC:
-        raise ValueError("not an armfleet images message")
-    n = int.from_bytes(message[4:8], "little")
-    header = orjson.loads(message[8 : 8 + n])
-    out, at = [], 8 + n
-    for size in header["sizes"]:
-        out.append(message[at : at + size])
-        at += size
-    return header, out
 
 
 def camera_info(spec: dict, frame: str) -> CameraInfo:

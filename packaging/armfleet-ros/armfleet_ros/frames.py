@@ -13,29 +13,7 @@ import numpy as np
 from geometry_msgs.msg import TransformStamped
 from tf2_msgs.msg import TFMessage
 
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ],
-        axis=-1,
-    )
-
-
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    u, w = q[..., 1:], q[..., :1]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+from clients import quat as quaternion
 
 
 def _transform(parent: str, child: str, pos: Any, quat: Any, sec: int, nanosec: int) -> Any:
@@ -73,10 +51,10 @@ class TfTree:
         quat = poses[:, 3:].astype(np.float64)
         pp, pq = pos[self._pb], quat[self._pb]
         cp, cq = pos[self._cb], quat[self._cb]
-        inv = _conj(pq)
-        rel_q = _mul(inv, cq)
+        inv = quaternion.conj(pq)
+        rel_q = quaternion.mul(inv, cq)
         rel_q /= np.linalg.norm(rel_q, axis=-1, keepdims=True)
-        rel_p = _rotate(inv, cp - pp)
+        rel_p = quaternion.rotate(inv, cp - pp)
         msg = TFMessage()
         msg.transforms = [
             _transform(p, c, rel_p[i], rel_q[i], sec, nanosec)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from clients import quat as quaternion
 from service.surfaces.ros.urdf import ROOT_LINK, robot_links
 
 
@@ -24,31 +25,6 @@ class Transform:
     child: str
     pos: tuple[float, float, float]
     quat: tuple[float, float, float, float]
-
-
-def _quat_conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack(
-        [
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ],
-        axis=-1,
-    )
-
-
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors v by unit quaternions q (broadcast over leading axes)."""
-    u, w = q[..., 1:], q[..., :1]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
 
 
 class FrameTree:
@@ -93,7 +69,7 @@ class FrameTree:
         quat = np.asarray(body_quat, dtype=np.float64)
         pp, pq = pos[..., self._parent_body, :], quat[..., self._parent_body, :]
         cp, cq = pos[..., self._child_body, :], quat[..., self._child_body, :]
-        inv = _quat_conj(pq)
-        rel_q = _quat_mul(inv, cq)
+        inv = quaternion.conj(pq)
+        rel_q = quaternion.mul(inv, cq)
         rel_q /= np.linalg.norm(rel_q, axis=-1, keepdims=True)  # float32 poses: renormalise
-        return _rotate(inv, cp - pp), rel_q
+        return quaternion.rotate(inv, cp - pp), rel_q
