@@ -9,7 +9,7 @@ import httpx
 import pytest
 from conftest import HOME, Server, serve, wait_for
 
-from tests.test_page import browser, open_page, page  # noqa: F401 (fixtures)
+from tests.test_page import open_page, page  # noqa: F401 (fixtures; `browser` is conftest's)
 
 try:
     from playwright.sync_api import expect
