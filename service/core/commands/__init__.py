@@ -7,7 +7,8 @@ the shared rules are in `rules`: world ids, JointState-shaped names and position
 in `arithmetic`), how it is staged at a tick boundary (`stage`, through the loop's command
 tables and the trajectory runner: `base.Door`), what listeners hear of it (`announce`: worlds,
 targets, tick and its record fields, written to MCAP by the recorder), how replay re-applies a
-recorded one (`from_record`) and its metrics label (`kind`).
+recorded one (`from_record`), its metrics label (`kind`) and the worlds it writes (`touches`,
+which the lease gate checks before it is staged; None: every world, the administrator's).
 
 `Control.run(command, source)` is the one way to run any of them, from every surface.
 
@@ -15,8 +16,8 @@ To add a command:
 
 1. write its class in a module of this package (or of the feature it belongs to): `kind`,
    `op` if the WebSocket takes it, `http` for the last segment of its HTTP write path, a
-   `create` class method that validates, `stage`, and `announce` / `ack` / `from_record` as it
-   needs;
+   `create` class method that validates, `stage`, `touches`, and `announce` / `ack` /
+   `from_record` as it needs;
 2. add it to `registry.COMMANDS`;
 3. only if it writes a kind of engine state no command wrote before: add that to
    `service.core.batch.TickWrites` (what every engine applies at a tick boundary).
