@@ -279,27 +279,28 @@ def test_simulation_interfaces(ros: tuple[Server, httpx.Client]) -> None:
 
 
 def test_set_entity_state_places_the_cube(ros: tuple[Server, httpx.Client]) -> None:
-    """SetEntityState in world 1 (paused), read back over ROS and HTTP at the same tick;
-    refused sets (unknown entity, NaN, out of bounds) change nothing."""
-    _srv, http = ros
+    """SetEntityState in world 1 (paused), read back over ROS and HTTP at one tick; refused
+    sets (unknown entity, NaN, out of bounds) change nothing, not even after a step."""
+    http, url = ros[1], "/v1/worlds/1/entities/cube"
     try:
         seen = judge("entity", "/world_1", timeout=120)
-        cube = http.get("/v1/worlds/1/entities/cube").json()
-        dt = 1 / http.get("/v1/info").json()["control_hz"]
+        cube = http.get(url).json()
+        later = http.post("/v1/sim/step", json={"ticks": 1}) and http.get(url).json()
     finally:
         http.post("/v1/sim/mode", json={"mode": "realtime"})
-    assert (seen["pause"], seen["set"], seen["step"]) in ((1, 1, 1), (101, 1, 1))
-    got, after = seen["got"], seen["after"]
-    assert got["stamp"] == pytest.approx(cube["tick"] * dt, abs=1e-6) and after == got
+    dt, got = 1 / http.get("/v1/info").json()["control_hz"], seen["got"]
+    assert seen["set"] == seen["step"] == 1 and seen["pause"] in (1, 101) and seen["after"] == got
+    assert got["stamp"] == pytest.approx(cube["tick"] * dt, abs=1e-6)
     np.testing.assert_allclose(got["pose"], cube["position"] + cube["orientation"], atol=1e-6)
     c, s = np.cos(dt / 2) / 2**0.5, np.sin(dt / 2) / 2**0.5  # as set, one tick's spin about z
     np.testing.assert_allclose(got["pose"][:2] + got["pose"][3:], [0.3, -0.5, c, c, s, s], 1e-6)
-    np.testing.assert_allclose(cube["angular"], [0, 1, 0], atol=1e-3)  # body frame
-    np.testing.assert_allclose(got["angular"], [0, 0, 1], atol=1e-3)  # world frame, as set
-    np.testing.assert_allclose(seen["many_angular"], got["angular"], atol=1e-9)
-    assert seen["missing"][0] == 2 and "unknown entity 'sphere'" in seen["missing"][1]
-    assert seen["nan"][0] == 4 and "state.pose.position.z is nan" in seen["nan"][1]
-    assert seen["high"][0] == 4 and "outside the scene's bounds at z" in seen["high"][1]
+    spin = cube["angular"] + got["angular"] + seen["many_angular"]  # body frame, world, world
+    np.testing.assert_allclose(spin, [0, 1, 0, 0, 0, 1, 0, 0, 1], atol=1e-3)
+    assert later["position"][:2] == pytest.approx([0.3, -0.5], abs=1e-6)
+    assert later["tick"] == cube["tick"] + 1 and later["position"][2] < cube["position"][2]
+    assert [seen[k][0] for k in ("missing", "nan", "high")] == [2, 4, 4]  # NOT_FOUND, FAILED
+    assert "unknown entity 'sphere'" in seen["missing"][1] and "z is nan" in seen["nan"][1]
+    assert "outside the scene's bounds at z" in seen["high"][1]
 
 
 # -- supervision and start orders ----------------------------------------------------------------
