@@ -254,8 +254,8 @@ def test_simulation_interfaces(ros: tuple[Server, httpx.Client]) -> None:
     srv, http = ros
     http.put("/v1/worlds/1/targets", json={"name": ["elbow_joint"], "position": [1.0]})
     seen = judge("sim", "/world_3", "/world_1", timeout=120)
-    assert {20, 22, 24, 25, 26, 31, 32, 33, 10} == set(seen["features"])
-    assert 11 not in seen["features"] and "twist" in seen["custom_info"]
+    assert {20, 22, 24, 25, 26, 31, 32, 33, 10, 11} == set(seen["features"])
+    assert "twist" in seen["custom_info"]
     assert seen["state0"] == 1 and seen["step_playing"] == 3  # PLAYING; INCORRECT_STATE
     assert (seen["pause"], seen["pause_again"], seen["state_paused"]) == (1, 101, 2)
     dt = 1 / http.get("/v1/info").json()["control_hz"]
@@ -273,9 +273,34 @@ def test_simulation_interfaces(ros: tuple[Server, httpx.Client]) -> None:
     np.testing.assert_allclose(seen["cube"]["pose"], poses[scene["cube"]], atol=1e-4)
     for name, pos in seen["states"].items():
         np.testing.assert_allclose(pos, poses[scene[name], :3], atol=2e-3, err_msg=name)
-    assert seen["missing"] == 2 and seen["set_entity"] == 0  # NOT_FOUND; FEATURE_UNSUPPORTED
+    assert seen["missing"] == 2 and seen["set_entity"] == 2  # a robot link is no free body
     assert (seen["reset_time"], seen["reset_state"]) == (0, 1)
     assert targets(http, 1)[2] == http.get("/v1/info").json()["joints"][2]["home"]
+
+
+def test_set_entity_state_places_the_cube(ros: tuple[Server, httpx.Client]) -> None:
+    """SetEntityState in world 1 (paused), read back over ROS and HTTP at one tick; refused
+    sets (unknown entity, NaN, out of bounds) change nothing, not even after a step."""
+    http, url = ros[1], "/v1/worlds/1/entities/cube"
+    try:
+        seen = judge("entity", "/world_1", timeout=120)
+        cube = http.get(url).json()
+        later = http.post("/v1/sim/step", json={"ticks": 1}) and http.get(url).json()
+    finally:
+        http.post("/v1/sim/mode", json={"mode": "realtime"})
+    dt, got = 1 / http.get("/v1/info").json()["control_hz"], seen["got"]
+    assert seen["set"] == seen["step"] == 1 and seen["pause"] in (1, 101) and seen["after"] == got
+    assert got["stamp"] == pytest.approx(cube["tick"] * dt, abs=1e-6)
+    np.testing.assert_allclose(got["pose"], cube["position"] + cube["orientation"], atol=1e-6)
+    c, s = np.cos(dt / 2) / 2**0.5, np.sin(dt / 2) / 2**0.5  # as set, one tick's spin about z
+    np.testing.assert_allclose(got["pose"][:2] + got["pose"][3:], [0.3, -0.5, c, c, s, s], 1e-6)
+    spin = cube["angular"] + got["angular"] + seen["many_angular"]  # body frame, world, world
+    np.testing.assert_allclose(spin, [0, 1, 0, 0, 0, 1, 0, 0, 1], atol=1e-3)
+    assert later["position"][:2] == pytest.approx([0.3, -0.5], abs=1e-6)
+    assert later["tick"] == cube["tick"] + 1 and later["position"][2] < cube["position"][2]
+    assert [seen[k][0] for k in ("missing", "nan", "high")] == [2, 4, 4]  # NOT_FOUND, FAILED
+    assert "unknown entity 'sphere'" in seen["missing"][1] and "z is nan" in seen["nan"][1]
+    assert "outside the scene's bounds at z" in seen["high"][1]
 
 
 # -- supervision and start orders ----------------------------------------------------------------

@@ -283,6 +283,10 @@ def main() -> None:
             from sim_judge import sim
 
             sim(args[0], args[1])
+        elif cmd == "entity":
+            from sim_judge import entity
+
+            entity(args[0])
         elif cmd == "latency":
             from load_judge import latency
 

@@ -94,7 +94,7 @@ def sim(ns: str, reset_ns: str) -> None:
         for n, s in zip(many.entities, many.states, strict=True)
     }
     r["set_entity"] = call(
-        srv.SetEntityState, f"{ns}/set_entity_state", entity="cube"
+        srv.SetEntityState, f"{ns}/set_entity_state", entity="wrist_3_link"
     ).result.result
     r["reset_time"] = call(
         srv.ResetSimulation, f"{reset_ns}/reset_simulation", scope=1
@@ -102,4 +102,60 @@ def sim(ns: str, reset_ns: str) -> None:
     r["reset_state"] = call(
         srv.ResetSimulation, f"{reset_ns}/reset_simulation", scope=2
     ).result.result
+    out(**r)
+
+
+def entity(ns: str) -> None:
+    """SetEntityState as a ROS user places a body: paused, the cube set in `ns` (pose and a
+    world-frame spin), one step, read back; then a set of an unknown entity, read again."""
+    from simulation_interfaces import srv
+    from simulation_interfaces.msg import EntityState, SimulationState
+
+    node = Node("judge_entity")
+
+    def call(kind, name, **fields):
+        client = node.create_client(kind, name)
+        assert client.wait_for_service(timeout_sec=20), name
+        req = kind.Request()
+        for k, v in fields.items():
+            setattr(req, k, v)
+        fut = client.call_async(req)
+        rclpy.spin_until_future_complete(node, fut, timeout_sec=30)
+        return fut.result()
+
+    def get() -> dict:
+        s = call(srv.GetEntityState, f"{ns}/get_entity_state", entity="cube").state
+        p, q, a = s.pose.position, s.pose.orientation, s.twist.angular
+        return {
+            "pose": [p.x, p.y, p.z, q.w, q.x, q.y, q.z],
+            "angular": [a.x, a.y, a.z],
+            "stamp": s.header.stamp.sec + s.header.stamp.nanosec * 1e-9,
+        }
+
+    paused = SimulationState()
+    paused.state = SimulationState.STATE_PAUSED
+    r: dict = {"pause": call(srv.SetSimulationState, "/set_simulation_state", state=paused)}
+    r["pause"] = r["pause"].result.result
+    st = EntityState()
+    st.pose.position.x, st.pose.position.y, st.pose.position.z = 0.3, -0.5, 1.2
+    h = 0.5**0.5  # 90 degrees about x
+    st.pose.orientation.w, st.pose.orientation.x = h, h
+    st.pose.orientation.y = st.pose.orientation.z = 0.0
+    st.twist.angular.z = 1.0
+    done = call(srv.SetEntityState, f"{ns}/set_entity_state", entity="cube", state=st)
+    r["set"] = done.result.result
+    r["step"] = call(srv.StepSimulation, "/step_simulation", steps=1).result.result
+    r["got"] = get()
+    missing = call(srv.SetEntityState, f"{ns}/set_entity_state", entity="sphere", state=st)
+    r["missing"] = [missing.result.result, missing.result.error_message]
+    st.pose.position.z = float("nan")
+    nan = call(srv.SetEntityState, f"{ns}/set_entity_state", entity="cube", state=st)
+    r["nan"] = [nan.result.result, nan.result.error_message]
+    st.pose.position.z = 9.0
+    high = call(srv.SetEntityState, f"{ns}/set_entity_state", entity="cube", state=st)
+    r["high"] = [high.result.result, high.result.error_message]
+    r["after"] = get()
+    many = call(srv.GetEntitiesStates, f"{ns}/get_entities_states")
+    cube = many.states[list(many.entities).index("cube")]
+    r["many_angular"] = [cube.twist.angular.x, cube.twist.angular.y, cube.twist.angular.z]
     out(**r)

@@ -6,9 +6,9 @@ Global, once (root namespace): `get_simulator_features`, `get_simulation_state`,
 paused and every world reset), `step_simulation` and the `simulate_steps` action (paused only;
 one control tick per step, feedback per step), `reset_simulation` (every world).
 Per world namespace: `reset_simulation` (that world), `get_entities`, `get_entity_state`,
-`get_entities_states` (the robot's links and the scene's free bodies, world-frame poses from
-MuJoCo; twist and acceleration are not reported), `set_entity_state` (FEATURE_UNSUPPORTED:
-armfleet cannot place bodies yet).
+`get_entities_states` (the robot's links, world-frame poses from MuJoCo; and the scene's free
+bodies, pose and world-frame twist from armfleet's entity API; acceleration is not reported),
+`set_entity_state` (a free body's pose and twist, from armfleet's next tick: entities.py).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from simulation_interfaces.srv import (
 )
 from websockets.sync.client import connect
 
-from armfleet_ros import auth
+from armfleet_ros import auth, entities
 from armfleet_ros.convert import stamp
 from armfleet_ros.link import POSE_MAGIC, Poses
 from armfleet_ros.params import param
@@ -50,19 +50,18 @@ FEATURES = [
     F.STEP_SIMULATION_MULTIPLE,
     F.STEP_SIMULATION_ACTION,
     F.ENTITY_STATE_GETTING,
+    F.ENTITY_STATE_SETTING,
 ]
 INFO = (
     "armfleet: many UR10e + Robotiq 2F-140 worlds, one per /world_N namespace (world 0 also at "
     "the root). PLAYING runs in the node's play_mode (realtime or fast). A step is one control "
     "tick. Resets put worlds back to home; simulated time keeps counting. Entity states carry "
-    "world-frame poses only (no twist, no acceleration); setting them is not supported."
+    "world-frame poses; free bodies (the scene's entities) also their world-frame twist, and only "
+    "they can be set (pose and twist, from the next tick). No acceleration (zeros)."
 )
 
 
-def _result(msg: Any, code: int, text: str = "") -> Any:
-    msg.result.result = code
-    msg.result.error_message = text
-    return msg
+_result = entities.result
 
 
 class GlobalSim:
@@ -190,6 +189,8 @@ class WorldSim:
         self.owner, self.world = owner, world
         node, group = part.servers, part.group
         self.bodies = {b["name"]: b["id"] for b in owner.frames["bodies"]}
+        self.free = [e["name"] for e in owner.http.entities(world)["entities"]]
+        self.bodies |= {name: -1 for name in self.free if name not in self.bodies}
         srv = node.create_service
         if ns:  # the root's reset_simulation is the global one
             srv(ResetSimulation, f"{ns}/reset_simulation", self._reset, callback_group=group)
@@ -242,8 +243,12 @@ class WorldSim:
         if req.entity not in self.bodies:
             return _result(res, Result.RESULT_NOT_FOUND, f"no entity {req.entity!r}")
         try:
-            self._fill(res.state, self._poses(), req.entity)
-        except (OSError, *_stream.LOST) as exc:
+            if req.entity in self.free:
+                got = self.owner.http.entity(self.world, req.entity)
+                entities.fill(res.state, got, got["tick"], self.owner.tick_dt)
+            else:
+                self._fill(res.state, self._poses(), req.entity)
+        except (OSError, ArmfleetError, *_stream.LOST) as exc:
             return _result(res, Result.RESULT_OPERATION_FAILED, str(exc))
         return _result(res, Result.RESULT_OK)
 
@@ -253,21 +258,23 @@ class WorldSim:
         try:
             names = self._matching(req.filters.filter)
             poses = self._poses()
+            free = self.owner.http.entities(self.world) if self.free else {"entities": []}
         except re.error as exc:
             return _result(res, Result.RESULT_OPERATION_FAILED, f"filter: {exc}")
-        except (OSError, *_stream.LOST) as exc:
+        except (OSError, ArmfleetError, *_stream.LOST) as exc:
             return _result(res, Result.RESULT_OPERATION_FAILED, str(exc))
         res.entities = names
+        by_name = {e["name"]: e for e in free["entities"]}
         states = []
         for name in names:
             st = EntityState()
-            self._fill(st, poses, name)
+            if name in by_name:
+                entities.fill(st, by_name[name], free["tick"], self.owner.tick_dt)
+            else:
+                self._fill(st, poses, name)
             states.append(st)
         res.states = states
         return _result(res, Result.RESULT_OK)
 
     def _set(self, req: Any, res: Any) -> Any:
-        text = (
-            "armfleet cannot place bodies yet (GetSimulatorFeatures lists no ENTITY_STATE_SETTING)"
-        )
-        return _result(res, Result.RESULT_FEATURE_UNSUPPORTED, text)
+        return entities.set_state(self.owner.http, self.world, self.free, req, res)
