@@ -7,6 +7,18 @@ from common import out, spin_until
 from rclpy.node import Node
 
 
+def call_service(node, kind, name, **fields):
+    """One service call from `node`, waiting for the server and the reply."""
+    client = node.create_client(kind, name)
+    assert client.wait_for_service(timeout_sec=20), name
+    req = kind.Request()
+    for k, v in fields.items():
+        setattr(req, k, v)
+    fut = client.call_async(req)
+    rclpy.spin_until_future_complete(node, fut, timeout_sec=30)
+    return fut.result()
+
+
 def sim(ns: str, reset_ns: str) -> None:
     """Every simulation_interfaces call: global ones at the root, entity ones in `ns`, a
     world's reset in `reset_ns`."""
@@ -21,14 +33,7 @@ def sim(ns: str, reset_ns: str) -> None:
     node.create_subscription(Clock, "/clock", lambda m: clock.append(m.clock), 10)
 
     def call(kind, name, **fields):
-        client = node.create_client(kind, name)
-        assert client.wait_for_service(timeout_sec=20), name
-        req = kind.Request()
-        for k, v in fields.items():
-            setattr(req, k, v)
-        fut = client.call_async(req)
-        rclpy.spin_until_future_complete(node, fut, timeout_sec=30)
-        return fut.result()
+        return call_service(node, kind, name, **fields)
 
     def now() -> float:
         n = len(clock)
@@ -114,14 +119,7 @@ def entity(ns: str) -> None:
     node = Node("judge_entity")
 
     def call(kind, name, **fields):
-        client = node.create_client(kind, name)
-        assert client.wait_for_service(timeout_sec=20), name
-        req = kind.Request()
-        for k, v in fields.items():
-            setattr(req, k, v)
-        fut = client.call_async(req)
-        rclpy.spin_until_future_complete(node, fut, timeout_sec=30)
-        return fut.result()
+        return call_service(node, kind, name, **fields)
 
     def get() -> dict:
         s = call(srv.GetEntityState, f"{ns}/get_entity_state", entity="cube").state
