@@ -18,10 +18,10 @@ from service.core.loop_types import CommandResult
 from service.core.schemas import IncrementRequest, JointTargets
 from service.core.types import RobotSpec
 
-__all__ = ["Increment", "SetMany", "SetTargets", "validation_detail"]
+__all__ = ["Increment", "SetMany", "SetTargets"]
 
 
-def validation_detail(exc: ValidationError) -> str:
+def _validation_detail(exc: ValidationError) -> str:
     """pydantic's errors as one line: `loc: msg; loc: msg`."""
     return "; ".join(
         f"{'.'.join(str(p) for p in err['loc']) or 'message'}: {err['msg']}" for err in exc.errors()
@@ -33,7 +33,7 @@ def _model(model: Any, body: dict[str, Any]) -> Any:
     try:
         return model.model_validate(body)
     except ValidationError as exc:  # the detail names each field itself
-        raise BadCommand("", validation_detail(exc)) from None
+        raise BadCommand("", _validation_detail(exc)) from None
 
 
 @dataclass(frozen=True)
