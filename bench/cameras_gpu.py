@@ -4,11 +4,11 @@ On one CUDA device, in one run: (1) the renderer alone: MuJoCo Warp's batch rend
 worlds' wrist camera at 64x64 RGB, timed to completion on the device (BVH refit + render; also with
 the kinematics and camera poses the service recomputes), then the service's `BatchRenderer.render`
 (state in, pixels out to the host); (2) `armfleet serve` with N worlds, the wrist camera at 64x64
-RGB, `--camera-batch N` (one render draws every world) and one client of
-`/v1/ws/cameras?worlds=0-(N-1)&rate=30&format=raw` (every world's image in each message; the client
-asks for no compression), in realtime mode then fast mode: ticks/s and real-time factor with nobody
-looking, then while the stream runs, messages/s delivered and their ratio to min(30, the renderer
-alone's batches/s); (3) the largest batch that fits: per resolution, the worlds doubled from N
+RGB, `--camera-batch N`, and clients of `/v1/ws/cameras?worlds=..&rate=30&format=raw` (one client
+asking every world, then 8 client processes asking an eighth each; no compression), in realtime
+then fast mode: ticks/s and real-time factor with nobody looking, then while the stream runs,
+pictures of every world delivered a second and their ratio to min(30, the renderer alone's
+batches/s); (3) the largest batch that fits: per resolution, the worlds doubled from N
 until building or drawing the render batch fails (a child process per resolution).
 
 Run it: ``armfleet bench --section 30 --device cuda`` (``--quick``: 1,024 worlds, shorter).
@@ -20,10 +20,11 @@ import contextlib
 import gc
 import json
 import math
+import os
 import subprocess
 import sys
-import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -36,6 +37,9 @@ SIZE = (64, 64)  # the wrist camera's size for the stream and the renderer alone
 CAMERA = "wrist"
 FIT_SIZES = ((64, 64), (128, 128), (256, 256))
 FIT_MAX_WORLDS = 1 << 22  # the doubling stops here even when memory is left
+STREAMS = (("realtime", 1), ("realtime", 8), ("fast", 8))  # (mode, client processes)
+# ARMFLEET_BENCH_FITS=0: take the largest fits from the last run's file instead of searching
+FITS_BEFORE = Path(__file__).parent / "results" / "cameras_gpu_cuda.json"
 
 
 def _mjm_and_spec(width: int, height: int) -> tuple[Any, Any]:
@@ -149,34 +153,95 @@ def _metrics(url: str) -> dict[str, float]:
     return {x.split()[0]: float(x.split()[1]) for x in lines if x.startswith("armfleet_camera")}
 
 
-def _read(url: str, n: int, got: dict[str, Any], stop: threading.Event) -> None:
-    """A camera-stream client: counts whole messages into `got`, checks the first one."""
+def _read(url: str, worlds: list[int], counts: Any, first: Any, stop: Any) -> None:
+    """One camera-stream client (a process of its own: a reader of 6 GB/s must not share a
+    GIL): counts whole messages and bytes into `counts`, checks the first message."""
     from websockets.sync.client import connect
 
     try:
         with connect(url, max_size=None, compression=None, open_timeout=60) as ws:
+            ws.recv_bufsize = 1 << 22  # 4 MiB reads: a 201 MB message in 48, not 3,072
             while not stop.is_set():
                 with contextlib.suppress(TimeoutError):
                     msg = ws.recv(timeout=5)
-                    if "first" not in got:
+                    if first.empty():
                         hlen = int.from_bytes(msg[4:8], "little")
                         head = json.loads(msg[8 : 8 + hlen])
-                        got["first"] = {
-                            "every_world": head["worlds"] == list(range(n)),
-                            "image_bytes": sorted(set(head["sizes"])),
-                            "message_bytes": len(msg),
-                        }
-                    got["messages"] += 1
-                    got["bytes"] += len(msg)
+                        sizes = head["sizes"]
+                        first.put(
+                            {
+                                "every_world": head["worlds"] == worlds,
+                                "image_bytes": sorted(set(sizes)),
+                                "message_bytes": len(msg),
+                                "whole": len(msg) == 8 + hlen + sum(sizes),
+                            }
+                        )
+                    with counts.get_lock():
+                        counts[0] += 1
+                        counts[1] += len(msg)
     except Exception as exc:
-        got["error"] = f"{type(exc).__name__}: {exc}"
+        first.put({"error": f"{type(exc).__name__}: {exc}"})
 
 
-def _window(srv: common.Served, seconds: float, got: dict, srv_device: str) -> dict[str, Any]:
-    """Ticks/s, RTF, messages/s and the cameras' metrics over one window."""
-    m0, f0, a = _metrics(srv.url), got["messages"], srv.get_info()
+class _Readers:
+    """`k` client processes, each streaming its share of the worlds 0..n-1."""
+
+    def __init__(self, ws_url: str, n: int, k: int) -> None:
+        import multiprocessing as mp
+
+        spawn = mp.get_context("spawn")
+        self.stop = spawn.Event()
+        self.k, self.n = k, n
+        self.counts = [spawn.Array("q", 2) for _ in range(k)]  # messages, bytes
+        self.firsts = [spawn.Queue() for _ in range(k)]
+        self.procs = []
+        for i in range(k):
+            lo, hi = i * n // k, (i + 1) * n // k - 1
+            q = f"camera={CAMERA}&worlds={lo}-{hi}&rate={RATE:g}&image=rgb&format=raw"
+            args = (f"{ws_url}/v1/ws/cameras?{q}", list(range(lo, hi + 1)))
+            args += (self.counts[i], self.firsts[i], self.stop)
+            self.procs.append(spawn.Process(target=_read, args=args, daemon=True))
+        for proc in self.procs:
+            proc.start()
+
+    def frames(self) -> float:
+        """Pictures of every world delivered so far (each client's messages x its share)."""
+        return sum(c[0] * ((i + 1) * self.n // self.k - i * self.n // self.k) for i, c in
+                   enumerate(self.counts)) / self.n  # fmt: skip
+
+    def messages(self) -> int:
+        return sum(int(c[0]) for c in self.counts)
+
+    def close(self) -> dict[str, Any]:
+        self.stop.set()
+        for proc in self.procs:
+            proc.join(timeout=30)
+            if proc.is_alive():
+                proc.kill()
+        firsts = [q.get(timeout=5) if not q.empty() else {} for q in self.firsts]
+        return {
+            "clients": self.k,
+            "messages": self.messages(),
+            "bytes": sum(int(c[1]) for c in self.counts),
+            "first": firsts[0],
+            "errors": [f["error"] for f in firsts if "error" in f],
+            "every_world": all(f.get("every_world") for f in firsts),
+            "whole_messages": all(f.get("whole") for f in firsts),
+            "image_bytes": sorted({b for f in firsts for b in f.get("image_bytes", [])}),
+        }
+
+
+def _window(
+    srv: common.Served, seconds: float, readers: _Readers | None, srv_device: str
+) -> dict[str, Any]:
+    """Ticks/s, RTF, frames/s (pictures of every world), messages/s, the cameras' metrics."""
+
+    def seen() -> tuple[float, int]:
+        return (readers.frames(), readers.messages()) if readers else (0.0, 0)
+
+    m0, (f0, n0), a = _metrics(srv.url), seen(), srv.get_info()
     time.sleep(seconds)
-    m1, f1, b = _metrics(srv.url), got["messages"], srv.get_info()
+    m1, (f1, n1), b = _metrics(srv.url), seen(), srv.get_info()
     wall = b[0] - a[0]
     d = {k.removeprefix("armfleet_camera_"): m1[k] - m0.get(k, 0.0) for k in m1}
     renders = d.get("renders_total") or math.nan
@@ -184,7 +249,8 @@ def _window(srv: common.Served, seconds: float, got: dict, srv_device: str) -> d
         "wall_s": wall,
         "ticks_per_s": (b[1]["tick"] - a[1]["tick"]) / wall,
         "rtf": common.rtf_between(a, b),
-        "messages_per_s": (f1 - f0) / wall,
+        "frames_per_s": (f1 - f0) / wall,
+        "messages_per_s": (n1 - n0) / wall,
         "renders_per_s": d.get("renders_total", 0.0) / wall,
         "render_ms": 1e3 * d.get("render_seconds_total", 0.0) / renders,
         "state_ms": 1e3 * d.get("state_seconds_total", 0.0) / renders,
@@ -201,31 +267,29 @@ def _ready(url: str) -> float:
     raise TimeoutError("cameras not ready in 900 s")
 
 
-def stream(ctx: Context, n: int, mode: str, window: float) -> dict[str, Any]:
-    """`armfleet serve --mode MODE`, N worlds: a window idle, then one while every world streams."""
+def stream(ctx: Context, n: int, mode: str, clients: int, window: float) -> dict[str, Any]:
+    """`armfleet serve --mode MODE`, N worlds: a window idle, then one while every world streams
+    to `clients` readers, each asking its share of the worlds."""
     w, h = SIZE
     env = {f"ARMFLEET_{k}": v for k, v in (("CAMERA_SIZE", f"{w}x{h}"), ("CAMERA_BATCH", str(n)))}
     env |= {"ARMFLEET_CAMERA_OUTPUTS": "rgb", "ARMFLEET_CAMERAS": "overview=off"}
-    out: dict[str, Any] = {"mode": mode, "worlds": n}
+    out: dict[str, Any] = {"mode": mode, "worlds": n, "clients": clients}
     with ctx.serve(n, mode, env) as srv:
         out["ready_s"], out["cameras_warm_s"] = srv.ready_s, _ready(srv.url)
         time.sleep(2.0)
-        got: dict[str, Any] = {"messages": 0, "bytes": 0}
-        out["idle"] = _window(srv, window, got, ctx.device)
-        q = f"camera={CAMERA}&worlds=0-{n - 1}&rate={RATE:g}&image=rgb&format=raw"
-        stop = threading.Event()
-        args = (f"{srv.ws_url}/v1/ws/cameras?{q}", n, got, stop)
-        reader = threading.Thread(target=_read, args=args, daemon=True)
-        reader.start()
-        deadline = time.monotonic() + 120
-        while got["messages"] < 2 and "error" not in got and time.monotonic() < deadline:
-            time.sleep(0.1)
-        time.sleep(1.0)
-        out["streaming"] = _window(srv, window, got, ctx.device)
-        stop.set()
-        reader.join(timeout=30)
-    out["client"] = got
-    out["whole_messages"] = got.get("first", {}).get("image_bytes") == [w * h * 3]
+        out["idle"] = _window(srv, window, None, ctx.device)
+        readers = _Readers(srv.ws_url, n, clients)
+        try:
+            deadline = time.monotonic() + 120
+            while readers.frames() < 2 and time.monotonic() < deadline:
+                time.sleep(0.1)
+            time.sleep(1.0)
+            out["streaming"] = _window(srv, window, readers, ctx.device)
+        finally:
+            out["client"] = readers.close()
+    out["whole_messages"] = out["client"]["whole_messages"] and out["client"]["image_bytes"] == [
+        w * h * 3
+    ]
     return out
 
 
@@ -329,13 +393,13 @@ def _rows(alone: dict, streams: list[dict], fits: list[dict], n: int) -> list[di
             ("service's renderer (state in, pixels out): batches/s", per_s["service"]),
         ]
     for s in streams:
-        mode, st = s["mode"], s["streaming"]
+        st, how = s["streaming"], f"{s['mode']}, {s['clients']} client(s)"
         got += [
-            (f"{mode}: stream messages/s asked at 30 (every world in each)", st["messages_per_s"]),
-            (f"{mode}: stream ratio to the renderer alone, min(30, batches/s)", s.get("ratio")),
-            (f"{mode}: ticks/s, nobody looking", s["idle"]["ticks_per_s"]),
-            (f"{mode}: ticks/s, while streaming", st["ticks_per_s"]),
-            (f"{mode}: ms per render in the service (draw, pixels to host)", st["render_ms"]),
+            (f"{how}: every world's picture, per second, asked at 30", st["frames_per_s"]),
+            (f"{how}: stream ratio to the renderer alone, min(30, batches/s)", s.get("ratio")),
+            (f"{how}: ticks/s, nobody looking", s["idle"]["ticks_per_s"]),
+            (f"{how}: ticks/s, while streaming", st["ticks_per_s"]),
+            (f"{how}: ms per render in the service (draw, pixels to host)", st["render_ms"]),
         ]  # fmt: skip
     for f in fits:
         capped = " (search capped)" if f["capped"] else ""
@@ -363,31 +427,38 @@ def cameras_gpu(ctx: Context) -> Result:
         ctx.say(f"  renderer alone FAILED: {errors['renderer_alone']}")
     best = min(RATE, alone["render"]["batches_per_s"]) if alone else None
     streams = []
-    for mode in ("realtime", "fast"):
+    for mode, clients in STREAMS:
         try:
-            s = stream(ctx, n, mode, window)
-            s["ratio"] = s["streaming"]["messages_per_s"] / best if best else None
+            s = stream(ctx, n, mode, clients, window)
+            s["ratio"] = s["streaming"]["frames_per_s"] / best if best else None
             streams.append(s)
             idle, st = s["idle"]["ticks_per_s"], s["streaming"]["ticks_per_s"]
-            ctx.say(f"  {mode}: {s['streaming']['messages_per_s']:.2f} messages/s, ticks/s ")
-            ctx.say(f"    {idle:.1f} nobody looking, {st:.1f} streaming")
+            ctx.say(f"  {mode}, {clients} client(s): {s['streaming']['frames_per_s']:.2f} frames/s")
+            ctx.say(f"    ticks/s {idle:.1f} nobody looking, {st:.1f} streaming")
         except Exception as exc:
-            errors[f"stream {mode}"] = f"{type(exc).__name__}: {exc}"
-            ctx.say(f"  {mode} stream FAILED: {errors[f'stream {mode}']}")
-    fits = []
-    for w, h in ctx.pick(FIT_SIZES, FIT_SIZES[:1]):
+            errors[f"stream {mode} {clients}"] = f"{type(exc).__name__}: {exc}"
+            ctx.say(f"  {mode} stream FAILED: {errors[f'stream {mode} {clients}']}")
+    fits, fits_from = [], None
+    if os.environ.get("ARMFLEET_BENCH_FITS", "1") == "0" and FITS_BEFORE.exists():
+        before = json.loads(FITS_BEFORE.read_text())  # the renderer alone did not change
+        fits, fits_from = before["fits"], before.get("fits_from") or before["started"]
+    for w, h in ctx.pick(FIT_SIZES, FIT_SIZES[:1]) if fits_from is None else ():
         f = largest_fit(ctx.device, w, h, n, ctx.pick(FIT_MAX_WORLDS, 2 * n), ctx.pick(150, 90))
         fits.append(f)
         ctx.say(f"  fits at {w}x{h}: {f['largest_worlds']} worlds ({f['gpu_used_gib']} GiB)")
     gpu = common.gpu_name(ctx.device) or ""
     card = "H200" if "H200" in gpu else "H100" if "H100" in gpu else gpu or "none"
     notes = [
-        f"card: {card} ({gpu or 'no GPU'}); one WebSocket client on the same machine, raw "
-        "pixels, no compression; ratio: messages/s over min(30, the renderer's batches/s); "
+        f"card: {card} ({gpu or 'no GPU'}); WebSocket clients on the same machine, each a "
+        "process asking an equal share of the worlds, raw pixels, no compression; ratio: "
+        "pictures of every world delivered a second over min(30, the renderer's batches/s); "
         "largest fit: the renderer alone (the service draws at most 2^26 pixels a render)"
     ]
+    if fits_from:
+        notes.append(f"largest fit: carried from the run started {fits_from}")
     data = dict(card=card, gpu=gpu, worlds=n, size=f"{SIZE[0]}x{SIZE[1]}", rate=RATE)
     data.update(renderer_alone=alone, streams=streams, fits=fits, errors=errors)
+    data["fits_from"] = fits_from
     return Result(_rows(alone, streams, fits, n), data, notes)
 
 

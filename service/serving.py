@@ -16,6 +16,7 @@ from collections.abc import Awaitable, Callable, Iterator
 
 import uvicorn
 
+from service import heap
 from service.core import redact
 from service.core.settings import Settings
 from service.core.stopping import StopSignals
@@ -65,6 +66,7 @@ class _Server(uvicorn.Server):
 
 def serve_until_stopped(app: object, runtime: Runtime, settings: Settings) -> list[str]:
     """Serve `app` until SIGINT/SIGTERM; returns what stopping could not do (empty: all saved)."""
+    heap.keep_large_blocks()  # big camera messages and frames: no page faults per message
     config = uvicorn.Config(
         app,  # type: ignore[arg-type]
         host=settings.host,

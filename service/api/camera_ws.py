@@ -4,12 +4,13 @@
 
 Each binary message is one render of every listed world at one tick, laid out as
 service/core/camera_wire.py's `pack` (header JSON with `tick`, `worlds`, sizes; then the
-images). Newest only: the next picture is taken when the last one has been handed to the
-socket, so a slow reader holds drawing back instead of piling images up in the service (at
-most what the socket's buffers hold is in flight, a few MB on loopback); a reader that keeps
-up gets `rate` a second (fewer when drawing takes longer than a period). With `pull=true`
-nothing is in flight beyond what was asked: the client sends a text message (any text) for
-each picture it wants, and gets the newest at that moment (still at most `rate` a second).
+images). Newest only: the next picture is drawn while the last one is being sent, and no
+other until that send is done, so a slow reader holds drawing back instead of piling images up
+in the service (at most one message waits beyond what the socket's buffers hold); a reader
+that keeps up gets `rate` a second (fewer when drawing or sending takes longer than a period).
+With `pull=true` nothing is in flight beyond what was asked: the client sends a text message
+(any text) for each picture it wants, and gets the newest at that moment (still at most `rate`
+a second).
 Nothing is drawn while nobody is connected.
 """
 
@@ -87,22 +88,45 @@ async def _send(
     rate: float,
     wanted: asyncio.Semaphore | None,
 ) -> None:
+    """Send a picture every period. In push mode the next picture is drawn while this one is
+    sent, started so that it is ready when due (one drawing time before): a send that takes
+    most of a period (201 MB of raw images) does not halve the rate, and still at most one
+    message waits beyond the socket."""
     period = 1.0 / rate
     due = time.monotonic()
-    while True:
-        if wanted is not None:
-            await wanted.acquire()
-        try:
-            shot = await feed.shoot_async(ids, camera)  # type: ignore[arg-type]
-        except ArmfleetError as exc:  # warming up: say so and try again a period later
-            if exc.status != 503:
-                await ws.close(code=_CLOSE_POLICY, reason=str(exc)[:120])
-                return
-            if wanted is not None:
-                wanted.release()  # still wanted
-            await asyncio.sleep(period)
-            continue
+    draw_s = 0.0  # how long a picture takes to draw and pack (smoothed)
+    ahead: asyncio.Task[tuple[bytes, float]] | None = None
+
+    async def draw(start: float) -> tuple[bytes, float]:
+        await asyncio.sleep(max(0.0, start - time.monotonic()))
+        t0 = time.monotonic()
+        shot = await feed.shoot_async(ids, camera)  # type: ignore[arg-type]
         message = await asyncio.to_thread(camera_wire.pack, shot, image, fmt, quality)
-        await ws.send_bytes(message)  # waits while the reader is slow: no frame piles up
-        due = max(due + period, time.monotonic())  # late: start again from now, no burst
-        await asyncio.sleep(max(0.0, due - time.monotonic()))
+        return message, time.monotonic() - t0
+
+    try:
+        while True:
+            if wanted is not None:
+                await wanted.acquire()
+            job, ahead = ahead or asyncio.create_task(draw(0.0)), None
+            try:
+                message, took = await job
+            except ArmfleetError as exc:  # warming up: say so and try again a period later
+                if exc.status != 503:
+                    await ws.close(code=_CLOSE_POLICY, reason=str(exc)[:120])
+                    return
+                if wanted is not None:
+                    wanted.release()  # still wanted
+                await asyncio.sleep(period)
+                due = time.monotonic()
+                continue
+            draw_s = took if draw_s == 0.0 else 0.8 * draw_s + 0.2 * took
+            await asyncio.sleep(max(0.0, due - time.monotonic()))
+            if wanted is None:
+                ahead = asyncio.create_task(draw(due + period - draw_s))
+            await ws.send_bytes(message)  # waits while the reader is slow: nothing piles up
+            due = max(due + period, time.monotonic())  # late: start again from now, no burst
+    finally:
+        if ahead is not None:
+            ahead.cancel()
+            await asyncio.gather(ahead, return_exceptions=True)
