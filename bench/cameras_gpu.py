@@ -120,8 +120,10 @@ def _service_renderer_rate(mjm: Any, spec: Any, n: int, device: str, seconds: fl
     """Batches a second of the service's BatchRenderer.render: state in, pixels out to host."""
     import numpy as np
 
+    from service import heap
     from service.engines.camera_render import BatchRenderer
 
+    heap.keep_large_blocks()  # as `armfleet serve` does
     renderer = BatchRenderer(mjm, [spec], n, device)
     qpos = np.tile(mjm.qpos0, (n, 1))
     renderer.render(qpos, CAMERA)

@@ -7,10 +7,12 @@ decodes every PNG and JPEG. The servers are paused, so a picture shows a known s
 
 from __future__ import annotations
 
+import concurrent.futures
 import io
 import math
 import subprocess
 import sys
+import threading
 
 import httpx
 import mujoco
@@ -20,6 +22,7 @@ from PIL import Image
 
 from clients.images import unpack
 from clients.testing import Server, serve
+from service.core.camera_feed import _rows
 from service.core.robot import load_robot
 from tests.conftest import ROOT, wait_for
 
@@ -202,6 +205,39 @@ def test_many_worlds_in_one_binary_reply(http: httpx.Client) -> None:
     pics = [np.asarray(Image.open(io.BytesIO(b))) for b in images]
     assert all(p.shape == (120, 160, 3) for p in pics)
     assert np.array_equal(pics[0], _rgb(http, 0, "wrist"))  # paused: the same tick
+
+
+def test_requests_at_once_each_get_their_own_worlds(
+    warp_server: Server, http: httpx.Client
+) -> None:
+    """Requests for one camera that meet at a tick boundary are drawn in one render; each must
+    still get exactly its own worlds (raw, so bytes compare exactly)."""
+    asks = ["3,1", "0-3", "2", "1-2", "0", "3,0", "1", "2-3"] * 2
+    alone = {w: _rgb(http, w, "wrist", format="png") for w in range(4)}
+    barrier = threading.Barrier(len(asks))
+
+    def ask(worlds: str) -> tuple[dict, list[bytes]]:
+        with httpx.Client(base_url=warp_server.url, timeout=60) as c:
+            barrier.wait()
+            params = {"worlds": worlds, "format": "raw"}
+            return unpack(c.get("/v1/cameras/wrist/images", params=params).content)
+
+    with concurrent.futures.ThreadPoolExecutor(len(asks)) as pool:
+        answers = list(pool.map(ask, asks))
+    for worlds, (header, images) in zip(asks, answers, strict=True):
+        ends = [int(x) for x in worlds.replace("-", ",").split(",")]
+        want = list(range(ends[0], ends[1] + 1)) if "-" in worlds else sorted(ends)
+        assert header["worlds"] == want  # a world list is served in ascending order
+        for w, raw in zip(want, images, strict=True):
+            got = np.frombuffer(raw, np.uint8).reshape(120, 160, 3)
+            assert np.array_equal(got, alone[w]), (worlds, w)
+
+
+def test_rows_of_a_request_among_the_drawn_worlds() -> None:
+    drawn = np.array([0, 2, 3, 5, 9])
+    assert _rows(drawn, np.array([2, 3, 5])) == slice(1, 4)  # a run: a view, no copy
+    assert list(_rows(drawn, np.array([5, 0]))) == [3, 0]
+    assert list(_rows(drawn, np.array([0, 3]))) == [0, 2]
 
 
 @pytest.mark.parametrize(
