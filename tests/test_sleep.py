@@ -18,6 +18,7 @@ from mjcf import MJCF_DIR
 from service.core.batch import StateWrite
 from service.core.robot import load_robot
 from service.engines.native import NativeBatch
+from tests.test_model import solve_ik
 
 EXAMPLE = MJCF_DIR / "examples" / "bin_picking.xml"
 SETTLE = 180  # ticks (3 s at 60 Hz): the parts come to rest and fall asleep
@@ -113,3 +114,41 @@ def test_a_snapshot_restored_into_a_fresh_batch_goes_on_within_micrometres():
     fresh.set_state(saved)
     fresh.step(120)
     assert np.abs(fresh.qpos() - first.qpos()).max() < 1e-4
+
+
+@pytest.mark.parametrize("sleep", [True, False], ids=["asleep", "awake"])
+def test_the_gripper_picks_a_sleeping_part_as_an_awake_one(sleep):
+    """The pads closing on the box asleep in the bin wake it: it is lifted 10 cm and held, as
+    when nothing sleeps (the grasp of tests/test_model.py, on the cell's box)."""
+    robot = dataclasses.replace(load_robot(EXAMPLE), sleep=sleep)
+    batch = NativeBatch(1, robot=robot)
+    batch.step(SETTLE)
+    mjm = robot.mjm
+    data = mujoco.MjData(mjm)
+    data.qpos[:] = batch.qpos()[0]
+    mujoco.mj_kinematics(mjm, data)
+    box = mjm.body("part_box").id
+    start = data.xpos[box].copy()
+    rot = data.site("flange").xmat.reshape(3, 3).copy()
+    home = data.qpos[:6].copy()
+    q_grasp = solve_ik(mjm, data, home, start + np.array([0.0, 0.0, 0.02]), rot)
+    q_lift = solve_ik(mjm, data, q_grasp, start + np.array([0.0, 0.0, 0.12]), rot)
+
+    def move(q_from, q_to, seconds, finger):
+        n = round(seconds * batch.control_hz)
+        for k in range(n):
+            s = min(1.0, 1.5 * (k + 1) / n)
+            f = finger[0] + s * (finger[1] - finger[0])
+            batch.apply_targets(np.array([0]), np.r_[q_from + s * (q_to - q_from), f][None])
+            batch.step(1)
+
+    move(home, q_grasp, 1.2, (0.0, 0.0))
+    move(q_grasp, q_grasp, 0.8, (0.0, 0.7))
+    move(q_grasp, q_lift, 1.2, (0.7, 0.7))
+    rise = []
+    for _ in range(120):  # 2 s held
+        batch.step(1)
+        rise.append(batch.snapshot().bodies.get()[0][0, box, 2] - start[2])
+    assert min(rise) >= 0.095, min(rise)
+    assert max(rise) - min(rise) <= 0.01
+    assert batch.snapshot().faults[0] == 0
