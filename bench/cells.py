@@ -8,7 +8,11 @@
   (native, realtime): the time from sending it to the first state read that carries it
   (read-your-writes waits for the acknowledged tick), with the request's own time beside it;
 * the example bin-picking cell (three parts) and the default scene at 256 worlds, native,
-  real time, with one 30 Hz subscriber of every world: the real-time factor of each;
+  real time, with one 30 Hz subscriber of every world: the real-time factor of each, and the
+  CPU the server spent per simulated second (the cores real time takes; the RTF only says
+  whether they were free on a machine that other work shares), with the load beside it;
+* what one world-step of each costs (native, one thread, the two alternating in one process):
+  what the served figures come from, without the server or the load;
 * drawing a randomisation for 10,000 worlds (the spec of the docs' guide): the time to draw
   and validate it (what `POST /v1/randomize` spends before anything is staged).
 
@@ -17,6 +21,7 @@ Section 23 of ``armfleet bench`` (``--section 23``), or ``python -m bench.cells 
 
 from __future__ import annotations
 
+import os
 import statistics
 import time
 from types import SimpleNamespace
@@ -139,19 +144,60 @@ def first_tick(n: int) -> dict[str, Any]:
     return out
 
 
+def _cpu_s(pid: int) -> float:
+    """CPU seconds (user + system, every thread) process `pid` has run so far."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rpartition(")")[2].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def cell_rtf(n: int, scene: str | None, window: float) -> dict[str, Any]:
     """Real-time factor of a served native batch of `scene` (None: the default one) with ONE
-    30 Hz subscriber of every world, as the capacity section measures it."""
+    30 Hz subscriber of every world, as the capacity section measures it; and the server's CPU
+    seconds per simulated second over the same span (None where /proc is not there)."""
     import asyncio
 
     from bench import common
     from bench.service_bench import _measure_realtime
 
     env = {"ARMFLEET_ENGINE": "mujoco", **({"ARMFLEET_SCENE": scene} if scene else {})}
+    load = [round(x, 2) for x in os.getloadavg()]
     with common.served(n, "realtime", "cpu", env) as srv:
+        pid = srv.server.process.pid
+        proc = os.path.exists(f"/proc/{pid}/stat")
+        cpu0, info0 = _cpu_s(pid) if proc else 0.0, srv.get_info()[1]
         got = asyncio.run(_measure_realtime(srv, window, warmup=2.0, per_subscriber=n))
+        cpu1, info1 = _cpu_s(pid) if proc else 0.0, srv.get_info()[1]
+    sim_s = (info1["tick"] - info0["tick"]) / info1["control_hz"]
+    cores = (cpu1 - cpu0) / sim_s if proc and sim_s > 0 else None
     keep = ("realtime_factor", "min_loop_rtf_1s", "frames_per_s_per_subscriber_min")
-    return {"nworld": n, "scene": scene or "default", **{k: got[k] for k in keep}}
+    return {
+        "nworld": n,
+        "scene": scene or "default",
+        **{k: got[k] for k in keep},
+        "cpu_s_per_sim_s": None if cores is None else round(cores, 3),
+        "loadavg_at_start": load,
+    }
+
+
+def step_cost(scenes: dict[str, str | None], n: int, windows: int, ticks: int) -> dict[str, Any]:
+    """CPU microseconds per world-step of each scene: native batches of `n` worlds on one thread,
+    settled for 2 s, stepped in alternating windows (a burst of load lands in one window, and
+    the median of each scene's windows leaves it out)."""
+    from service.engines.native import NativeBatch
+
+    batches = {
+        k: NativeBatch(n, nthread=1, **({"model_path": p} if p else {})) for k, p in scenes.items()
+    }
+    for b in batches.values():
+        b.step(120)
+    spent: dict[str, list[float]] = {k: [] for k in batches}
+    for _ in range(windows):
+        for k, b in batches.items():
+            t0 = time.process_time()
+            b.step(ticks)
+            spent[k].append((time.process_time() - t0) / (ticks * n * b.substeps))
+    return {k: round(statistics.median(v) * 1e6, 2) for k, v in spent.items()}
 
 
 def randomize_draw(n: int) -> dict[str, Any]:
@@ -205,6 +251,7 @@ def cells(ctx: Context) -> Result:
 
     example = str(MJCF_DIR / "examples" / "bin_picking.xml")
     data["cell_rtf"] = []
+    names = {None: "default scene (1 cube)", example: "bin-picking cell (3 parts)"}
     for scene in (None, example):
         try:
             r = cell_rtf(256, scene, ctx.pick(15.0, 6.0))
@@ -212,12 +259,26 @@ def cells(ctx: Context) -> Result:
             data["errors"][f"rtf {scene}"] = f"{type(exc).__name__}: {exc}"
             continue
         data["cell_rtf"].append(r)
-        what = "bin-picking cell (3 parts)" if scene else "default scene (1 cube)"
+        cores = r["cpu_s_per_sim_s"]
         rows.append(
             {
-                "measure": f"{what}, 256 worlds, native, one 30 Hz subscriber: RTF",
-                "value": f"{r['realtime_factor']:.3f}",
+                "measure": f"{names[scene]}, 256 worlds, native, one 30 Hz subscriber: RTF"
+                " (server CPU per simulated second; load at start)",
+                "value": f"{r['realtime_factor']:.3f} ("
+                + ("-" if cores is None else f"{cores:.2f} cores")
+                + f"; load {r['loadavg_at_start'][0]})",
                 "ratio": "",
+            }
+        )
+    data["step_us"] = us = step_cost(
+        {"default": None, "cell": example}, 64, *ctx.pick((9, 20), (5, 10))
+    )
+    for key, scene in (("default", None), ("cell", example)):
+        rows.append(
+            {
+                "measure": f"{names[scene]}: one world-step, native, one thread (CPU)",
+                "value": f"{us[key]} µs",
+                "ratio": "" if scene is None else round(us[key] / us["default"], 2),
             }
         )
     data["randomize"] = rz = randomize_draw(10_000)
@@ -230,7 +291,10 @@ def cells(ctx: Context) -> Result:
     )
     notes = [
         "ratio: ticks/s with every listed parameter given per world over ticks/s of the shared "
-        "model: the median over pairs of neighbouring windows, the two batches alternating"
+        "model: the median over pairs of neighbouring windows, the two batches alternating",
+        "cores: the served batch's CPU seconds per simulated second, what real time takes; "
+        "the RTF holds 1.0 while that many cores are free, whatever else the machine runs",
+        "one world-step: the cell's ratio is to the default scene's",
     ]
     warp = next((r for r in data["stepping"] if r["engine"] == "warp"), None)
     if warp:

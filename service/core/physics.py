@@ -32,9 +32,15 @@ def configure(mjm: mujoco.MjModel, physics_dt: float) -> None:
 
     Conjugate gradient instead of Newton: ~15-20% less work per step on this model (measured in
     bench/), and every fidelity test (hold, step response, grasp, warp-vs-native) passes.
+
+    Sleeping is cleared: a model with it needs a persistent native batch (its bookkeeping is not
+    in the state rows) and the Newton solver on MuJoCo Warp. A scene that asks for it
+    (`LoadedRobot.sleep`) sleeps in the native engine only, on the batch's own copy
+    (service.engines.native); warp, the camera renderer and the kinematics step every body.
     """
     mjm.opt.timestep = physics_dt
     mjm.opt.solver = mujoco.mjtSolver.mjSOL_CG
+    mjm.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
 
 
 def feedforward_gain(mjm: mujoco.MjModel, actuator_ids: np.ndarray) -> np.ndarray:

@@ -32,6 +32,9 @@ class LoadedRobot:
     actuator_ids: np.ndarray  # (7,) actuator driving each commanded joint
     flange_site: int
     home_key: int
+    # The scene asks MuJoCo to let bodies at rest sleep (<flag sleep="enable"/>): the native
+    # engine honours it; `configure` clears the flag on `mjm`, which everything else shares.
+    sleep: bool = False
 
 
 def compile_scene(path: Path | str) -> mujoco.MjModel:
@@ -90,6 +93,7 @@ def load_robot(path: Path | str = SCENE_XML) -> LoadedRobot:
         actuator_ids=np.arange(mjm.nu, dtype=np.int32),
         flange_site=flange,
         home_key=home_key,
+        sleep=bool(mjm.opt.enableflags & mujoco.mjtEnableBit.mjENBL_SLEEP),
     )
 
 

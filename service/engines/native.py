@@ -18,11 +18,13 @@ Not thread-safe: one thread (the loop) owns a NativeBatch.
 
 from __future__ import annotations
 
+import copy
 import logging
 import threading
 import time
 from pathlib import Path
 
+import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
@@ -63,6 +65,14 @@ def _adjacent(a: np.ndarray, b: np.ndarray) -> np.ndarray | None:
         return None
     shape = (a.shape[0], a.shape[1] + b.shape[1])
     return np.lib.stride_tricks.as_strided(a, shape=shape, strides=a.strides, writeable=False)
+
+
+def _with_sleep(mjm: mujoco.MjModel) -> mujoco.MjModel:
+    """A copy of `mjm` with MuJoCo's sleeping on: a tree at rest long enough skips collision,
+    constraints and integration until something awake touches it or its state is written."""
+    model = copy.copy(mjm)
+    model.opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    return model
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -122,8 +132,12 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         self._flange_body = int(mjm.site_bodyid[self._flange])
         self._flange_local_quat = np.array(mjm.site_quat[self._flange], dtype=np.float64)
 
-        # The batch copies the model: options are set above, before it is built.
-        self._b = mjbatch.Batch(mjm, nworld, nthread=self.nthread)
+        # The batch copies the model: options are set above, before it is built. A scene that
+        # lets bodies at rest sleep sleeps here, with one MjData kept per world (persistent):
+        # MuJoCo keeps who sleeps there, not in the rows; writing a row wakes its body.
+        sleep = self.robot.sleep
+        model = _with_sleep(mjm) if sleep else mjm
+        self._b = mjbatch.Batch(model, nworld, nthread=self.nthread, persistent=sleep)
         self._kin = Kinematics(mjm, nworld, self.nthread)  # body poses, read on demand
         self._kin_lock = threading.Lock()
         try:  # the flange alone, for frames and snapshots: numpy on one core
