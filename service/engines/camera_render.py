@@ -45,9 +45,6 @@ class Images:
     seg: np.ndarray | None
 
 
-GRAPHS = 16  # CUDA graphs kept, one per (camera, worlds drawn)
-
-
 @wp.kernel
 def _rgb_bytes(packed: wp.array2d(dtype=wp.uint32), out: wp.array2d(dtype=wp.uint8)):
     """Packed 0xAARRGGBB (one word a pixel) to R, G, B bytes, for world i, pixel p."""
@@ -100,8 +97,6 @@ class BatchRenderer:
                 )
                 for c in cameras
             }
-        self._graphs: dict[tuple[str, int], object] = {}  # (camera, k) -> CUDA graph
-        self._uncapturable: set[tuple[str, int]] = set()
         self.build_s = time.perf_counter() - t0
         self.compile_s = 0.0  # the first render of each camera compiles (or loads) its kernel
 
@@ -132,7 +127,9 @@ class BatchRenderer:
         )
 
     def _draw(self, spec: CameraSpec, k: int) -> None:
-        """The device's work for one picture of the first k slots (launches only)."""
+        """The device's work for one picture of the first k slots (launches only). Not captured
+        as a CUDA graph: a capture on the stream the engine steps on would take the engine's
+        own launches into it."""
         rc, d = self._ctx[spec.name], self._d
         d.nworld = k  # every launch below covers the first k slots only
         try:
@@ -146,28 +143,6 @@ class BatchRenderer:
             n = spec.width * spec.height
             wp.launch(_rgb_bytes, dim=(k, n), inputs=[rc.rgb_data], outputs=[self._rgb[spec.name]])
 
-    def _launch(self, spec: CameraSpec, k: int) -> None:
-        """`_draw`, replayed as a CUDA graph on a GPU: one launch instead of a hundred, each of
-        which would wait for the interpreter while the server copies a large message. A graph
-        per (camera, k), the last GRAPHS kept; drawn directly where capturing fails."""
-        if not self.device.is_cuda:
-            return self._draw(spec, k)
-        key = (spec.name, k)
-        graph = self._graphs.pop(key, None)
-        if graph is None and key not in self._uncapturable:
-            try:
-                with wp.ScopedCapture(device=self.device) as capture:
-                    self._draw(spec, k)
-                graph = capture.graph
-            except Exception:  # a kernel that allocates or syncs: draw without a graph
-                self._uncapturable.add(key)
-        if graph is None:
-            return self._draw(spec, k)
-        self._graphs[key] = graph  # most recent last
-        while len(self._graphs) > GRAPHS:
-            self._graphs.pop(next(iter(self._graphs)))
-        wp.capture_launch(graph)
-
     def _render_chunk(
         self, qpos: np.ndarray, spec: CameraSpec
     ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
@@ -176,7 +151,7 @@ class BatchRenderer:
         with wp.ScopedDevice(self.device):
             self._qpos[:k] = qpos
             self._d.qpos.assign(self._qpos)
-            self._launch(spec, k)
+            self._draw(spec, k)
             h, w = spec.height, spec.width
             rgb = depth = seg = None
             if spec.rgb:
