@@ -30,7 +30,7 @@ import numpy as np
 from service.core import wire
 from service.core.batch import Batch, PacksFrames
 from service.core.packed_rows import PackedRows
-from service.core.types import Snapshot
+from service.core.types import EntityFrame, Snapshot
 
 log = logging.getLogger("armfleet.frames")
 
@@ -55,6 +55,7 @@ class FrameData:
     target: np.ndarray | None = None
     faults: np.ndarray | None = None
     extra: dict[str, Any] | None = None  # JSON's last fields (None: DEFAULT_EXTRA)
+    entities: EntityFrame | None = None  # read when a subscriber asked (JSON_ENTITIES)
 
     @property
     def tick(self) -> int:
@@ -173,9 +174,22 @@ def json(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
     )
 
 
+def json_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
+    """`wire.batch_frame(..., entities=True)`'s bytes: the JSON frame, then `entities`."""
+    assert data.sim_time is not None and data.target is not None and data.faults is not None
+    assert data.entities is not None
+    extra = {**(DEFAULT_EXTRA if data.extra is None else data.extra)}
+    extra["entities"] = wire.entity_columns(data.entities)
+    return json_bytes(
+        data.tick, names, data.ids, data.sim_time, rows, data.target, data.faults, True, extra
+    )
+
+
+JSON_ENTITIES = "json+entities"  # JSON frames with each world's entities (`entities=true`)
 ENCODERS: dict[str, Callable[[FrameData, np.ndarray, list[str]], bytes]] = {
     "binary": binary,
     "json": json,
+    JSON_ENTITIES: json_entities,
 }
 
 

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from service.core import entity_frames
 from service.core.batch import Batch, ModelWrite, StateWrite, TickWrites
 from service.core.commands.arithmetic import TargetUpdate
 from service.core.errors import NotPaused
@@ -333,6 +334,8 @@ class SimLoop(TickBoundary):
     def _publish(self, now: float) -> None:
         """Take a snapshot, wake the readers waiting for one, hand it to every sink."""
         snap = self.batch.snapshot()
+        if any(getattr(sink, "wants_entities", False) for sink in self._sinks):
+            snap = entity_frames.attach(snap, self.batch)  # a client asked (entity_frames.py)
         with self._lock:
             self._latest = snap
             self._last_snapshot_wall = now

@@ -16,6 +16,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from service.core.commands.entities import EntityState
 from service.core.commands.rules import BadJointState, joint_state
 from service.core.schema_fields import (
     Delta,
@@ -80,6 +81,7 @@ class WorldState(BaseModel):
         description="only while paused: the targets as of every accepted command, which the "
         "next step puts in effect (`target` is what the last step used) [rad]",
     )
+    entities: list[EntityState] | None = Field(None, description="only with ?entities=true")
 
 
 class WorldStates(BaseModel):
