@@ -45,9 +45,15 @@ StatusCallback = Callable[[ConnectionStatus], None]
 
 
 def ws_url(
-    base_url: str, worlds: WorldSpec, rate: float | None = None, binary: bool = False
+    base_url: str,
+    worlds: WorldSpec,
+    rate: float | None = None,
+    binary: bool = False,
+    entities: bool = False,
 ) -> str:
-    """http://host:port + 3 → ws://host:port/v1/ws/worlds/3; a list/range/None → /v1/ws?worlds=."""
+    """http://host:port + 3 → ws://host:port/v1/ws/worlds/3; a list/range/None → /v1/ws?worlds=.
+
+    `entities`: frames carry the entities too (JSON frames only; the server refuses binary)."""
     parts = urlsplit(base_url)
     scheme = {"http": "ws", "https": "wss"}.get(parts.scheme, parts.scheme)
     params: dict[str, str] = {}
@@ -62,6 +68,8 @@ def ws_url(
             params = {"worlds": spec, **params}
         if binary:
             params["format"] = "binary"
+    if entities:
+        params["entities"] = "true"
     base_path = parts.path.rstrip("/")
     return urlunsplit((scheme, parts.netloc, base_path + path, urlencode(params), ""))
 
@@ -220,6 +228,7 @@ class StreamOptions(TypedDict, total=False):
     backoff: Backoff | None  # reconnect delays (default Backoff())
     give_up_after: float | None  # seconds of failing in a row before Unreachable
     binary: bool  # batch streams as float32 frames
+    entities: bool  # frames carry each entity's pose and twist (JSON frames)
 
 
 class Reconnector:
@@ -252,7 +261,8 @@ class Reconnector:
     ) -> Reconnector:
         """The policy (and, as `.url`, the socket URL) of one `stream()` call."""
         opts = dict(options)
-        url = ws_url(base_url, worlds, rate, bool(opts.pop("binary", False)))
+        binary, entities = bool(opts.pop("binary", False)), bool(opts.pop("entities", False))
+        url = ws_url(base_url, worlds, rate, binary, entities)
         return cls(url, **opts)
 
     def opened(self) -> None:

@@ -1,0 +1,141 @@
+"""Entities in state frames, for the clients that ask (`entities=true`), over real sockets.
+
+A paused native-MuJoCo server (float64 state, ticks counted exactly): the cube of world 1 is put
+somewhere through the entity API, one tick is stepped, and the frames of that tick carry the
+cube exactly as the entity API reads it at that tick, next to the joints of the same tick; a
+subscriber that did not ask gets today's frames, without an `entities` field. A bad flag, or
+entities asked with binary frames, is refused naming the field.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+
+import httpx
+import pytest
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+
+from clients import ArmfleetClient, AsyncArmfleetClient
+
+S = math.sqrt(0.5)
+POSE = {"position": [0.3, -0.5, 1.2], "orientation": [S, 0, 0, S]}
+REST = {"linear": [0.0, 0.0, 0.0], "angular": [0.0, 0.0, 0.0]}
+
+
+def _frame_at(ws, tick: int) -> dict:
+    """The first state frame of `tick` or later (acks and status frames skipped)."""
+    while True:
+        msg = json.loads(ws.recv(timeout=10))
+        if msg.get("op") in ("states", "state") and msg["tick"] >= tick:
+            return msg
+
+
+def _place_cube(http: httpx.Client, world: int) -> int:
+    """Put world's cube at POSE, at rest; step one tick; that tick (the write's ack tick)."""
+    ack = http.put(f"/v1/worlds/{world}/entities/cube", json=POSE | REST).json()
+    stepped = http.post("/v1/sim/step", json={"ticks": 1}).json()
+    assert stepped["tick"] == ack["tick"]
+    return ack["tick"]
+
+
+def test_batch_frames_carry_the_entities_of_their_tick_only_when_asked(paused):
+    http = httpx.Client(base_url=paused.url, timeout=10)
+    with (
+        connect(f"{paused.ws_url}/v1/ws?worlds=0-3&entities=true") as with_entities,
+        connect(f"{paused.ws_url}/v1/ws?worlds=0-3") as plain,
+    ):
+        first = _frame_at(with_entities, 0)
+        assert first["entities"]["name"] == ["cube"]
+        assert [len(first["entities"][k][0][0]) for k in ("position", "orientation")] == [3, 4]
+        assert "entities" not in _frame_at(plain, 0)
+
+        tick = _place_cube(http, 1)
+        frame, other = _frame_at(with_entities, tick), _frame_at(plain, tick)
+        assert frame["tick"] == other["tick"] == tick
+        cube = http.get("/v1/worlds/1/entities/cube").json()
+        assert cube["tick"] == tick
+        ents = frame["entities"]
+        row = frame["worlds"].index(1)
+        got = {k: ents[k][row][0] for k in ("position", "orientation", "linear", "angular")}
+        # exactly what the entity API reads at that tick (float64: the JSON text round-trips)
+        assert got == {k: cube[k] for k in got}
+        assert got["position"][:2] == POSE["position"][:2]  # one tick of free fall: z only
+        assert got["orientation"] == pytest.approx(POSE["orientation"], abs=1e-15)
+        assert got["position"][2] < POSE["position"][2]
+        # the other worlds' cubes are where they were; the joints are the same tick's
+        assert ents["position"][0][0] != got["position"]
+        assert {k: v for k, v in frame.items() if k != "entities"} == other
+        assert "entities" not in other
+
+        # the REST state read, asked likewise, reports the same tick's entities
+        state = http.get("/v1/worlds/1/state", params={"entities": "true"}).json()
+        assert state["tick"] == tick and state["entities"] == [{"name": "cube", **got}]
+        assert "entities" not in http.get("/v1/worlds/1/state").json()
+        rows = http.get("/v1/worlds/state", params={"worlds": "1", "entities": "1"}).json()
+        assert rows["worlds"][0]["entities"] == state["entities"]
+
+
+def test_a_single_world_socket_carries_its_entities(paused):
+    http = httpx.Client(base_url=paused.url, timeout=10)
+    with connect(f"{paused.ws_url}/v1/ws/worlds/2?entities=true") as ws:
+        assert [e["name"] for e in _frame_at(ws, 0)["entities"]] == ["cube"]
+        tick = _place_cube(http, 2)
+        frame = _frame_at(ws, tick)
+    cube = http.get("/v1/worlds/2/entities/cube").json()
+    assert frame["tick"] == cube["tick"] == tick
+    assert frame["entities"] == [{k: cube[k] for k in frame["entities"][0]}]
+    with connect(f"{paused.ws_url}/v1/ws/worlds/2") as ws:
+        assert "entities" not in _frame_at(ws, 0)
+
+
+@pytest.mark.parametrize(
+    ("query", "words"),
+    [
+        ("ws/worlds/1?entities=maybe", "'maybe' is not a flag"),
+        ("ws?entities=2", "'2' is not a flag"),
+        ("ws?format=binary&entities=true", "binary frames carry no entities"),
+    ],
+)
+def test_a_bad_entities_option_is_refused_naming_the_field(paused, query, words):
+    with connect(f"{paused.ws_url}/v1/{query}") as ws, pytest.raises(ConnectionClosed) as exc:
+        ws.recv(timeout=10)
+    assert exc.value.rcvd is not None and exc.value.rcvd.code == 1008
+    assert "query.entities" in exc.value.rcvd.reason and words in exc.value.rcvd.reason
+
+
+def test_a_bad_entities_flag_over_http_is_a_422_naming_it(paused):
+    reply = httpx.get(f"{paused.url}/v1/worlds/1/state", params={"entities": "maybe"})
+    assert reply.status_code == 422 and '"entities"' in reply.text
+
+
+def test_the_python_clients_stream_and_read_entities(paused):
+    tick = _place_cube(httpx.Client(base_url=paused.url, timeout=10), 3)
+    with ArmfleetClient(paused.url) as arm:
+        cube = arm.entity(3, "cube")
+        states = arm.states([1, 3], entities=True)
+        assert states.tick == tick and states.entities is not None
+        assert states.entities.name == ("cube",)
+        assert states.world(3).entities.position[0].tolist() == cube["position"]
+        one = arm.state(3, entities=True)
+        assert one.entities.orientation[0].tolist() == cube["orientation"]
+        assert arm.state(3).entities is None
+        batch = next(arm.stream([3], entities=True, reconnect=False))
+        assert batch.entities.position.shape == (1, 1, 3)
+        assert batch.entities.position[0, 0].tolist() == cube["position"]
+        single = next(arm.stream(3, entities=True, reconnect=False))
+        assert single.entities.linear[single.entities.index("cube")].tolist() == cube["linear"]
+        assert next(arm.stream([3], reconnect=False)).entities is None
+
+    async def run() -> None:
+        async with AsyncArmfleetClient(paused.url) as arm:
+            one = await arm.state(3, entities=True)
+            assert one.entities.position[0].tolist() == cube["position"]
+            stream = arm.stream("3", entities=True, reconnect=False)
+            got = await anext(stream)
+            await stream.aclose()
+            assert got.entities.angular[0, 0].tolist() == cube["angular"]
+
+    asyncio.run(run())
