@@ -172,10 +172,12 @@ class StreamHub(SnapshotSink):
     def subscribers(self) -> int:
         return len(self._subs)
 
-    @property
-    def wants_entities(self) -> bool:
-        """Some subscriber asked for entities: the loop's snapshots carry them (sim thread)."""
-        return any(s.entities for s in self._subs)
+    def extend_snapshot(self, snap: Snapshot, batch: Batch) -> Snapshot:
+        """The loop's snapshot about to be published, with every world's entities while some
+        subscriber asked for them (sim thread, at the snapshot's tick); as it is otherwise."""
+        if any(s.entities for s in self._subs):
+            return entity_frames.attach(snap, batch)
+        return snap
 
     # -- sim thread -------------------------------------------------------------------------
 

@@ -20,7 +20,6 @@ from typing import Any
 
 import numpy as np
 
-from service.core import entity_frames
 from service.core.batch import Batch, ModelWrite, StateWrite, TickWrites
 from service.core.commands.arithmetic import TargetUpdate
 from service.core.errors import NotPaused
@@ -334,8 +333,9 @@ class SimLoop(TickBoundary):
     def _publish(self, now: float) -> None:
         """Take a snapshot, wake the readers waiting for one, hand it to every sink."""
         snap = self.batch.snapshot()
-        if any(getattr(sink, "wants_entities", False) for sink in self._sinks):
-            snap = entity_frames.attach(snap, self.batch)  # a client asked (entity_frames.py)
+        for sink in self._sinks:  # what a sink's clients asked for besides (the hub: entities)
+            if (extend := getattr(sink, "extend_snapshot", None)) is not None:
+                snap = extend(snap, self.batch)
         with self._lock:
             self._latest = snap
             self._last_snapshot_wall = now
