@@ -34,6 +34,7 @@ from service.core.schemas import (
     WorldStates,
     errors,
 )
+from service.core.snapshot_schemas import WorldRandomization
 from service.core.types import Mode, Snapshot
 from service.core.worlds import WORLDS_PATTERN, parse_worlds
 
@@ -258,6 +259,23 @@ async def put_params(control: Ctl, world: World, body: params.ParamValues) -> Re
 )
 async def post_params(control: Ctl, body: params.ParamWrites) -> Response:
     return _written(control, params.SetParams, [w.model_dump() for w in body.writes])
+
+
+@router.get(
+    "/worlds/{world}/randomization",
+    response_model=WorldRandomization,
+    summary="One world's last randomisation (seed and spec), as its state holds it now",
+)
+async def get_randomization(loop: Loop, world: World) -> WorldRandomization:
+    snap, _ = await _read(loop, [world])  # includes every randomisation accepted before
+    last = loop.randomizations.at(snap.tick).get(world)
+    return WorldRandomization(
+        world=world,
+        tick=snap.tick,
+        randomized_at=None if last is None else last.tick,
+        seed=None if last is None else last.seed,
+        spec=None if last is None else dict(last.spec),
+    )
 
 
 @router.post(

@@ -328,25 +328,6 @@ class SnapshotRequest(Strict):
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"name": "before"}]})
 
 
-class SnapshotInfo(BaseModel):
-    """One saved snapshot as listed: name, bytes on disk, when, at which tick, of which batch
-    (service/persistence/snapshots.py makes them)."""
-
-    model_config = ConfigDict(frozen=True)
-
-    name: str
-    size_bytes: int
-    created: str = Field(description="UTC, ISO 8601")
-    tick: int = Field(description="batch tick the snapshot was taken at")
-    nworld: int
-    model_hash: str = Field(description="sha256 of the compiled model (MJB)")
-
-
-class RestoreReply(BaseModel):
-    name: str
-    tick: int = Field(description="the tick the batch continues from")
-
-
 class RecordingRequest(Strict):
     name: SnapshotName = Field(description="file <data-dir>/recordings/<name>.mcap")
     worlds: str | None = Field(

@@ -10,7 +10,7 @@ from __future__ import annotations
 import enum
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -18,6 +18,7 @@ import numpy as np
 # Defined with the client's models (the wire's own description of a joint), so that the client
 # installs without the service and the two cannot drift apart.
 from clients.models import JointSpec
+from service.core.randomizations import Randomized
 
 
 def _frozen(values: list[float]) -> np.ndarray:
@@ -247,6 +248,9 @@ class BatchState:
     faults: np.ndarray
     targets: np.ndarray
     physics: dict[str, np.ndarray]
+    # per world, the last randomisation this state holds (`randomizations.py`; filled by the
+    # loop, not the engines, which neither need nor keep it); worlds without one are absent
+    randomized: dict[int, Randomized] = field(default_factory=dict)
 
     @property
     def nworld(self) -> int:
