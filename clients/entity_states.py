@@ -49,6 +49,20 @@ class EntityStates:
         return cls(name=names, **arrays)
 
     @classmethod
+    def from_block(cls, header: Mapping[str, Any], data: bytes, at: int, n: int) -> EntityStates:
+        """A binary frame's entity block: float32[n, ne, width] at byte `at` of `data`,
+        `header` its {"name", "columns"} (layout in service/core/wire.py)."""
+        names = tuple(header["name"])
+        width = sum(w for _, w in header["columns"])
+        block = np.frombuffer(data, "<f4", n * len(names) * width, at)
+        block = block.reshape(n, len(names), width).astype(np.float64)
+        arrays, col = {}, 0
+        for name, w in header["columns"]:
+            arrays[name] = block[:, :, col : col + w]
+            col += w
+        return cls(name=names, **{k: arrays[k] for k, _ in _FIELDS})
+
+    @classmethod
     def from_list(cls, items: Sequence[Mapping[str, Any]]) -> EntityStates:
         """One world's `entities` (a list of {name, position, orientation, linear, angular})."""
         arrays = {

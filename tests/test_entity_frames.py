@@ -19,7 +19,7 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
-from clients import ArmfleetClient, AsyncArmfleetClient
+from clients import ArmfleetClient, AsyncArmfleetClient, _stream
 from service.core import entity_frames, frames, wire
 
 S = math.sqrt(0.5)
@@ -35,6 +35,18 @@ def _frame_at(ws, tick: int) -> dict:
             return msg
 
 
+def _binary_at(ws, tick: int) -> tuple[dict, bytes]:
+    """The first binary frame of `tick` or later: its header and what follows the rows."""
+    while True:
+        msg = ws.recv(timeout=10)
+        if isinstance(msg, bytes):
+            hlen = int.from_bytes(msg[4:8], "little")
+            header = json.loads(msg[8 : 8 + hlen])
+            if header["tick"] >= tick:
+                width = sum(w for _, w in header["columns"])
+                return header, msg[8 + hlen + 4 * header["n"] * (1 + width) :]
+
+
 def _place_cube(http: httpx.Client, world: int) -> int:
     """Put world's cube at POSE, at rest; step one tick; that tick (the write's ack tick)."""
     ack = http.put(f"/v1/worlds/{world}/entities/cube", json=POSE | REST).json()
@@ -45,9 +57,12 @@ def _place_cube(http: httpx.Client, world: int) -> int:
 
 def test_batch_frames_carry_the_entities_of_their_tick_only_when_asked(paused):
     http = httpx.Client(base_url=paused.url, timeout=10)
+    url = f"{paused.ws_url}/v1/ws?worlds=0-3"
     with (
-        connect(f"{paused.ws_url}/v1/ws?worlds=0-3&entities=true") as with_entities,
-        connect(f"{paused.ws_url}/v1/ws?worlds=0-3") as plain,
+        connect(f"{url}&entities=true") as with_entities,
+        connect(url) as plain,
+        connect(f"{url}&format=binary&entities=yes") as binary_entities,
+        connect(f"{url}&format=binary") as binary_plain,
     ):
         first = _frame_at(with_entities, 0)
         assert first["entities"]["name"] == ["cube"]
@@ -71,6 +86,13 @@ def test_batch_frames_carry_the_entities_of_their_tick_only_when_asked(paused):
         assert ents["position"][0][0] != got["position"]
         assert {k: v for k, v in frame.items() if k != "entities"} == other
         assert "entities" not in other
+        # binary frames of the same selection, packed together: the block only where asked
+        header, block = _binary_at(binary_entities, tick)
+        assert header["tick"] == tick and header["entities"]["name"] == ["cube"]
+        values = np.frombuffer(block, "<f4").reshape(4, 1, 13)
+        np.testing.assert_array_equal(values[row, 0, :3], np.float32(got["position"]))
+        header, rest = _binary_at(binary_plain, tick)
+        assert header["tick"] == tick and "entities" not in header and rest == b""
 
         # the REST state read, asked likewise, reports the same tick's entities
         state = http.get("/v1/worlds/1/state", params={"entities": "true"}).json()
@@ -98,7 +120,7 @@ def test_a_single_world_socket_carries_its_entities(paused):
     [
         ("ws/worlds/1?entities=maybe", "'maybe' is not a flag"),
         ("ws?entities=2", "'2' is not a flag"),
-        ("ws?format=binary&entities=true", "binary frames carry no entities"),
+        ("ws?format=binary&entities=on%20", "'on ' is not a flag"),
     ],
 )
 def test_a_bad_entities_option_is_refused_naming_the_field(paused, query, words):
@@ -127,6 +149,16 @@ def test_the_python_clients_stream_and_read_entities(paused):
         batch = next(arm.stream([3], entities=True, reconnect=False))
         assert batch.entities.position.shape == (1, 1, 3)
         assert batch.entities.position[0, 0].tolist() == cube["position"]
+        # binary frames: the same values as float32, the joints' columns as before
+        fast = next(arm.stream([1, 3], entities=True, binary=True, reconnect=False))
+        assert fast.tick == tick and fast.entities.name == ("cube",)
+        np.testing.assert_array_equal(
+            fast.entities.position[1, 0], np.float32(cube["position"]).astype(np.float64)
+        )
+        np.testing.assert_array_equal(fast.position, np.float32(states.position))
+        assert next(arm.stream([3], binary=True, reconnect=False)).entities is None
+        with arm.connect(3, entities=True) as session:
+            assert session.recv_state(timeout=10).entities.linear[0].tolist() == cube["linear"]
         single = next(arm.stream(3, entities=True, reconnect=False))
         assert single.entities.linear[single.entities.index("cube")].tolist() == cube["linear"]
         assert next(arm.stream([3], reconnect=False)).entities is None
@@ -170,13 +202,19 @@ def test_packed_frames_with_entities_are_the_snapshot_frames_byte_for_byte(engin
             packed = frames.json_entities(data, rows, names)
             assert packed == wire.batch_frame(snap, ids, names, None, entities=True)
             assert frames.json(data, rows, names) == wire.batch_frame(snap, ids, names)
+            binary = frames.binary_entities(data, rows, names)
+            assert binary == wire.batch_frame_binary(snap, ids, names, entities=True)
+            assert frames.binary(data, rows, names) == wire.batch_frame_binary(snap, ids, names)
         finally:
             data.packed.release()
         doc = json.loads(packed)
         qpos = batch.qpos()
         adr = batch.robot.mjm.jnt_qposadr[batch.robot.mjm.joint("cube_joint").id]
+        parsed = _stream.parse(binary).entities  # the client's reading of the binary block
         for i, w in enumerate(ids):
             got = doc["entities"]["position"][i][0] + doc["entities"]["orientation"][i][0]
             np.testing.assert_array_equal(np.array(got, qpos.dtype), qpos[w, adr : adr + 7])
+            pose = np.concatenate((parsed.position[i, 0], parsed.orientation[i, 0]))
+            np.testing.assert_array_equal(pose, qpos[w, adr : adr + 7].astype(np.float32))
     finally:
         batch.close()

@@ -36,7 +36,7 @@ _CLOSE_POLICY = 1008
 # `entities=true`: each frame carries the worlds' entities (service/core/entity_frames.py).
 Entities = Annotated[
     str | None,
-    Query(description="true: each frame carries every entity's pose and twist (JSON frames)"),
+    Query(description="true: each frame carries every entity's pose and twist"),
 ]
 
 
@@ -112,10 +112,6 @@ async def batch_socket(
     try:
         ids = np.arange(n) if worlds is None else parse_worlds(worlds, n)
         with_entities = flag(entities, "query.entities")
-        if with_entities and format == "binary":
-            raise BadCommand(
-                "query.entities", "binary frames carry no entities; ask with format=json"
-            )
     except ArmfleetError as exc:
         return await _refuse(ws, _CLOSE_POLICY, str(exc))
     names = loop.spec.names
@@ -124,8 +120,17 @@ async def batch_socket(
     if format == "binary":
         render = wire.batch_frame_binary
         sub = Subscription(
-            ids, rate, lambda s: render(s, ids, names), "binary", True, "binary", names
+            ids,
+            rate,
+            lambda s: render(s, ids, names, with_entities),
+            "binary",
+            True,
+            "binary",
+            names,
         )
+        if with_entities:
+            _with_entities(sub, "binary")
+            sub.packed = frames.BINARY_ENTITIES
     else:
         briefs = control.trajectories.briefs
         sub = Subscription(

@@ -104,18 +104,20 @@ def pack(batch: Batch, ids: np.ndarray, json: bool) -> FrameData | None:
 
 def binary(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
     """`wire.batch_frame_binary`'s bytes from packed rows (one copy of them)."""
-    header = wire.dumps(
-        {
-            "op": "states",
-            "tick": data.tick,
-            "n": len(data.ids),
-            "name": names,
-            "columns": wire.BINARY_COLUMNS,
-        }
-    )
+    header = wire.dumps(wire.binary_header(data.tick, len(data.ids), names))
     ids = data.ids.astype("<i4").tobytes()
     size = len(header).to_bytes(4, "little")
     return b"".join((wire.BINARY_MAGIC, size, header, ids, memoryview(rows)))
+
+
+def binary_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
+    """`wire.batch_frame_binary(..., entities=True)`'s bytes: the rows, then the entities."""
+    assert data.entities is not None
+    header = wire.dumps(wire.binary_header(data.tick, len(data.ids), names, data.entities))
+    ids = data.ids.astype("<i4").tobytes()
+    size = len(header).to_bytes(4, "little")
+    block = wire.entity_block(data.entities)
+    return b"".join((wire.BINARY_MAGIC, size, header, ids, memoryview(rows), block))
 
 
 def _array(values: np.ndarray, sliced: bool) -> bytes:
@@ -185,11 +187,14 @@ def json_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
     )
 
 
-JSON_ENTITIES = "json+entities"  # JSON frames with each world's entities (`entities=true`)
+# The frame formats with each world's entities too (`entities=true`).
+JSON_ENTITIES, BINARY_ENTITIES = "json+entities", "binary+entities"
+WITH_ENTITIES = (JSON_ENTITIES, BINARY_ENTITIES)
 ENCODERS: dict[str, Callable[[FrameData, np.ndarray, list[str]], bytes]] = {
     "binary": binary,
     "json": json,
     JSON_ENTITIES: json_entities,
+    BINARY_ENTITIES: binary_entities,
 }
 
 

@@ -207,9 +207,10 @@ class StreamHub(SnapshotSink):
             extra = next((s.extra for s in group if s.extra), None) if json else None
             if extra is not None:
                 data.extra = extra()
-            if frames.JSON_ENTITIES in formats and not self._read_entities(batch, data):
-                formats.remove(frames.JSON_ENTITIES)
-                self.frames_skipped += sum(s.packed == frames.JSON_ENTITIES for s in group)
+            asked = [f for f in formats if f in frames.WITH_ENTITIES]
+            if asked and not self._read_entities(batch, data):
+                formats = [f for f in formats if f not in asked]
+                self.frames_skipped += sum(s.packed in asked for s in group)
             self._sender.submit(frames.Job(data, formats, group, group[0].names))
 
     @staticmethod
