@@ -230,29 +230,36 @@ class FrameSender:
         self._thread = threading.Thread(target=self._run, name="armfleet-frames", daemon=True)
         self._thread.start()
 
-    def _in_process(self, job: Job, rows: np.ndarray) -> bool:
-        """Hand a big JSON frame to the helper processes (several frames in flight, delivered
-        when done, in order of completion); False when it is serialised here instead."""
-        if "json" not in job.formats or len(job.data.ids) < BIG_JSON_ROWS:
-            return False
+    def _in_process(self, job: Job, rows: np.ndarray) -> list[str]:
+        """Hand a big frame's JSON formats to the helper processes (several frames in flight,
+        delivered when done, in order of completion); the formats handed (or dropped because
+        every helper is busy), none when the frame is serialised here instead."""
+        asked = [f for f in job.formats if f in ("json", JSON_ENTITIES)]
+        if not asked or len(job.data.ids) < BIG_JSON_ROWS:
+            return []
         if self._pool is None:
             ctx = multiprocessing.get_context("spawn")  # never fork a process holding CUDA
             self._pool = concurrent.futures.ProcessPoolExecutor(JSON_PROCESSES, mp_context=ctx)
-        if self._json_in_flight >= JSON_PROCESSES:
-            self.replaced += 1  # all helpers busy: this frame is dropped (the next one is newer)
-            return True
         d = job.data
         rows = np.array(rows)  # a copy: the pinned buffer goes back to the engine at once
-        args = (d.tick, job.names, d.ids, d.sim_time, rows, d.target, d.faults, False, d.extra)
-        self._json_in_flight += 1
-        fut = self._pool.submit(json_bytes, *args)
-        fut.add_done_callback(lambda f: self._json_done(job, f))
-        return True
+        for f in asked:
+            if self._json_in_flight >= JSON_PROCESSES:
+                self.replaced += 1  # all helpers busy: dropped (the next frame is newer)
+                continue
+            extra = d.extra
+            if f == JSON_ENTITIES and d.entities is not None:
+                extra = {**(DEFAULT_EXTRA if extra is None else extra)}
+                extra["entities"] = wire.entity_columns(d.entities)
+            args = (d.tick, job.names, d.ids, d.sim_time, rows, d.target, d.faults, False, extra)
+            self._json_in_flight += 1
+            fut = self._pool.submit(json_bytes, *args)
+            fut.add_done_callback(lambda done, f=f: self._json_done(job, f, done))
+        return asked
 
-    def _json_done(self, job: Job, fut: concurrent.futures.Future[bytes]) -> None:
+    def _json_done(self, job: Job, fmt: str, fut: concurrent.futures.Future[bytes]) -> None:
         self._json_in_flight -= 1
         if not fut.cancelled() and fut.exception() is None:
-            self._deliver(job, {"json": fut.result()})
+            self._deliver(job, {fmt: fut.result()})
 
     def submit(self, job: Job) -> None:
         key = job.data.ids.tobytes()
@@ -282,8 +289,8 @@ class FrameSender:
                 _, job = self._jobs.popitem()
             try:
                 rows = job.data.packed.wait()
-                big = self._in_process(job, rows)
-                formats = [f for f in job.formats if not (big and f == "json")]
+                handed = self._in_process(job, rows)
+                formats = [f for f in job.formats if f not in handed]
                 out = {f: ENCODERS[f](job.data, rows, job.names) for f in formats}
             except Exception:
                 log.exception("a frame could not be serialised")
