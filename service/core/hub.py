@@ -46,11 +46,11 @@ class Subscription:
         entities: bool = False,
     ):
         self.worlds = worlds
-        # Frames carry the worlds' entities too (`entities=true`): packed ones as
-        # frames.JSON_ENTITIES, rendered ones from snapshots that carry them.
+        # Frames carry the worlds' entities too (`entities=true`): packed ones in a format of
+        # frames.WITH_ENTITIES, rendered ones from snapshots that carry them.
         self.entities = entities
         self.binary = binary  # frames go out as binary WebSocket messages
-        # "binary" / "json" / "json+entities": frames come packed from the sim thread
+        # "binary" / "json" (or either "+entities"): frames come packed from the sim thread
         # (service.frames), not rendered from snapshots; `names` are the joint names they carry.
         self.packed = packed
         self.names = names or []
