@@ -182,10 +182,16 @@ def _engine(name: str):
         return NativeBatch(4, nthread=1)
     from service.engines.warp import WorldBatch
 
-    return WorldBatch(4, capture=False)
+    return WorldBatch(4, device=name.removeprefix("warp-"), capture=False)
 
 
-@pytest.mark.parametrize("engine", ["mujoco", "warp"])
+def _engines() -> list[str]:
+    import warp as wp
+
+    return ["mujoco", "warp-cpu", *(["warp-cuda"] if wp.is_cuda_available() else [])]
+
+
+@pytest.mark.parametrize("engine", _engines())
 def test_packed_frames_with_entities_are_the_snapshot_frames_byte_for_byte(engine):
     """The sim thread's packed frame (frames.JSON_ENTITIES) and the one rendered from a
     snapshot that carries entities are the same bytes, on either engine's dtype."""
