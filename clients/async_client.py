@@ -119,6 +119,14 @@ class AsyncArmfleetClient(_Closes):
     ) -> dict[str, Any]:
         return await self._call(cell.set_params_many_call(writes))
 
+    async def randomize(
+        self, seed: int, spec: Mapping[str, Any], worlds: Iterable[int] | None = None
+    ) -> dict[str, Any]:
+        return await self._call(cell.randomize_call(seed, spec, worlds))
+
+    async def randomization(self, world: int) -> dict[str, Any]:
+        return await self._call(cell.randomization_call(world))
+
     # -- trajectories: as ArmfleetClient's -------------------------------------------------
 
     async def start_trajectory(

@@ -139,6 +139,18 @@ class ArmfleetClient(_Closes):
         """(world, params) pairs, all at one tick."""
         return self._call(cell.set_params_many_call(writes))
 
+    def randomize(
+        self, seed: int, spec: Mapping[str, Any], worlds: Iterable[int] | None = None
+    ) -> dict[str, Any]:
+        """Reset worlds (None: all) with entity poses and parameters drawn from `spec` with
+        `seed` (the same seed, the same worlds); the reply names the tick, seed and spec."""
+        return self._call(cell.randomize_call(seed, spec, worlds))
+
+    def randomization(self, world: int) -> dict[str, Any]:
+        """A world's last randomisation (seed, spec, randomized_at; null when none), kept
+        through snapshots and restores."""
+        return self._call(cell.randomization_call(world))
+
     # -- trajectories (bodies and calls: clients.trajectory) ---------------------------------
 
     def start_trajectory(

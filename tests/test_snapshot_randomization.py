@@ -11,6 +11,7 @@ names the seed and spec, in the snapshots it takes and per world. A file of the 
 
 from __future__ import annotations
 
+import asyncio
 import io
 import json
 import shutil
@@ -21,6 +22,7 @@ import numpy as np
 import pytest
 
 from bench.cells import SPEC
+from clients import ArmfleetClient, AsyncArmfleetClient
 from clients.testing import serve
 
 NWORLD = 6
@@ -134,12 +136,20 @@ def test_a_previous_format_file_still_loads_with_no_randomisation(tmp_path):
 
 @pytest.mark.parametrize("name", ["drawn"])
 def test_restore_at_start_keeps_the_randomisation(tmp_path, name):
-    with _server(tmp_path) as srv:
+    with _server(tmp_path) as srv, ArmfleetClient(srv.url) as arm:
+        ack = arm.randomize(SEED, SPEC, [3])
+        assert (ack["seed"], ack["worlds"]) == (SEED, [3])
+        arm.step(1)
         http = httpx.Client(base_url=srv.url, timeout=30)
-        http.post("/v1/randomize", json={"seed": SEED, "spec": SPEC, "worlds": [3]})
-        http.post("/v1/sim/step", json={"ticks": 1}).raise_for_status()
         http.post("/v1/snapshots", json={"name": name}).raise_for_status()
     with _server(tmp_path, "--restore", name) as srv:
-        got = httpx.get(f"{srv.url}/v1/worlds/3/randomization").json()
-        assert (got["seed"], got["spec"]) == (SEED, SPEC)
-        assert httpx.get(f"{srv.url}/v1/worlds/2/randomization").json()["seed"] is None
+        with ArmfleetClient(srv.url) as arm:
+            got = arm.randomization(3)
+            assert (got["seed"], got["spec"], got["randomized_at"]) == (SEED, SPEC, ack["tick"])
+            assert arm.randomization(2)["seed"] is None
+
+        async def read() -> dict:
+            async with AsyncArmfleetClient(srv.url) as arm:
+                return await arm.randomization(3)
+
+        assert asyncio.run(read())["seed"] == SEED
