@@ -17,6 +17,7 @@ import nothing of `service` and keep to 3.10's language and standard library.
 from clients._stream import Backoff
 from clients.async_client import AsyncArmfleetClient, AsyncWorldSession
 from clients.client import ArmfleetClient, WorldSession
+from clients.entity_states import EntityStates
 from clients.errors import (
     ArmfleetError,
     CommandRejected,
@@ -61,6 +62,7 @@ __all__ = [
     "CommandRejected",
     "Conflict",
     "ConnectionStatus",
+    "EntityStates",
     "Forbidden",
     "Info",
     "InvalidRequest",

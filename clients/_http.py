@@ -126,14 +126,17 @@ def info_call() -> Call:
     return Call("GET", "/v1/info", Info.from_json)
 
 
-def state_call(world: int) -> Call:
-    return Call("GET", f"/v1/worlds/{int(world)}/state", WorldState.from_json)
+def state_call(world: int, entities: bool = False) -> Call:
+    params = {"entities": "true"} if entities else None
+    return Call("GET", f"/v1/worlds/{int(world)}/state", WorldState.from_json, params=params)
 
 
-def states_call(worlds: WorldSpec = None) -> Call:
+def states_call(worlds: WorldSpec = None, entities: bool = False) -> Call:
     spec = worlds_param(worlds)
-    params = None if spec is None else {"worlds": spec}
-    return Call("GET", "/v1/worlds/state", BatchStates.from_rows, params=params)
+    params = {} if spec is None else {"worlds": spec}
+    if entities:
+        params["entities"] = "true"
+    return Call("GET", "/v1/worlds/state", BatchStates.from_rows, params=params or None)
 
 
 def increment_call(world: int, joint: JointRef, delta: float) -> Call:

@@ -20,6 +20,7 @@ import orjson
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
 
 from clients._http import increment_body, targets_body, worlds_param
+from clients.entity_states import EntityStates
 from clients.errors import CommandRejected, NotFound, Unreachable, unreachable
 from clients.models import (
     BatchStates,
@@ -45,9 +46,15 @@ StatusCallback = Callable[[ConnectionStatus], None]
 
 
 def ws_url(
-    base_url: str, worlds: WorldSpec, rate: float | None = None, binary: bool = False
+    base_url: str,
+    worlds: WorldSpec,
+    rate: float | None = None,
+    binary: bool = False,
+    entities: bool = False,
 ) -> str:
-    """http://host:port + 3 → ws://host:port/v1/ws/worlds/3; a list/range/None → /v1/ws?worlds=."""
+    """http://host:port + 3 → ws://host:port/v1/ws/worlds/3; a list/range/None → /v1/ws?worlds=.
+
+    `entities`: frames carry the entities too (`.entities` of the states parsed)."""
     parts = urlsplit(base_url)
     scheme = {"http": "ws", "https": "wss"}.get(parts.scheme, parts.scheme)
     params: dict[str, str] = {}
@@ -62,6 +69,8 @@ def ws_url(
             params = {"worlds": spec, **params}
         if binary:
             params["format"] = "binary"
+    if entities:
+        params["entities"] = "true"
     base_path = parts.path.rstrip("/")
     return urlunsplit((scheme, parts.netloc, base_path + path, urlencode(params), ""))
 
@@ -83,6 +92,9 @@ def parse_binary_states(data: bytes) -> BatchStates:
     for name, w in header["columns"]:
         cols[name] = rows[:, col : col + w] if w > 1 else rows[:, col]
         col += w
+    if "entities" in header:  # asked with entities=True: float32[n, ne, 13] after the rows
+        at += 4 * n * (1 + width)
+        cols["entities"] = EntityStates.from_block(header["entities"], data, at, n)
     return BatchStates(
         tick=int(header["tick"]),
         name=tuple(header["name"]),
@@ -220,6 +232,7 @@ class StreamOptions(TypedDict, total=False):
     backoff: Backoff | None  # reconnect delays (default Backoff())
     give_up_after: float | None  # seconds of failing in a row before Unreachable
     binary: bool  # batch streams as float32 frames
+    entities: bool  # frames carry each entity's pose and twist
 
 
 class Reconnector:
@@ -252,7 +265,8 @@ class Reconnector:
     ) -> Reconnector:
         """The policy (and, as `.url`, the socket URL) of one `stream()` call."""
         opts = dict(options)
-        url = ws_url(base_url, worlds, rate, bool(opts.pop("binary", False)))
+        binary, entities = bool(opts.pop("binary", False)), bool(opts.pop("entities", False))
+        url = ws_url(base_url, worlds, rate, binary, entities)
         return cls(url, **opts)
 
     def opened(self) -> None:

@@ -73,11 +73,11 @@ class AsyncArmfleetClient(_Closes):
     async def info(self) -> models.Info:
         return await self._call(_http.info_call())
 
-    async def state(self, world: int) -> models.WorldState:
-        return await self._call(_http.state_call(world))
+    async def state(self, world: int, entities: bool = False) -> models.WorldState:
+        return await self._call(_http.state_call(world, entities))
 
-    async def states(self, worlds: WorldSpec = None) -> models.BatchStates:
-        return await self._call(_http.states_call(worlds))
+    async def states(self, worlds: WorldSpec = None, entities: bool = False) -> models.BatchStates:
+        return await self._call(_http.states_call(worlds, entities))
 
     async def increment(self, world: int, joint: JointRef, delta: float) -> models.CommandAck:
         return await self._call(_http.increment_call(world, joint, delta))
@@ -118,6 +118,14 @@ class AsyncArmfleetClient(_Closes):
         self, writes: Iterable[tuple[int, Mapping[str, Any]]]
     ) -> dict[str, Any]:
         return await self._call(cell.set_params_many_call(writes))
+
+    async def randomize(
+        self, seed: int, spec: Mapping[str, Any], worlds: Iterable[int] | None = None
+    ) -> dict[str, Any]:
+        return await self._call(cell.randomize_call(seed, spec, worlds))
+
+    async def randomization(self, world: int) -> dict[str, Any]:
+        return await self._call(cell.randomization_call(world))
 
     # -- trajectories: as ArmfleetClient's -------------------------------------------------
 
@@ -237,9 +245,12 @@ class AsyncArmfleetClient(_Closes):
                 reason = _stream.reason_for(exc)
             await asyncio.sleep(policy.dropped(reason))
 
-    async def connect(self, world: int, rate: float | None = None) -> AsyncWorldSession:
-        """Open a WebSocket to one world (`async with await client.connect(0) as s:`)."""
-        url = _stream.ws_url(self.url, world, rate)
+    async def connect(
+        self, world: int, rate: float | None = None, entities: bool = False
+    ) -> AsyncWorldSession:
+        """Open a WebSocket to one world (`async with await client.connect(0) as s:`);
+        `entities=True`: its states carry the world's entities."""
+        url = _stream.ws_url(self.url, world, rate, entities=entities)
         session = AsyncWorldSession(url, world, self.timeout, self.token)
         await session.open()
         return session

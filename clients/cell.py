@@ -83,3 +83,15 @@ def set_params_many_call(writes: Iterable[tuple[int, Mapping[str, Any]]]) -> Cal
     """(world, params) pairs applied at one tick."""
     body = [{"world": int(w), "params": _values(p)} for w, p in writes]
     return Call("POST", "/v1/params", _identity, json={"writes": body})
+
+
+def randomize_call(seed: int, spec: Mapping[str, Any], worlds: Iterable[int] | None = None) -> Call:
+    """Worlds (None: all) reset with entity poses and parameters drawn from `spec` with `seed`."""
+    body: dict[str, Any] = {"seed": int(seed), "spec": dict(spec)}
+    if worlds is not None:
+        body["worlds"] = [int(w) for w in worlds]
+    return Call("POST", "/v1/randomize", _identity, json=body)
+
+
+def randomization_call(world: int) -> Call:
+    return Call("GET", f"/v1/worlds/{int(world)}/randomization", _identity)

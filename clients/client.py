@@ -82,12 +82,14 @@ class ArmfleetClient(_Closes):
         """The robot (joint names, limits, home), batch size, device, mode and speed."""
         return self._call(_http.info_call())
 
-    def state(self, world: int) -> models.WorldState:
-        return self._call(_http.state_call(world))
+    def state(self, world: int, entities: bool = False) -> models.WorldState:
+        """One world; `entities=True`: its entities' pose and twist of the same tick too."""
+        return self._call(_http.state_call(world, entities))
 
-    def states(self, worlds: WorldSpec = None) -> models.BatchStates:
-        """Several worlds (None: all; or [0, 3], or "0-63") as column arrays."""
-        return self._call(_http.states_call(worlds))
+    def states(self, worlds: WorldSpec = None, entities: bool = False) -> models.BatchStates:
+        """Several worlds (None: all; or [0, 3], or "0-63") as column arrays; `entities=True`:
+        their entities of the same tick too (`BatchStates.entities`)."""
+        return self._call(_http.states_call(worlds, entities))
 
     def increment(self, world: int, joint: JointRef, delta: float) -> models.CommandAck:
         """Add `delta` [rad] to one joint's target (the seed's Up/Down buttons)."""
@@ -136,6 +138,18 @@ class ArmfleetClient(_Closes):
     def set_params_many(self, writes: Iterable[tuple[int, Mapping[str, Any]]]) -> dict[str, Any]:
         """(world, params) pairs, all at one tick."""
         return self._call(cell.set_params_many_call(writes))
+
+    def randomize(
+        self, seed: int, spec: Mapping[str, Any], worlds: Iterable[int] | None = None
+    ) -> dict[str, Any]:
+        """Reset worlds (None: all) with entity poses and parameters drawn from `spec` with
+        `seed` (the same seed, the same worlds); the reply names the tick, seed and spec."""
+        return self._call(cell.randomize_call(seed, spec, worlds))
+
+    def randomization(self, world: int) -> dict[str, Any]:
+        """A world's last randomisation (seed, spec, randomized_at; null when none), kept
+        through snapshots and restores."""
+        return self._call(cell.randomization_call(world))
 
     # -- trajectories (bodies and calls: clients.trajectory) ---------------------------------
 
@@ -260,7 +274,8 @@ class ArmfleetClient(_Closes):
         `on_status` hears about each drop and reconnect. `reconnect=False` raises Unreachable
         instead; `give_up_after` seconds of failing in a row raise it too. An unknown world
         raises NotFound at once. `binary=True` asks batch streams for float32 frames (same
-        BatchStates, a fraction of the bytes and parse time).
+        BatchStates, a fraction of the bytes and parse time). `entities=True`: every state
+        carries its worlds' entities (`.entities`, pose and twist of the same tick).
         """
         policy = _stream.Reconnector.for_stream(self.url, worlds, rate, options)
         while True:
@@ -275,9 +290,12 @@ class ArmfleetClient(_Closes):
                 reason = _stream.reason_for(exc)
             time.sleep(policy.dropped(reason))
 
-    def connect(self, world: int, rate: float | None = None) -> WorldSession:
-        """Open a WebSocket to one world: send commands, get their acks, iterate states."""
-        url = _stream.ws_url(self.url, world, rate)
+    def connect(
+        self, world: int, rate: float | None = None, entities: bool = False
+    ) -> WorldSession:
+        """Open a WebSocket to one world: send commands, get their acks, iterate states
+        (`entities=True`: with the world's entities)."""
+        url = _stream.ws_url(self.url, world, rate, entities=entities)
         return WorldSession(url, world, self.timeout, self.token)
 
 

@@ -11,11 +11,14 @@ Arrays are numpy float64; JSON null (a NaN on the server side) becomes NaN.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from clients.entity_states import EntityStates
 
 JointRef = str | int  # a joint by name ("elbow_joint") or by index in `Info.joints` (2)
 WorldSpec = int | str | Iterable[int] | None  # one world, "0-63", [0, 3, 7], or None: all
@@ -125,6 +128,7 @@ class WorldState:
     faults: int  # times this world was reset for NaN or capacity overflow
     # Only while the service is paused: targets as of every accepted command (the next step's).
     pending_target: np.ndarray | None = None
+    entities: EntityStates | None = None  # only when asked for (entities=True)
 
     def index(self, joint: JointRef) -> int:
         return joint_index(self.name, joint)
@@ -144,6 +148,7 @@ class WorldState:
             flange_quaternion=_arr(d["flange"]["quaternion"]),
             faults=int(d["faults"]),
             pending_target=_arr(d["pending_target"]) if "pending_target" in d else None,
+            entities=EntityStates.from_list(d["entities"]) if "entities" in d else None,
         )
 
 
@@ -169,6 +174,7 @@ class BatchStates:
     flange_quaternion: np.ndarray  # (n, 4) w x y z
     faults: np.ndarray  # (n,) int
     pending_target: np.ndarray | None = None  # (n, 7), only while the service is paused
+    entities: EntityStates | None = None  # (n, ne, ...) arrays, only when asked for
 
     def __len__(self) -> int:
         return int(self.worlds.shape[0])
@@ -190,6 +196,7 @@ class BatchStates:
             name=self.name,
             faults=int(self.faults[i]),
             pending_target=None if self.pending_target is None else self.pending_target[i],
+            entities=None if self.entities is None else self.entities.row(i),
             **rows,
         )
 
@@ -212,7 +219,11 @@ class BatchStates:
         columns.update({k: [r[k] for r in rows] for k in _JOINT_COLUMNS})
         if rows and "pending_target" in rows[0]:
             columns["pending_target"] = [r["pending_target"] for r in rows]
-        return cls.from_columns(columns)
+        batch = cls.from_columns(columns)
+        if rows and "entities" in rows[0]:
+            each = [EntityStates.from_list(r["entities"]) for r in rows]
+            batch = dataclasses.replace(batch, entities=EntityStates.stack(each))
+        return batch
 
     @classmethod
     def from_columns(cls, d: Mapping[str, Any]) -> BatchStates:
@@ -222,6 +233,7 @@ class BatchStates:
         floats = {k: _arr2(d[k], len(names)) for k in _JOINT_COLUMNS}
         floats.update({k: _arr2(d[k], width) for k, width in _FLANGE_COLUMNS})
         pending = d.get("pending_target")
+        entities = d.get("entities")
         return cls(
             tick=int(d["tick"]),
             name=names,
@@ -229,6 +241,7 @@ class BatchStates:
             sim_time=_arr(d["sim_time"]),
             faults=np.array(d["faults"], dtype=np.int64).reshape(n),
             pending_target=None if pending is None else _arr2(pending, len(names)),
+            entities=None if entities is None else EntityStates.from_columns(entities, n),
             **floats,
         )
 

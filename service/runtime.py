@@ -26,6 +26,7 @@ from service.core.lease_metrics import LeaseCollector
 from service.core.leases import LeaseBook
 from service.core.loop import SimLoop
 from service.core.metrics import Metrics
+from service.core.randomizations import Randomized
 from service.core.settings import Settings
 from service.core.stopping import reclaim_stop_signals
 from service.core.surface import Finishing, SurfaceContext
@@ -57,6 +58,7 @@ class Runtime:
         self._problems: list[str] = []
         self._watchdog: asyncio.Task[None] | None = None
         self.stop_problems: list[str] = []  # what `stop` could not save (the exit status)
+        self._restored_randomized: dict[int, Randomized] = {}  # `--restore`'s randomisations
         self._register_levels()
         self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
         self.leases: LeaseBook | None = None  # worlds lent (service.core.leases); None: off
@@ -189,6 +191,7 @@ class Runtime:
             return
         self.hub = hub = StreamHub(asyncio.get_running_loop())
         loop = SimLoop(batch, s.mode, (hub,))
+        loop.randomizations.replace(self._restored_randomized)
         loop.add_restore_listener(lambda _tick, _state, _name: hub.restored())
         self.control = Control(loop)
         self.control.add_listener(self._count_accepted)
@@ -250,6 +253,7 @@ class Runtime:
             check_state_support(batch)
             state = self.persistence.snapshots.load(name, self.header)
             batch.set_state(state)
+            self._restored_randomized = state.randomized  # for the loop's book
         except NotFound:
             if name == LATEST:
                 log.warning(
@@ -304,7 +308,8 @@ class Runtime:
         """Snapshot `latest` of the stopped batch; a failure is logged and kept, never raised."""
         assert self.loop is not None
         try:
-            info = self.persistence.snapshots.save(LATEST, self.loop.batch.get_state(), self.header)
+            state = self.loop.state_of(self.loop.batch)
+            info = self.persistence.snapshots.save(LATEST, state, self.header)
             log.info("saved snapshot 'latest' at tick %d (%d bytes)", info.tick, info.size_bytes)
             return
         except ArmfleetError as exc:  # CannotWrite: the cause is in the message

@@ -15,7 +15,7 @@ from fastapi import APIRouter, Body, Query
 from fastapi.responses import Response
 
 from service.api.deps import CommandWorld, Ctl, Loop, World
-from service.core import wire
+from service.core import entity_frames, wire
 from service.core.commands import entities, params, randomize
 from service.core.commands.base import HTTP
 from service.core.commands.writes import ManyWrites
@@ -34,6 +34,7 @@ from service.core.schemas import (
     WorldStates,
     errors,
 )
+from service.core.snapshot_schemas import WorldRandomization
 from service.core.types import Mode, Snapshot
 from service.core.worlds import WORLDS_PATTERN, parse_worlds
 
@@ -52,19 +53,30 @@ _READ_TIMEOUT = 5.0
 
 
 async def _read(
-    loop: SimLoop, worlds: np.ndarray | list[int]
+    loop: SimLoop, worlds: np.ndarray | list[int], with_entities: bool = False
 ) -> tuple[Snapshot, np.ndarray | None]:
     """Read-your-writes: a snapshot including every accepted command for `worlds`, and while
-    paused their pending targets (which the next step puts in effect)."""
+    paused their pending targets (which the next step puts in effect). `with_entities`: then
+    one taken on the sim thread with the entities of its own tick (entity_frames.py)."""
     try:
         snap = await asyncio.wait_for(
             asyncio.wrap_future(loop.fresh_snapshot(worlds)), timeout=_READ_TIMEOUT
         )
+        if with_entities:
+            fut = loop.call(lambda b: entity_frames.attach(b.snapshot(), b))
+            snap = await asyncio.wait_for(asyncio.wrap_future(fut), timeout=_READ_TIMEOUT)
     except TimeoutError:
         why = loop.failure or "no tick completed"
         raise Unavailable(f"the engine is not advancing ({why}); see /readyz") from None
     pending = loop.pending_targets(np.asarray(worlds)) if loop.mode is Mode.PAUSED else None
     return snap, pending
+
+
+# `?entities=true` on a state read: each world's entities too, of the same tick.
+WithEntities = Annotated[
+    bool,
+    Query(description="true: each world's entities (pose and twist) of the same tick too"),
+]
 
 
 @router.get(
@@ -83,11 +95,12 @@ async def get_states(
             pattern=WORLDS_PATTERN,
         ),
     ] = None,
+    entities: WithEntities = False,
 ) -> Response:
     n = loop.batch.nworld
     ids = np.arange(n) if worlds is None else parse_worlds(worlds, n)
-    snap, pending = await _read(loop, ids)
-    return _json(wire.states(snap, ids, loop.spec.names, pending))
+    snap, pending = await _read(loop, ids, entities)
+    return _json(wire.states(snap, ids, loop.spec.names, pending, entities))
 
 
 @router.get(
@@ -96,11 +109,10 @@ async def get_states(
     summary="One world's JointState, target and flange pose, including every command accepted "
     "before",
 )
-async def get_state(loop: Loop, world: World) -> Response:
-    snap, pending = await _read(loop, [world])
-    return _json(
-        wire.world_state(snap, world, loop.spec.names, None if pending is None else pending[0])
-    )
+async def get_state(loop: Loop, world: World, entities: WithEntities = False) -> Response:
+    snap, pending = await _read(loop, [world], entities)
+    pending_row = None if pending is None else pending[0]
+    return _json(wire.world_state(snap, world, loop.spec.names, pending_row, entities))
 
 
 @router.post(
@@ -247,6 +259,23 @@ async def put_params(control: Ctl, world: World, body: params.ParamValues) -> Re
 )
 async def post_params(control: Ctl, body: params.ParamWrites) -> Response:
     return _written(control, params.SetParams, [w.model_dump() for w in body.writes])
+
+
+@router.get(
+    "/worlds/{world}/randomization",
+    response_model=WorldRandomization,
+    summary="One world's last randomisation (seed and spec), as its state holds it now",
+)
+async def get_randomization(loop: Loop, world: World) -> WorldRandomization:
+    snap, _ = await _read(loop, [world])  # includes every randomisation accepted before
+    last = loop.randomizations.at(snap.tick).get(world)
+    return WorldRandomization(
+        world=world,
+        tick=snap.tick,
+        randomized_at=None if last is None else last.tick,
+        seed=None if last is None else last.seed,
+        spec=None if last is None else dict(last.spec),
+    )
 
 
 @router.post(

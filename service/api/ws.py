@@ -16,7 +16,7 @@ import numpy as np
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
 from service.api import ws_ops
-from service.core import access, wire
+from service.core import access, entity_frames, frames, wire
 from service.core.commands.base import BROWSER, WS
 from service.core.control import Control
 from service.core.errors import ArmfleetError, BadCommand
@@ -33,11 +33,40 @@ _CLOSE_TRY_AGAIN = 1013
 _CLOSE_POLICY = 1008
 
 
+# `entities=true`: each frame carries the worlds' entities (service/core/entity_frames.py).
+Entities = Annotated[
+    str | None,
+    Query(description="true: each frame carries every entity's pose and twist"),
+]
+
+
+_TRUE, _FALSE = ("true", "1", "yes", "on"), ("false", "0", "no", "off")
+
+
+def flag(value: str | None, field: str) -> bool:
+    """A query flag as HTTP's routes read one (true/false, 1/0, yes/no, on/off); BadCommand
+    naming `field` otherwise (FastAPI's own refusal on a socket names no field)."""
+    if value is None or value.lower() in _FALSE:
+        return False
+    if value.lower() in _TRUE:
+        return True
+    raise BadCommand(field, f"{value[:40]!r} is not a flag: give true or false")
+
+
+def _with_entities(sub: Subscription, kind: str) -> None:
+    """Frames of `sub` carry entities: their own serialisation key, and no frame from a
+    snapshot taken before anyone asked (the next one carries them)."""
+    sub.entities = True
+    sub.key = (f"{kind}+entities", sub.key[1])
+    sub.skip = lambda snap: snap.entities is None
+
+
 @router.websocket("/ws/worlds/{world}")
 async def world_socket(
     ws: WebSocket,
     world: int,
     rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
+    entities: Entities = None,
 ) -> None:
     """One world's state frames (`{"op": "state", ...}`); commands need no `world` field."""
     running = _running(ws)
@@ -46,15 +75,20 @@ async def world_socket(
     loop, control, hub = running
     try:
         world = control.world(world)
+        with_entities = flag(entities, "query.entities")
     except ArmfleetError as exc:
-        return await _refuse(ws, _CLOSE_POLICY, exc.detail)
+        return await _refuse(ws, _CLOSE_POLICY, str(exc))
     names = loop.spec.names
     sub = Subscription(
         np.array([world]),
         rate,
-        lambda s: wire.single_frame(s, world, names, control.trajectories.brief(world)),
+        lambda s: wire.single_frame(
+            s, world, names, control.trajectories.brief(world), with_entities
+        ),
         "single",
     )
+    if with_entities:
+        _with_entities(sub, "single")
     await _serve(ws, loop, control, hub, sub, default_world=world)
 
 
@@ -67,6 +101,7 @@ async def batch_socket(
         Literal["json", "binary"],
         Query(description="binary: float32 rows, see service/core/wire.py"),
     ] = "json",
+    entities: Entities = None,
 ) -> None:
     """Many worlds per frame (`{"op": "states", ...}`, column-wise); commands name `world`."""
     running = _running(ws)
@@ -76,6 +111,7 @@ async def batch_socket(
     n = loop.batch.nworld
     try:
         ids = np.arange(n) if worlds is None else parse_worlds(worlds, n)
+        with_entities = flag(entities, "query.entities")
     except ArmfleetError as exc:
         return await _refuse(ws, _CLOSE_POLICY, str(exc))
     names = loop.spec.names
@@ -84,14 +120,30 @@ async def batch_socket(
     if format == "binary":
         render = wire.batch_frame_binary
         sub = Subscription(
-            ids, rate, lambda s: render(s, ids, names), "binary", True, "binary", names
+            ids,
+            rate,
+            lambda s: render(s, ids, names, with_entities),
+            "binary",
+            True,
+            "binary",
+            names,
         )
+        if with_entities:
+            _with_entities(sub, "binary")
+            sub.packed = frames.BINARY_ENTITIES
     else:
         briefs = control.trajectories.briefs
         sub = Subscription(
-            ids, rate, lambda s: wire.batch_frame(s, ids, names, briefs(ids)), "batch", False
+            ids,
+            rate,
+            lambda s: wire.batch_frame(s, ids, names, briefs(ids), with_entities),
+            "batch",
+            False,
         )
         sub.packed, sub.names, sub.extra = "json", names, lambda: {"trajectories": briefs(ids)}
+        if with_entities:
+            _with_entities(sub, "batch")
+            sub.packed = frames.JSON_ENTITIES
     await _serve(ws, loop, control, hub, sub, default_world=None)
 
 
@@ -217,8 +269,13 @@ async def _serve(
 
     sub.close = close
     sub.status_frames = True
+    first = loop.latest
+    if sub.entities and first.entities is None:  # nobody asked before: read them at a boundary
+        first = await asyncio.wrap_future(
+            loop.call(lambda b: entity_frames.attach(b.snapshot(), b))
+        )
     hub.add(sub)
-    sub.offer(loop.latest, time.monotonic())  # the current state at once, then the stream
+    sub.offer(first, time.monotonic())  # the current state at once, then the stream
     writer = asyncio.create_task(_write(ws, hub, sub))
     try:
         while True:

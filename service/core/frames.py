@@ -30,7 +30,7 @@ import numpy as np
 from service.core import wire
 from service.core.batch import Batch, PacksFrames
 from service.core.packed_rows import PackedRows
-from service.core.types import Snapshot
+from service.core.types import EntityFrame, Snapshot
 
 log = logging.getLogger("armfleet.frames")
 
@@ -55,6 +55,7 @@ class FrameData:
     target: np.ndarray | None = None
     faults: np.ndarray | None = None
     extra: dict[str, Any] | None = None  # JSON's last fields (None: DEFAULT_EXTRA)
+    entities: EntityFrame | None = None  # read when a subscriber asked (JSON_ENTITIES)
 
     @property
     def tick(self) -> int:
@@ -103,18 +104,20 @@ def pack(batch: Batch, ids: np.ndarray, json: bool) -> FrameData | None:
 
 def binary(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
     """`wire.batch_frame_binary`'s bytes from packed rows (one copy of them)."""
-    header = wire.dumps(
-        {
-            "op": "states",
-            "tick": data.tick,
-            "n": len(data.ids),
-            "name": names,
-            "columns": wire.BINARY_COLUMNS,
-        }
-    )
+    header = wire.dumps(wire.binary_header(data.tick, len(data.ids), names))
     ids = data.ids.astype("<i4").tobytes()
     size = len(header).to_bytes(4, "little")
     return b"".join((wire.BINARY_MAGIC, size, header, ids, memoryview(rows)))
+
+
+def binary_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
+    """`wire.batch_frame_binary(..., entities=True)`'s bytes: the rows, then the entities."""
+    assert data.entities is not None
+    header = wire.dumps(wire.binary_header(data.tick, len(data.ids), names, data.entities))
+    ids = data.ids.astype("<i4").tobytes()
+    size = len(header).to_bytes(4, "little")
+    block = wire.entity_block(data.entities)
+    return b"".join((wire.BINARY_MAGIC, size, header, ids, memoryview(rows), block))
 
 
 def _array(values: np.ndarray, sliced: bool) -> bytes:
@@ -173,9 +176,25 @@ def json(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
     )
 
 
+def json_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
+    """`wire.batch_frame(..., entities=True)`'s bytes: the JSON frame, then `entities`."""
+    assert data.sim_time is not None and data.target is not None and data.faults is not None
+    assert data.entities is not None
+    extra = {**(DEFAULT_EXTRA if data.extra is None else data.extra)}
+    extra["entities"] = wire.entity_columns(data.entities)
+    return json_bytes(
+        data.tick, names, data.ids, data.sim_time, rows, data.target, data.faults, True, extra
+    )
+
+
+# The frame formats with each world's entities too (`entities=true`).
+JSON_ENTITIES, BINARY_ENTITIES = "json+entities", "binary+entities"
+WITH_ENTITIES = (JSON_ENTITIES, BINARY_ENTITIES)
 ENCODERS: dict[str, Callable[[FrameData, np.ndarray, list[str]], bytes]] = {
     "binary": binary,
     "json": json,
+    JSON_ENTITIES: json_entities,
+    BINARY_ENTITIES: binary_entities,
 }
 
 
@@ -211,29 +230,36 @@ class FrameSender:
         self._thread = threading.Thread(target=self._run, name="armfleet-frames", daemon=True)
         self._thread.start()
 
-    def _in_process(self, job: Job, rows: np.ndarray) -> bool:
-        """Hand a big JSON frame to the helper processes (several frames in flight, delivered
-        when done, in order of completion); False when it is serialised here instead."""
-        if "json" not in job.formats or len(job.data.ids) < BIG_JSON_ROWS:
-            return False
+    def _in_process(self, job: Job, rows: np.ndarray) -> list[str]:
+        """Hand a big frame's JSON formats to the helper processes (several frames in flight,
+        delivered when done, in order of completion); the formats handed (or dropped because
+        every helper is busy), none when the frame is serialised here instead."""
+        asked = [f for f in job.formats if f in ("json", JSON_ENTITIES)]
+        if not asked or len(job.data.ids) < BIG_JSON_ROWS:
+            return []
         if self._pool is None:
             ctx = multiprocessing.get_context("spawn")  # never fork a process holding CUDA
             self._pool = concurrent.futures.ProcessPoolExecutor(JSON_PROCESSES, mp_context=ctx)
-        if self._json_in_flight >= JSON_PROCESSES:
-            self.replaced += 1  # all helpers busy: this frame is dropped (the next one is newer)
-            return True
         d = job.data
         rows = np.array(rows)  # a copy: the pinned buffer goes back to the engine at once
-        args = (d.tick, job.names, d.ids, d.sim_time, rows, d.target, d.faults, False, d.extra)
-        self._json_in_flight += 1
-        fut = self._pool.submit(json_bytes, *args)
-        fut.add_done_callback(lambda f: self._json_done(job, f))
-        return True
+        for f in asked:
+            if self._json_in_flight >= JSON_PROCESSES:
+                self.replaced += 1  # all helpers busy: dropped (the next frame is newer)
+                continue
+            extra = d.extra
+            if f == JSON_ENTITIES and d.entities is not None:
+                extra = {**(DEFAULT_EXTRA if extra is None else extra)}
+                extra["entities"] = wire.entity_columns(d.entities)
+            args = (d.tick, job.names, d.ids, d.sim_time, rows, d.target, d.faults, False, extra)
+            self._json_in_flight += 1
+            fut = self._pool.submit(json_bytes, *args)
+            fut.add_done_callback(lambda done, f=f: self._json_done(job, f, done))
+        return asked
 
-    def _json_done(self, job: Job, fut: concurrent.futures.Future[bytes]) -> None:
+    def _json_done(self, job: Job, fmt: str, fut: concurrent.futures.Future[bytes]) -> None:
         self._json_in_flight -= 1
         if not fut.cancelled() and fut.exception() is None:
-            self._deliver(job, {"json": fut.result()})
+            self._deliver(job, {fmt: fut.result()})
 
     def submit(self, job: Job) -> None:
         key = job.data.ids.tobytes()
@@ -263,8 +289,8 @@ class FrameSender:
                 _, job = self._jobs.popitem()
             try:
                 rows = job.data.packed.wait()
-                big = self._in_process(job, rows)
-                formats = [f for f in job.formats if not (big and f == "json")]
+                handed = self._in_process(job, rows)
+                formats = [f for f in job.formats if f not in handed]
                 out = {f: ENCODERS[f](job.data, rows, job.names) for f in formats}
             except Exception:
                 log.exception("a frame could not be serialised")

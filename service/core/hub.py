@@ -14,6 +14,7 @@ pose frames) are rendered from snapshots, as is every subscription's first frame
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 from collections import deque
@@ -22,10 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from service.core import frames
+from service.core import entity_frames, frames
 from service.core.batch import Batch
 from service.core.loop import SnapshotSink
 from service.core.types import Snapshot
+
+log = logging.getLogger("armfleet.hub")
 
 
 class Subscription:
@@ -40,11 +43,15 @@ class Subscription:
         binary: bool = False,
         packed: str | None = None,
         names: list[str] | None = None,
+        entities: bool = False,
     ):
         self.worlds = worlds
+        # Frames carry the worlds' entities too (`entities=true`): packed ones in a format of
+        # frames.WITH_ENTITIES, rendered ones from snapshots that carry them.
+        self.entities = entities
         self.binary = binary  # frames go out as binary WebSocket messages
-        # "binary" / "json": frames come packed from the sim thread (service.frames), not
-        # rendered from snapshots; `names` are the joint names they carry.
+        # "binary" / "json" (or either "+entities"): frames come packed from the sim thread
+        # (service.frames), not rendered from snapshots; `names` are the joint names they carry.
         self.packed = packed
         self.names = names or []
         self.frame: bytes | None = None  # the newest packed frame not yet sent
@@ -165,6 +172,13 @@ class StreamHub(SnapshotSink):
     def subscribers(self) -> int:
         return len(self._subs)
 
+    def extend_snapshot(self, snap: Snapshot, batch: Batch) -> Snapshot:
+        """The loop's snapshot about to be published, with every world's entities while some
+        subscriber asked for them (sim thread, at the snapshot's tick); as it is otherwise."""
+        if any(s.entities for s in self._subs):
+            return entity_frames.attach(snap, batch)
+        return snap
+
     # -- sim thread -------------------------------------------------------------------------
 
     def wants_snapshot(self, now: float) -> bool:
@@ -185,14 +199,30 @@ class StreamHub(SnapshotSink):
             groups.setdefault(sub.key[1], []).append(sub)
         for group in groups.values():
             formats = sorted({s.packed for s in group if s.packed})
-            data = frames.pack(batch, group[0].worlds, "json" in formats)
+            json = any(f.startswith("json") for f in formats)
+            data = frames.pack(batch, group[0].worlds, json)
             if data is None or self._sender is None:
                 self.frames_skipped += len(group)
                 continue
-            extra = next((s.extra for s in group if s.packed == "json" and s.extra), None)
+            extra = next((s.extra for s in group if s.extra), None) if json else None
             if extra is not None:
                 data.extra = extra()
+            asked = [f for f in formats if f in frames.WITH_ENTITIES]
+            if asked and not self._read_entities(batch, data):
+                formats = [f for f in formats if f not in asked]
+                self.frames_skipped += sum(s.packed in asked for s in group)
             self._sender.submit(frames.Job(data, formats, group, group[0].names))
+
+    @staticmethod
+    def _read_entities(batch: Batch, data: frames.FrameData) -> bool:
+        """The frame's worlds' entities, of the tick of its rows (sim thread); False when the
+        engine cannot give them now (a Ray shard being rebuilt): that frame is skipped."""
+        try:
+            data.entities = entity_frames.read(batch, data.ids)
+        except Exception:
+            log.exception("the entities of tick %d could not be read", data.tick)
+            return False
+        return True
 
     def restored(self) -> None:
         """The batch was restored: the next snapshot goes to packed subscriptions as well."""

@@ -32,6 +32,7 @@ from service.core.loop_types import (  # re-exported: the loop's vocabulary
     TickListener,
     resolve,
 )
+from service.core.randomizations import RandomizationBook, Randomized
 from service.core.staging import CommandTable, Override, Staging, TrajectoryHook
 from service.core.types import Mode, Snapshot
 
@@ -80,6 +81,8 @@ class SimLoop(TickBoundary):
         # Work for the sim thread between two ticks (state, restore, reads of the batch).
         self._requests: list[tuple[Callable[[Batch], Any], concurrent.futures.Future[Any]]] = []
         self._restore_listeners: tuple[RestoreListener, ...] = ()
+        # Per world, the last randomisation (seed, spec) and its tick: snapshots name it.
+        self.randomizations = RandomizationBook()
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -127,12 +130,26 @@ class SimLoop(TickBoundary):
                 self._traj.overridden(np.asarray(worlds), Override.MANUAL, named)
             return out
 
-    def reset(self, worlds: list[int] | None = None) -> int:
-        """Reset worlds (all when None) to home, state and targets; returns the effective tick."""
+    def reset(
+        self,
+        worlds: list[int] | None = None,
+        writes: Sequence[StateWrite | ModelWrite] = (),
+        randomized: tuple[int, dict[str, Any]] | None = None,
+    ) -> int:
+        """Reset worlds (all when None) to home, state and targets; returns the effective tick.
+
+        A randomisation's draws (`writes`) are staged for the same boundary, after the reset,
+        and its (seed, spec) goes into `randomizations` with that tick, under the same lock.
+        """
         idx = np.arange(self.batch.nworld) if worlds is None else np.asarray(worlds, dtype=int)
         with self._lock:
             tick = self._accept_tick()
             self._table.stage_reset(idx, tick)
+            if writes:
+                self._table.stage_state(writes, tick)
+            if randomized is not None:
+                entry = Randomized(tick, *randomized)
+                self.randomizations.record(idx.tolist(), entry, self._tick)
             if self._traj is not None:
                 self._traj.overridden(idx, Override.RESET)
             return tick
@@ -333,6 +350,9 @@ class SimLoop(TickBoundary):
     def _publish(self, now: float) -> None:
         """Take a snapshot, wake the readers waiting for one, hand it to every sink."""
         snap = self.batch.snapshot()
+        for sink in self._sinks:  # what a sink's clients asked for besides (the hub: entities)
+            if (extend := getattr(sink, "extend_snapshot", None)) is not None:
+                snap = extend(snap, self.batch)
         with self._lock:
             self._latest = snap
             self._last_snapshot_wall = now

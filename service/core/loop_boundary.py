@@ -9,6 +9,7 @@ is the loop's own, guarded by the loop's lock.
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
 import logging
 import threading
 import time
@@ -19,6 +20,7 @@ import numpy as np
 
 from service.core.batch import Batch
 from service.core.loop_types import RestoreListener, resolve, run_request
+from service.core.randomizations import RandomizationBook
 from service.core.staging import CommandTable, TrajectoryHook
 from service.core.types import BatchState, Mode, Snapshot
 
@@ -46,6 +48,7 @@ class TickBoundary:
     _requests: list[tuple[Callable[[Batch], Any], concurrent.futures.Future[Any]]]
     _restore_listeners: tuple[RestoreListener, ...]
     _publish: Callable[[float], None]
+    randomizations: RandomizationBook
 
     def call(self, fn: Callable[[Batch], T]) -> concurrent.futures.Future[T]:
         """Run `fn(batch)` on the sim thread between two ticks; the future gets its result.
@@ -63,8 +66,13 @@ class TickBoundary:
         return fut
 
     def request_state(self) -> concurrent.futures.Future[BatchState]:
-        """Every world's full state at the next tick boundary (`Batch.get_state`)."""
-        return self.call(lambda batch: batch.get_state())
+        """Every world's full state at the next tick boundary (`state_of`)."""
+        return self.call(self.state_of)
+
+    def state_of(self, batch: Batch) -> BatchState:
+        """`batch.get_state()` with the randomisations it holds (sim thread, or a stopped
+        loop): a snapshot's header names them."""
+        return dataclasses.replace(batch.get_state(), randomized=self.randomizations.at(batch.tick))
 
     def restore(self, state: BatchState, name: str = "") -> concurrent.futures.Future[int]:
         """Continue from `state` at the next tick boundary; the future gets the restored tick.
@@ -88,6 +96,7 @@ class TickBoundary:
             self._tick = batch.tick
             self._step_goal = self._tick
             self._table.restored(batch.targets, self._tick)
+            self.randomizations.replace(state.randomized)
             if self._traj is not None:
                 self._traj.restored()
             self._window = (time.monotonic(), self._tick)

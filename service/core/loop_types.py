@@ -60,6 +60,11 @@ class SnapshotSink:
         """Time stopped at the batch's tick (paused: the last tick of a step burst, or where a
         pause found it): no later tick will carry its state, so show it now."""
 
+    def extend_snapshot(self, snap: Snapshot, batch: Batch) -> Snapshot:
+        """The snapshot about to be published, with what this sink's clients asked for besides
+        (the hub: entities, while a client asks), read from `batch` at the snapshot's tick."""
+        return snap
+
 
 def resolve(fut: concurrent.futures.Future[Snapshot], snap: Snapshot) -> None:
     if not fut.done():  # a reader that gave up may have cancelled it

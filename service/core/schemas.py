@@ -16,6 +16,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from service.core.commands.entities import EntityState
 from service.core.commands.rules import BadJointState, joint_state
 from service.core.schema_fields import (
     Delta,
@@ -80,6 +81,7 @@ class WorldState(BaseModel):
         description="only while paused: the targets as of every accepted command, which the "
         "next step puts in effect (`target` is what the last step used) [rad]",
     )
+    entities: list[EntityState] | None = Field(None, description="only with ?entities=true")
 
 
 class WorldStates(BaseModel):
@@ -324,25 +326,6 @@ class SnapshotRequest(Strict):
     name: SnapshotName
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"name": "before"}]})
-
-
-class SnapshotInfo(BaseModel):
-    """One saved snapshot as listed: name, bytes on disk, when, at which tick, of which batch
-    (service/persistence/snapshots.py makes them)."""
-
-    model_config = ConfigDict(frozen=True)
-
-    name: str
-    size_bytes: int
-    created: str = Field(description="UTC, ISO 8601")
-    tick: int = Field(description="batch tick the snapshot was taken at")
-    nworld: int
-    model_hash: str = Field(description="sha256 of the compiled model (MJB)")
-
-
-class RestoreReply(BaseModel):
-    name: str
-    tick: int = Field(description="the tick the batch continues from")
 
 
 class RecordingRequest(Strict):

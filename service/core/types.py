@@ -10,7 +10,7 @@ from __future__ import annotations
 import enum
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -18,6 +18,7 @@ import numpy as np
 # Defined with the client's models (the wire's own description of a joint), so that the client
 # installs without the service and the two cannot drift apart.
 from clients.models import JointSpec
+from service.core.randomizations import Randomized
 
 
 def _frozen(values: list[float]) -> np.ndarray:
@@ -106,6 +107,40 @@ class Poses:
 
 
 @dataclass(frozen=True)
+class EntityFrame:
+    """The scene's entities (named free bodies) in some worlds at one tick, as the engine holds
+    them (float32 on MuJoCo Warp, float64 on native MuJoCo): what a state frame carries when a
+    client asks for entities.
+
+    names: entity names, the order of axis 1 below                              (ne,)
+    worlds: the world id of each row, ascending                                 (k,)
+    position: x y z [m], world frame                                            (k, ne, 3)
+    orientation: quaternion w x y z                                             (k, ne, 4)
+    linear: linear velocity [m/s], world frame                                  (k, ne, 3)
+    angular: angular velocity [rad/s], the body's own frame (MuJoCo's free joint) (k, ne, 3)
+    """
+
+    names: tuple[str, ...]
+    worlds: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray
+    linear: np.ndarray
+    angular: np.ndarray
+
+    def take(self, ids: np.ndarray) -> EntityFrame:
+        """The rows of worlds `ids` (each one of `worlds`), in the order of `ids`."""
+        rows = np.searchsorted(self.worlds, ids)
+        return EntityFrame(
+            self.names,
+            np.asarray(ids),
+            *(np.ascontiguousarray(a[rows]) for a in self.arrays()),
+        )
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return self.position, self.orientation, self.linear, self.angular
+
+
+@dataclass(frozen=True)
 class Snapshot:
     """One consistent view of every world at the end of one control tick.
 
@@ -122,6 +157,8 @@ class Snapshot:
       body_pos: every body's origin in the world frame [m], float32             (nworld, nbody, 3)
       body_quat: every body's orientation, quaternion w x y z, float32         (nworld, nbody, 4)
         (bodies in MjModel order, 0 = world; what viewers draw, see GET /v1/scene)
+    entities: every world's entities (`EntityFrame`), only in snapshots taken while a client
+      asks for entities in its frames (None otherwise: no cost for those that do not)
     """
 
     tick: int
@@ -133,6 +170,7 @@ class Snapshot:
     faults: np.ndarray
     flange: Poses
     bodies: Poses
+    entities: EntityFrame | None = None
 
     # positions (.., 3) and quaternions (.., 4, w x y z), computed when first read
     flange_pos = property(lambda self: self.flange.get()[0])
@@ -210,6 +248,9 @@ class BatchState:
     faults: np.ndarray
     targets: np.ndarray
     physics: dict[str, np.ndarray]
+    # per world, the last randomisation this state holds (`randomizations.py`; filled by the
+    # loop, not the engines, which neither need nor keep it); worlds without one are absent
+    randomized: dict[int, Randomized] = field(default_factory=dict)
 
     @property
     def nworld(self) -> int:

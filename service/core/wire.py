@@ -14,7 +14,7 @@ import numpy as np
 import orjson
 
 from service.core.errors import ArmfleetError
-from service.core.types import Snapshot
+from service.core.types import EntityFrame, Snapshot
 
 if TYPE_CHECKING:
     from service.core.loop import CommandResult
@@ -47,11 +47,16 @@ def error_frame(msg_id: Any, error: ArmfleetError | str) -> dict[str, Any]:
 
 
 def world_state(
-    snap: Snapshot, world: int, names: list[str], pending: np.ndarray | None = None
+    snap: Snapshot,
+    world: int,
+    names: list[str],
+    pending: np.ndarray | None = None,
+    entities: bool = False,
 ) -> dict[str, Any]:
     """One world as sensor_msgs/JointState fields plus target, flange and fault count.
 
-    `pending` (paused only): the world's targets as of every accepted command.
+    `pending` (paused only): the world's targets as of every accepted command. `entities`: the
+    world's entities too (`entity_list`; the snapshot must carry them).
     """
     out = {
         "world": world,
@@ -67,25 +72,82 @@ def world_state(
     }
     if pending is not None:
         out["pending_target"] = pending
+    if entities:
+        out["entities"] = entity_list(_entities_of(snap), world)
     return out
 
 
+def _entities_of(snap: Snapshot) -> EntityFrame:
+    if snap.entities is None:  # a caller's bug: entities are read with the snapshot
+        raise ValueError(f"the snapshot of tick {snap.tick} was taken without entities")
+    return snap.entities
+
+
+def entity_list(frame: EntityFrame, world: int) -> list[dict[str, Any]]:
+    """One world's entities as GET /v1/worlds/{w}/entities lists them (name, position,
+    orientation w x y z, linear, angular)."""
+    row = int(np.searchsorted(frame.worlds, world))
+    return [
+        {
+            "name": name,
+            "position": frame.position[row, e],
+            "orientation": frame.orientation[row, e],
+            "linear": frame.linear[row, e],
+            "angular": frame.angular[row, e],
+        }
+        for e, name in enumerate(frame.names)
+    ]
+
+
+def entity_columns(frame: EntityFrame) -> dict[str, Any]:
+    """A batch frame's `entities`, column-wise like the rest of it: `name` (ne,), then
+    `position` (n, ne, 3), `orientation` (n, ne, 4, w x y z), `linear` and `angular`
+    (n, ne, 3); row i belongs to the frame's worlds[i]."""
+    if not frame.names:  # orjson writes no array with a zero-length axis
+        empty = [[] for _ in frame.worlds]
+        return {
+            "name": [],
+            "position": empty,
+            "orientation": empty,
+            "linear": empty,
+            "angular": empty,
+        }
+    return {
+        "name": list(frame.names),
+        "position": frame.position,
+        "orientation": frame.orientation,
+        "linear": frame.linear,
+        "angular": frame.angular,
+    }
+
+
 def states(
-    snap: Snapshot, worlds: np.ndarray, names: list[str], pending: np.ndarray | None = None
+    snap: Snapshot,
+    worlds: np.ndarray,
+    names: list[str],
+    pending: np.ndarray | None = None,
+    entities: bool = False,
 ) -> dict[str, Any]:
-    """Several worlds; `pending` (paused only) holds one row of pending targets per world."""
+    """Several worlds; `pending` (paused only) holds one row of pending targets per world;
+    `entities`: each world's entities too."""
     rows = [
-        world_state(snap, int(w), names, None if pending is None else pending[i])
+        world_state(snap, int(w), names, None if pending is None else pending[i], entities)
         for i, w in enumerate(worlds)
     ]
     return {"tick": snap.tick, "worlds": rows}
 
 
 def single_frame(
-    snap: Snapshot, world: int, names: list[str], trajectory: dict[str, Any] | None = None
+    snap: Snapshot,
+    world: int,
+    names: list[str],
+    trajectory: dict[str, Any] | None = None,
+    entities: bool = False,
 ) -> bytes:
-    """One world's state frame; `trajectory`: its trajectory's id, state, reason, progress."""
-    return dumps({"op": "state", **world_state(snap, world, names), "trajectory": trajectory})
+    """One world's state frame; `trajectory`: its trajectory's id, state, reason, progress;
+    `entities`: the world's entities (`entity_list`) after `faults`."""
+    state = world_state(snap, world, names, None, entities)
+    return dumps({"op": "state", **state, "trajectory": trajectory})
 
 
 def batch_frame(
@@ -93,31 +155,37 @@ def batch_frame(
     worlds: np.ndarray,
     names: list[str],
     trajectories: dict[str, Any] | None = None,
+    entities: bool = False,
 ) -> bytes:
     """Many worlds in one frame, column-wise (row i of each array belongs to worlds[i]);
-    `trajectories`: world id → its trajectory's id, state, reason, progress (those that ran one).
+    `trajectories`: world id → its trajectory's id, state, reason, progress (those that ran one);
+    `entities`: the worlds' entities (`entity_columns`), last.
     """
-    return dumps(
-        {
-            "op": "states",
-            "tick": snap.tick,
-            "name": names,
-            "worlds": worlds,
-            "sim_time": snap.sim_time[worlds],
-            "position": snap.position[worlds],
-            "velocity": snap.velocity[worlds],
-            "effort": snap.effort[worlds],
-            "target": snap.target[worlds],
-            "flange_position": snap.flange_pos[worlds],
-            "flange_quaternion": snap.flange_quat[worlds],
-            "faults": snap.faults[worlds],
-            "trajectories": trajectories or {},
-        }
-    )
+    frame: dict[str, Any] = {
+        "op": "states",
+        "tick": snap.tick,
+        "name": names,
+        "worlds": worlds,
+        "sim_time": snap.sim_time[worlds],
+        "position": snap.position[worlds],
+        "velocity": snap.velocity[worlds],
+        "effort": snap.effort[worlds],
+        "target": snap.target[worlds],
+        "flange_position": snap.flange_pos[worlds],
+        "flange_quaternion": snap.flange_quat[worlds],
+        "faults": snap.faults[worlds],
+        "trajectories": trajectories or {},
+    }
+    if entities:
+        frame["entities"] = entity_columns(_entities_of(snap).take(worlds))
+    return dumps(frame)
 
 
 # Binary batch frames: b"AFS1", uint32 header length, JSON header, int32 world ids, then one
-# float32 row per world holding these columns side by side (all little-endian).
+# float32 row per world holding these columns side by side (all little-endian). Asked with
+# `entities=true`, the header also has "entities": {"name": [...], "columns": ENTITY_COLUMNS}
+# and the rows are followed by float32[n, ne, 13]: per world, per entity (in `name` order) its
+# position, orientation (w x y z), linear and angular velocity side by side.
 BINARY_MAGIC = b"AFS1"
 BINARY_COLUMNS = (
     ("sim_time", 1),
@@ -131,17 +199,37 @@ BINARY_COLUMNS = (
 )
 
 
-def batch_frame_binary(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> bytes:
-    """The batch frame as float32 rows: ~4x smaller than JSON and no per-number formatting."""
-    header = dumps(
-        {
-            "op": "states",
-            "tick": snap.tick,
-            "n": len(worlds),
-            "name": names,
-            "columns": BINARY_COLUMNS,
-        }
-    )
+ENTITY_COLUMNS = (("position", 3), ("orientation", 4), ("linear", 3), ("angular", 3))
+
+
+def binary_header(
+    tick: int, n: int, names: list[str], entities: EntityFrame | None = None
+) -> dict[str, Any]:
+    """A binary batch frame's JSON header (with the entity block's, when it has one)."""
+    out: dict[str, Any] = {
+        "op": "states",
+        "tick": tick,
+        "n": n,
+        "name": names,
+        "columns": BINARY_COLUMNS,
+    }
+    if entities is not None:
+        out["entities"] = {"name": list(entities.names), "columns": ENTITY_COLUMNS}
+    return out
+
+
+def entity_block(frame: EntityFrame) -> bytes:
+    """The binary frame's entity block: float32[n, ne, 13] (layout above)."""
+    return np.concatenate(frame.arrays(), axis=2, dtype="<f4").tobytes()
+
+
+def batch_frame_binary(
+    snap: Snapshot, worlds: np.ndarray, names: list[str], entities: bool = False
+) -> bytes:
+    """The batch frame as float32 rows: ~4x smaller than JSON and no per-number formatting;
+    `entities`: the worlds' entities follow the rows (layout above)."""
+    frame = _entities_of(snap).take(worlds) if entities else None
+    header = dumps(binary_header(snap.tick, len(worlds), names, frame))
     rows = np.concatenate(
         [
             snap.sim_time[worlds, None],
@@ -163,6 +251,7 @@ def batch_frame_binary(snap: Snapshot, worlds: np.ndarray, names: list[str]) -> 
             header,
             worlds.astype("<i4").tobytes(),
             rows.tobytes(),
+            b"" if frame is None else entity_block(frame),
         )
     )
 

@@ -115,7 +115,7 @@ class Recorder:
         loop.add_restore_listener(self._on_restore)
         try:
             # The state and the trajectories running in it, at one tick boundary.
-            taken = loop.call(lambda b: (b.get_state(), control.trajectories.running()))
+            taken = loop.call(lambda b: (loop.state_of(b), control.trajectories.running()))
             state, running = taken.result(timeout=60)
         except BaseException:
             self._give_up()

@@ -1,12 +1,14 @@
 """Snapshots: the full state of every world in one file, saved atomically, checked before use.
 
 A snapshot is one uncompressed `.npz` (a zip of .npy arrays; numpy reads it without pickle):
-`header` (UTF-8 JSON: format, name, created, tick, the batch header of `provenance.py`, and
-a sha256 over every array) plus the arrays of a `BatchState`. It is written to a temporary file,
-fsynced and renamed, so a crash leaves the old file or the new one, never half of one. Loading
-reads and checks everything (zip CRCs, digest, header, shapes) before anything is restored: a
-truncated, corrupt or foreign file is refused with `Conflict` saying why, and the batch is
-untouched. The same bytes are embedded in MCAP recordings as the starting state of a replay.
+`header` (UTF-8 JSON: format, name, created, tick, the batch header of `provenance.py`, a
+sha256 over every array, and `randomization`: per world the last seed and spec the state holds,
+grouped as in core/randomizations.py) plus the arrays of a `BatchState`. It is written to a
+temporary file, fsynced and renamed, so a crash leaves the old file or the new one, never half
+of one. Loading reads and checks everything (zip CRCs, digest, header, shapes) before anything
+is restored: a truncated, corrupt or foreign file is refused with `Conflict` saying why, and the
+batch is untouched. The same bytes are embedded in MCAP recordings as the starting state of a
+replay.
 """
 
 from __future__ import annotations
@@ -24,14 +26,19 @@ from typing import Any
 
 import numpy as np
 
+from service.core import randomizations
 from service.core.batch import Batch, Restorable
 from service.core.errors import BadCommand, CannotWrite, Conflict, NotFound
-from service.core.schemas import SNAPSHOT_NAME, SnapshotInfo
+from service.core.schemas import SNAPSHOT_NAME
+from service.core.snapshot_schemas import RandomizationGroup, SnapshotInfo
 from service.core.types import PHYSICS_FIELDS, BatchState
 from service.persistence.provenance import mismatch
 from service.persistence.storage import describe
 
-FORMAT = "armfleet-snapshot/1"
+# /2 adds the header's `randomization` (per world, the last seed and spec the state holds);
+# /1 files load as before, their worlds with none.
+FORMAT = "armfleet-snapshot/2"
+READABLE = ("armfleet-snapshot/1", FORMAT)
 SUFFIX = ".npz"
 NAME_PATTERN = SNAPSHOT_NAME  # names become file names: no separators, no hidden files
 LATEST = "latest"  # what a clean shutdown saves and `--restore latest` reads
@@ -81,6 +88,7 @@ def encode_state(state: BatchState, header: dict[str, Any], name: str = "") -> b
         "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         "tick": int(state.tick),
         "sha256": _digest(arrays),
+        "randomization": randomizations.groups(state.randomized),
     }
     buf = io.BytesIO()
     head = np.frombuffer(json.dumps(meta, sort_keys=True).encode(), dtype=np.uint8)
@@ -114,7 +122,7 @@ def decode_state(data: bytes, current: dict[str, Any] | None = None) -> BatchSta
         header = json.loads(arrays.pop("header").tobytes())
     except Exception:
         raise Conflict("the snapshot file has no readable header") from None
-    if header.get("format") != FORMAT:
+    if header.get("format") not in READABLE:
         raise Conflict(f"not an {FORMAT} file (format {header.get('format')!r})")
     if _digest(arrays) != header.get("sha256"):
         raise Conflict("the snapshot's arrays do not match its checksum (corrupt file)")
@@ -124,6 +132,11 @@ def decode_state(data: bytes, current: dict[str, Any] | None = None) -> BatchSta
     missing += [f"physics.{f}" for f in PHYSICS_FIELDS if f"physics.{f}" not in arrays]
     if missing:
         raise Conflict(f"the snapshot lacks {', '.join(missing)}")
+    nworld = int(arrays["faults"].shape[0])
+    try:
+        randomized = randomizations.from_groups(header.get("randomization"), nworld)
+    except ValueError as exc:
+        raise Conflict(f"the snapshot's header is malformed: {exc}") from None
     return BatchState(
         tick=int(arrays["tick"]),
         world_ticks=arrays["world_ticks"],
@@ -131,6 +144,7 @@ def decode_state(data: bytes, current: dict[str, Any] | None = None) -> BatchSta
         targets=arrays["targets"],
         # the state's fields, and per-world model fields (`MODEL_PREFIX`) where there are any
         physics={k.removeprefix("physics."): v for k, v in arrays.items() if "." in k},
+        randomized=randomized,
     )
 
 
@@ -205,4 +219,6 @@ class SnapshotStore:
             tick=int(header.get("tick", -1)),
             nworld=int(header.get("nworld", -1)),
             model_hash=str(header.get("model_hash", "")),
+            format=str(header.get("format", "")),
+            randomization=[RandomizationGroup(**g) for g in header.get("randomization") or ()],
         )

@@ -34,7 +34,7 @@ from service.core.commands.writes import MAX_WRITES, ManyWrites, batch_config
 from service.core.errors import BadCommand
 from service.core.schema_fields import FiniteFloat, Strict, WorldId, example_config
 
-__all__ = ["EntityTable", "SetEntities", "entity_table", "read"]
+__all__ = ["EntityState", "EntityTable", "SetEntities", "entity_table", "read"]
 
 MAX_LINEAR = 50.0  # m/s
 MAX_ANGULAR = 500.0  # rad/s
@@ -136,6 +136,16 @@ class EntityValues(Strict):
     model_config = example_config(
         {"position": [0.7, 0.1, 0.9], "orientation": [1, 0, 0, 0], "linear": [0, 0, 0]}
     )
+
+
+class EntityState(Strict):
+    """One entity as read (GET .../entities, and state frames that ask for entities)."""
+
+    name: str
+    position: list[float] = Field(description="x y z [m], world frame")
+    orientation: list[float] = Field(description="quaternion w x y z")
+    linear: list[float] = Field(description="linear velocity [m/s], world frame")
+    angular: list[float] = Field(description="angular velocity [rad/s], body frame")
 
 
 class EntityWrite(EntityValues):

@@ -208,13 +208,12 @@ class Randomize(Command[RandomizeResult]):
         return cls.create(door, [world], body.get("seed"), body.get("spec"))
 
     def stage(self, door: Door, source: str) -> RandomizeResult:
-        tick = door.loop.reset(self.worlds)
         writes = [
             *(self.params.writes if self.params else ()),
             *(self.entities.writes if self.entities else ()),
         ]
-        if writes:
-            door.loop.stage_state(writes)
+        # one boundary for the reset and the draws; the loop notes seed and spec with its tick
+        tick = door.loop.reset(self.worlds, writes, (self.seed, self.spec))
         return RandomizeResult(tick, self.worlds)
 
     def announce(self, door: Door, result: RandomizeResult) -> Announcement:
