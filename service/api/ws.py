@@ -10,7 +10,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from typing import Annotated, Literal
+from collections.abc import Callable
+from typing import Annotated, Literal, TypeVar
 
 import numpy as np
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
@@ -26,6 +27,7 @@ from service.core.types import Snapshot
 from service.core.worlds import parse_worlds
 
 router = APIRouter(prefix="/v1")
+T = TypeVar("T")
 
 MAX_RATE = 1000.0
 _MAX_QUEUED_ACKS = 256  # a client that never reads its acks stops being read (backpressure)
@@ -69,15 +71,14 @@ async def world_socket(
     entities: Entities = None,
 ) -> None:
     """One world's state frames (`{"op": "state", ...}`); commands need no `world` field."""
-    running = _running(ws)
-    if running is None:
-        return await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
-    loop, control, hub = running
-    try:
-        world = control.world(world)
-        with_entities = flag(entities, "query.entities")
-    except ArmfleetError as exc:
-        return await _refuse(ws, _CLOSE_POLICY, str(exc))
+
+    def read(loop: SimLoop, control: Control) -> tuple[int, bool]:
+        return control.world(world), flag(entities, "query.entities")
+
+    opened = await _open(ws, read)
+    if opened is None:
+        return
+    loop, control, hub, (world, with_entities) = opened
     names = loop.spec.names
     sub = Subscription(
         np.array([world]),
@@ -104,16 +105,16 @@ async def batch_socket(
     entities: Entities = None,
 ) -> None:
     """Many worlds per frame (`{"op": "states", ...}`, column-wise); commands name `world`."""
-    running = _running(ws)
-    if running is None:
-        return await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
-    loop, control, hub = running
-    n = loop.batch.nworld
-    try:
+
+    def read(loop: SimLoop, control: Control) -> tuple[np.ndarray, bool]:
+        n = loop.batch.nworld
         ids = np.arange(n) if worlds is None else parse_worlds(worlds, n)
-        with_entities = flag(entities, "query.entities")
-    except ArmfleetError as exc:
-        return await _refuse(ws, _CLOSE_POLICY, str(exc))
+        return ids, flag(entities, "query.entities")
+
+    opened = await _open(ws, read)
+    if opened is None:
+        return
+    loop, control, hub, (ids, with_entities) = opened
     names = loop.spec.names
     # Packed: the sim thread gathers these worlds' rows and a thread of the hub serialises them
     # (service.core.frames); the renderers make the first frame, from the latest snapshot.
@@ -198,22 +199,23 @@ async def view_socket(
     its header, so one socket feeds both the 3D view and the panel. Its commands are the
     control layer's with source `browser`.
     """
-    running = _running(ws)
-    if running is None:
-        return await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
-    loop, control, hub = running
-    try:
-        focus = None if focus is None else control.world(focus)
+
+    def read(loop: SimLoop, control: Control) -> tuple[int | None, np.ndarray]:
+        shown = None if focus is None else control.world(focus)
         if worlds is not None:
             ids = parse_worlds(worlds, loop.batch.nworld)
-        elif focus is not None:
-            ids = np.array([focus])
+        elif shown is not None:
+            ids = np.array([shown])
         else:
             raise BadCommand("query.worlds", "give `worlds`, `focus` or both")
         if len(ids) > MAX_VIEW_WORLDS:
             raise BadCommand("query.worlds", f"{len(ids)} asked, at most {MAX_VIEW_WORLDS}")
-    except ArmfleetError as exc:
-        return await _refuse(ws, _CLOSE_POLICY, str(exc))
+        return shown, ids
+
+    opened = await _open(ws, read)
+    if opened is None:
+        return
+    loop, control, hub, (focus, ids) = opened
     names = loop.spec.names
 
     def render(snap: Snapshot) -> bytes:
@@ -231,11 +233,22 @@ async def view_socket(
     await _serve(ws, loop, control, hub, sub, default_world=None, source=BROWSER)
 
 
-def _running(ws: WebSocket) -> tuple[SimLoop, Control, StreamHub] | None:
+async def _open(
+    ws: WebSocket, read: Callable[[SimLoop, Control], T]
+) -> tuple[SimLoop, Control, StreamHub, T] | None:
+    """The running service's loop, control and hub, with `read`'s reading of the socket's
+    query; None once the socket has been refused (starting: 1013; a bad query: 1008 naming
+    the field)."""
     runtime = ws.app.state.runtime
     if runtime.loop is None or runtime.control is None or runtime.hub is None:
+        await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
         return None
-    return runtime.loop, runtime.control, runtime.hub
+    try:
+        got = read(runtime.loop, runtime.control)
+    except ArmfleetError as exc:
+        await _refuse(ws, _CLOSE_POLICY, str(exc))
+        return None
+    return runtime.loop, runtime.control, runtime.hub, got
 
 
 async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
