@@ -1,4 +1,5 @@
-"""A cell that lets bodies at rest sleep (<flag sleep="enable"/>, the example bin-picking cell).
+"""A cell that lets bodies at rest sleep (<flag sleep="enable"/>): the example bin-picking cell
+with the flag set (the shipped example keeps its parts awake, so that restores stay bit-exact).
 
 The native engine honours it (a persistent batch: MuJoCo keeps who sleeps in one MjData per
 world); everything else sharing the model steps every body. Sleeping must not change where the
@@ -9,6 +10,8 @@ must wake it.
 from __future__ import annotations
 
 import dataclasses
+import tempfile
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -21,6 +24,21 @@ from service.engines.native import NativeBatch
 from tests.test_model import solve_ik
 
 EXAMPLE = MJCF_DIR / "examples" / "bin_picking.xml"
+AWAKE_OPTION = '<option timestep="0.002" integrator="implicitfast"/>'
+
+
+def _sleeping_copy() -> Path:
+    """The example cell with `<flag sleep="enable"/>`, in a folder of its own (the arm's file
+    is found by name, wherever the cell lies)."""
+    text = EXAMPLE.read_text()
+    flagged = text.replace(AWAKE_OPTION, AWAKE_OPTION[:-2] + '><flag sleep="enable"/></option>')
+    assert flagged != text, "the example's <option> line changed: update AWAKE_OPTION"
+    path = Path(tempfile.mkdtemp(prefix="armfleet-sleep-")) / "bin_picking_sleeping.xml"
+    path.write_text(flagged)
+    return path
+
+
+SLEEPY = _sleeping_copy()
 SETTLE = 180  # ticks (3 s at 60 Hz): the parts come to rest and fall asleep
 
 
@@ -32,16 +50,16 @@ def _qpos_adr(batch: NativeBatch, joint: str) -> int:
 @pytest.fixture(scope="module")
 def settled() -> tuple[NativeBatch, NativeBatch]:
     """The example cell in 2 worlds, sleeping and (the same cell, sleep off) awake, settled."""
-    asleep = NativeBatch(2, model_path=EXAMPLE)
-    awake = NativeBatch(2, robot=dataclasses.replace(load_robot(EXAMPLE), sleep=False))
+    asleep = NativeBatch(2, model_path=SLEEPY)
+    awake = NativeBatch(2, robot=load_robot(EXAMPLE))
     for b in (asleep, awake):
         b.step(SETTLE)
     return asleep, awake
 
 
-def test_the_example_asks_for_sleep_and_only_the_native_batch_keeps_it(settled):
+def test_a_cell_asking_for_sleep_sleeps_in_the_native_batch_only(settled):
     asleep, awake = settled
-    assert asleep.robot.sleep and not load_robot().sleep
+    assert asleep.robot.sleep and not load_robot().sleep and not load_robot(EXAMPLE).sleep
     # The shared model steps every body (warp, the camera renderer, the kinematics use it).
     assert not asleep.robot.mjm.opt.enableflags & mujoco.mjtEnableBit.mjENBL_SLEEP
     for b in (asleep, awake):
@@ -61,7 +79,7 @@ def test_sleeping_does_not_move_where_the_parts_rest(settled):
 
 
 def test_a_written_pose_wakes_a_sleeping_part_in_that_world_only():
-    batch = NativeBatch(2, model_path=EXAMPLE)
+    batch = NativeBatch(2, model_path=SLEEPY)
     batch.step(SETTLE)
     a = _qpos_adr(batch, "part_ball_joint")
     rest = batch.qpos()[:, a + 2].copy()
@@ -76,7 +94,7 @@ def test_a_written_pose_wakes_a_sleeping_part_in_that_world_only():
 
 
 def test_a_part_landing_on_a_sleeping_part_wakes_it_and_rests_on_it():
-    batch = NativeBatch(1, model_path=EXAMPLE)
+    batch = NativeBatch(1, model_path=SLEEPY)
     batch.step(SETTLE)
     box, cyl = _qpos_adr(batch, "part_box_joint"), _qpos_adr(batch, "part_cylinder_joint")
     box_before = batch.qpos()[0, box : box + 3].copy()
@@ -90,7 +108,7 @@ def test_a_part_landing_on_a_sleeping_part_wakes_it_and_rests_on_it():
 
 
 def test_state_round_trip_and_reset_on_a_sleeping_batch():
-    batch = NativeBatch(2, model_path=EXAMPLE)
+    batch = NativeBatch(2, model_path=SLEEPY)
     batch.step(SETTLE)
     saved = batch.get_state()
     batch.step(60)
@@ -106,11 +124,11 @@ def test_state_round_trip_and_reset_on_a_sleeping_batch():
 def test_a_snapshot_restored_into_a_fresh_batch_goes_on_within_micrometres():
     """Who sleeps is not in the state rows: restored elsewhere, a sleeping part starts awake and
     falls asleep again (the guide says so); the worlds stay within micrometres, not bits."""
-    first = NativeBatch(2, model_path=EXAMPLE)
+    first = NativeBatch(2, model_path=SLEEPY)
     first.step(SETTLE)
     saved = first.get_state()
     first.step(120)
-    fresh = NativeBatch(2, model_path=EXAMPLE)
+    fresh = NativeBatch(2, model_path=SLEEPY)
     fresh.set_state(saved)
     fresh.step(120)
     assert np.abs(fresh.qpos() - first.qpos()).max() < 1e-4
@@ -120,7 +138,7 @@ def test_a_snapshot_restored_into_a_fresh_batch_goes_on_within_micrometres():
 def test_the_gripper_picks_a_sleeping_part_as_an_awake_one(sleep):
     """The pads closing on the box asleep in the bin wake it: it is lifted 10 cm and held, as
     when nothing sleeps (the grasp of tests/test_model.py, on the cell's box)."""
-    robot = dataclasses.replace(load_robot(EXAMPLE), sleep=sleep)
+    robot = dataclasses.replace(load_robot(SLEEPY), sleep=sleep)
     batch = NativeBatch(1, robot=robot)
     batch.step(SETTLE)
     mjm = robot.mjm
