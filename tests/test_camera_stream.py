@@ -101,3 +101,26 @@ def test_pull_sends_one_fresh_picture_per_request_and_nothing_else(server: Serve
         second, images = unpack(ws.recv(timeout=30))
         assert Image.open(io.BytesIO(images[0])).size == (128, 96)
     assert second["tick"] - first["tick"] >= 40  # about a second of 60 Hz ticks later: fresh
+
+
+def test_readers_of_one_camera_at_one_rate_share_renders(server: Server) -> None:
+    """Three sockets, each asking its own world of the wrist camera at 10 Hz: their pictures
+    fall due at the same instants (the rate's shared grid), so the feed draws them together;
+    each still gets only its own world, at one tick per picture."""
+    urls = [
+        f"{server.ws_url}/v1/ws/cameras?camera=wrist&worlds={w}&rate=10&format=raw"
+        for w in (0, 2, 3)
+    ]
+    with connect(urls[0]) as a, connect(urls[1]) as b, connect(urls[2]) as c:
+        for ws in (a, b, c):
+            ws.recv(timeout=30)  # warm: each stream has started
+        before = _renders(server)
+        got = {
+            w: [unpack(ws.recv(timeout=30))[0] for _ in range(10)]
+            for w, ws in zip((0, 2, 3), (a, b, c), strict=True)
+        }
+        renders = _renders(server) - before
+    for w, headers in got.items():
+        assert all(h["worlds"] == [w] for h in headers)
+    messages = sum(len(h) for h in got.values())
+    assert renders <= 0.7 * messages, (renders, messages)  # alone, each message is a render

@@ -4,10 +4,12 @@
 
 Each binary message is one render of every listed world at one tick, laid out as
 service/core/camera_wire.py's `pack` (header JSON with `tick`, `worlds`, sizes; then the
-images). Newest only: the next picture is drawn while the last one is being sent, and no
-other until that send is done, so a slow reader holds drawing back instead of piling images up
-in the service (at most one message waits beyond what the socket's buffers hold); a reader
-that keeps up gets `rate` a second (fewer when drawing or sending takes longer than a period).
+images). Pictures are drawn at the instants of a grid of the rate shared by every socket, so
+readers of one camera share renders. Newest only: the next picture is drawn while the last
+one is being sent, and no other until that send is done, so a slow reader holds drawing back
+instead of piling images up in the service (at most one message waits beyond what the
+socket's buffers hold); a reader that keeps up gets `rate` a second (fewer when drawing or
+sending takes longer than a period).
 With `pull=true` nothing is in flight beyond what was asked: the client sends a text message
 (any text) for each picture it wants, and gets the newest at that moment (still at most `rate`
 a second).
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import time
 from typing import Annotated
 
@@ -88,44 +91,44 @@ async def _send(
     rate: float,
     wanted: asyncio.Semaphore | None,
 ) -> None:
-    """Send a picture every period. In push mode the next picture is drawn while this one is
-    sent, started so that it is ready when due (one drawing time before): a send that takes
-    most of a period (201 MB of raw images) does not halve the rate, and still at most one
-    message waits beyond the socket."""
+    """Draw a picture at each instant of the rate's grid (multiples of the period on the
+    monotonic clock, the same for every socket of the process) and send it once drawn. The
+    shared grid makes readers of one camera at one rate ask at the same instants, so the feed
+    draws them in one render; in push mode the next picture is drawn while this one is sent
+    (a send that takes most of a period does not halve the rate), and at most one message
+    waits beyond the socket."""
     period = 1.0 / rate
-    due = time.monotonic()
-    draw_s = 0.0  # how long a picture takes to draw and pack (smoothed)
-    ahead: asyncio.Task[tuple[bytes, float]] | None = None
+    next_at = math.ceil(time.monotonic() / period) * period
+    ahead: asyncio.Task[bytes] | None = None
 
-    async def draw(start: float) -> tuple[bytes, float]:
+    async def draw(start: float) -> bytes:
         await asyncio.sleep(max(0.0, start - time.monotonic()))
-        t0 = time.monotonic()
         shot = await feed.shoot_async(ids, camera)  # type: ignore[arg-type]
-        message = await asyncio.to_thread(camera_wire.pack, shot, image, fmt, quality)
-        return message, time.monotonic() - t0
+        return await asyncio.to_thread(camera_wire.pack, shot, image, fmt, quality)
+
+    def after(at: float) -> float:
+        """The grid instant after `at`, skipping those already past (late: no burst)."""
+        return max(at + period, math.ceil(time.monotonic() / period) * period)
 
     try:
         while True:
             if wanted is not None:
                 await wanted.acquire()
-            job, ahead = ahead or asyncio.create_task(draw(0.0)), None
+            job, ahead = ahead or asyncio.create_task(draw(next_at)), None
             try:
-                message, took = await job
+                message = await job
             except ArmfleetError as exc:  # warming up: say so and try again a period later
                 if exc.status != 503:
                     await ws.close(code=_CLOSE_POLICY, reason=str(exc)[:120])
                     return
                 if wanted is not None:
                     wanted.release()  # still wanted
-                await asyncio.sleep(period)
-                due = time.monotonic()
+                next_at = after(next_at)
                 continue
-            draw_s = took if draw_s == 0.0 else 0.8 * draw_s + 0.2 * took
-            await asyncio.sleep(max(0.0, due - time.monotonic()))
+            next_at = after(next_at)
             if wanted is None:
-                ahead = asyncio.create_task(draw(due + period - draw_s))
+                ahead = asyncio.create_task(draw(next_at))
             await ws.send_bytes(message)  # waits while the reader is slow: nothing piles up
-            due = max(due + period, time.monotonic())  # late: start again from now, no burst
     finally:
         if ahead is not None:
             ahead.cancel()
