@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import threading
 import time
 from collections.abc import Callable
@@ -151,7 +152,7 @@ class CameraFeed:
             state = batch.tick, ids, batch.render_state(ids), group
         except Exception as exc:
             for _, out in group:
-                out.set_exception(exc)
+                _fail(out, exc)
             return None
         with self._lock:
             self.state_seconds += time.perf_counter() - t0
@@ -162,7 +163,7 @@ class CameraFeed:
             with self._lock:
                 group = self._waiting.pop(spec.name, [])
             for _, out in group:
-                out.set_exception(got.exception())  # type: ignore[arg-type]
+                _fail(out, got.exception())  # type: ignore[arg-type]
             return
         if got.result() is None:
             return
@@ -170,7 +171,7 @@ class CameraFeed:
             self._pool.submit(self._draw, *got.result(), spec)
         except RuntimeError as exc:  # closed meanwhile
             for _, out in got.result()[3]:
-                out.set_exception(Unavailable(f"cameras stopped: {exc}"))
+                _fail(out, Unavailable(f"cameras stopped: {exc}"))
 
     async def shoot_async(self, worlds: np.ndarray, camera: str) -> Shot:
         return await asyncio.wrap_future(self.shoot(worlds, camera))
@@ -206,6 +207,14 @@ class CameraFeed:
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _fail(out: concurrent.futures.Future[Shot], exc: BaseException) -> None:
+    """Fail a request unless its asker gave up on it meanwhile (cancelled: nothing to tell)."""
+    if out.cancelled():
+        return
+    with contextlib.suppress(concurrent.futures.InvalidStateError):
+        out.set_exception(exc)
 
 
 def _rows(drawn: np.ndarray, worlds: np.ndarray) -> slice | np.ndarray:
