@@ -197,6 +197,7 @@ class _Readers:
         self.counts = [spawn.Array("q", 2) for _ in range(k)]  # messages, bytes
         self.firsts = [spawn.Queue() for _ in range(k)]
         self.procs = []
+        self.shares = [(i + 1) * n // k - i * n // k for i in range(k)]  # worlds per client
         for i in range(k):
             lo, hi = i * n // k, (i + 1) * n // k - 1
             q = f"camera={CAMERA}&worlds={lo}-{hi}&rate={RATE:g}&image=rgb&format=raw"
@@ -208,8 +209,7 @@ class _Readers:
 
     def frames(self) -> float:
         """Pictures of every world delivered so far (each client's messages x its share)."""
-        return sum(c[0] * ((i + 1) * self.n // self.k - i * self.n // self.k) for i, c in
-                   enumerate(self.counts)) / self.n  # fmt: skip
+        return sum(c[0] * w for c, w in zip(self.counts, self.shares, strict=True)) / self.n
 
     def messages(self) -> int:
         return sum(int(c[0]) for c in self.counts)
