@@ -33,6 +33,7 @@ from service.core.commands.base import Door, world_ack
 from service.core.commands.writes import MAX_WRITES, ManyWrites, batch_config
 from service.core.errors import BadCommand
 from service.core.schema_fields import FiniteFloat, Strict, WorldId, example_config
+from service.core.types import EntityFrame
 
 __all__ = ["EntityState", "EntityTable", "SetEntities", "entity_table", "read"]
 
@@ -280,30 +281,41 @@ class SetEntities(ManyWrites[EntityResult]):
 # -- reading ------------------------------------------------------------------------------
 
 
-def read(batch: Batch, worlds: Sequence[int]) -> dict[str, Any]:
-    """Entities of `worlds` at the batch's last tick (call on the sim thread: `SimLoop.call`).
+def read_frame(batch: Batch, ids: Sequence[int] | np.ndarray | None = None) -> EntityFrame:
+    """Entities of worlds `ids` (all when None), in that order, at the batch's last tick (call
+    on the sim thread: `SimLoop.call`). One host copy of qpos and qvel.
 
     Values are the engine's own state (float32 on MuJoCo Warp, float64 on native MuJoCo), so
     a written value reads back as the engine holds it.
     """
     table = entity_table(batch.robot.mjm)
     qpos, qvel = batch.qpos(), batch.qvel()
-    rows = []
-    for w in worlds:
-        entities = []
-        for e, name in enumerate(table.names):
-            p, v = (
-                qpos[w, table.qpos[e] : table.qpos[e] + 7],
-                qvel[w, table.qvel[e] : table.qvel[e] + 6],
-            )
-            entities.append(
-                {
-                    "name": name,
-                    "position": p[:3].tolist(),
-                    "orientation": p[3:].tolist(),
-                    "linear": v[:3].tolist(),
-                    "angular": v[3:].tolist(),
-                }
-            )
-        rows.append({"world": int(w), "entities": entities})
+    rows = np.arange(qpos.shape[0]) if ids is None else np.asarray(ids, dtype=np.int64)
+    pose = qpos[rows][:, table.qpos[:, None] + np.arange(7)]  # (k, ne, 7)
+    twist = qvel[rows][:, table.qvel[:, None] + np.arange(6)]  # (k, ne, 6)
+    return EntityFrame(
+        names=table.names,
+        worlds=rows,
+        position=np.ascontiguousarray(pose[..., :3]),
+        orientation=np.ascontiguousarray(pose[..., 3:]),
+        linear=np.ascontiguousarray(twist[..., :3]),
+        angular=np.ascontiguousarray(twist[..., 3:]),
+    )
+
+
+def read(batch: Batch, worlds: Sequence[int]) -> dict[str, Any]:
+    """Entities of `worlds` at the batch's last tick, as GET /v1/worlds/{w}/entities answers
+    (sim thread only, as `read_frame`)."""
+    frame = read_frame(batch, worlds)
+    fields = ("position", "orientation", "linear", "angular")
+    rows = [
+        {
+            "world": int(w),
+            "entities": [
+                {"name": name, **{f: getattr(frame, f)[i, e].tolist() for f in fields}}
+                for e, name in enumerate(frame.names)
+            ],
+        }
+        for i, w in enumerate(frame.worlds)
+    ]
     return {"tick": batch.tick, "worlds": rows}
