@@ -39,6 +39,9 @@ FIT_SIZES = ((64, 64), (128, 128), (256, 256))
 FIT_MAX_WORLDS = 1 << 22  # the doubling stops here even when memory is left
 STREAMS = (("realtime", 1), ("realtime", 8), ("fast", 8))  # (mode, client processes)
 # ARMFLEET_BENCH_FITS=0: take the largest fits from the last run's file instead of searching
+# ARMFLEET_BENCH_STREAMS=realtime:8,fast:8: only these streams (mode:clients), to save device time
+# ARMFLEET_BENCH_PYSPY=/path/to/py-spy: while each stream runs, record which of the server's
+#   threads hold the interpreter (py-spy --gil, collapsed stacks) into the --out folder
 FITS_BEFORE = Path(__file__).parent / "results" / "cameras_gpu_cuda.json"
 
 
@@ -286,13 +289,51 @@ def stream(ctx: Context, n: int, mode: str, clients: int, window: float) -> dict
             while readers.frames() < 2 and time.monotonic() < deadline:
                 time.sleep(0.1)
             time.sleep(1.0)
+            spy = _profile(ctx, srv, f"gil_{mode}_{clients}.txt", window)
             out["streaming"] = _window(srv, window, readers, ctx.device)
+            if spy is not None:
+                out["profile"] = _profiled(spy)
         finally:
             out["client"] = readers.close()
     out["whole_messages"] = out["client"]["whole_messages"] and out["client"]["image_bytes"] == [
         w * h * 3
     ]
     return out
+
+
+def _profile(ctx: Context, srv: common.Served, name: str, seconds: float) -> Any:
+    """py-spy recording the server's interpreter holders for `seconds` (ARMFLEET_BENCH_PYSPY)."""
+    spy = os.environ.get("ARMFLEET_BENCH_PYSPY")
+    if not spy:
+        return None
+    path = Path(ctx.out_dir) / name
+    cmd = [spy, "record", "--gil", "--threads", "--rate", "200", "--format", "raw"]
+    cmd += ["--duration", f"{seconds:.0f}", "--pid", str(srv.server.process.pid), "-o", str(path)]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True), path
+
+
+def _profiled(spy: Any) -> dict[str, Any]:
+    """The recording's top frames by samples (where the interpreter went while streaming)."""
+    proc, path = spy
+    try:
+        log = proc.communicate(timeout=60)[0][-500:]
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        log = "py-spy did not finish"
+    leaves: dict[str, int] = {}
+    threads: dict[str, int] = {}
+    total = 0
+    with contextlib.suppress(OSError):
+        for line in Path(path).read_text().splitlines():
+            stack, _, count = line.rpartition(" ")
+            n = int(count)
+            total += n
+            frames = stack.split(";")
+            threads[frames[0]] = threads.get(frames[0], 0) + n
+            for frame in frames[-3:]:  # the innermost frames: what held the interpreter
+                leaves[frame] = leaves.get(frame, 0) + n
+    top = sorted(leaves.items(), key=lambda kv: -kv[1])[:25]
+    return {"file": str(path), "samples": total, "threads": threads, "top": top, "log": log}
 
 
 # -- the largest batch that fits (child processes) ----------------------------------------
@@ -429,7 +470,12 @@ def cameras_gpu(ctx: Context) -> Result:
         ctx.say(f"  renderer alone FAILED: {errors['renderer_alone']}")
     best = min(RATE, alone["render"]["batches_per_s"]) if alone else None
     streams = []
-    for mode, clients in STREAMS:
+    chosen = os.environ.get("ARMFLEET_BENCH_STREAMS")
+    streams_asked = STREAMS
+    if chosen:
+        pairs = (x.partition(":") for x in chosen.split(","))
+        streams_asked = tuple((m, int(c)) for m, _, c in pairs)
+    for mode, clients in streams_asked:
         try:
             s = stream(ctx, n, mode, clients, window)
             s["ratio"] = s["streaming"]["frames_per_s"] / best if best else None

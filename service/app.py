@@ -30,6 +30,7 @@ from service.api import (
     web,
     worlds,
     ws,
+    ws_bulk,
 )
 from service.core import access
 from service.core.errors import ArmfleetError, BadCommand
@@ -176,6 +177,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         leases=lambda: runtime.leases,
     )
     app.add_middleware(CommandCounter, metrics=runtime.metrics)
+    app.add_middleware(ws_bulk.RememberOwner)  # outermost: sees the server's own `send`
     for module in (health, metrics, web):
         app.include_router(module.router)
     for router in runtime.surfaces.routers():  # rosbridge's socket and GET /v1/ros

@@ -144,6 +144,11 @@ class Runtime:
             ("armfleet_camera_images", "images", "camera images drawn (worlds x renders)"),
             ("armfleet_camera_render_seconds", "render_seconds", "wall time spent drawing"),
             (
+                "armfleet_camera_streams_direct",
+                "streams_direct",
+                "camera streams written by a thread of their own, without copies",
+            ),
+            (
                 "armfleet_camera_state_seconds",
                 "state_seconds",
                 "wall time the sim thread spent handing world states to the cameras",
@@ -243,6 +248,9 @@ class Runtime:
         that the service is stopping rather than restarting (uvicorn's own close says 1012)."""
         if self.hub is not None:
             await self.hub.close_all(1001, "service stopping")
+        if self.cameras is not None:
+            for stream in list(self.cameras.streams):
+                await stream.close(1001, "service stopping")
 
     def _restore_at_start(self, batch: Batch, name: str) -> bool:
         """`--restore NAME` before the loop starts; False (and `error` set) if it cannot be.

@@ -14,6 +14,10 @@ With `pull=true` nothing is in flight beyond what was asked: the client sends a 
 (any text) for each picture it wants, and gets the newest at that moment (still at most `rate`
 a second).
 Nothing is drawn while nobody is connected.
+
+Under `armfleet serve` (uvicorn) the socket is taken over once accepted (service/api/ws_bulk.py):
+messages are written by a thread of the socket's own, straight from the drawn pixels, so that
+hundreds of megabytes a second cost the interpreter nothing; elsewhere they go through ASGI.
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
+from service.api import ws_bulk
+from service.api.ws_bulk import BulkSocket
 from service.core import access, camera_wire
 from service.core.camera_feed import CameraFeed
 from service.core.errors import ArmfleetError
@@ -63,25 +69,58 @@ async def camera_socket(
         ids = parse_worlds(worlds, feed.loop.batch.nworld)
     except ArmfleetError as exc:
         return await ws.close(code=_CLOSE_POLICY, reason=str(exc)[:120])
+    link: BulkSocket | _AsgiSocket | None = ws_bulk.take_over(ws.scope)
+    if link is None:
+        link = _AsgiSocket(ws)
+    else:
+        feed.streams_direct += 1
+    feed.streams.add(link)
     wanted = asyncio.Semaphore(0) if pull else None
-    sender = asyncio.create_task(_send(ws, feed, ids, camera, image, fmt, quality, rate, wanted))
+    sender = asyncio.create_task(_send(link, feed, ids, camera, image, fmt, quality, rate, wanted))
     try:
-        while True:  # pull requests, and to notice the client leaving
-            message = await ws.receive()
-            if message["type"] == "websocket.disconnect":
-                break
-            if wanted is not None and message.get("text") is not None:
+        while await link.receive() is not None:  # pull requests; None: the client left
+            if wanted is not None:
                 wanted.release()
-    except (WebSocketDisconnect, RuntimeError):
-        pass
     finally:
+        feed.streams.discard(link)
         sender.cancel()
         with contextlib.suppress(BaseException):
             await sender
+        await link.finish()
+
+
+class _AsgiSocket:
+    """BulkSocket's calls on the ASGI socket, where the server's cannot be taken over: each
+    message is joined into bytes and sent through the server (copies that a stream of
+    hundreds of megabytes a second cannot afford, but every ASGI server can do it)."""
+
+    def __init__(self, ws: WebSocket) -> None:
+        self._ws = ws
+
+    async def send(self, parts: list[bytes | memoryview]) -> None:
+        await self._ws.send_bytes(b"".join(parts))
+
+    async def receive(self) -> str | None:
+        try:
+            while True:
+                message = await self._ws.receive()
+                if message["type"] == "websocket.disconnect":
+                    return None
+                if message.get("text") is not None:
+                    return message["text"]
+        except (WebSocketDisconnect, RuntimeError):
+            return None
+
+    async def close(self, code: int = 1000, reason: str = "") -> None:
+        with contextlib.suppress(Exception):
+            await self._ws.close(code=code, reason=reason)
+
+    async def finish(self) -> None:
+        pass
 
 
 async def _send(
-    ws: WebSocket,
+    link: BulkSocket | _AsgiSocket,
     feed: CameraFeed,
     ids: object,
     camera: str,
@@ -99,12 +138,12 @@ async def _send(
     waits beyond the socket."""
     period = 1.0 / rate
     next_at = math.ceil(time.monotonic() / period) * period
-    ahead: asyncio.Task[bytes] | None = None
+    ahead: asyncio.Task[list[bytes | memoryview]] | None = None
 
-    async def draw(start: float) -> bytes:
+    async def draw(start: float) -> list[bytes | memoryview]:
         await asyncio.sleep(max(0.0, start - time.monotonic()))
         shot = await feed.shoot_async(ids, camera)  # type: ignore[arg-type]
-        return await asyncio.to_thread(camera_wire.pack, shot, image, fmt, quality)
+        return await asyncio.to_thread(camera_wire.pack_parts, shot, image, fmt, quality)
 
     def after(at: float) -> float:
         """The grid instant after `at`, skipping those already past (late: no burst)."""
@@ -119,7 +158,7 @@ async def _send(
                 message = await job
             except ArmfleetError as exc:  # warming up: say so and try again a period later
                 if exc.status != 503:
-                    await ws.close(code=_CLOSE_POLICY, reason=str(exc)[:120])
+                    await link.close(_CLOSE_POLICY, str(exc)[:120])
                     return
                 if wanted is not None:
                     wanted.release()  # still wanted
@@ -128,7 +167,7 @@ async def _send(
             next_at = after(next_at)
             if wanted is None:
                 ahead = asyncio.create_task(draw(next_at))
-            await ws.send_bytes(message)  # waits while the reader is slow: nothing piles up
+            await link.send(message)  # waits while the reader is slow: nothing piles up
     finally:
         if ahead is not None:
             ahead.cancel()

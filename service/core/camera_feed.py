@@ -78,6 +78,8 @@ class CameraFeed:
         self.render_seconds = 0.0  # wall time spent drawing
         self.state_seconds = 0.0  # wall time the loop's thread spent handing over states
         self.warm_s: float | None = None  # seconds the first draw of every camera took
+        self.streams_direct = 0  # streams whose socket was taken over (service/api/ws_bulk.py)
+        self.streams: set[Any] = set()  # open streams (`async close(code, reason)`): going away
         self.error: str | None = None
         self._lock = threading.Lock()
         self._waiting: dict[str, list[tuple[np.ndarray, concurrent.futures.Future[Shot]]]] = {}

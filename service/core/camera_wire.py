@@ -76,21 +76,26 @@ def encode(pixels: np.ndarray, image: str, fmt: str, quality: int = 90) -> bytes
 
 
 def pack(shot: Shot, image: str, fmt: str, quality: int = 90) -> bytes:
-    """Every world of `shot` in one binary message (layout in the module docstring).
+    """Every world of `shot` in one binary message (layout in the module docstring)."""
+    return b"".join(pack_parts(shot, image, fmt, quality))
 
-    Raw images are the drawn array's bytes as they lie, copied once into the message (16,384
-    64x64 RGB images are 201 MB: a copy per image, or a reordering, would cost more than the
-    drawing); PNG and JPEG are encoded one image at a time."""
+
+def pack_parts(shot: Shot, image: str, fmt: str, quality: int = 90) -> list[bytes | memoryview]:
+    """The message of `pack` as parts to be written one after the other: the magic, length and
+    header, then the images. Raw images are one part, a view of the drawn array's bytes as
+    they lie: 16,384 64x64 RGB images are 201 MB, and a socket that writes the parts as a
+    gather list (service/api/ws_bulk.py) sends them with no copy at all; PNG and JPEG are
+    encoded one image at a time, then joined (they are small)."""
     arr = shot.image(image)
     if fmt == "raw":
         dtype = {"rgb": np.uint8, "depth": "<f4", "seg": "<i4"}[image]
         per = int(np.prod(arr.shape[1:]))
         flat = np.ascontiguousarray(arr, dtype=dtype).reshape(len(shot.worlds), per)
-        parts: list[bytes | memoryview] = [memoryview(flat).cast("B")]
+        body: bytes | memoryview = memoryview(flat).cast("B")
         sizes = [flat.shape[1] * flat.itemsize] * len(shot.worlds)
     else:
-        parts = [encode(arr[i], image, fmt, quality) for i in range(len(shot.worlds))]
-        sizes = [len(p) for p in parts]
+        encoded = [encode(arr[i], image, fmt, quality) for i in range(len(shot.worlds))]
+        body, sizes = b"".join(encoded), [len(p) for p in encoded]
     header = {
         "tick": shot.tick,
         "camera": shot.camera.name,
@@ -103,4 +108,4 @@ def pack(shot: Shot, image: str, fmt: str, quality: int = 90) -> bytes:
         "sizes": sizes,
     }
     head = orjson.dumps(header)
-    return b"".join([MAGIC, struct.pack("<I", len(head)), head, *parts])
+    return [MAGIC + struct.pack("<I", len(head)) + head, body]

@@ -1,0 +1,117 @@
+"""Camera streams on a taken-over socket (service/api/ws_bulk.py), against a real server.
+
+The websockets library's own client judges the protocol: whole messages, pings answered,
+permessage-deflate negotiated, pull requests read, a client's protocol error closed with the
+library's code; and the service's stop closes the stream with 1001. The frame header is
+judged by the library's own frame parser.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+
+import httpx
+import pytest
+from websockets.exceptions import ConnectionClosed
+from websockets.frames import Frame, Opcode
+from websockets.streams import StreamReader
+from websockets.sync.client import connect
+
+from clients.images import unpack
+from clients.testing import Server, serve
+from service.api.ws_bulk import frame_header
+from tests.conftest import wait_for
+
+RAW = "camera=wrist&worlds=0-3&rate=20&format=raw"
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
+    with serve(worlds=4, log_dir=tmp_path_factory.mktemp("s")) as s:
+        wait_for(lambda: httpx.get(f"{s.url}/v1/cameras").json()["ready"], "cameras", 300)
+        yield s
+
+
+def _metric(server: Server, name: str) -> float:
+    text = httpx.get(f"{server.url}/metrics").text
+    return float(next(x for x in text.splitlines() if x.startswith(name + " ")).split()[1])
+
+
+@pytest.mark.parametrize("length", [0, 1, 125, 126, 65535, 65536, 201_326_592])
+def test_frame_header_is_read_by_the_websockets_parser(length: int) -> None:
+    reader = StreamReader()
+    reader.feed_data(frame_header(length))
+    parse = Frame.parse(reader.read_exact, mask=False)
+    with pytest.raises(StopIteration) as got:  # the header alone: the parser wants the payload
+        while True:
+            next(parse)
+            if len(reader.buffer) == 0:
+                reader.feed_data(b"\0" * length)
+    frame = got.value.value
+    assert frame.opcode is Opcode.BINARY and frame.fin and len(frame.data) == length
+
+
+@pytest.mark.parametrize("compression", [None, "deflate"])
+def test_stream_is_written_directly_and_answers_pings(server: Server, compression) -> None:
+    before = _metric(server, "armfleet_camera_streams_direct_total")
+    with connect(f"{server.ws_url}/v1/ws/cameras?{RAW}", compression=compression) as ws:
+        got = [unpack(ws.recv(timeout=30)) for _ in range(6)]
+        assert ws.ping().wait(10)  # answered by the taken-over socket, between messages
+        got.append(unpack(ws.recv(timeout=30)))
+    assert _metric(server, "armfleet_camera_streams_direct_total") == before + 1
+    ticks = [h["tick"] for h, _ in got]
+    assert ticks == sorted(ticks) and ticks[-1] > ticks[0]
+    for header, images in got:
+        assert header["worlds"] == [0, 1, 2, 3]
+        assert [len(x) for x in images] == [header["width"] * header["height"] * 3] * 4
+
+
+def test_pull_requests_are_read_from_the_taken_over_socket(server: Server) -> None:
+    url = f"{server.ws_url}/v1/ws/cameras?camera=wrist&worlds=1&rate=30&pull=true&format=png"
+    with connect(url) as ws:
+        ticks = []
+        for _ in range(3):
+            ws.send("next")
+            ticks.append(unpack(ws.recv(timeout=30))[0]["tick"])
+        with pytest.raises(TimeoutError):  # nothing unasked
+            ws.recv(timeout=1.0)
+    assert ticks == sorted(ticks)
+
+
+def test_a_client_that_leaves_stops_the_drawing(server: Server) -> None:
+    with connect(f"{server.ws_url}/v1/ws/cameras?{RAW}") as ws:
+        ws.recv(timeout=30)
+    time.sleep(0.5)
+    before = _metric(server, "armfleet_camera_renders_total")
+    time.sleep(1.0)
+    assert _metric(server, "armfleet_camera_renders_total") == before
+
+
+def test_a_client_breaking_the_protocol_is_closed_and_others_go_on(server: Server) -> None:
+    url = f"{server.ws_url}/v1/ws/cameras?{RAW}"
+    with connect(url, max_size=None) as other, connect(url, max_size=None) as bad:
+        other.recv(timeout=30)
+        bad.recv(timeout=30)
+        bad.send(b"x" * (1 << 17))  # over what a camera socket's client may send
+        with pytest.raises(ConnectionClosed):
+            while True:
+                bad.recv(timeout=10)
+        assert bad.close_code == 1009  # message too big: the websockets library's answer
+        ticks = [unpack(other.recv(timeout=30))[0]["tick"] for _ in range(3)]
+        assert ticks == sorted(ticks)
+
+
+def test_stopping_the_service_closes_the_stream_with_1001(tmp_path) -> None:
+    with serve(worlds=2, log_dir=tmp_path) as srv:
+        wait_for(lambda: httpx.get(f"{srv.url}/v1/cameras").json()["ready"], "cameras", 300)
+        url = f"{srv.ws_url}/v1/ws/cameras?camera=wrist&worlds=0-1&rate=30&format=raw"
+        with connect(url) as ws:
+            ws.recv(timeout=30)
+            srv.process.send_signal(signal.SIGTERM)
+            with pytest.raises(ConnectionClosed):
+                while True:
+                    ws.recv(timeout=10)
+            assert ws.close_code == 1001, srv.log()[-2000:]
+        srv.process.wait(timeout=30)
+        assert "Traceback" not in srv.log()
