@@ -120,7 +120,10 @@ def _device_rates(mjm: Any, spec: Any, n: int, device: str, seconds: float) -> d
 
 
 def _service_renderer_rate(mjm: Any, spec: Any, n: int, device: str, seconds: float) -> dict:
-    """Batches a second of the service's BatchRenderer.render: state in, pixels out to host."""
+    """Batches a second of the service's BatchRenderer: state in, pixels out to the host, one
+    picture at a time, and pipelined as the camera feed runs it (the next picture launched
+    before this one's pixels are waited for); and whether the pipelined pictures are the plain
+    path's, byte for byte (every world posed apart, so a mix-up of worlds or buffers shows)."""
     import numpy as np
 
     from service import heap
@@ -128,9 +131,25 @@ def _service_renderer_rate(mjm: Any, spec: Any, n: int, device: str, seconds: fl
 
     heap.keep_large_blocks()  # as `armfleet serve` does
     renderer = BatchRenderer(mjm, [spec], n, device)
+    rng = np.random.default_rng(7)
     qpos = np.tile(mjm.qpos0, (n, 1))
-    renderer.render(qpos, CAMERA)
-    return _rate(common.time_calls(lambda: renderer.render(qpos, CAMERA), seconds))
+    qpos[:, :6] += rng.uniform(-0.3, 0.3, (n, 6))
+    plain = renderer._render_all(qpos, spec).rgb
+    first = renderer.launch(qpos, CAMERA)
+    second = renderer.launch(qpos[::-1].copy(), CAMERA)  # into the other buffer, meanwhile
+    same = bool(np.array_equal(first.result().rgb, plain))
+    same = same and bool(np.array_equal(second.result().rgb, plain[::-1]))
+    out = _rate(common.time_calls(lambda: renderer.render(qpos, CAMERA), seconds))
+    reps, t0, pending = 0, time.perf_counter(), renderer.launch(qpos, CAMERA)
+    while time.perf_counter() - t0 < seconds or reps < 3:
+        following = renderer.launch(qpos, CAMERA)
+        pending.result()
+        pending, reps = following, reps + 1
+    pending.result()
+    took = (time.perf_counter() - t0) / (reps + 1)
+    out["pipelined"] = {"batches_per_s": 1 / took, "ms_per_batch": 1e3 * took}
+    out["pipelined_equals_plain"] = same
+    return out
 
 
 def renderer_alone(device: str, n: int, seconds: float) -> dict[str, Any]:
@@ -434,6 +453,14 @@ def _rows(alone: dict, streams: list[dict], fits: list[dict], n: int) -> list[di
             ("renderer alone: images/s", per_s["render"] * n),
             ("renderer + kinematics, camera poses: batches/s", per_s["picture"]),
             ("service's renderer (state in, pixels out): batches/s", per_s["service"]),
+            (
+                "service's renderer, pipelined: batches/s",
+                alone["service"].get("pipelined", {}).get("batches_per_s"),
+            ),
+            (
+                "pipelined pictures equal the plain path's",
+                alone["service"].get("pipelined_equals_plain"),
+            ),
         ]
     for s in streams:
         st, how = s["streaming"], f"{s['mode']}, {s['clients']} client(s)"

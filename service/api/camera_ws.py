@@ -141,8 +141,7 @@ async def _send(
     ahead: asyncio.Task[list[bytes | memoryview]] | None = None
 
     async def draw(start: float) -> list[bytes | memoryview]:
-        await asyncio.sleep(max(0.0, start - time.monotonic()))
-        shot = await feed.shoot_async(ids, camera)  # type: ignore[arg-type]
+        shot = await feed.shoot_async(ids, camera, at=start)  # type: ignore[arg-type]
         return await asyncio.to_thread(camera_wire.pack_parts, shot, image, fmt, quality)
 
     def after(at: float) -> float:

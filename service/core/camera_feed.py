@@ -41,6 +41,10 @@ class ImageRenderer(Protocol):
         """An object with `rgb`, `depth` and `seg` arrays (None for an output not drawn)."""
         ...
 
+    def launch(self, qpos: np.ndarray, camera: str) -> Any:
+        """`render`, started: an object whose `result()` waits for what `render` returns."""
+        ...
+
 
 @dataclass(frozen=True)
 class Shot:
@@ -82,8 +86,14 @@ class CameraFeed:
         self.streams: set[Any] = set()  # open streams (`async close(code, reason)`): going away
         self.error: str | None = None
         self._lock = threading.Lock()
-        self._waiting: dict[str, list[tuple[np.ndarray, concurrent.futures.Future[Shot]]]] = {}
+        # requests waiting for their state, by (camera, instant named or None)
+        self._waiting: dict[
+            tuple[str, float | None], list[tuple[np.ndarray, concurrent.futures.Future[Shot]]]
+        ] = {}
         self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="armfleet-render")
+        self._collect = concurrent.futures.ThreadPoolExecutor(
+            1, thread_name_prefix="armfleet-pixels"
+        )
         self._renderer = self._pool.submit(self._build, build)  # at start, off every hot path
 
     def _build(self, build: Callable[[], ImageRenderer]) -> ImageRenderer:
@@ -127,29 +137,63 @@ class CameraFeed:
         state hand-over and one render of the worlds they ask between them, each request then
         given its own worlds (eight readers of a 2,048-world share each cost one render of
         16,384 worlds, not eight renders of 2,048)."""
-        spec = self.spec(camera)
+        out, first = self._enqueue(worlds, camera, (camera, None))
+        if first:  # the others ride along with this one's hand-over
+            self._hand_over((camera, None))
+        return out
+
+    async def shoot_async(self, worlds: np.ndarray, camera: str, at: float | None = None) -> Shot:
+        """`shoot` from the event loop. With `at` (a `time.monotonic()` instant still ahead),
+        the picture shows the first tick boundary after `at`, and every request naming the
+        same camera and instant shares its render: one timer on the event loop hands their
+        state over. Naming the instant is what makes streams meet: readers that each asked
+        "now" at one instant reached the loop a little apart, often on either side of a tick
+        boundary, and were drawn apart."""
+        if at is None or at <= time.monotonic():
+            return await asyncio.wrap_future(self.shoot(worlds, camera))
+        key = (camera, at)
+        out, first = self._enqueue(worlds, camera, key)
+        if first:
+            delay = max(0.0, at - time.monotonic())
+            asyncio.get_running_loop().call_later(delay, self._hand_over, key)
+        return await asyncio.wrap_future(out)
+
+    def _enqueue(
+        self, worlds: np.ndarray, camera: str, key: tuple[str, float | None]
+    ) -> tuple[concurrent.futures.Future[Shot], bool]:
+        """A request in the group `key`; True when it is the group's first (it hands over)."""
+        self.spec(camera)
         if not isinstance(self.loop.batch, Renderable):
             raise Conflict("this engine cannot hand its state to the cameras", "camera")
         if not self._renderer.done() or self._renderer.exception() is not None:
             raise Unavailable(self.error or "the cameras are starting (compiling kernels)")
         out: concurrent.futures.Future[Shot] = concurrent.futures.Future()
         with self._lock:
-            group = self._waiting.setdefault(camera, [])
+            group = self._waiting.setdefault(key, [])
             group.append((np.asarray(worlds, dtype=np.int64), out))
-            first = len(group) == 1
-        if first:  # the others ride along with this one's hand-over
-            taken = self.loop.call(lambda batch: self._take(batch, camera))
-            taken.add_done_callback(lambda got: self._drawn_later(got, spec))
-        return out
+            return out, len(group) == 1
 
-    def _take(self, batch: Batch, camera: str) -> tuple[int, np.ndarray, np.ndarray, list] | None:
+    def _hand_over(self, key: tuple[str, float | None]) -> None:
+        """Ask the loop for the state of the worlds waiting under `key` (camera, instant)."""
+        spec = self.specs[key[0]]
+        taken = self.loop.call(lambda batch: self._take(batch, key))
+        taken.add_done_callback(lambda got: self._drawn_later(got, key, spec))
+
+    def _take(
+        self, batch: Batch, key: tuple[str, float | None]
+    ) -> tuple[int, np.ndarray, np.ndarray, list] | None:
         """On the loop's thread: the state of every world the waiting requests ask (None, and
         every request failed, when the engine cannot hand it over)."""
         t0 = time.perf_counter()
         with self._lock:
-            group = self._waiting.pop(camera)
+            group = self._waiting.pop(key, [])
+        if not group:
+            return None
         try:
-            ids = np.unique(np.concatenate([g[0] for g in group]))
+            parts = [g[0] for g in group]
+            ids = parts[0] if len(parts) == 1 else np.concatenate(parts)
+            if len(ids) > 1 and not np.all(ids[1:] > ids[:-1]):  # sorted and distinct: as is
+                ids = np.unique(ids)
             assert isinstance(batch, Renderable)
             state = batch.tick, ids, batch.render_state(ids), group
         except Exception as exc:
@@ -160,10 +204,12 @@ class CameraFeed:
             self.state_seconds += time.perf_counter() - t0
         return state
 
-    def _drawn_later(self, got: concurrent.futures.Future, spec: CameraSpec) -> None:
+    def _drawn_later(
+        self, got: concurrent.futures.Future, key: tuple[str, float | None], spec: CameraSpec
+    ) -> None:
         if got.exception() is not None:  # the loop never ran the hand-over (stopping)
             with self._lock:
-                group = self._waiting.pop(spec.name, [])
+                group = self._waiting.pop(key, [])
             for _, out in group:
                 _fail(out, got.exception())  # type: ignore[arg-type]
             return
@@ -175,9 +221,6 @@ class CameraFeed:
             for _, out in got.result()[3]:
                 _fail(out, Unavailable(f"cameras stopped: {exc}"))
 
-    async def shoot_async(self, worlds: np.ndarray, camera: str) -> Shot:
-        return await asyncio.wrap_future(self.shoot(worlds, camera))
-
     def _draw(
         self,
         tick: int,
@@ -186,12 +229,32 @@ class CameraFeed:
         group: list[tuple[np.ndarray, concurrent.futures.Future[Shot]]],
         spec: CameraSpec,
     ) -> None:
+        """On the render thread: start the drawing, and hand the rest (waiting for the pixels
+        to reach the host) to the collecting thread, so that the next picture's drawing is
+        queued on the device while this one's pixels come over."""
         group = [(w, out) for w, out in group if out.set_running_or_notify_cancel()]
         if not group:
             return
+        t0 = time.perf_counter()
         try:
-            t0 = time.perf_counter()
-            images = self._renderer.result().render(qpos, spec.name)
+            pending = self._renderer.result().launch(qpos, spec.name)
+        except BaseException as exc:
+            for _, out in group:
+                out.set_exception(exc)
+            return
+        self._collect.submit(self._collected, t0, tick, ids, pending, group, spec)
+
+    def _collected(
+        self,
+        t0: float,
+        tick: int,
+        ids: np.ndarray,
+        pending: Any,
+        group: list[tuple[np.ndarray, concurrent.futures.Future[Shot]]],
+        spec: CameraSpec,
+    ) -> None:
+        try:
+            images = pending.result()
             took = time.perf_counter() - t0
             with self._lock:
                 self.renders += 1
@@ -209,6 +272,7 @@ class CameraFeed:
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
+        self._collect.shutdown(wait=True, cancel_futures=True)
 
 
 def _fail(out: concurrent.futures.Future[Shot], exc: BaseException) -> None:
