@@ -104,9 +104,9 @@ def test_pull_sends_one_fresh_picture_per_request_and_nothing_else(server: Serve
 
 
 def test_readers_of_one_camera_at_one_rate_share_renders(server: Server) -> None:
-    """Three sockets, each asking its own world of the wrist camera at 10 Hz: their pictures
-    fall due at the same instants (the rate's shared grid), so the feed draws them together;
-    each still gets only its own world, at one tick per picture."""
+    """Three sockets, each asking its own world of the wrist camera at 10 Hz: one clock draws
+    them (service/api/camera_clock.py), one render per instant for all three; each still gets
+    only its own world, at one tick per picture."""
     urls = [
         f"{server.ws_url}/v1/ws/cameras?camera=wrist&worlds={w}&rate=10&format=raw"
         for w in (0, 2, 3)
@@ -123,4 +123,6 @@ def test_readers_of_one_camera_at_one_rate_share_renders(server: Server) -> None
     for w, headers in got.items():
         assert all(h["worlds"] == [w] for h in headers)
     messages = sum(len(h) for h in got.values())
-    assert renders <= 0.7 * messages, (renders, messages)  # alone, each message is a render
+    # alone, each message is a render (1.0); together a third, give or take an instant that a
+    # reader of a loaded box missed
+    assert renders <= 0.5 * messages, (renders, messages)

@@ -4,12 +4,13 @@
 
 Each binary message is one render of every listed world at one tick, laid out as
 service/core/camera_wire.py's `pack` (header JSON with `tick`, `worlds`, sizes; then the
-images). Pictures are drawn at the instants of a grid of the rate shared by every socket, so
-readers of one camera share renders. Newest only: the next picture is drawn while the last
-one is being sent, and no other until that send is done, so a slow reader holds drawing back
-instead of piling images up in the service (at most one message waits beyond what the
-socket's buffers hold); a reader that keeps up gets `rate` a second (fewer when drawing or
-sending takes longer than a period).
+images). Pictures are drawn at the instants of the rate's grid by one clock per camera and rate
+(service/api/camera_clock.py): every reader of that camera at that rate ready for a picture is
+in the same render, and gets its own worlds of it. Newest only: the next picture is drawn
+while the last one is being sent, and no other until that send is done, so a slow reader
+holds its own drawing back instead of piling images up in the service (at most one message
+waits beyond what the socket's buffers hold); a reader that keeps up gets `rate` a second
+(fewer when drawing or sending takes longer than a period).
 With `pull=true` nothing is in flight beyond what was asked: the client sends a text message
 (any text) for each picture it wants, and gets the newest at that moment (still at most `rate`
 a second).
@@ -24,13 +25,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import math
-import time
 from typing import Annotated
 
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
 from service.api import ws_bulk
+from service.api.camera_clock import Reader, clock_for
 from service.api.ws_bulk import BulkSocket
 from service.core import access, camera_wire
 from service.core.camera_feed import CameraFeed
@@ -75,13 +75,17 @@ async def camera_socket(
     else:
         feed.streams_direct += 1
     feed.streams.add(link)
-    wanted = asyncio.Semaphore(0) if pull else None
-    sender = asyncio.create_task(_send(link, feed, ids, camera, image, fmt, quality, rate, wanted))
+    reader = Reader(ids, pull)
+    clock = clock_for(feed, camera, rate)
+    clock.join(reader)
+    sender = asyncio.create_task(_send(link, reader, image, fmt, quality))
     try:
         while await link.receive() is not None:  # pull requests; None: the client left
-            if wanted is not None:
-                wanted.release()
+            if pull:
+                reader.ask()
+                clock.poke()
     finally:
+        clock.leave(reader)
         feed.streams.discard(link)
         sender.cancel()
         with contextlib.suppress(BaseException):
@@ -120,54 +124,20 @@ class _AsgiSocket:
 
 
 async def _send(
-    link: BulkSocket | _AsgiSocket,
-    feed: CameraFeed,
-    ids: object,
-    camera: str,
-    image: str,
-    fmt: str,
-    quality: int,
-    rate: float,
-    wanted: asyncio.Semaphore | None,
+    link: BulkSocket | _AsgiSocket, reader: Reader, image: str, fmt: str, quality: int
 ) -> None:
-    """Draw a picture at each instant of the rate's grid (multiples of the period on the
-    monotonic clock, the same for every socket of the process) and send it once drawn. The
-    shared grid makes readers of one camera at one rate ask at the same instants, so the feed
-    draws them in one render; in push mode the next picture is drawn while this one is sent
-    (a send that takes most of a period does not halve the rate), and at most one message
-    waits beyond the socket."""
-    period = 1.0 / rate
-    next_at = math.ceil(time.monotonic() / period) * period
-    ahead: asyncio.Task[list[bytes | memoryview]] | None = None
-
-    async def draw(start: float) -> list[bytes | memoryview]:
-        shot = await feed.shoot_async(ids, camera, at=start)  # type: ignore[arg-type]
-        return await asyncio.to_thread(camera_wire.pack_parts, shot, image, fmt, quality)
-
-    def after(at: float) -> float:
-        """The grid instant after `at`, skipping those already past (late: no burst)."""
-        return max(at + period, math.ceil(time.monotonic() / period) * period)
-
-    try:
-        while True:
-            if wanted is not None:
-                await wanted.acquire()
-            job, ahead = ahead or asyncio.create_task(draw(next_at)), None
-            try:
-                message = await job
-            except ArmfleetError as exc:  # warming up: say so and try again a period later
-                if exc.status != 503:
-                    await link.close(_CLOSE_POLICY, str(exc)[:120])
-                    return
-                if wanted is not None:
-                    wanted.release()  # still wanted
-                next_at = after(next_at)
-                continue
-            next_at = after(next_at)
-            if wanted is None:
-                ahead = asyncio.create_task(draw(next_at))
-            await link.send(message)  # waits while the reader is slow: nothing piles up
-    finally:
-        if ahead is not None:
-            ahead.cancel()
-            await asyncio.gather(ahead, return_exceptions=True)
+    """Send each picture the clock draws for this reader (service/api/camera_clock.py): the
+    next one is drawn while this one is packed and sent, and none beyond it, so a slow reader
+    holds back its own drawing and nothing piles up."""
+    while True:
+        try:
+            shot = await reader.take()
+        except ArmfleetError as exc:  # warming up: the clock tries again at its next instant
+            if exc.status != 503:
+                await link.close(_CLOSE_POLICY, str(exc)[:120])
+                return
+            if reader.pull:
+                reader.ask()  # still wanted
+            continue
+        message = await asyncio.to_thread(camera_wire.pack_parts, shot, image, fmt, quality)
+        await link.send(message)  # waits while the reader is slow: nothing piles up

@@ -142,21 +142,8 @@ class CameraFeed:
             self._hand_over((camera, None))
         return out
 
-    async def shoot_async(self, worlds: np.ndarray, camera: str, at: float | None = None) -> Shot:
-        """`shoot` from the event loop. With `at` (a `time.monotonic()` instant still ahead),
-        the picture shows the first tick boundary after `at`, and every request naming the
-        same camera and instant shares its render: one timer on the event loop hands their
-        state over. Naming the instant is what makes streams meet: readers that each asked
-        "now" at one instant reached the loop a little apart, often on either side of a tick
-        boundary, and were drawn apart."""
-        if at is None or at <= time.monotonic():
-            return await asyncio.wrap_future(self.shoot(worlds, camera))
-        key = (camera, at)
-        out, first = self._enqueue(worlds, camera, key)
-        if first:
-            delay = max(0.0, at - time.monotonic())
-            asyncio.get_running_loop().call_later(delay, self._hand_over, key)
-        return await asyncio.wrap_future(out)
+    async def shoot_async(self, worlds: np.ndarray, camera: str) -> Shot:
+        return await asyncio.wrap_future(self.shoot(worlds, camera))
 
     def _enqueue(
         self, worlds: np.ndarray, camera: str, key: tuple[str, float | None]

@@ -1,0 +1,148 @@
+"""CameraClock: one picture clock per camera and rate, shared by every stream reading it.
+
+At each instant of the rate's grid (multiples of the period on the monotonic clock) the clock
+asks the camera feed for ONE picture: the worlds of every reader ready for one, drawn in one
+render at one tick. Each reader then gets its own worlds of it. Readers that are still busy
+(their last picture is being drawn or waits behind the one being sent) skip that instant, so a
+slow reader never makes the others wait and nothing piles up for it: newest only.
+
+Why one clock and not each socket asking at the grid's instants: sockets that each ask "now"
+drift apart as soon as one picture comes late (eight readers ended up on two or three phases
+of the grid and cost two or three renders a picture); a shared clock cannot split.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+import weakref
+from typing import Any
+
+import numpy as np
+
+from service.core.camera_feed import CameraFeed, Shot
+from service.core.errors import ArmfleetError, Unavailable
+
+
+class Reader:
+    """One stream's place on a clock: the worlds it reads and at most one picture ahead of
+    the one it is sending. Pull readers (`pull=True`) are ready only while they have asked."""
+
+    def __init__(self, worlds: np.ndarray, pull: bool) -> None:
+        self.worlds = np.asarray(worlds, dtype=np.int64)
+        self.pull = pull
+        self.asked = 0  # pull: pictures asked and not yet taken into a render
+        self._drawing = False  # a picture of ours is being drawn
+        self._next: Shot | BaseException | None = None  # drawn, not yet taken by the sender
+        self._wake = asyncio.Event()
+
+    def ready(self) -> bool:
+        if self._drawing or self._next is not None:
+            return False
+        return self.asked > 0 if self.pull else True
+
+    def ask(self) -> None:
+        """Pull: one more picture wanted."""
+        self.asked += 1
+
+    async def take(self) -> Shot:
+        """The next picture for this reader (its own worlds); raises what drawing raised."""
+        while self._next is None:
+            self._wake.clear()
+            await self._wake.wait()
+        got, self._next = self._next, None
+        if isinstance(got, BaseException):
+            raise got
+        return got
+
+    def _drawn(self, got: Shot | BaseException) -> None:
+        self._drawing = False
+        self._next = got
+        self._wake.set()
+
+
+class CameraClock:
+    """The clock of one camera at one rate: see the module docstring."""
+
+    def __init__(self, feed: CameraFeed, camera: str, rate: float) -> None:
+        self.feed, self.camera, self.period = feed, camera, 1.0 / rate
+        self.readers: set[Reader] = set()
+        self._task: asyncio.Task[None] | None = None
+        self._wake = asyncio.Event()  # a pull reader asked: no need to wait for the next instant
+
+    def join(self, reader: Reader) -> None:
+        self.readers.add(reader)
+        if self._task is None or self._task.done():
+            self._task = asyncio.create_task(self._run())
+
+    def leave(self, reader: Reader) -> None:
+        self.readers.discard(reader)
+
+    def poke(self) -> None:
+        self._wake.set()
+
+    async def _run(self) -> None:
+        pictures: set[asyncio.Task[None]] = set()
+        try:
+            while self.readers:
+                now = time.monotonic()
+                at = math.ceil(now / self.period) * self.period
+                self._wake.clear()
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._wake.wait(), max(0.0, at - now))
+                    # woken by a pull request: still on the grid (the rate is a ceiling)
+                    await asyncio.sleep(max(0.0, at - time.monotonic()))
+                ready = [r for r in self.readers if r.ready()]
+                if not ready:
+                    continue
+                for r in ready:
+                    r._drawing = True
+                    r.asked = max(0, r.asked - 1)
+                task = asyncio.create_task(self._picture(ready))
+                pictures.add(task)
+                task.add_done_callback(pictures.discard)
+        finally:
+            for task in pictures:
+                task.cancel()
+
+    async def _picture(self, ready: list[Reader]) -> None:
+        """One render of the ready readers' worlds; each reader is handed its own."""
+        parts = [r.worlds for r in ready]
+        ids = parts[0] if len(parts) == 1 else np.unique(np.concatenate(parts))
+        try:
+            shot = await self.feed.shoot_async(ids, self.camera)
+        except ArmfleetError as exc:
+            for r in ready:
+                r._drawn(exc)
+            return
+        except asyncio.CancelledError:
+            for r in ready:
+                r._drawn(Unavailable("the stream stopped"))
+            raise
+        for r in ready:
+            r._drawn(shot if len(ready) == 1 else _own(shot, r.worlds))
+
+
+def _own(shot: Shot, worlds: np.ndarray) -> Shot:
+    """`shot` cut down to `worlds` (a view where they are consecutive rows)."""
+    at = np.searchsorted(shot.worlds, worlds)
+    rows: Any = at
+    if len(at) and at[-1] - at[0] == len(at) - 1 and np.all(np.diff(at) == 1):
+        rows = slice(int(at[0]), int(at[-1]) + 1)
+    arrays = (None if a is None else a[rows] for a in (shot.rgb, shot.depth, shot.seg))
+    return Shot(shot.tick, shot.camera, worlds, *arrays)
+
+
+_CLOCKS: weakref.WeakKeyDictionary[CameraFeed, dict[tuple[str, float], CameraClock]]
+_CLOCKS = weakref.WeakKeyDictionary()
+
+
+def clock_for(feed: CameraFeed, camera: str, rate: float) -> CameraClock:
+    """The clock of `camera` at `rate` of this feed (made when it has no readers)."""
+    clocks = _CLOCKS.setdefault(feed, {})
+    key = (camera, float(rate))
+    if key not in clocks or not clocks[key].readers:
+        clocks[key] = CameraClock(feed, camera, rate)
+    return clocks[key]
