@@ -25,23 +25,32 @@ import numpy as np
 from service.core.camera_feed import CameraFeed, Shot
 from service.core.errors import ArmfleetError, Unavailable
 
+AHEAD = 2  # pictures a push reader may have drawing or waiting beyond the one it sends
+
 
 class Reader:
-    """One stream's place on a clock: the worlds it reads and at most one picture ahead of
-    the one it is sending. Pull readers (`pull=True`) are ready only while they have asked."""
+    """One stream's place on a clock: the worlds it reads, and pictures drawing or drawn for
+    it beyond the one it is sending: at most AHEAD (push; drawing a picture of 16,384 worlds
+    takes longer than a period at 30 Hz, so with one ahead every other instant was missed) or
+    what it asked (pull), and none while a drawn one waits for the sender (a slow reader holds
+    back its own drawing). A picture drawn while an older one still waits replaces it: newest
+    only, so a slow reader gets fresh pictures, not a backlog."""
 
     def __init__(self, worlds: np.ndarray, pull: bool) -> None:
         self.worlds = np.asarray(worlds, dtype=np.int64)
         self.pull = pull
         self.asked = 0  # pull: pictures asked and not yet taken into a render
-        self._drawing = False  # a picture of ours is being drawn
+        self._drawing = 0  # pictures of ours being drawn
+        self._newest = -1  # the tick of the newest picture handed to the sender or waiting
         self._next: Shot | BaseException | None = None  # drawn, not yet taken by the sender
         self._wake = asyncio.Event()
 
     def ready(self) -> bool:
-        if self._drawing or self._next is not None:
+        if self._next is not None:  # the sender has not taken the last one: it is busy
             return False
-        return self.asked > 0 if self.pull else True
+        if self.pull:
+            return self.asked > 0 and self._drawing == 0
+        return self._drawing < AHEAD
 
     def ask(self) -> None:
         """Pull: one more picture wanted."""
@@ -58,8 +67,12 @@ class Reader:
         return got
 
     def _drawn(self, got: Shot | BaseException) -> None:
-        self._drawing = False
-        self._next = got
+        self._drawing -= 1
+        if isinstance(got, Shot) and got.tick <= self._newest:
+            return  # two asks met at one tick boundary: that tick is on its way already
+        if isinstance(got, Shot):
+            self._newest = got.tick
+        self._next = got  # the feed draws in the order asked: a later one is newer
         self._wake.set()
 
 
@@ -98,7 +111,7 @@ class CameraClock:
                 if not ready:
                     continue
                 for r in ready:
-                    r._drawing = True
+                    r._drawing += 1
                     r.asked = max(0, r.asked - 1)
                 task = asyncio.create_task(self._picture(ready))
                 pictures.add(task)
