@@ -126,3 +126,23 @@ def test_readers_of_one_camera_at_one_rate_share_renders(server: Server) -> None
     # alone, each message is a render (1.0); together a third, give or take an instant that a
     # reader of a loaded box missed
     assert renders <= 0.5 * messages, (renders, messages)
+
+
+def test_a_clock_draws_its_readers_worlds_once_and_hands_each_its_own() -> None:
+    """The union the clock asks for, and each reader's rows in it: readers of ranges in order
+    get slices (views, no search); overlapping readers are found among the distinct worlds."""
+    from service.api.camera_clock import Reader, _own, _union
+    from service.core.camera_feed import Shot
+    from service.core.cameras import CameraSpec
+
+    ranges = [Reader(np.arange(0, 4), False), Reader(np.arange(4, 9), False)]
+    ids, rows = _union(ranges)
+    assert ids.tolist() == list(range(9)) and rows == [slice(0, 4), slice(4, 9)]
+    overlapping = [Reader(np.array([1, 5]), False), Reader(np.array([2, 5, 7]), False)]
+    ids, rows = _union(overlapping)
+    assert ids.tolist() == [1, 2, 5, 7] and rows == [None, None]
+    spec = CameraSpec.__new__(CameraSpec)
+    rgb = np.arange(4)[:, None, None, None] * np.ones((4, 2, 2, 3), dtype=np.uint8)
+    shot = Shot(3, spec, ids, rgb, None, None)
+    mine = _own(shot, np.array([2, 7]), None)
+    assert mine.rgb[:, 0, 0, 0].tolist() == [1, 3] and mine.tick == 3

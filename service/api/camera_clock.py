@@ -18,14 +18,13 @@ import contextlib
 import math
 import time
 import weakref
-from typing import Any
 
 import numpy as np
 
 from service.core.camera_feed import CameraFeed, Shot
 from service.core.errors import ArmfleetError, Unavailable
 
-AHEAD = 2  # pictures a push reader may have drawing or waiting beyond the one it sends
+AHEAD = 3  # pictures a push reader may have drawing or waiting beyond the one it sends
 
 
 class Reader:
@@ -122,8 +121,8 @@ class CameraClock:
 
     async def _picture(self, ready: list[Reader]) -> None:
         """One render of the ready readers' worlds; each reader is handed its own."""
-        parts = [r.worlds for r in ready]
-        ids = parts[0] if len(parts) == 1 else np.unique(np.concatenate(parts))
+        ready.sort(key=lambda r: int(r.worlds[0]) if len(r.worlds) else -1)
+        ids, rows = _union(ready)
         try:
             shot = await self.feed.shoot_async(ids, self.camera)
         except ArmfleetError as exc:
@@ -134,16 +133,31 @@ class CameraClock:
             for r in ready:
                 r._drawn(Unavailable("the stream stopped"))
             raise
-        for r in ready:
-            r._drawn(shot if len(ready) == 1 else _own(shot, r.worlds))
+        for r, at in zip(ready, rows, strict=True):
+            r._drawn(shot if len(ready) == 1 else _own(shot, r.worlds, at))
 
 
-def _own(shot: Shot, worlds: np.ndarray) -> Shot:
+def _union(ready: list[Reader]) -> tuple[np.ndarray, list[slice | None]]:
+    """The worlds of every reader, sorted and distinct, and where each reader's worlds lie
+    among them: a slice when the readers' worlds follow each other in order (readers of
+    disjoint ranges, the common case: no search), else None (found by `_own`)."""
+    parts = [r.worlds for r in ready]
+    if len(parts) == 1:
+        return parts[0], [slice(0, len(parts[0]))]
+    ids = np.concatenate(parts)
+    if len(ids) < 2 or bool(np.all(ids[1:] > ids[:-1])):
+        ends = np.cumsum([len(p) for p in parts])
+        return ids, [slice(int(e - len(p)), int(e)) for p, e in zip(parts, ends, strict=True)]
+    return np.unique(ids), [None] * len(parts)
+
+
+def _own(shot: Shot, worlds: np.ndarray, rows: slice | None) -> Shot:
     """`shot` cut down to `worlds` (a view where they are consecutive rows)."""
-    at = np.searchsorted(shot.worlds, worlds)
-    rows: Any = at
-    if len(at) and at[-1] - at[0] == len(at) - 1 and np.all(np.diff(at) == 1):
-        rows = slice(int(at[0]), int(at[-1]) + 1)
+    if rows is None:
+        at = np.searchsorted(shot.worlds, worlds)
+        rows = at  # type: ignore[assignment]
+        if len(at) and at[-1] - at[0] == len(at) - 1 and np.all(np.diff(at) == 1):
+            rows = slice(int(at[0]), int(at[-1]) + 1)
     arrays = (None if a is None else a[rows] for a in (shot.rgb, shot.depth, shot.seg))
     return Shot(shot.tick, shot.camera, worlds, *arrays)
 

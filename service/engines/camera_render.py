@@ -67,7 +67,7 @@ class _HostBuffers:
     most `keep` buffers are made; while all are lent, a picture gets a pageable copy of its
     own, so a slow reader never holds drawing back here."""
 
-    def __init__(self, like: wp.array, keep: int = 6) -> None:
+    def __init__(self, like: wp.array, keep: int = 8) -> None:
         self._like = like
         self._keep = keep
         self._free: list[wp.array] = []
