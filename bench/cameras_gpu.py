@@ -513,10 +513,11 @@ def cameras_gpu(ctx: Context) -> Result:
         except Exception as exc:
             errors[f"stream {mode} {clients}"] = f"{type(exc).__name__}: {exc}"
             ctx.say(f"  {mode} stream FAILED: {errors[f'stream {mode} {clients}']}")
-    fits, fits_from = [], None
+    fits, fits_from, fits_card = [], None, None
     if os.environ.get("ARMFLEET_BENCH_FITS", "1") == "0" and FITS_BEFORE.exists():
         before = json.loads(FITS_BEFORE.read_text())  # the renderer alone did not change
         fits, fits_from = before["fits"], before.get("fits_from") or before["started"]
+        fits_card = before.get("fits_card") or before.get("card")
     for w, h in ctx.pick(FIT_SIZES, FIT_SIZES[:1]) if fits_from is None else ():
         f = largest_fit(ctx.device, w, h, n, ctx.pick(FIT_MAX_WORLDS, 2 * n), ctx.pick(150, 90))
         fits.append(f)
@@ -530,10 +531,10 @@ def cameras_gpu(ctx: Context) -> Result:
         "largest fit: the renderer alone (the service draws at most 2^26 pixels a render)"
     ]
     if fits_from:
-        notes.append(f"largest fit: carried from the run started {fits_from}")
+        notes.append(f"largest fit: carried from the run started {fits_from} on {fits_card}")
     data = dict(card=card, gpu=gpu, worlds=n, size=f"{SIZE[0]}x{SIZE[1]}", rate=RATE)
     data.update(renderer_alone=alone, streams=streams, fits=fits, errors=errors)
-    data["fits_from"] = fits_from
+    data["fits_from"], data["fits_card"] = fits_from, fits_card or card
     return Result(_rows(alone, streams, fits, n), data, notes)
 
 
