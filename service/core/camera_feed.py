@@ -86,10 +86,7 @@ class CameraFeed:
         self.streams: set[Any] = set()  # open streams (`async close(code, reason)`): going away
         self.error: str | None = None
         self._lock = threading.Lock()
-        # requests waiting for their state, by (camera, instant named or None)
-        self._waiting: dict[
-            tuple[str, float | None], list[tuple[np.ndarray, concurrent.futures.Future[Shot]]]
-        ] = {}
+        self._waiting: dict[str, list[tuple[np.ndarray, concurrent.futures.Future[Shot]]]] = {}
         self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="armfleet-render")
         self._collect = concurrent.futures.ThreadPoolExecutor(
             1, thread_name_prefix="armfleet-pixels"
@@ -137,18 +134,19 @@ class CameraFeed:
         state hand-over and one render of the worlds they ask between them, each request then
         given its own worlds (eight readers of a 2,048-world share each cost one render of
         16,384 worlds, not eight renders of 2,048)."""
-        out, first = self._enqueue(worlds, camera, (camera, None))
+        out, first = self._enqueue(worlds, camera)
         if first:  # the others ride along with this one's hand-over
-            self._hand_over((camera, None))
+            self._hand_over(camera)
         return out
 
     async def shoot_async(self, worlds: np.ndarray, camera: str) -> Shot:
         return await asyncio.wrap_future(self.shoot(worlds, camera))
 
     def _enqueue(
-        self, worlds: np.ndarray, camera: str, key: tuple[str, float | None]
+        self, worlds: np.ndarray, camera: str
     ) -> tuple[concurrent.futures.Future[Shot], bool]:
-        """A request in the group `key`; True when it is the group's first (it hands over)."""
+        """A request among those waiting for `camera`; True when it is the first (it hands
+        the state over for all of them)."""
         self.spec(camera)
         if not isinstance(self.loop.batch, Renderable):
             raise Conflict("this engine cannot hand its state to the cameras", "camera")
@@ -156,24 +154,22 @@ class CameraFeed:
             raise Unavailable(self.error or "the cameras are starting (compiling kernels)")
         out: concurrent.futures.Future[Shot] = concurrent.futures.Future()
         with self._lock:
-            group = self._waiting.setdefault(key, [])
+            group = self._waiting.setdefault(camera, [])
             group.append((np.asarray(worlds, dtype=np.int64), out))
             return out, len(group) == 1
 
-    def _hand_over(self, key: tuple[str, float | None]) -> None:
-        """Ask the loop for the state of the worlds waiting under `key` (camera, instant)."""
-        spec = self.specs[key[0]]
-        taken = self.loop.call(lambda batch: self._take(batch, key))
-        taken.add_done_callback(lambda got: self._drawn_later(got, key, spec))
+    def _hand_over(self, camera: str) -> None:
+        """Ask the loop for the state of the worlds waiting for `camera`."""
+        spec = self.specs[camera]
+        taken = self.loop.call(lambda batch: self._take(batch, camera))
+        taken.add_done_callback(lambda got: self._drawn_later(got, spec))
 
-    def _take(
-        self, batch: Batch, key: tuple[str, float | None]
-    ) -> tuple[int, np.ndarray, np.ndarray, list] | None:
+    def _take(self, batch: Batch, camera: str) -> tuple[int, np.ndarray, np.ndarray, list] | None:
         """On the loop's thread: the state of every world the waiting requests ask (None, and
         every request failed, when the engine cannot hand it over)."""
         t0 = time.perf_counter()
         with self._lock:
-            group = self._waiting.pop(key, [])
+            group = self._waiting.pop(camera, [])
         if not group:
             return None
         try:
@@ -191,12 +187,10 @@ class CameraFeed:
             self.state_seconds += time.perf_counter() - t0
         return state
 
-    def _drawn_later(
-        self, got: concurrent.futures.Future, key: tuple[str, float | None], spec: CameraSpec
-    ) -> None:
+    def _drawn_later(self, got: concurrent.futures.Future, spec: CameraSpec) -> None:
         if got.exception() is not None:  # the loop never ran the hand-over (stopping)
             with self._lock:
-                group = self._waiting.pop(key, [])
+                group = self._waiting.pop(spec.name, [])
             for _, out in group:
                 _fail(out, got.exception())  # type: ignore[arg-type]
             return

@@ -84,17 +84,14 @@ class _HostBuffers:
         wp.synchronize_stream(self._like.device.stream)  # asynchronous into pinned memory
         return self.lend(buf, k)
 
-    def borrow(self) -> wp.array | None:
-        """A free buffer shaped as the device array, or None while `keep` are lent."""
-        return self._borrow()
-
     def lend(self, buf: wp.array, k: int) -> np.ndarray:
         """The first k rows of `buf` (filled), given back once no view of them is left."""
         whole = buf.numpy()
         weakref.finalize(whole, self._give_back, buf)
         return whole[:k]
 
-    def _borrow(self) -> wp.array | None:
+    def borrow(self) -> wp.array | None:
+        """A free buffer shaped as the device array, or None while `keep` are lent."""
         with self._lock:
             if self._free:
                 return self._free.pop()
@@ -142,13 +139,8 @@ class _Copying:
         shape: tuple[int, ...],
         rest: tuple[np.ndarray | None, np.ndarray | None],
     ) -> None:
-        self._copied, self._pool, self._buf, self._shape, self._rest = (
-            copied,
-            pool,
-            buf,
-            shape,
-            rest,
-        )
+        self._copied, self._pool, self._buf = copied, pool, buf
+        self._shape, self._rest = shape, rest
 
     def result(self) -> Images:
         wp.synchronize_event(self._copied)
