@@ -131,7 +131,7 @@ def test_readers_of_one_camera_at_one_rate_share_renders(server: Server) -> None
 def test_a_clock_draws_its_readers_worlds_once_and_hands_each_its_own() -> None:
     """The union the clock asks for, and each reader's rows in it: readers of ranges in order
     get slices (views, no search); overlapping readers are found among the distinct worlds."""
-    from service.api.camera_clock import Reader, _own, _union
+    from service.api.camera_clock import Reader, _union
     from service.core.camera_feed import Shot
     from service.core.cameras import CameraSpec
 
@@ -144,5 +144,28 @@ def test_a_clock_draws_its_readers_worlds_once_and_hands_each_its_own() -> None:
     spec = CameraSpec.__new__(CameraSpec)
     rgb = np.arange(4)[:, None, None, None] * np.ones((4, 2, 2, 3), dtype=np.uint8)
     shot = Shot(3, spec, ids, rgb, None, None)
-    mine = _own(shot, np.array([2, 7]), None)
+    mine = shot.only(np.array([2, 7]))
     assert mine.rgb[:, 0, 0, 0].tolist() == [1, 3] and mine.tick == 3
+    assert shot.only(np.array([2, 5]), slice(1, 3)).rgb[:, 0, 0, 0].tolist() == [1, 2]
+
+
+def test_a_tick_is_pushed_once_but_pulled_as_often_as_asked() -> None:
+    """Two pictures of one tick (two asks met at one tick boundary, or a paused service): a
+    push reader is sent it once; a pull reader gets each picture it asked for (dropping one
+    would leave the client waiting for ever)."""
+    from service.api.camera_clock import Reader
+    from service.core.camera_feed import Shot
+    from service.core.cameras import CameraSpec
+
+    shot = Shot(7, CameraSpec.__new__(CameraSpec), np.array([0]), None, None, None)
+    for pull, sent in ((False, 1), (True, 2)):
+        reader, got = Reader(np.array([0]), pull=pull), 0
+        for _ in range(2):
+            reader.ask()
+            assert reader.ready()
+            reader._drawing += 1  # as the clock does when it asks for the picture
+            reader.asked -= 1
+            reader._drawn(shot)
+            if reader._next is not None:  # the sender takes it
+                reader._next, got = None, got + 1
+        assert got == sent, pull

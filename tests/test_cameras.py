@@ -22,7 +22,7 @@ from PIL import Image
 
 from clients.images import unpack
 from clients.testing import Server, serve
-from service.core.camera_feed import _rows
+from service.core.camera_feed import rows_of
 from service.core.robot import load_robot
 from tests.conftest import ROOT, wait_for
 
@@ -235,9 +235,9 @@ def test_requests_at_once_each_get_their_own_worlds(
 
 def test_rows_of_a_request_among_the_drawn_worlds() -> None:
     drawn = np.array([0, 2, 3, 5, 9])
-    assert _rows(drawn, np.array([2, 3, 5])) == slice(1, 4)  # a run: a view, no copy
-    assert list(_rows(drawn, np.array([5, 0]))) == [3, 0]
-    assert list(_rows(drawn, np.array([0, 3]))) == [0, 2]
+    assert rows_of(drawn, np.array([2, 3, 5])) == slice(1, 4)  # a run: a view, no copy
+    assert list(rows_of(drawn, np.array([5, 0]))) == [3, 0]
+    assert list(rows_of(drawn, np.array([0, 3]))) == [0, 2]
 
 
 @pytest.mark.parametrize(

@@ -115,3 +115,15 @@ def test_stopping_the_service_closes_the_stream_with_1001(tmp_path) -> None:
             assert ws.close_code == 1001, srv.log()[-2000:]
         srv.process.wait(timeout=30)
         assert "Traceback" not in srv.log()
+
+
+def test_a_paused_service_answers_every_pull_with_the_tick_it_stands_at(tmp_path) -> None:
+    with serve(worlds=2, mode="paused", log_dir=tmp_path) as srv:
+        wait_for(lambda: httpx.get(f"{srv.url}/v1/cameras").json()["ready"], "cameras", 300)
+        url = f"{srv.ws_url}/v1/ws/cameras?camera=wrist&worlds=0&rate=30&pull=true&format=png"
+        with connect(url) as ws:
+            ticks = []
+            for _ in range(3):
+                ws.send("next")
+                ticks.append(unpack(ws.recv(timeout=30))[0]["tick"])
+    assert ticks == [0, 0, 0]  # nothing moves, and still every ask is answered

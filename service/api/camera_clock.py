@@ -33,7 +33,8 @@ class Reader:
     takes longer than a period at 30 Hz, so with one ahead every other instant was missed) or
     what it asked (pull), and none while a drawn one waits for the sender (a slow reader holds
     back its own drawing). A picture drawn while an older one still waits replaces it: newest
-    only, so a slow reader gets fresh pictures, not a backlog."""
+    only, so a slow reader gets fresh pictures, not a backlog; a push reader never gets the
+    same tick twice."""
 
     def __init__(self, worlds: np.ndarray, pull: bool) -> None:
         self.worlds = np.asarray(worlds, dtype=np.int64)
@@ -67,8 +68,9 @@ class Reader:
 
     def _drawn(self, got: Shot | BaseException) -> None:
         self._drawing -= 1
-        if isinstance(got, Shot) and got.tick <= self._newest:
+        if not self.pull and isinstance(got, Shot) and got.tick <= self._newest:
             return  # two asks met at one tick boundary: that tick is on its way already
+        # (a pull reader gets what it asked for, even the same tick: paused, nothing moves)
         if isinstance(got, Shot):
             self._newest = got.tick
         self._next = got  # the feed draws in the order asked: a later one is newer
@@ -134,13 +136,13 @@ class CameraClock:
                 r._drawn(Unavailable("the stream stopped"))
             raise
         for r, at in zip(ready, rows, strict=True):
-            r._drawn(shot if len(ready) == 1 else _own(shot, r.worlds, at))
+            r._drawn(shot if len(ready) == 1 else shot.only(r.worlds, at))
 
 
 def _union(ready: list[Reader]) -> tuple[np.ndarray, list[slice | None]]:
     """The worlds of every reader, sorted and distinct, and where each reader's worlds lie
     among them: a slice when the readers' worlds follow each other in order (readers of
-    disjoint ranges, the common case: no search), else None (found by `_own`)."""
+    disjoint ranges, the common case: no search), else None (found by `Shot.only`)."""
     parts = [r.worlds for r in ready]
     if len(parts) == 1:
         return parts[0], [slice(0, len(parts[0]))]
@@ -149,17 +151,6 @@ def _union(ready: list[Reader]) -> tuple[np.ndarray, list[slice | None]]:
         ends = np.cumsum([len(p) for p in parts])
         return ids, [slice(int(e - len(p)), int(e)) for p, e in zip(parts, ends, strict=True)]
     return np.unique(ids), [None] * len(parts)
-
-
-def _own(shot: Shot, worlds: np.ndarray, rows: slice | None) -> Shot:
-    """`shot` cut down to `worlds` (a view where they are consecutive rows)."""
-    if rows is None:
-        at = np.searchsorted(shot.worlds, worlds)
-        rows = at  # type: ignore[assignment]
-        if len(at) and at[-1] - at[0] == len(at) - 1 and np.all(np.diff(at) == 1):
-            rows = slice(int(at[0]), int(at[-1]) + 1)
-    arrays = (None if a is None else a[rows] for a in (shot.rgb, shot.depth, shot.seg))
-    return Shot(shot.tick, shot.camera, worlds, *arrays)
 
 
 _CLOCKS: weakref.WeakKeyDictionary[CameraFeed, dict[tuple[str, float], CameraClock]]

@@ -68,6 +68,13 @@ class Shot:
             )
         return arr
 
+    def only(self, worlds: np.ndarray, rows: slice | np.ndarray | None = None) -> Shot:
+        """This picture cut down to `worlds` (among this one's); `rows`, where they lie, is
+        found when not given. A view where they are consecutive rows."""
+        at = rows_of(self.worlds, worlds) if rows is None else rows
+        cut = (None if a is None else a[at] for a in (self.rgb, self.depth, self.seg))
+        return Shot(self.tick, self.camera, worlds, *cut)
+
 
 class CameraFeed:
     """The service's cameras: the specs served, and pictures on request."""
@@ -245,11 +252,9 @@ class CameraFeed:
             for _, out in group:
                 out.set_exception(exc)
             return
+        whole = Shot(tick, spec, ids, images.rgb, images.depth, images.seg)
         for worlds, out in group:
-            rows = _rows(ids, worlds)
-            drawn = (images.rgb, images.depth, images.seg)
-            arrays = (None if a is None else a[rows] for a in drawn)
-            out.set_result(Shot(tick, spec, worlds, *arrays))
+            out.set_result(whole.only(worlds))
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
@@ -264,7 +269,7 @@ def _fail(out: concurrent.futures.Future[Shot], exc: BaseException) -> None:
         out.set_exception(exc)
 
 
-def _rows(drawn: np.ndarray, worlds: np.ndarray) -> slice | np.ndarray:
+def rows_of(drawn: np.ndarray, worlds: np.ndarray) -> slice | np.ndarray:
     """Where `worlds` lie among the sorted `drawn` ids: a slice (a view, no copy) when they are
     a run of consecutive rows in order, else the row indices."""
     at = np.searchsorted(drawn, worlds)
