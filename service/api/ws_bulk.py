@@ -217,6 +217,8 @@ class BulkSocket:
         poll = select.poll()
         poll.register(self._sock.fileno(), select.POLLOUT)
         while views:
+            if self._stop.is_set():
+                raise ConnectionAbortedError("the stream stopped before the message was sent")
             try:
                 sent = self._sock.sendmsg(views)
             except BlockingIOError:
@@ -226,11 +228,8 @@ class BulkSocket:
                     sent -= views.pop(0).nbytes
                 else:
                     views[0], sent = views[0][sent:], 0
-            while views and not poll.poll(_POLL_MS):
-                if self._stop.is_set():
-                    raise ConnectionAbortedError("the stream stopped before the message was sent")
-            if self._stop.is_set() and views:
-                raise ConnectionAbortedError("the stream stopped before the message was sent")
+            if views:
+                poll.poll(_POLL_MS)  # room in the socket, or time to look at `_stop` again
 
 
 class _Reader(asyncio.Protocol):
