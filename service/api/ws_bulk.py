@@ -45,6 +45,7 @@ from websockets.protocol import Protocol, Side, State
 
 SCOPE_KEY = "armfleet.ws_owner"  # the ASGI server's protocol object, where it is uvicorn's
 MAX_INCOMING = 1 << 16  # what a bulk socket's client may send in one message (pull requests)
+FLUSH_S = 5.0  # at most this long for the writer to finish what it holds when a stream ends
 _POLL_MS = 500  # a writer waiting for room looks this often whether it was told to stop
 
 Buffer = bytes | bytearray | memoryview
@@ -149,12 +150,13 @@ class BulkSocket:
         self._left()
 
     async def finish(self) -> None:
-        """Stop the writer once what it holds is written (or the client is gone) and drop our
-        descriptor; the transport itself is closed by uvicorn when the route returns."""
+        """Stop the writer once what it holds is written, the close frame last (a client that
+        left makes those writes fail at once; one that stopped reading is given up on after
+        FLUSH_S), and drop our descriptor; uvicorn closes the transport when the route
+        returns."""
         self._out.put(None)
-        if not self.gone.is_set():
-            with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(asyncio.shield(self._joined()), 5.0)
+        with contextlib.suppress(asyncio.TimeoutError):
+            await asyncio.wait_for(asyncio.shield(self._joined()), FLUSH_S)
         self._stop.set()
         await self._joined()
         self._sock.close()
