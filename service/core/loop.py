@@ -22,6 +22,7 @@ import numpy as np
 
 from service.core.batch import Batch, ModelWrite, StateWrite, TickWrites
 from service.core.commands.arithmetic import TargetUpdate
+from service.core.device_turns import DeviceTurns
 from service.core.errors import NotPaused
 from service.core.loop_boundary import TickBoundary
 from service.core.loop_types import (  # re-exported: the loop's vocabulary
@@ -80,6 +81,8 @@ class SimLoop(TickBoundary):
         self._window: tuple[float, int] = (time.monotonic(), self._tick)
         # Work for the sim thread between two ticks (state, restore, reads of the batch).
         self._requests: list[tuple[Callable[[Batch], Any], concurrent.futures.Future[Any]]] = []
+        # launches on a device shared with the camera renderer go in turns (device_turns.py)
+        self._turns: DeviceTurns = getattr(batch, "device_turns", None) or DeviceTurns()
         self._restore_listeners: tuple[RestoreListener, ...] = ()
         # Per world, the last randomisation (seed, spec) and its tick: snapshots name it.
         self.randomizations = RandomizationBook()
@@ -234,8 +237,10 @@ class SimLoop(TickBoundary):
 
     def _run(self) -> None:
         next_deadline = time.perf_counter()
+        turns = self._turns
         while True:
-            self._serve_requests()
+            with turns.loop_turn():  # the device's launches (service/core/device_turns.py)
+                self._serve_requests()
             with self._wake:
                 if not self._running:
                     return
@@ -253,11 +258,13 @@ class SimLoop(TickBoundary):
                         self._wake.wait(delay)
                         continue
             if idle:  # paused after a tick that took no snapshot: show where time stopped
-                self._publish(time.monotonic())
-                self._at_rest(time.monotonic())
+                with turns.loop_turn():
+                    self._publish(time.monotonic())
+                    self._at_rest(time.monotonic())
                 continue
             try:
-                self._tick_once(mode)
+                with turns.loop_turn():
+                    self._tick_once(mode)
             except Exception as exc:  # never let a bad tick kill the loop, nor flood the log
                 self._tick_failed(exc)
                 time.sleep(0.1)

@@ -19,6 +19,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from service.core.batch import Batch
+from service.core.device_turns import DeviceTurns
 from service.core.loop_types import RestoreListener, resolve, run_request
 from service.core.randomizations import RandomizationBook
 from service.core.staging import CommandTable, TrajectoryHook
@@ -47,6 +48,7 @@ class TickBoundary:
     _snapshot_waiters: list[tuple[int, concurrent.futures.Future[Snapshot]]]
     _requests: list[tuple[Callable[[Batch], Any], concurrent.futures.Future[Any]]]
     _restore_listeners: tuple[RestoreListener, ...]
+    _turns: DeviceTurns
     _publish: Callable[[float], None]
     randomizations: RandomizationBook
 
@@ -62,7 +64,8 @@ class TickBoundary:
                 self._requests.append((fn, fut))
                 self._wake.notify_all()
                 return fut
-        run_request(fn, fut, self.batch)  # not running: no other thread touches the batch
+        with self._turns.loop_turn():  # not running: no other thread touches the batch
+            run_request(fn, fut, self.batch)
         return fut
 
     def request_state(self) -> concurrent.futures.Future[BatchState]:

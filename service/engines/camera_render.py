@@ -17,9 +17,11 @@ Nothing here is thread-safe: one thread (the camera feed's) owns a BatchRenderer
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 import weakref
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import mujoco
@@ -29,6 +31,7 @@ import warp as wp
 
 from service.core.camera_feed import CameraFeed
 from service.core.cameras import CameraSpec, camera_specs
+from service.core.device_turns import DeviceTurns
 from service.core.loop import SimLoop
 from service.core.settings import Settings
 
@@ -152,8 +155,15 @@ class BatchRenderer:
     """Draws up to `slots` worlds at a time (more are drawn in turn) for the given cameras."""
 
     def __init__(
-        self, mjm: mujoco.MjModel, cameras: list[CameraSpec], slots: int, device: str = "cpu"
+        self,
+        mjm: mujoco.MjModel,
+        cameras: list[CameraSpec],
+        slots: int,
+        device: str = "cpu",
+        turns: DeviceTurns | None = None,
     ) -> None:
+        """`turns`: the engine's, where it steps on the same CUDA device: the renderer then
+        launches on a stream of its own, in its turns (service/core/device_turns.py)."""
         self.cameras = {c.name: c for c in cameras}
         self.slots = int(slots)
         self.device = wp.get_device(device)
@@ -190,6 +200,8 @@ class BatchRenderer:
         self._turn = dict.fromkeys(self._rgb, 0)
         self._copied: dict[tuple[str, int], wp.Event] = {}
         self._copy_stream = wp.Stream(self.device) if self.device.is_cuda else None
+        self._turns = turns if self.device.is_cuda else None
+        self._stream = wp.Stream(self.device) if self._turns is not None else None
         if self.device.is_cuda:
             with wp.ScopedDevice(self.device):
                 self._rgb_next = {name: wp.zeros_like(buf) for name, buf in self._rgb.items()}
@@ -218,11 +230,22 @@ class BatchRenderer:
         before this one's pixels have arrived (they are 201 MB for 16,384 64x64 worlds)."""
         spec = self.cameras[camera]
         qpos = np.asarray(qpos).reshape(-1, self.nq)
-        if self._copy_stream is not None and spec.rgb and 0 < len(qpos) <= self.slots:
-            started = self._launch_copying(qpos, spec)
-            if started is not None:
-                return started
-        return _Drawn(self._render_all(qpos, spec))
+        with self._own_stream():
+            if self._copy_stream is not None and spec.rgb and 0 < len(qpos) <= self.slots:
+                started = self._launch_copying(qpos, spec)
+                if started is not None:
+                    return started
+            return _Drawn(self._render_all(qpos, spec))
+
+    @contextlib.contextmanager
+    def _own_stream(self) -> Iterator[None]:
+        """Launches on the renderer's own stream, in its turn, where it shares the device with
+        an engine; else on the device's current stream."""
+        if self._turns is None or self._stream is None:
+            yield
+            return
+        with self._turns.render_turn(), wp.ScopedStream(self._stream, sync_enter=False):
+            yield
 
     def _launch_copying(self, qpos: np.ndarray, spec: CameraSpec) -> _Copying | None:
         k, name = len(qpos), spec.name
@@ -318,4 +341,5 @@ def camera_feed(loop: SimLoop, settings: Settings) -> CameraFeed:
     specs = camera_specs(mjm, settings.camera_size, settings.camera_outputs, settings.cameras)
     device = batch.device_name if batch.device_name.startswith("cuda") else "cpu"
     slots = min(settings.camera_batch, batch.nworld)
-    return CameraFeed(loop, specs, lambda: BatchRenderer(mjm, specs, slots, device))
+    turns = getattr(batch, "device_turns", None)
+    return CameraFeed(loop, specs, lambda: BatchRenderer(mjm, specs, slots, device, turns))

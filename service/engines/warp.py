@@ -22,6 +22,7 @@ import warp as wp
 
 from mjcf import SCENE_XML
 from service.core.batch import Batch, Renderable, Restorable, StateWrite
+from service.core.device_turns import DeviceTurns
 from service.core.packed_rows import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
@@ -126,6 +127,7 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         self.substeps, self.physics_dt = tick_timing(self.control_hz, physics_dt)
         self.device = wp.get_device(device)
         self.device_name = str(self.device)
+        self.device_turns = DeviceTurns() if self.device.is_cuda else None  # the renderer's
 
         mjm = self.robot.mjm
         configure(mjm, self.physics_dt)
@@ -352,14 +354,12 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         return np.array(self._d.qvel.numpy(), copy=True)
 
     def render_state(self, worlds: np.ndarray) -> np.ndarray:
-        """Renderable: the asked rows of this batch's own qpos (on the CPU a view of the
-        device array, so only the k rows are copied)."""
+        """Renderable: the asked rows of this batch's own qpos (k rows copied on the CPU)."""
         return self._d.qpos.numpy()[np.asarray(worlds, dtype=np.int64)].copy()
 
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos (used to inject faults on purpose in tests)."""
-        full = self._d.qpos.numpy().copy()
-        full[world] = qpos
+        (full := self._d.qpos.numpy().copy())[world] = qpos
         self._d.qpos.assign(full)
 
     def write_state(self, write: StateWrite) -> None:

@@ -1,0 +1,69 @@
+"""DeviceTurns: whose turn it is to launch work on a CUDA device, the loop's or the renderer's.
+
+Warp's current stream is one per device, not one per thread, and MuJoCo Warp's functions
+launch on it. The camera renderer draws on a stream of its own, so that the device runs a
+picture beside the engine's ticks instead of in line with them (on one stream a tick waited
+behind the picture queued before it, and the next picture's hand-over waited for that tick:
+ticks and pictures took turns on the device). It does so by making its stream the device's
+current one for the few milliseconds its launches take; meanwhile the loop's thread must not
+launch, or its work would land on the renderer's stream. So launching is taken in turns: the
+loop's thread holds a turn for each tick and each batch of requests it serves, the renderer
+for each picture's launches. A waiting renderer goes before the loop's next turn: with a plain
+lock the loop, which takes its turn again at once in fast mode, would keep it.
+
+Engines that share a device with the renderer (warp on CUDA) carry one as `device_turns`;
+for the others the loop's turns cost an uncontended lock.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Iterator
+
+
+class DeviceTurns:
+    """Turns to launch on one device: `loop_turn` (the loop's thread), `render_turn`."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition(threading.Lock())
+        self._busy = False
+        self._holder: int | None = None  # the thread whose turn it is
+        self._renders_waiting = 0
+
+    @contextlib.contextmanager
+    def loop_turn(self) -> Iterator[None]:
+        """The loop's turn; a turn already held by this thread goes on (a request served in a
+        turn may serve another)."""
+        me = threading.get_ident()
+        if self._holder == me:
+            yield
+            return
+        with self._cond:
+            while self._busy or self._renders_waiting:
+                self._cond.wait()
+            self._busy, self._holder = True, me
+        try:
+            yield
+        finally:
+            self._release()
+
+    @contextlib.contextmanager
+    def render_turn(self) -> Iterator[None]:
+        with self._cond:
+            self._renders_waiting += 1
+            try:
+                while self._busy:
+                    self._cond.wait()
+            finally:
+                self._renders_waiting -= 1
+            self._busy, self._holder = True, threading.get_ident()
+        try:
+            yield
+        finally:
+            self._release()
+
+    def _release(self) -> None:
+        with self._cond:
+            self._busy, self._holder = False, None
+            self._cond.notify_all()
