@@ -34,6 +34,7 @@ from service.core.cameras import CameraSpec, camera_specs
 from service.core.device_turns import DeviceTurns
 from service.core.loop import SimLoop
 from service.core.settings import Settings
+from service.engines.cuda_streams import render_stream
 
 
 @dataclass(frozen=True)
@@ -199,9 +200,9 @@ class BatchRenderer:
         # other; `_copied` holds each buffer's last copy, which the next draw into it waits for
         self._turn = dict.fromkeys(self._rgb, 0)
         self._copied: dict[tuple[str, int], wp.Event] = {}
-        self._copy_stream = wp.Stream(self.device) if self.device.is_cuda else None
+        self._copy_stream = render_stream(self.device) if self.device.is_cuda else None
         self._turns = turns if self.device.is_cuda else None
-        self._stream = wp.Stream(self.device) if self._turns is not None else None
+        self._stream = render_stream(self.device) if self._turns is not None else None
         if self.device.is_cuda:
             with wp.ScopedDevice(self.device):
                 self._rgb_next = {name: wp.zeros_like(buf) for name, buf in self._rgb.items()}

@@ -22,12 +22,12 @@ import warp as wp
 
 from mjcf import SCENE_XML
 from service.core.batch import Batch, Renderable, Restorable, StateWrite
-from service.core.device_turns import DeviceTurns
 from service.core.packed_rows import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
 from service.core.types import PHYSICS_FIELDS, BatchState, Poses, Snapshot
 from service.engines import warp_frames as frames
+from service.engines.cuda_streams import engine_streams
 from service.engines.mirror import HostMirror
 from service.engines.warp_kernels import gather_bodies, gather_state
 from service.engines.warp_model import DERIVED, batched, host_layout, write_rows
@@ -127,7 +127,7 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         self.substeps, self.physics_dt = tick_timing(self.control_hz, physics_dt)
         self.device = wp.get_device(device)
         self.device_name = str(self.device)
-        self.device_turns = DeviceTurns() if self.device.is_cuda else None  # the renderer's
+        self.device_turns = engine_streams(self.device)  # ticks go first (cuda_streams.py)
 
         mjm = self.robot.mjm
         configure(mjm, self.physics_dt)
