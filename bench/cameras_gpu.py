@@ -41,7 +41,8 @@ STREAMS = (("realtime", 1), ("realtime", 8), ("fast", 8))  # (mode, client proce
 # ARMFLEET_BENCH_FITS=0: take the largest fits from the last run's file instead of searching
 # ARMFLEET_BENCH_STREAMS=realtime:8,fast:8: only these streams (mode:clients), to save device time
 # ARMFLEET_BENCH_PYSPY=/path/to/py-spy: while each stream runs, record which of the server's
-#   threads hold the interpreter (py-spy --gil, collapsed stacks) into the --out folder
+#   threads hold the interpreter (py-spy --gil, collapsed stacks) into the --out folder;
+#   with ARMFLEET_BENCH_PYSPY_WALL=1, where every thread is, waiting or not (py-spy --idle)
 FITS_BEFORE = Path(__file__).parent / "results" / "cameras_gpu_cuda.json"
 
 
@@ -326,7 +327,10 @@ def _profile(ctx: Context, srv: common.Served, name: str, seconds: float) -> Any
     if not spy:
         return None
     path = Path(ctx.out_dir) / name
-    cmd = [spy, "record", "--gil", "--threads", "--rate", "200", "--format", "raw"]
+    how = "--idle" if os.environ.get("ARMFLEET_BENCH_PYSPY_WALL") == "1" else "--gil"
+    if how == "--idle":
+        path = path.with_name(path.name.replace("gil_", "wall_"))
+    cmd = [spy, "record", how, "--threads", "--rate", "200", "--format", "raw"]
     cmd += ["--duration", f"{seconds:.0f}", "--pid", str(srv.server.process.pid), "-o", str(path)]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True), path
 

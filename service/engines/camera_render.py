@@ -176,6 +176,14 @@ class BatchRenderer:
             mujoco.mj_kinematics(mjm, data)  # no contacts: the render batch never steps
             self._d = mjw.put_data(mjm, data, nworld=self.slots, nconmax=1, njmax=1)
             self._qpos = np.zeros((self.slots, mjm.nq), dtype=np.float32)
+            # CUDA: the states go up from two pinned buffers in turn, without the host waiting
+            # for the picture before (from pageable memory it would, holding the device's turn)
+            pinned = self.device.is_cuda
+            self._qpos_up = [
+                wp.empty((self.slots, mjm.nq), dtype=float, device="cpu", pinned=pinned)
+                for _ in range(2 if pinned else 0)
+            ]
+            self._qpos_sent: list[wp.Event | None] = [None, None]
             self._rgb = {  # the RGB bytes of each camera that draws RGB, on the device
                 c.name: wp.zeros((self.slots, 3 * c.width * c.height), dtype=wp.uint8)
                 for c in cameras
@@ -260,8 +268,7 @@ class BatchRenderer:
             stream = wp.get_stream(self.device)
             if (before := self._copied.get((name, turn))) is not None:
                 stream.wait_event(before)  # that buffer's last copy is done before we overwrite
-            self._qpos[:k] = qpos
-            self._d.qpos.assign(self._qpos)
+            self._upload(qpos)
             self._draw(spec, k, out)
             rest = self._depth_seg(spec, k)
             drawn = stream.record_event()
@@ -270,6 +277,22 @@ class BatchRenderer:
             copied = self._copied[(name, turn)] = self._copy_stream.record_event()
         shape = (k, spec.height, spec.width, 3)
         return _Copying(copied, pool, buf, shape, rest)
+
+    def _upload(self, qpos: np.ndarray) -> None:
+        """The k states into the render batch's first k slots, on the current stream."""
+        k = len(qpos)
+        if not self._qpos_up:
+            self._qpos[:k] = qpos
+            self._d.qpos.assign(self._qpos)
+            return
+        self._qpos_sent.reverse()
+        self._qpos_up.reverse()
+        if (sent := self._qpos_sent[0]) is not None:
+            wp.synchronize_event(sent)  # this buffer's last upload (two pictures ago) is done
+        host = self._qpos_up[0]
+        host.numpy()[:k] = qpos
+        wp.copy(self._d.qpos, host, count=k * self.nq)
+        self._qpos_sent[0] = wp.get_stream(self.device).record_event()
 
     def _render_all(self, qpos: np.ndarray, spec: CameraSpec) -> Images:
         qpos = np.asarray(qpos).reshape(-1, self.nq)
@@ -311,8 +334,7 @@ class BatchRenderer:
         with wp.ScopedDevice(self.device):
             if (copying := self._copied.get((spec.name, 0))) is not None:
                 wp.get_stream(self.device).wait_event(copying)  # its buffer is drawn into next
-            self._qpos[:k] = qpos
-            self._d.qpos.assign(self._qpos)
+            self._upload(qpos)
             self._draw(spec, k)
             h, w = spec.height, spec.width
             rgb = None
