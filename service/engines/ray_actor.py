@@ -19,7 +19,8 @@ import ray
 from service.core.types import BatchState
 from service.engines.sharding import Shipment, apply_and_step
 from service.engines.shards import MIN_WORLDS_PER_SHARD
-from service.engines.warp import SnapshotArrays, WorldBatch
+from service.engines.warp import WorldBatch
+from service.engines.warp_snapshot import SnapshotArrays
 
 # The directory that holds the `service` package: actors import it from there when the node has
 # the same checkout (one machine, or a shared path); elsewhere armfleet must be installed.

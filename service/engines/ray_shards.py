@@ -44,7 +44,7 @@ from service.engines.sharding import (
     stage_model,
     with_model,
 )
-from service.engines.warp import SnapshotArrays, snapshot_from
+from service.engines.warp_snapshot import SnapshotArrays, snapshot_from
 
 log = logging.getLogger("armfleet.ray")
 

@@ -13,7 +13,6 @@ import logging
 import os
 import time
 from pathlib import Path
-from typing import NamedTuple
 
 import mujoco
 import mujoco_warp as mjw
@@ -25,12 +24,13 @@ from service.core.batch import Batch, Renderable, Restorable, StateWrite
 from service.core.packed_rows import PackedRows
 from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.robot import LoadedRobot, load_robot
-from service.core.types import PHYSICS_FIELDS, BatchState, Poses, Snapshot
+from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
 from service.engines import warp_frames as frames
 from service.engines.cuda_streams import engine_streams
 from service.engines.mirror import HostMirror
 from service.engines.warp_kernels import gather_bodies, gather_state
 from service.engines.warp_model import DERIVED, batched, host_layout, write_rows
+from service.engines.warp_snapshot import NCOL, SnapshotArrays, snapshot_from
 
 log = logging.getLogger("armfleet.engine")
 
@@ -38,13 +38,6 @@ log = logging.getLogger("armfleet.engine")
 # `armfleet setup` (ARMFLEET_WARP_LOG=info) shows them as compile progress.
 _VERBOSE_WARP = os.environ.get("ARMFLEET_WARP_LOG") == "info"
 wp.config.log_level = wp.LOG_INFO if _VERBOSE_WARP else wp.LOG_WARNING
-
-NJOINT = 7
-# Columns of the gathered state array, one row per world.
-_POS, _VEL, _EFF = (slice(i * NJOINT, (i + 1) * NJOINT) for i in range(3))
-_FPOS = slice(3 * NJOINT, 3 * NJOINT + 3)
-_FQUAT = slice(3 * NJOINT + 3, 3 * NJOINT + 7)
-_NCOL = 3 * NJOINT + 7
 
 # Overflows that mean contacts or constraints were dropped: the world's physics is no longer
 # trustworthy. (Solver iteration limits are not faults: the solution is just less converged.)
@@ -60,38 +53,6 @@ CAPACITY_OVERFLOWS = int(
 # the table, arm near the table): see tests/test_engine.py::test_grasp_never_overflows_capacity.
 NCONMAX = 32
 NJMAX = 128
-
-
-class SnapshotArrays(NamedTuple):
-    """A Snapshot before it is cut into fields: contiguous host arrays, as the gather kernels
-    write them, so that shipping one between processes copies no field on its own.
-
-    state: position, velocity, effort, flange_pos, flange_quat side by side   (nworld, 28) f32
-    bodies: body_pos then body_quat of every body                          (nworld, nbody, 7) f32
-    sim_time, faults: as in Snapshot                                                 (nworld,)
-    """
-
-    tick: int
-    sim_time: np.ndarray
-    state: np.ndarray
-    bodies: np.ndarray
-    faults: np.ndarray
-
-
-def snapshot_from(a: SnapshotArrays, target: np.ndarray) -> Snapshot:
-    """The Snapshot whose fields are views of `a`'s arrays (no copy); `target` is the caller's."""
-    state, bodies = a.state, a.bodies
-    return Snapshot(
-        tick=a.tick,
-        sim_time=a.sim_time,
-        position=state[:, _POS],
-        velocity=state[:, _VEL],
-        effort=state[:, _EFF],
-        target=target,
-        faults=a.faults,
-        flange=Poses(state[:, _FPOS], state[:, _FQUAT]),
-        bodies=Poses(bodies[:, :, :3], bodies[:, :, 3:]),
-    )
 
 
 class WorldBatch(HostMirror, Batch, Restorable, Renderable):
@@ -147,7 +108,7 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
             self._d = mjw.put_data(mjm, home, nworld=nworld, nconmax=nconmax, njmax=njmax)
             self._qpos_adr = wp.array(self.robot.qpos_adr, dtype=int)
             self._dof_adr = wp.array(self.robot.dof_adr, dtype=int)
-            self._state = wp.zeros((nworld, _NCOL), dtype=float)
+            self._state = wp.zeros((nworld, NCOL), dtype=float)
             self._bodies = wp.zeros((nworld, mjm.nbody, 7), dtype=float)
             self._fault = wp.zeros(nworld, dtype=int)
             self._nfault = wp.zeros(1, dtype=int)
@@ -238,7 +199,7 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
             wp.capture_launch(self._graph)
         else:
             self._run_tick_ops()
-        if self._nfault.numpy()[0]:
+        if self._read(self._nfault)[0]:
             return np.flatnonzero(self._fault.numpy())
         return np.zeros(0, dtype=np.int64)
 
@@ -354,8 +315,13 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         return np.array(self._d.qvel.numpy(), copy=True)
 
     def render_state(self, worlds: np.ndarray) -> np.ndarray:
-        """Renderable: the asked rows of this batch's own qpos (k rows copied on the CPU)."""
-        return self._d.qpos.numpy()[np.asarray(worlds, dtype=np.int64)].copy()
+        """Renderable: the asked rows of this batch's own qpos (a copy of k rows)."""
+        return self._read(self._d.qpos)[np.asarray(worlds, dtype=np.int64)]
+
+    def _read(self, arr: wp.array) -> np.ndarray:
+        """`arr` on the host, waiting for this engine's stream only (see PinnedPool.copy_out);
+        a view of a buffer reused once no view of it is left (CPU: of the array itself)."""
+        return self._pinned.copy_out((arr,), self.device)[0] if self.device.is_cuda else arr.numpy()
 
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos (used to inject faults on purpose in tests)."""

@@ -81,19 +81,22 @@ class PinnedPool:
         self._bufs: dict[tuple[int, ...], list[tuple[wp.array, np.ndarray]]] = {}
 
     def _take(self, src: wp.array, pinned: bool) -> tuple[wp.array, np.ndarray] | None:
-        ring = self._bufs.setdefault(tuple(src.shape), [])
+        dtype = np.dtype(wp.dtype_to_numpy(src.dtype))
+        ring = self._bufs.setdefault((*src.shape, dtype.num), [])
         for arr, flat in ring:
             if sys.getrefcount(flat) <= _FREE_REFS:
                 return arr, flat
         if len(ring) >= self.MAX_PER_SHAPE:
             return None
         arr = wp.empty(src.shape, dtype=src.dtype, device="cpu", pinned=pinned)
-        buf = (ctypes.c_byte * (arr.size * 4)).from_address(arr.ptr)
-        ring.append((arr, np.frombuffer(buf, dtype=np.float32)))
+        buf = (ctypes.c_byte * (arr.size * dtype.itemsize)).from_address(arr.ptr)
+        ring.append((arr, np.frombuffer(buf, dtype=dtype)))
         return ring[-1]
 
     def copy_out(self, srcs: tuple[wp.array, ...], device: wp.Device) -> list[np.ndarray]:
-        """Host copies of float32 device arrays `srcs` as of now (stream order), in one sync."""
+        """Host copies of device arrays `srcs` as of now, in one sync of the current stream
+        only (`array.numpy()` copies on CUDA's legacy stream, which waits for every stream of
+        the device: the camera renderer's pictures too)."""
         outs: list[np.ndarray] = []
         for src in srcs:
             got = self._take(src, device.is_cuda)
