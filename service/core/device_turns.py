@@ -9,7 +9,9 @@ current one for the few milliseconds its launches take; meanwhile the loop's thr
 launch, or its work would land on the renderer's stream. So launching is taken in turns: the
 loop's thread holds a turn for each tick and each batch of requests it serves, the renderer
 for each picture's launches. A waiting renderer goes before the loop's next turn: with a plain
-lock the loop, which takes its turn again at once in fast mode, would keep it.
+lock the loop, which takes its turn again at once in fast mode, would keep it. While the loop's
+thread waits for the device inside its turn (a tick's results coming to the host), it lends
+the turn (`lent`): a picture's launches then wait for neither the tick nor the copy.
 
 Engines that share a device with the renderer (warp on CUDA) carry one as `device_turns`;
 for the others the loop's turns cost an uncontended lock.
@@ -62,6 +64,23 @@ class DeviceTurns:
             yield
         finally:
             self._release()
+
+    @contextlib.contextmanager
+    def lent(self) -> Iterator[None]:
+        """While the thread holding a turn waits for the device (launching nothing), a
+        renderer may take its turn; the holder's turn goes on after. Elsewhere: nothing."""
+        me = threading.get_ident()
+        if self._holder != me:
+            yield
+            return
+        self._release()
+        try:
+            yield
+        finally:
+            with self._cond:
+                while self._busy:
+                    self._cond.wait()
+                self._busy, self._holder = True, me
 
     def _release(self) -> None:
         with self._cond:

@@ -118,7 +118,7 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
             self._wticks = wp.zeros(nworld, dtype=wp.int64)
             self._faults_dev = wp.zeros(nworld, dtype=wp.int32)
             self._packer = frames.DevicePacker(self.device, self.tick_dt)
-            self._pinned = frames.PinnedPool()
+            self._pinned = frames.PinnedPool(self.device_turns)
             # One uncaptured tick compiles (or loads from cache) every kernel the tick uses;
             # capture needs them loaded. Then every world goes back to home.
             self._run_tick_ops()

@@ -16,12 +16,14 @@ a `PackedRows` is waited on and released by one consumer (service.core.frames.Fr
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import sys
 
 import numpy as np
 import warp as wp
 
+from service.core.device_turns import DeviceTurns
 from service.core.packed_rows import PackedRows
 
 NCOL = 37  # sim_time, position 7, velocity 7, effort 7, target 7, flange xyz, flange wxyz, faults
@@ -77,7 +79,8 @@ class PinnedPool:
 
     MAX_PER_SHAPE = 12  # beyond this many live snapshots, plain (pageable) copies are made
 
-    def __init__(self) -> None:
+    def __init__(self, turns: DeviceTurns | None = None) -> None:
+        self._turns = turns  # lent while the copies are waited for (service/core/device_turns.py)
         self._bufs: dict[tuple[int, ...], list[tuple[wp.array, np.ndarray]]] = {}
 
     def _take(self, src: wp.array, pinned: bool) -> tuple[wp.array, np.ndarray] | None:
@@ -107,7 +110,9 @@ class PinnedPool:
             wp.copy(arr, src)
             outs.append(flat.reshape(src.shape))
         if device.is_cuda:
-            wp.synchronize_stream(wp.get_stream(device))  # ctypes: the GIL is released meanwhile
+            stream = wp.get_stream(device)
+            with self._turns.lent() if self._turns else contextlib.nullcontext():
+                wp.synchronize_stream(stream)  # ctypes: the GIL is released meanwhile
         return outs
 
 
