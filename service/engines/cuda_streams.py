@@ -17,11 +17,17 @@ only for its launches, in turns with the loop's thread (service/core/device_turn
 
 from __future__ import annotations
 
+import os
+
 import warp as wp
 
 from service.core.device_turns import DeviceTurns
 
 HIGH, LOW = -1, 0  # CUDA stream priorities as Warp takes them (a lower number goes first)
+# experiment: ARMFLEET_CUDA_PICTURES_FIRST=1 gives the pictures the high priority
+_TICKS, _PICTURES = (
+    (LOW, HIGH) if os.environ.get("ARMFLEET_CUDA_PICTURES_FIRST") == "1" else (HIGH, LOW)
+)
 
 
 def engine_streams(device: wp.context.Device) -> DeviceTurns | None:
@@ -29,10 +35,10 @@ def engine_streams(device: wp.context.Device) -> DeviceTurns | None:
     and the turns the renderer and the loop take to launch; None elsewhere."""
     if not device.is_cuda:
         return None
-    wp.set_stream(wp.Stream(device, priority=HIGH), device=device, sync=True)
+    wp.set_stream(wp.Stream(device, priority=_TICKS), device=device, sync=True)
     return DeviceTurns()
 
 
 def render_stream(device: wp.context.Device) -> wp.Stream:
     """A low-priority stream for the pictures (and their copies to the host)."""
-    return wp.Stream(device, priority=LOW)
+    return wp.Stream(device, priority=_PICTURES)
