@@ -38,6 +38,7 @@ CAMERA = "wrist"
 FIT_SIZES = ((64, 64), (128, 128), (256, 256))
 FIT_MAX_WORLDS = 1 << 22  # the doubling stops here even when memory is left
 STREAMS = (("realtime", 1), ("realtime", 8), ("fast", 8))  # (mode, client processes)
+# ARMFLEET_BENCH_CLIENT=websockets: the stream clients use the websockets sync client (else aiohttp)
 # ARMFLEET_BENCH_FITS=0: take the largest fits from the last run's file instead of searching
 # ARMFLEET_BENCH_STREAMS=realtime:8,fast:8: only these streams (mode:clients), to save device time
 # ARMFLEET_BENCH_PYSPY=/path/to/py-spy: while each stream runs, record which of the server's
@@ -178,34 +179,77 @@ def _metrics(url: str) -> dict[str, float]:
     return {x.split()[0]: float(x.split()[1]) for x in lines if x.startswith("armfleet_camera")}
 
 
+def _first(msg: bytes, worlds: list[int]) -> dict[str, Any]:
+    """What the first message of a client says: its worlds, image sizes, wholeness."""
+    hlen = int.from_bytes(msg[4:8], "little")
+    head = json.loads(msg[8 : 8 + hlen])
+    sizes = head["sizes"]
+    return {
+        "every_world": head["worlds"] == worlds,
+        "image_bytes": sorted(set(sizes)),
+        "message_bytes": len(msg),
+        "whole": len(msg) == 8 + hlen + sum(sizes),
+    }
+
+
 def _read(url: str, worlds: list[int], counts: Any, first: Any, stop: Any) -> None:
     """One camera-stream client (a process of its own: a reader of 6 GB/s must not share a
-    GIL): counts whole messages and bytes into `counts`, checks the first message."""
-    from websockets.sync.client import connect
-
+    GIL): counts whole messages and bytes into `counts`, checks the first message. The
+    client library is aiohttp (its frame reader is compiled: about twice the websockets sync
+    client's throughput per connection on loopback); ARMFLEET_BENCH_CLIENT=websockets uses
+    the websockets sync client."""
     try:
-        with connect(url, max_size=None, compression=None, open_timeout=60) as ws:
-            ws.recv_bufsize = 1 << 22  # 4 MiB reads: a 201 MB message in 48, not 3,072
-            while not stop.is_set():
-                with contextlib.suppress(TimeoutError):
-                    msg = ws.recv(timeout=5)
-                    if first.empty():
-                        hlen = int.from_bytes(msg[4:8], "little")
-                        head = json.loads(msg[8 : 8 + hlen])
-                        sizes = head["sizes"]
-                        first.put(
-                            {
-                                "every_world": head["worlds"] == worlds,
-                                "image_bytes": sorted(set(sizes)),
-                                "message_bytes": len(msg),
-                                "whole": len(msg) == 8 + hlen + sum(sizes),
-                            }
-                        )
-                    with counts.get_lock():
-                        counts[0] += 1
-                        counts[1] += len(msg)
+        if _client().startswith("websockets "):
+            _read_websockets(url, worlds, counts, first, stop)
+        else:
+            import asyncio
+
+            asyncio.run(_read_aiohttp(url, worlds, counts, first, stop))
     except Exception as exc:
         first.put({"error": f"{type(exc).__name__}: {exc}"})
+
+
+def _client() -> str:
+    """The stream clients' library (ARMFLEET_BENCH_CLIENT), with its version."""
+    from importlib.metadata import version
+
+    name = os.environ.get("ARMFLEET_BENCH_CLIENT", "aiohttp")
+    return f"{name} {version(name)}"
+
+
+def _count(msg: bytes, worlds: list[int], counts: Any, first: Any) -> None:
+    if first.empty():
+        first.put(_first(msg, worlds))
+    with counts.get_lock():
+        counts[0] += 1
+        counts[1] += len(msg)
+
+
+def _read_websockets(url: str, worlds: list[int], counts: Any, first: Any, stop: Any) -> None:
+    from websockets.sync.client import connect
+
+    with connect(url, max_size=None, compression=None, open_timeout=60) as ws:
+        while not stop.is_set():
+            with contextlib.suppress(TimeoutError):
+                _count(ws.recv(timeout=5), worlds, counts, first)
+
+
+async def _read_aiohttp(url: str, worlds: list[int], counts: Any, first: Any, stop: Any) -> None:
+    import aiohttp
+
+    timeout = aiohttp.ClientTimeout(total=None, connect=60)
+    async with (
+        aiohttp.ClientSession(timeout=timeout) as session,
+        session.ws_connect(url, max_msg_size=0, compress=0) as ws,
+    ):
+        while not stop.is_set():
+            try:
+                msg = await ws.receive(timeout=5)
+            except TimeoutError:
+                continue
+            if msg.type != aiohttp.WSMsgType.BINARY:
+                raise RuntimeError(f"the stream ended: {msg.type.name} {msg.data!r}")
+            _count(msg.data, worlds, counts, first)
 
 
 class _Readers:
@@ -529,14 +573,15 @@ def cameras_gpu(ctx: Context) -> Result:
     gpu = common.gpu_name(ctx.device) or ""
     card = "H200" if "H200" in gpu else "H100" if "H100" in gpu else gpu or "none"
     notes = [
-        f"card: {card} ({gpu or 'no GPU'}); WebSocket clients on the same machine, each a "
-        "process asking an equal share of the worlds, raw pixels, no compression; ratio: "
+        f"card: {card} ({gpu or 'no GPU'}); WebSocket clients ({_client()}) on the same machine, "
+        "each a process asking an equal share of the worlds, raw pixels, no compression; ratio: "
         "pictures of every world delivered a second over min(30, the renderer's batches/s); "
         "largest fit: the renderer alone (the service draws at most 2^26 pixels a render)"
     ]
     if fits_from:
         notes.append(f"largest fit: carried from the run started {fits_from} on {fits_card}")
     data = dict(card=card, gpu=gpu, worlds=n, size=f"{SIZE[0]}x{SIZE[1]}", rate=RATE)
+    data["client"] = _client()
     data.update(renderer_alone=alone, streams=streams, fits=fits, errors=errors)
     data["fits_from"], data["fits_card"] = fits_from, fits_card or card
     return Result(_rows(alone, streams, fits, n), data, notes)
