@@ -491,6 +491,21 @@ def largest_fit(
 # -- the section -----------------------------------------------------------------------------
 
 
+def _rooms(alone: dict, streams: list[dict]) -> None:
+    """Each stream's `room`: the renderer alone's batches/s times the share of the device its
+    ticks leave, 1 - (ticks/s while streaming) / (ticks/s in fast mode with nobody looking,
+    this run); and the stream's ratio to min(30, room). A model: a tick is taken to cost the
+    device the same beside pictures as alone, and the two are taken not to overlap."""
+    fast = [s["idle"]["ticks_per_s"] for s in streams if s["mode"] == "fast"]
+    if not alone or not fast:
+        return
+    for s in streams:
+        left = max(0.0, 1.0 - s["streaming"]["ticks_per_s"] / max(fast))
+        s["room"] = alone["render"]["batches_per_s"] * left
+        best = min(RATE, s["room"])
+        s["ratio_to_room"] = s["streaming"]["frames_per_s"] / best if best > 0 else None
+
+
 def _rows(alone: dict, streams: list[dict], fits: list[dict], n: int) -> list[dict[str, Any]]:
     shape = f"{n:,} worlds x {SIZE[0]}x{SIZE[1]} RGB"
     got: list[tuple[str, Any]] = []
@@ -519,6 +534,11 @@ def _rows(alone: dict, streams: list[dict], fits: list[dict], n: int) -> list[di
             (f"{how}: ticks/s, while streaming", st["ticks_per_s"]),
             (f"{how}: ms per render in the service (draw, pixels to host)", st["render_ms"]),
         ]  # fmt: skip
+        if s.get("room") is not None:
+            got += [
+                (f"{how}: batches/s the device has room for beside these ticks", s["room"]),
+                (f"{how}: stream ratio to that room, min(30, room)", s["ratio_to_room"]),
+            ]
     for f in fits:
         capped = " (search capped)" if f["capped"] else ""
         got.append((f"largest batch that fits at {f['size']}: worlds{capped}", f["largest_worlds"]))
@@ -561,6 +581,7 @@ def cameras_gpu(ctx: Context) -> Result:
         except Exception as exc:
             errors[f"stream {mode} {clients}"] = f"{type(exc).__name__}: {exc}"
             ctx.say(f"  {mode} stream FAILED: {errors[f'stream {mode} {clients}']}")
+    _rooms(alone, streams)
     fits, fits_from, fits_card = [], None, None
     if os.environ.get("ARMFLEET_BENCH_FITS", "1") == "0" and FITS_BEFORE.exists():
         before = json.loads(FITS_BEFORE.read_text())  # the renderer alone did not change
@@ -576,6 +597,8 @@ def cameras_gpu(ctx: Context) -> Result:
         f"card: {card} ({gpu or 'no GPU'}); WebSocket clients ({_client()}) on the same machine, "
         "each a process asking an equal share of the worlds, raw pixels, no compression; ratio: "
         "pictures of every world delivered a second over min(30, the renderer's batches/s); "
+        "room: the renderer alone's batches/s x the share of the device the ticks leave (1 - "
+        "ticks/s streaming / ticks/s in fast mode with nobody looking; a model, no overlap); "
         "largest fit: the renderer alone (the service draws at most 2^26 pixels a render)"
     ]
     if fits_from:

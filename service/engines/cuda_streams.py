@@ -7,7 +7,10 @@ picture waits for all of it, and the loop, which waits for its tick, falls behin
 device idles between them. So the engine steps on a high-priority stream and the renderer
 draws on a low-priority one: whenever a block of the picture ends, the scheduler gives its
 place to the tick's blocks first. The tick keeps nearly its own pace and the picture takes
-what the ticks leave of the device.
+what the ticks leave of the device. (Measured on an H200, 16,384 worlds, realtime, pictures of
+every world asked at 30 Hz: ticks held 60/s and pictures came at 25.9/s. The other way round,
+ticks fell to 22/s and pictures to 19/s: a picture is handed its state at a tick boundary, so
+starving the ticks starves the pictures too.)
 
 Warp's current stream is one per device, not one per thread, so the engine's stream is made
 the device's current stream once, when the engine is built (every launch, capture and copy
@@ -17,17 +20,11 @@ only for its launches, in turns with the loop's thread (service/core/device_turn
 
 from __future__ import annotations
 
-import os
-
 import warp as wp
 
 from service.core.device_turns import DeviceTurns
 
 HIGH, LOW = -1, 0  # CUDA stream priorities as Warp takes them (a lower number goes first)
-# experiment: ARMFLEET_CUDA_PICTURES_FIRST=1 gives the pictures the high priority
-_TICKS, _PICTURES = (
-    (LOW, HIGH) if os.environ.get("ARMFLEET_CUDA_PICTURES_FIRST") == "1" else (HIGH, LOW)
-)
 
 
 def engine_streams(device: wp.context.Device) -> DeviceTurns | None:
@@ -35,10 +32,10 @@ def engine_streams(device: wp.context.Device) -> DeviceTurns | None:
     and the turns the renderer and the loop take to launch; None elsewhere."""
     if not device.is_cuda:
         return None
-    wp.set_stream(wp.Stream(device, priority=_TICKS), device=device, sync=True)
+    wp.set_stream(wp.Stream(device, priority=HIGH), device=device, sync=True)
     return DeviceTurns()
 
 
 def render_stream(device: wp.context.Device) -> wp.Stream:
     """A low-priority stream for the pictures (and their copies to the host)."""
-    return wp.Stream(device, priority=_PICTURES)
+    return wp.Stream(device, priority=LOW)
