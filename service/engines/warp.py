@@ -200,7 +200,7 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         else:
             self._run_tick_ops()
         if self._read(self._nfault)[0]:
-            return np.flatnonzero(self._fault.numpy())
+            return np.flatnonzero(self._read(self._fault))
         return np.zeros(0, dtype=np.int64)
 
     # -- commands ---------------------------------------------------------------------------
