@@ -52,6 +52,8 @@ class DeviceTurns:
 
     @contextlib.contextmanager
     def render_turn(self) -> Iterator[None]:
+        """The renderer's turn, for one picture's launches: it waits for the turn held now,
+        and goes before the loop's next one."""
         with self._cond:
             self._renders_waiting += 1
             try:
