@@ -67,13 +67,19 @@ def test_stream_is_written_directly_and_answers_pings(server: Server, compressio
         assert [len(x) for x in images] == [header["width"] * header["height"] * 3] * 4
 
 
+def _pulled_ticks(ws, n: int) -> list[int]:
+    """Ask a pull stream for `n` pictures one at a time; the tick each one shows."""
+    ticks = []
+    for _ in range(n):
+        ws.send("next")
+        ticks.append(unpack(ws.recv(timeout=30))[0]["tick"])
+    return ticks
+
+
 def test_pull_requests_are_read_from_the_taken_over_socket(server: Server) -> None:
     url = f"{server.ws_url}/v1/ws/cameras?camera=wrist&worlds=1&rate=30&pull=true&format=png"
     with connect(url) as ws:
-        ticks = []
-        for _ in range(3):
-            ws.send("next")
-            ticks.append(unpack(ws.recv(timeout=30))[0]["tick"])
+        ticks = _pulled_ticks(ws, 3)
         with pytest.raises(TimeoutError):  # nothing unasked
             ws.recv(timeout=1.0)
     assert ticks == sorted(ticks)
@@ -122,8 +128,5 @@ def test_a_paused_service_answers_every_pull_with_the_tick_it_stands_at(tmp_path
         wait_for(lambda: httpx.get(f"{srv.url}/v1/cameras").json()["ready"], "cameras", 300)
         url = f"{srv.ws_url}/v1/ws/cameras?camera=wrist&worlds=0&rate=30&pull=true&format=png"
         with connect(url) as ws:
-            ticks = []
-            for _ in range(3):
-                ws.send("next")
-                ticks.append(unpack(ws.recv(timeout=30))[0]["tick"])
+            ticks = _pulled_ticks(ws, 3)
     assert ticks == [0, 0, 0]  # nothing moves, and still every ask is answered
