@@ -40,7 +40,8 @@ FIT_MAX_WORLDS = 1 << 22  # the doubling stops here even when memory is left
 STREAMS = (("realtime", 1), ("realtime", 8), ("fast", 8))  # (mode, client processes)
 # ARMFLEET_BENCH_CLIENT=websockets: the stream clients use the websockets sync client (else aiohttp)
 # ARMFLEET_BENCH_FITS=0: take the largest fits from the last run's file instead of searching
-# ARMFLEET_BENCH_STREAMS=realtime:8,fast:8: only these streams (mode:clients), to save device time
+# ARMFLEET_BENCH_STREAMS=realtime:8,fast:8: only these streams (mode:clients), to save device time;
+#   realtime:8@cuda:1 serves the cameras on a GPU of their own (--camera-device cuda:1)
 # ARMFLEET_BENCH_PYSPY=/path/to/py-spy: while each stream runs, record which of the server's
 #   threads hold the interpreter (py-spy --gil, collapsed stacks) into the --out folder;
 #   with ARMFLEET_BENCH_PYSPY_WALL=1, where every thread is, waiting or not (py-spy --idle)
@@ -336,13 +337,18 @@ def _ready(url: str) -> float:
     raise TimeoutError("cameras not ready in 900 s")
 
 
-def stream(ctx: Context, n: int, mode: str, clients: int, window: float) -> dict[str, Any]:
+def stream(
+    ctx: Context, n: int, mode: str, clients: int, window: float, camera_device: str = ""
+) -> dict[str, Any]:
     """`armfleet serve --mode MODE`, N worlds: a window idle, then one while every world streams
-    to `clients` readers, each asking its share of the worlds."""
+    to `clients` readers, each asking its share of the worlds; `camera_device`: the cameras on
+    a device of their own (--camera-device), else on the engine's."""
     w, h = SIZE
     env = {f"ARMFLEET_{k}": v for k, v in (("CAMERA_SIZE", f"{w}x{h}"), ("CAMERA_BATCH", str(n)))}
     env |= {"ARMFLEET_CAMERA_OUTPUTS": "rgb", "ARMFLEET_CAMERAS": "overview=off"}
+    env |= {"ARMFLEET_CAMERA_DEVICE": camera_device} if camera_device else {}
     out: dict[str, Any] = {"mode": mode, "worlds": n, "clients": clients}
+    out["camera_device"] = camera_device or None
     with ctx.serve(n, mode, env) as srv:
         out["ready_s"], out["cameras_warm_s"] = srv.ready_s, _ready(srv.url)
         time.sleep(2.0)
@@ -500,6 +506,8 @@ def _rooms(alone: dict, streams: list[dict]) -> None:
     if not alone or not fast:
         return
     for s in streams:
+        if s.get("camera_device"):  # a device of their own: nothing shares it
+            continue
         left = max(0.0, 1.0 - s["streaming"]["ticks_per_s"] / max(fast))
         s["room"] = alone["render"]["batches_per_s"] * left
         best = min(RATE, s["room"])
@@ -527,6 +535,8 @@ def _rows(alone: dict, streams: list[dict], fits: list[dict], n: int) -> list[di
         ]
     for s in streams:
         st, how = s["streaming"], f"{s['mode']}, {s['clients']} client(s)"
+        if s.get("camera_device"):
+            how += f", cameras on {s['camera_device']}"
         got += [
             (f"{how}: every world's picture, per second, asked at 30", st["frames_per_s"]),
             (f"{how}: stream ratio to the renderer alone, min(30, batches/s)", s.get("ratio")),
@@ -569,14 +579,17 @@ def cameras_gpu(ctx: Context) -> Result:
     streams_asked = STREAMS
     if chosen:
         pairs = (x.partition(":") for x in chosen.split(","))
-        streams_asked = tuple((m, int(c)) for m, _, c in pairs)
-    for mode, clients in streams_asked:
+        streams_asked = tuple((m, *c.partition("@")[::2]) for m, _, c in pairs)
+    for mode, clients, *on in streams_asked:
+        camera_device = on[0] if on else ""
         try:
-            s = stream(ctx, n, mode, clients, window)
+            s = stream(ctx, n, mode, int(clients), window, camera_device)
             s["ratio"] = s["streaming"]["frames_per_s"] / best if best else None
             streams.append(s)
             idle, st = s["idle"]["ticks_per_s"], s["streaming"]["ticks_per_s"]
-            ctx.say(f"  {mode}, {clients} client(s): {s['streaming']['frames_per_s']:.2f} frames/s")
+            at = f" (cameras on {camera_device})" if camera_device else ""
+            got = s["streaming"]["frames_per_s"]
+            ctx.say(f"  {mode}, {clients} client(s){at}: {got:.2f} frames/s")
             ctx.say(f"    ticks/s {idle:.1f} nobody looking, {st:.1f} streaming")
         except Exception as exc:
             errors[f"stream {mode} {clients}"] = f"{type(exc).__name__}: {exc}"

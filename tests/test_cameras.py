@@ -288,6 +288,8 @@ def test_render_metrics_count(http: httpx.Client) -> None:
         (["--camera-outputs", "rgb,heat"], "camera_outputs"),
         (["--cameras", "wrist=64x48:rgb+x"], "cameras.wrist"),
         (["--camera-size", "4096x4096"], "camera_batch"),
+        (["--camera-device", "gpu"], "camera_device"),
+        (["--camera-device", "cuda:64"], "no CUDA device 'cuda:64'"),
     ],
 )
 def test_bad_camera_settings_are_refused_at_start(args: list[str], named: str) -> None:

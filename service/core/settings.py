@@ -19,6 +19,22 @@ from service.core.worlds import world_list
 MAX_RENDER_PIXELS = 1 << 26  # one camera's render batch: colour, depth, rays, ~12 bytes a pixel
 
 
+def _cuda_device_exists(name: str, setting: str) -> None:
+    """ValueError naming `setting` when this machine has no CUDA device `name` (cuda, cuda:N).
+    Warp is started only here, when a setting names a CUDA device."""
+    import warp as wp
+
+    index = int(name.partition(":")[2] or 0)
+    level, wp.config.log_level = wp.config.log_level, wp.LOG_WARNING  # no banner first
+    try:
+        count = wp.get_cuda_device_count()
+    finally:
+        wp.config.log_level = level
+    if index >= count:
+        have = ", ".join(f"cuda:{i}" for i in range(count)) or "none"
+        raise ValueError(f"{setting}: no CUDA device {name!r} on this machine (it has: {have})")
+
+
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="ARMFLEET_")
 
@@ -160,6 +176,12 @@ class Settings(BaseSettings):
     camera_batch: int = Field(
         16, ge=1, le=65_536, description="worlds one render draws at once (more are drawn in turn)"
     )
+    camera_device: str = Field(
+        "",
+        pattern=r"^(|cpu|cuda(:[0-9]+)?)$",
+        description="device the cameras draw on: cpu, cuda or cuda:N, e.g. a GPU of their own "
+        "beside the engine's (default: the engine's GPU; CPU engines: warp's CPU device)",
+    )
     camera_rate: float = Field(
         10.0,
         gt=0,
@@ -207,6 +229,8 @@ class Settings(BaseSettings):
                 )
         if self.camera_record:
             world_list(self.camera_record_worlds, self.worlds, "camera_record_worlds")
+        if self.camera_device.startswith("cuda"):
+            _cuda_device_exists(self.camera_device, "camera_device")
         return self
 
     @staticmethod

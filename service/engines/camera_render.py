@@ -357,12 +357,16 @@ class BatchRenderer:
 
 def camera_feed(loop: SimLoop, settings: Settings) -> CameraFeed:
     """The service's cameras: the scene's cameras at the sizes and outputs of the settings,
-    drawn by a BatchRenderer on the engine's device (CPU engines: warp's CPU device), built
-    and warmed on the feed's own thread."""
+    drawn by a BatchRenderer on --camera-device, else on the engine's device (CPU engines:
+    warp's CPU device), built and warmed on the feed's own thread. On a device of its own the
+    renderer takes no turns with the engine (service/core/device_turns.py): nothing else
+    launches there."""
     batch = loop.batch
     mjm = batch.robot.mjm
     specs = camera_specs(mjm, settings.camera_size, settings.camera_outputs, settings.cameras)
-    device = batch.device_name if batch.device_name.startswith("cuda") else "cpu"
+    engine = batch.device_name if batch.device_name.startswith("cuda") else "cpu"
+    device = settings.camera_device or engine
     slots = min(settings.camera_batch, batch.nworld)
-    turns = getattr(batch, "device_turns", None)
+    shared = str(wp.get_device(device)) == str(wp.get_device(engine))
+    turns = getattr(batch, "device_turns", None) if shared else None
     return CameraFeed(loop, specs, lambda: BatchRenderer(mjm, specs, slots, device, turns))
