@@ -36,6 +36,7 @@ def _ray_batch(n: int) -> Batch:
 ENGINES: dict[str, Callable[[int], Batch]] = {
     "warp": lambda n: WorldBatch(n),
     "warp-sharded": lambda n: ShardedBatch(n, shards=2),
+    "warp-worker": lambda n: ShardedBatch(n, shards=1, local=False),  # the engine kept apart
     "warp-ray": _ray_batch,
     "mujoco": lambda n: NativeBatch(n, nthread=2),
 }

@@ -51,6 +51,36 @@ def test_reset_after_targets_in_the_same_tick_wins_on_a_worker_shard(pair):
     np.testing.assert_allclose(sharded.snapshot().target[5], sharded.home_target)
 
 
+def test_an_engine_kept_apart_steps_bit_identically_to_one_batch_in_this_process():
+    """local=False: every shard a worker (the engine when the cameras have a GPU of their own)."""
+    apart, single = ShardedBatch(NWORLD, shards=2, local=False), WorldBatch(NWORLD)
+    try:
+        assert not apart.health() and apart.spec == single.spec
+        rng = np.random.default_rng(9)
+        for tick in range(12):
+            worlds = rng.choice(NWORLD, size=2, replace=False)
+            targets = single.home_target + rng.uniform(-0.3, 0.3, size=(2, 7))
+            if tick == 6:
+                for b in (apart, single):
+                    b.reset(np.array([0, 5]))
+            for b in (apart, single):
+                b.apply_targets(worlds, targets)
+                b.step(2)
+        np.testing.assert_array_equal(apart.qpos(), single.qpos())
+        np.testing.assert_array_equal(apart.render_state(np.array([4, 1])), single.qpos()[[4, 1]])
+        a, b = apart.snapshot(), single.snapshot()
+        assert a.tick == b.tick == apart.tick == 24
+        np.testing.assert_array_equal(a.position, b.position)
+        state = apart.get_state()
+        assert state.tick == 24
+        apart.step(3)
+        apart.set_state(state)  # back in time: the count comes back with the state
+        assert apart.tick == 24
+        np.testing.assert_array_equal(apart.qpos(), single.qpos())
+    finally:
+        apart.close()
+
+
 def test_auto_shards_uses_cores_only_for_big_cpu_batches():
     assert auto_shards(1, "cpu") == 1
     assert auto_shards(4096, "cuda") == 1

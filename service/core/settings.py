@@ -53,6 +53,12 @@ class Settings(BaseSettings):
         le=256,
         description="warp: CPU worker processes (one per core), mujoco: threads; 0 = auto",
     )
+    engine_worker: bool = Field(
+        False,
+        description="warp: step the engine in a worker process of its own (always so when "
+        "--camera-device names another device); the server outlives an engine crash, and the "
+        "engine is rebuilt from its last state copy",
+    )
     ray: str | None = Field(
         None,
         description="put the shards on Ray actors: auto (the cluster `ray start` runs here), "
@@ -233,6 +239,19 @@ class Settings(BaseSettings):
             _cuda_device_exists(self.camera_device, "camera_device")
         return self
 
+    def engine_apart(self) -> bool:
+        """Whether the warp engine steps in a worker process of its own: asked for, or the
+        cameras draw on another device. Warp's default device is one per process, so a
+        renderer on cuda:1 and an engine on cuda:0 (or the CPU) cannot share one process."""
+        if self.engine != "warp" or self.ray:
+            return False  # native MuJoCo has no warp device; Ray's shards are apart already
+
+        def named(device: str) -> str:
+            return "cuda:0" if device == "cuda" else device
+
+        engine = named(self.device if self.device.startswith("cuda") else "cpu")
+        return self.engine_worker or named(self.camera_device or engine) != engine
+
     @staticmethod
     def _names(text: str) -> list[str]:
         return [p.strip() for p in text.split(",") if p.strip()]
@@ -241,6 +260,11 @@ class Settings(BaseSettings):
     def _ray_runs_the_warp_engine(self) -> Settings:
         if self.ray and self.engine != "warp":
             raise ValueError("ray: Ray actors run the warp engine only (use --engine warp)")
+        if self.engine_worker and (self.engine != "warp" or self.ray):
+            raise ValueError(
+                "engine_worker: a worker process holds the warp engine only, and not with "
+                "--ray (its actors are processes of their own already)"
+            )
         return self
 
     @model_validator(mode="after")

@@ -12,7 +12,8 @@ from service.core.settings import Settings
 
 def build_batch(s: Settings) -> Batch:
     """Native MuJoCo on every core (`--engine mujoco`), or MuJoCo Warp: on Ray actors
-    (`--ray`), split over CPU worker processes when it pays, or one batch."""
+    (`--ray`), in worker processes only (`Settings.engine_apart`: the cameras on another
+    device, or asked), split over CPU worker processes when it pays, or one batch."""
     scene = {"model_path": s.scene} if s.scene is not None else {}
     if s.engine == "mujoco":
         from service.engines.native import NativeBatch
@@ -38,6 +39,8 @@ def build_batch(s: Settings) -> Batch:
             return RayBatch(
                 s.worlds, s.shards, address=s.ray, checkpoint_s=s.ray_checkpoint_s, **kwargs
             )
+    if s.engine_apart():  # every shard in a worker: nothing of the engine in this process
+        return ShardedBatch(s.worlds, shards, local=False, **kwargs)
     if shards > 1:
         return ShardedBatch(s.worlds, shards, **kwargs)
     return WorldBatch(s.worlds, **kwargs)

@@ -14,6 +14,22 @@ from service.core.stopping import start_worker
 from service.engines.sharding import apply_and_step
 from service.engines.warp import WorldBatch
 
+# The Batch facts that are the same for every shard: the parent reads them from its local
+# shard, or (every shard a worker) from the first worker's ready message.
+FACTS = (
+    "robot",
+    "spec",
+    "control_hz",
+    "tick_dt",
+    "substeps",
+    "physics_dt",
+    "device_name",
+    "home_target",
+    "compile_s",
+    "capture_s",
+    "capture_error",
+)
+
 
 def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
     """A shard's process: build the batch, then serve step/snapshot/reset/targets requests."""
@@ -22,7 +38,9 @@ def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
     except Exception as exc:  # report instead of leaving the parent waiting
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         return
-    conn.send(("ready", batch.compile_s, batch.capture_s, batch.capture_error))
+    facts = {name: getattr(batch, name) for name in FACTS}
+    facts |= {"captured": batch.captured, "physics_shapes": batch.physics_shapes()}
+    conn.send(("ready", batch.compile_s, batch.capture_s, batch.capture_error, facts))
     while True:
         try:
             op, *args = conn.recv()
@@ -42,7 +60,8 @@ def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
         elif op == "snapshot":
             conn.send(batch.snapshot())
         elif op == "write_qpos":
-            batch.write_qpos(*args)
+            args[0].apply(batch)  # staged commands come first
+            batch.write_qpos(*args[1:])
         elif op == "qpos":
             conn.send((batch.qpos(), batch.qvel()))
         elif op == "stop":

@@ -1,19 +1,21 @@
-"""ShardedBatch: one batch of worlds split across CPU cores, behind WorldBatch's interface.
+"""ShardedBatch: one batch of worlds split across processes, behind WorldBatch's interface.
 
 Warp runs CPU kernels on one core, and two captured graphs replayed from two threads of one
 process crash warp 1.19 (seen here: a segfault), so the second core is used by a worker
 *process*. Shard 0 steps in the calling thread while shards 1.. step in their processes at the
 same time; commands and snapshots cross a pipe as small numpy arrays. Worlds are independent, so
 the result is bit-identical to one WorldBatch of the same size (tests/test_shards.py).
+
+With `local=False` every shard, shard 0 too, is a worker process: the engine then never runs in
+the caller's process. That is how the cameras get a GPU of their own (`--camera-device`): Warp's
+default device is one per process, so a renderer on cuda:1 and an engine on cuda:0 cannot share
+one. Losing and rebuilding workers is `shard_recovery.py`.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import logging
-import threading
-import time
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -23,39 +25,19 @@ from service.core.batch import Batch, Renderable, Restorable, StateWrite, Superv
 from service.core.types import BatchState, Snapshot
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
-from service.engines.shard_worker import ready_reply, spawn
+from service.engines.shard_recovery import WorkerRecovery
+from service.engines.shard_worker import FACTS, ready_reply, spawn
 from service.engines.sharding import (
-    NOTHING,
     ShardPlan,
     StagedCommands,
     join_snapshots,
     join_states,
     slice_state,
     stage_model,
-    with_model,
 )
 from service.engines.warp import WorldBatch
 
 log = logging.getLogger("armfleet.shards")
-
-# The Batch facts that are the same for every shard (read from the local one).
-_FACTS_OF_LOCAL = (
-    "spec",
-    "control_hz",
-    "tick_dt",
-    "substeps",
-    "physics_dt",
-    "device_name",
-    "home_target",
-    "compile_s",
-    "capture_s",
-    "capture_error",
-)
-
-# How often each worker shard's full state is copied into this process (after a step, on the
-# sim thread: a host copy of that shard's arrays), so that a lost shard's worlds resume from at
-# most this long ago instead of from home.
-STATE_COPY_PERIOD = 2.0
 
 # Below this many worlds per shard the pipe round trip (~0.1 ms) outweighs the second core.
 MIN_WORLDS_PER_SHARD = 16
@@ -68,64 +50,63 @@ def auto_shards(nworld: int, device: str) -> int:
     return max(1, min(usable_cores(), nworld // MIN_WORLDS_PER_SHARD))
 
 
-class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
-    """N worlds as k contiguous shards; shard 0 local, the rest in worker processes."""
+class ShardedBatch(HostMirror, WorkerRecovery, Batch, Restorable, Supervised, Renderable):
+    """N worlds as k contiguous shards; shard 0 local (unless `local=False`), the rest (or all)
+    in worker processes."""
 
-    def __init__(self, nworld: int, shards: int, **kwargs: Any) -> None:
+    def __init__(self, nworld: int, shards: int, local: bool = True, **kwargs: Any) -> None:
         self._plan = ShardPlan(nworld, shards)
         self._starts, self._sizes = self._plan.starts, self._plan.sizes
         self._kwargs = kwargs
+        self._first = 1 if local else 0  # the first shard held by a worker process
         self._conns: list[Connection] = []
         self._procs: list[Any] = []
-        for size in self._sizes[1:]:
+        for size in self._sizes[self._first :]:
             proc, conn = spawn(int(size), kwargs)
             self._conns.append(conn)
             self._procs.append(proc)
-        self._local = WorldBatch(int(self._sizes[0]), **kwargs)  # builds while workers build
-        for conn in self._conns:
-            reply = ready_reply(conn)
+        # builds while the workers build
+        self._local = WorldBatch(int(self._sizes[0]), **kwargs) if local else None
+        replies = [ready_reply(conn) for conn in self._conns]
+        for reply in replies:
             if reply[0] == "error":
                 self.close()
                 raise RuntimeError(f"shard worker failed to start: {reply[1]}")
         self.nworld = nworld
         self.shards = shards
-        self.robot = self._local.robot
-        for name in _FACTS_OF_LOCAL:  # every shard is built alike: the local one speaks for all
-            setattr(self, name, getattr(self._local, name))
+        # every shard is built alike: the local one, else the first worker, speaks for all
+        local_facts = {name: getattr(self._local, name) for name in FACTS} if local else {}
+        facts = local_facts or replies[0][-1]
+        for name in FACTS:
+            setattr(self, name, facts[name])
+        self._captured = bool(facts.get("captured", False))  # the local one's: its own
+        self._shapes = facts.get("physics_shapes", {})
         self._init_mirror(nworld)  # its tick and faults are the shards' own
         self._staged = StagedCommands(shards)
         # Losing a worker (killed, crashed): its worlds pause, showing their last state, while
         # the others go on; a new worker is built in the background and swapped in at a tick
-        # boundary with the commanded targets of its worlds (their state starts from home).
-        # Index i below is the shard number (1.. for workers); the lock guards these tables.
-        self._health_lock = threading.Lock()
-        self._alive = [True] * shards
-        self._problems: dict[int, str] = {}
-        self._replacements: dict[int, tuple[Any, Connection]] = {}
-        self._last_parts: dict[int, Snapshot] = {}
-        self._fault_base = [np.zeros(int(n), dtype=np.int64) for n in self._sizes]
-        self.restarts = 0
-        self._copies: dict[int, tuple[float, BatchState]] = {}  # shard → (when, its state)
+        # boundary with the commanded targets of its worlds (shard_recovery.py).
+        self._init_recovery()
 
     @property
     def captured(self) -> bool:
-        return self._local.captured
+        return self._local.captured if self._local is not None else self._captured
 
     @property
     def tick(self) -> int:
-        return self._local.tick
+        return self._local.tick if self._local is not None else self._tick
 
     def apply_targets(
         self, worlds: np.ndarray, targets: np.ndarray, velocities: np.ndarray | None = None
     ) -> None:
         """The local shard gets its targets now, worker shards with their next step."""
         parts = self._plan.split(self._command(worlds, targets, velocities))
-        if parts[0].size:
+        if self._local is not None and parts[0].size:
             vel = self._velocity[parts[0]]
             self._local.apply_targets(
                 parts[0], self._targets[parts[0]], vel if velocities is not None else None
             )
-        self._staged.targets_of(parts[1:], first=1)
+        self._staged.targets_of(parts[self._first :], first=self._first)
 
     def reset(self, worlds: np.ndarray) -> None:
         worlds = np.asarray(worlds, dtype=np.int64)
@@ -133,50 +114,53 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
             return
         self._home(worlds)
         parts = self._plan.split(worlds)
-        self._local.reset(parts[0])
-        self._staged.resets_of(parts[1:], first=1)
+        if self._local is not None:
+            self._local.reset(parts[0])
+        self._staged.resets_of(parts[self._first :], first=self._first)
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance all live shards together; returns the (global) worlds reset for faults."""
         self._swap_in()
         sent = []
-        for i, conn in enumerate(self._conns, start=1):
+        for i in self._workers():
             if not self._alive[i]:
                 continue  # its commands stay staged (and in _targets) for the new worker
             shipment = self._staged.ship(i, self._targets, self._velocity, self._starts[i])
             try:
-                conn.send(("step", shipment, ticks))
+                self._conn(i).send(("step", shipment, ticks))
             except OSError:
                 self._lost(i, self._exit_reason(i))
                 continue
             sent.append(i)
-        faulted = [self._local.step(ticks)]
+        faulted = [self._local.step(ticks)] if self._local is not None else []
         for i in sent:
             try:
-                faulted.append(self._conns[i - 1].recv() + self._starts[i])
+                faulted.append(self._conn(i).recv() + self._starts[i])
             except (EOFError, OSError):
                 self._lost(i, self._exit_reason(i))
+        if self._local is None and sent:
+            self._tick += ticks  # every shard a worker: counted here, while any of them steps
         self._copy_states(sent)
-        out = np.concatenate(faulted)
+        out = np.concatenate(faulted) if faulted else np.zeros(0, dtype=np.int64)
         self._home(out)
         return out
 
     def snapshot(self) -> Snapshot:
         self._swap_in()
         asked = []
-        for i, conn in enumerate(self._conns, start=1):
+        for i in self._workers():
             if self._alive[i]:
                 try:
-                    conn.send(("snapshot",))
+                    self._conn(i).send(("snapshot",))
                     asked.append(i)
                 except OSError:
                     self._lost(i, self._exit_reason(i))
-        parts = [self._local.snapshot()]
-        for i in range(1, self.shards):
+        parts = [self._local.snapshot()] if self._local is not None else []
+        for i in self._workers():
             part = None
             if i in asked:
                 try:
-                    part = self._conns[i - 1].recv()
+                    part = self._conn(i).recv()
                 except (EOFError, OSError):
                     self._lost(i, self._exit_reason(i))
             if part is None:  # lost: its worlds show their last state until the rebuild
@@ -187,32 +171,33 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
         faults = np.concatenate(
             [p.faults + b for p, b in zip(parts, self._fault_base, strict=True)]
         )
-        return dataclasses.replace(
-            join_snapshots(parts, parts[0].tick, self._targets), faults=faults
-        )
+        return dataclasses.replace(join_snapshots(parts, self.tick, self._targets), faults=faults)
 
     def physics_shapes(self) -> dict[str, tuple[int, ...]]:
-        return self._local.physics_shapes()
+        return self._local.physics_shapes() if self._local is not None else dict(self._shapes)
 
     def get_state(self) -> BatchState:
         """Every shard's state (staged commands applied first), joined in world order."""
-        for i, conn in enumerate(self._conns, start=1):
+        for i in self._workers():
             shipment = self._staged.ship(i, self._targets, self._velocity, self._starts[i])
-            conn.send(("get_state", shipment))
-        parts = [self._local.get_state()] + [conn.recv() for conn in self._conns]
-        return join_states(parts, self._targets, self._model_state())
+            self._conn(i).send(("get_state", shipment))
+        parts = [self._local.get_state()] if self._local is not None else []
+        parts += [conn.recv() for conn in self._conns]
+        state = join_states(parts, self._targets, self._model_state())
+        return dataclasses.replace(state, tick=self.tick)
 
     def set_state(self, state: BatchState) -> None:
         """Split `state` over the shards; checked whole first so no shard is half-restored."""
         state.check_compatible(self.nworld, self.physics_shapes())
         model = self._check_model_state(state)
         self._copies.clear()  # copies of the replaced timeline must not come back after a loss
-        for i in range(1, self.shards):
+        for i in self._workers():
             self._staged.take(i)  # staged commands belonged to the state being replaced
         bounds = [*self._starts.tolist(), self.nworld]
-        for i, conn in enumerate(self._conns, start=1):
-            conn.send(("set_state", slice_state(state, bounds[i], bounds[i + 1])))
-        self._local.set_state(slice_state(state, 0, bounds[1]))
+        for i in self._workers():
+            self._conn(i).send(("set_state", slice_state(state, bounds[i], bounds[i + 1])))
+        if self._local is not None:
+            self._local.set_state(slice_state(state, 0, bounds[1]))
         errors = [err for err in (conn.recv() for conn in self._conns) if err]
         if errors:  # cannot happen after the check above; say so loudly if it does
             raise RuntimeError(f"shard refused a checked state: {errors[0]}")
@@ -227,13 +212,14 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
     def _gather_qpos(self) -> tuple[np.ndarray, np.ndarray]:
         for conn in self._conns:
             conn.send(("qpos",))
-        parts = [(self._local.qpos(), self._local.qvel())] + [c.recv() for c in self._conns]
+        parts = [(self._local.qpos(), self._local.qvel())] if self._local is not None else []
+        parts += [c.recv() for c in self._conns]
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
     def write_state(self, write: StateWrite) -> None:
         """The local shard's now; a worker's with its next step, after its resets."""
         shard, local = self._plan.locate(write.world)
-        if shard == 0:
+        if shard == 0 and self._local is not None:
             self._local.write_state(write.moved(local))
         else:
             self._staged.state(shard, write.moved(local))
@@ -249,132 +235,12 @@ class ShardedBatch(HostMirror, Batch, Restorable, Supervised, Renderable):
 
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         shard, local = self._plan.locate(world)
-        if shard == 0:
+        if shard == 0 and self._local is not None:
             self._local.write_qpos(local, qpos)
         else:
-            self._conns[shard - 1].send(("write_qpos", local, qpos))
-
-    # -- losing and rebuilding workers ------------------------------------------------------
-
-    def health(self) -> list[str]:
-        """Problems now (empty when every shard runs); notices dead workers between ticks too.
-
-        Cheap (a non-blocking wait per worker), so a watchdog may call it often from any thread.
-        """
-        for i, proc in enumerate(self._procs, start=1):
-            if self._alive[i] and proc.exitcode is not None:
-                self._lost(i, self._exit_reason(i))
-        with self._health_lock:
-            return [self._problems[i] for i in sorted(self._problems)]
-
-    def _exit_reason(self, i: int) -> str:
-        proc = self._procs[i - 1]
-        proc.join(timeout=0.5)
-        code = proc.exitcode
-        if code is None:
-            return "its pipe closed"
-        return f"killed by signal {-code}" if code < 0 else f"exited with status {code}"
-
-    def _lost(self, i: int, why: str) -> None:
-        """Mark worker shard i dead and start building its replacement (once)."""
-        with self._health_lock:
-            if not self._alive[i]:
-                return
-            self._alive[i] = False
-            lo, hi = int(self._starts[i]), int(self._starts[i] + self._sizes[i] - 1)
-            self._problems[i] = f"shard {i} (worlds {lo}..{hi}) lost: {why}; rebuilding"
-        log.error("shard %d (worlds %d..%d) lost: %s; rebuilding it", i, lo, hi, why)
-        threading.Thread(
-            target=self._rebuild, args=(i,), name=f"armfleet-rebuild-{i}", daemon=True
-        ).start()
-
-    def _rebuild(self, i: int) -> None:
-        """Build a new worker for shard i (off the sim thread); it is swapped in by _swap_in."""
-        for attempt in range(1, 4):
-            proc, conn = spawn(int(self._sizes[i]), self._kwargs)
-            reply = ready_reply(conn)
-            if reply[0] == "ready":
-                with self._health_lock:
-                    self._replacements[i] = (proc, conn)
-                return
-            proc.kill()
-            with self._health_lock:
-                self._problems[i] = f"shard {i} rebuild attempt {attempt} failed: {reply[1]}"
-            time.sleep(1.0)
-        log.error("shard %d could not be rebuilt: %s", i, self._problems.get(i))
-
-    def _copy_states(self, shards: list[int]) -> None:
-        """Refresh the state copy of every live worker shard whose copy is older than the period."""
-        now = time.monotonic()
-        for i in shards:
-            if not self._alive[i] or now - self._copies.get(i, (-1e9, None))[0] < STATE_COPY_PERIOD:
-                continue
-            try:
-                self._conns[i - 1].send(("get_state", NOTHING))
-                self._copies[i] = (now, self._conns[i - 1].recv())
-            except (EOFError, OSError):
-                self._lost(i, self._exit_reason(i))
-
-    def _resume(self, i: int, conn: Connection) -> bool:
-        """Put shard i's last state copy (with today's targets) into its new worker."""
-        copy = self._copies.get(i)
-        if copy is None:
-            return False
-        lo, hi = int(self._starts[i]), int(self._starts[i] + self._sizes[i])
-        physics = with_model(copy[1].physics, self._model_state(), lo, hi)
-        state = dataclasses.replace(copy[1], targets=self._targets[lo:hi].copy(), physics=physics)
-        conn.send(("set_state", state))
-        error = conn.recv()
-        if error:
-            log.error("shard %d: its state copy did not fit the new worker: %s", i, error)
-            return False
-        return True
-
-    def _swap_in(self) -> None:
-        """Put rebuilt workers in place at a tick boundary (sim thread), targets restored."""
-        if not self._replacements:
-            return
-        with self._health_lock:
-            ready, self._replacements = self._replacements, {}
-        for i, (proc, conn) in ready.items():
-            old_conn, old_proc = self._conns[i - 1], self._procs[i - 1]
-            with contextlib.suppress(OSError):
-                old_conn.close()
-            if old_proc.is_alive():
-                old_proc.kill()
-            self._conns[i - 1], self._procs[i - 1] = conn, proc
-            # Its worlds resume from the last state copy (else from home) with the targets
-            # commanded since, and the loss counts as one fault for each of them.
-            self._staged.take(i)  # staged resets are moot: the worlds restart anyway
-            try:
-                resumed = self._resume(i, conn)
-            except (EOFError, OSError):
-                resumed = False
-            self._staged.targets(i, np.arange(int(self._sizes[i]), dtype=np.int64))
-            last = self._last_parts.get(i)
-            restarted_at = self._copies[i][1].faults if resumed else 0
-            if last is not None:
-                self._fault_base[i] = self._fault_base[i] + last.faults + 1 - restarted_at
-            if not resumed:
-                self._copies.pop(i, None)  # a copy of the old worker's counts no longer fits
-            with self._health_lock:
-                self._alive[i] = True
-                self._problems.pop(i, None)
-                self.restarts += 1
-            how = "from its state copy" if resumed else "from home"
-            log.warning("shard %d rebuilt and back in the batch; its worlds resume %s", i, how)
+            # what is staged for it (a reset, say) goes first, as it would in this process
+            shipment = self._staged.ship(shard, self._targets, self._velocity, self._starts[shard])
+            self._conn(shard).send(("write_qpos", shipment, local, qpos))
 
     def close(self) -> None:
-        with self._health_lock:
-            self._replacements, spare = {}, self._replacements
-        for proc, conn in spare.values():
-            with contextlib.suppress(OSError):
-                conn.send(("stop",))
-            proc.kill()
-        for conn in self._conns:
-            with contextlib.suppress(BrokenPipeError, OSError):
-                conn.send(("stop",))
-        for proc in self._procs:
-            proc.join(timeout=5)
-            if proc.is_alive():
-                proc.kill()
+        self._stop_workers()
