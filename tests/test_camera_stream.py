@@ -162,10 +162,40 @@ def test_a_tick_is_pushed_once_but_pulled_as_often_as_asked() -> None:
         reader, got = Reader(np.array([0]), pull=pull), 0
         for _ in range(2):
             reader.ask()
-            assert reader.ready()
+            assert reader.ready(0.0, 1 / 30)
             reader._drawing += 1  # as the clock does when it asks for the picture
             reader.asked -= 1
             reader._drawn(shot)
             if reader._next is not None:  # the sender takes it
                 reader._next, got = None, got + 1
         assert got == sent, pull
+
+
+def test_a_reader_whose_send_is_young_stays_ready_while_a_picture_waits() -> None:
+    """A drawn picture waiting for the sender holds drawing back only when the sender has been
+    on its message for a period or more (a slow reader); a young send is taken over soon, and
+    skipping the instant would cost a picture every time sends and draws overlap."""
+    import asyncio
+
+    from service.api.camera_clock import Reader
+    from service.core.camera_feed import Shot
+    from service.core.cameras import CameraSpec
+
+    period = 1 / 30
+
+    async def run() -> None:
+        reader = Reader(np.array([0]), pull=False)
+        reader._drawing = 1
+        reader._drawn(Shot(1, CameraSpec.__new__(CameraSpec), np.array([0]), None, None, None))
+        assert not reader.ready(0.0, period)  # waiting, and nobody sending: the sender is away
+        await reader.take()  # the sender took tick 1 and sends it
+        began = reader._sending_since
+        assert began is not None
+        reader._drawing = 1
+        reader._drawn(Shot(2, CameraSpec.__new__(CameraSpec), np.array([0]), None, None, None))
+        assert reader.ready(began + 0.5 * period, period)  # young send: draw on
+        assert not reader.ready(began + 1.5 * period, period)  # long on one message: slow
+        reader._drawing = 3
+        assert not reader.ready(began, period)  # AHEAD bounds it all the same
+
+    asyncio.run(run())

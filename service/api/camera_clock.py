@@ -31,10 +31,11 @@ class Reader:
     """One stream's place on a clock: the worlds it reads, and pictures drawing or drawn for
     it beyond the one it is sending: at most AHEAD (push; drawing a picture of 16,384 worlds
     takes longer than a period at 30 Hz, so with one ahead every other instant was missed) or
-    what it asked (pull), and none while a drawn one waits for the sender (a slow reader holds
-    back its own drawing). A picture drawn while an older one still waits replaces it: newest
-    only, so a slow reader gets fresh pictures, not a backlog; a push reader never gets the
-    same tick twice."""
+    what it asked (pull), and none while a drawn one waits for a sender that has been busy
+    for a period or more (a slow reader holds back its own drawing; one whose send is young
+    takes the waiting picture soon, long before another is drawn). A picture drawn while an
+    older one still waits replaces it: newest only, so a slow reader gets fresh pictures, not
+    a backlog; a push reader never gets the same tick twice."""
 
     def __init__(self, worlds: np.ndarray, pull: bool) -> None:
         self.worlds = np.asarray(worlds, dtype=np.int64)
@@ -43,11 +44,14 @@ class Reader:
         self._drawing = 0  # pictures of ours being drawn
         self._newest = -1  # the tick of the newest picture handed to the sender or waiting
         self._next: Shot | BaseException | None = None  # drawn, not yet taken by the sender
+        self._sending_since: float | None = None  # when the sender took the one it sends
         self._wake = asyncio.Event()
 
-    def ready(self) -> bool:
+    def ready(self, now: float, period: float) -> bool:
         if self._next is not None:  # the sender has not taken the last one: it is busy
-            return False
+            since = self._sending_since
+            if self.pull or since is None or now - since >= period:
+                return False  # and slow (or pulling): nothing more is drawn for it
         if self.pull:
             return self.asked > 0 and self._drawing == 0
         return self._drawing < AHEAD
@@ -57,11 +61,14 @@ class Reader:
         self.asked += 1
 
     async def take(self) -> Shot:
-        """The next picture for this reader (its own worlds); raises what drawing raised."""
+        """The next picture for this reader (its own worlds); raises what drawing raised.
+        From then until it asks for the next, the reader counts as sending it."""
+        self._sending_since = None
         while self._next is None:
             self._wake.clear()
             await self._wake.wait()
         got, self._next = self._next, None
+        self._sending_since = time.monotonic()
         if isinstance(got, BaseException):
             raise got
         return got
@@ -108,7 +115,8 @@ class CameraClock:
                     await asyncio.wait_for(self._wake.wait(), max(0.0, at - now))
                     # woken by a pull request: still on the grid (the rate is a ceiling)
                     await asyncio.sleep(max(0.0, at - time.monotonic()))
-                ready = [r for r in self.readers if r.ready()]
+                now = time.monotonic()
+                ready = [r for r in self.readers if r.ready(now, self.period)]
                 if not ready:
                     continue
                 for r in ready:

@@ -62,6 +62,8 @@ def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
         elif op == "write_qpos":
             args[0].apply(batch)  # staged commands come first
             batch.write_qpos(*args[1:])
+        elif op == "render_state":
+            conn.send(batch.render_state(args[0]))
         elif op == "qpos":
             conn.send((batch.qpos(), batch.qvel()))
         elif op == "stop":
