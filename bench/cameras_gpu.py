@@ -1,6 +1,6 @@
 """Section 30: cameras on a GPU: every world's wrist camera streamed at 30 Hz, beside the renderer.
 
-On one CUDA device, in one run: (1) the renderer alone: MuJoCo Warp's batch renderer, N = 16,384
+On the CUDA device, in one run: (1) the renderer alone: MuJoCo Warp's batch renderer, N = 16,384
 worlds' wrist camera at 64x64 RGB, timed to completion on the device (BVH refit + render; also with
 the kinematics and camera poses the service recomputes), then the service's `BatchRenderer.render`
 (state in, pixels out to the host); (2) `armfleet serve` with N worlds, the wrist camera at 64x64
@@ -8,7 +8,9 @@ RGB, `--camera-batch N`, and clients of `/v1/ws/cameras?worlds=..&rate=30&format
 asking every world, then 8 client processes asking an eighth each; no compression), in realtime
 then fast mode: ticks/s and real-time factor with nobody looking, then while the stream runs,
 pictures of every world delivered a second and their ratio to min(30, the renderer alone's
-batches/s); (3) the largest batch that fits: per resolution, the worlds doubled from N
+batches/s); on a machine of two GPUs or more, also the 8-client streams with the cameras on
+the second GPU (`--camera-device cuda:1`; the engine steps in a process of its own on the
+first); (3) the largest batch that fits: per resolution, the worlds doubled from N
 until building or drawing the render batch fails (a child process per resolution).
 
 Run it: ``armfleet bench --section 30 --device cuda`` (``--quick``: 1,024 worlds, shorter).
@@ -38,6 +40,9 @@ CAMERA = "wrist"
 FIT_SIZES = ((64, 64), (128, 128), (256, 256))
 FIT_MAX_WORLDS = 1 << 22  # the doubling stops here even when memory is left
 STREAMS = (("realtime", 1), ("realtime", 8), ("fast", 8))  # (mode, client processes)
+# On a machine of two GPUs or more, also these, with the cameras on the second GPU (the engine
+# then steps in a worker process of its own on the first: `Settings.engine_apart`)
+APART_STREAMS = (("realtime", 8, "cuda:1"), ("fast", 8, "cuda:1"))
 # ARMFLEET_BENCH_CLIENT=websockets: the stream clients use the websockets sync client (else aiohttp)
 # ARMFLEET_BENCH_FITS=0: take the largest fits from the last run's file instead of searching
 # ARMFLEET_BENCH_STREAMS=realtime:8,fast:8: only these streams (mode:clients), to save device time;
@@ -85,6 +90,15 @@ def _build(mjm: Any, spec: Any, n: int, device: str) -> tuple[Any, Any, Any]:
             mjm, nworld=n, cam_res=[(spec.width, spec.height)], cam_active=[spec.id], **outputs
         )
     return m, d, rc
+
+
+def _cuda_count() -> int:
+    """CUDA devices on this machine (0 where warp finds none)."""
+    import warp as wp
+
+    with contextlib.suppress(Exception):
+        return int(wp.get_cuda_device_count())
+    return 0
 
 
 def _rate(t: common.Timing) -> dict[str, float]:
@@ -576,12 +590,13 @@ def cameras_gpu(ctx: Context) -> Result:
     best = min(RATE, alone["render"]["batches_per_s"]) if alone else None
     streams = []
     chosen = os.environ.get("ARMFLEET_BENCH_STREAMS")
-    streams_asked = STREAMS
+    streams_asked: tuple[tuple[str, Any, str], ...] = tuple((m, c, "") for m, c in STREAMS)
+    if _cuda_count() >= 2:
+        streams_asked += APART_STREAMS
     if chosen:
         pairs = (x.partition(":") for x in chosen.split(","))
         streams_asked = tuple((m, *c.partition("@")[::2]) for m, _, c in pairs)
-    for mode, clients, *on in streams_asked:
-        camera_device = on[0] if on else ""
+    for mode, clients, camera_device in streams_asked:
         try:
             s = stream(ctx, n, mode, int(clients), window, camera_device)
             s["ratio"] = s["streaming"]["frames_per_s"] / best if best else None
