@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from service.core.types import BatchState, Snapshot
+from service.engines.shard_arrays import ArrayReceiver
 from service.engines.shard_worker import ready_reply, spawn
 from service.engines.sharding import NOTHING, ShardPlan, StagedCommands, with_model
 
@@ -56,10 +57,16 @@ class WorkerRecovery:
         self._fault_base = [np.zeros(int(n), dtype=np.int64) for n in self._sizes]
         self.restarts = 0
         self._copies: dict[int, tuple[float, BatchState]] = {}  # shard → (when, its state)
+        self._receivers: dict[int, ArrayReceiver] = {}  # shard → its worker's shared block
 
     def _conn(self, i: int) -> Connection:
         """Worker shard i's pipe."""
         return self._conns[i - self._first]
+
+    def _recv_big(self, i: int) -> Any:
+        """Worker shard i's reply of arrays (a snapshot, a state), through shared memory."""
+        receiver = self._receivers.setdefault(i, ArrayReceiver())
+        return receiver.recv(self._conn(i))
 
     def _workers(self) -> range:
         """The shard numbers held by worker processes."""
@@ -120,7 +127,7 @@ class WorkerRecovery:
                 continue
             try:
                 self._conn(i).send(("get_state", NOTHING))
-                self._copies[i] = (now, self._conn(i).recv())
+                self._copies[i] = (now, self._recv_big(i))
             except (EOFError, OSError):
                 self._lost(i, self._exit_reason(i))
 
@@ -191,3 +198,5 @@ class WorkerRecovery:
             proc.join(timeout=5)
             if proc.is_alive():
                 proc.kill()
+        for receiver in getattr(self, "_receivers", {}).values():
+            receiver.close()

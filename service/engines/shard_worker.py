@@ -11,6 +11,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from service.core.stopping import start_worker
+from service.engines.shard_arrays import ArraySender
 from service.engines.sharding import apply_and_step
 from service.engines.warp import WorldBatch
 
@@ -41,6 +42,15 @@ def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
     facts = {name: getattr(batch, name) for name in FACTS}
     facts |= {"captured": batch.captured, "physics_shapes": batch.physics_shapes()}
     conn.send(("ready", batch.compile_s, batch.capture_s, batch.capture_error, facts))
+    big = ArraySender()  # snapshots and states go through shared memory (shard_arrays.py)
+    try:
+        _serve(conn, batch, big)
+    finally:
+        big.close()
+
+
+def _serve(conn: Connection, batch: WorldBatch, big: ArraySender) -> None:
+    """Answer the parent's requests until it says stop or goes."""
     while True:
         try:
             op, *args = conn.recv()
@@ -50,7 +60,7 @@ def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
             conn.send(apply_and_step(batch, *args))
         elif op == "get_state":
             args[0].apply(batch)  # staged commands are part of the state
-            conn.send(batch.get_state())
+            big.send(conn, batch.get_state())
         elif op == "set_state":
             try:
                 batch.set_state(args[0])
@@ -58,7 +68,7 @@ def worker(conn: Connection, nworld: int, kwargs: dict[str, Any]) -> None:
             except ValueError as exc:
                 conn.send(str(exc))
         elif op == "snapshot":
-            conn.send(batch.snapshot())
+            big.send(conn, batch.snapshot())
         elif op == "write_qpos":
             args[0].apply(batch)  # staged commands come first
             batch.write_qpos(*args[1:])

@@ -160,7 +160,7 @@ class ShardedBatch(HostMirror, WorkerRecovery, Batch, Restorable, Supervised, Re
             part = None
             if i in asked:
                 try:
-                    part = self._conn(i).recv()
+                    part = self._recv_big(i)
                 except (EOFError, OSError):
                     self._lost(i, self._exit_reason(i))
             if part is None:  # lost: its worlds show their last state until the rebuild
@@ -182,7 +182,7 @@ class ShardedBatch(HostMirror, WorkerRecovery, Batch, Restorable, Supervised, Re
             shipment = self._staged.ship(i, self._targets, self._velocity, self._starts[i])
             self._conn(i).send(("get_state", shipment))
         parts = [self._local.get_state()] if self._local is not None else []
-        parts += [conn.recv() for conn in self._conns]
+        parts += [self._recv_big(i) for i in self._workers()]
         state = join_states(parts, self._targets, self._model_state())
         return dataclasses.replace(state, tick=self.tick)
 
