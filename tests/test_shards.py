@@ -23,18 +23,22 @@ def pair():
     sharded.close()
 
 
+def _drive_alike(batches, seed: int, ticks: int, k: int, step: int, resets: list[int]) -> None:
+    """The same random targets for k worlds a tick into every batch, `resets` reset halfway."""
+    rng = np.random.default_rng(seed)
+    for tick in range(ticks):
+        worlds = rng.choice(NWORLD, size=k, replace=False)
+        targets = batches[0].home_target + rng.uniform(-0.3, 0.3, size=(k, 7))
+        for b in batches:
+            if tick == ticks // 2:
+                b.reset(np.array(resets))
+            b.apply_targets(worlds, targets)
+            b.step(step)
+
+
 def test_sharded_worlds_step_bit_identically_to_one_batch(pair):
     sharded, single = pair
-    rng = np.random.default_rng(5)
-    for tick in range(40):
-        worlds = rng.choice(NWORLD, size=3, replace=False)  # spans both shards
-        targets = single.home_target + rng.uniform(-0.3, 0.3, size=(3, 7))
-        if tick == 20:
-            for b in (sharded, single):
-                b.reset(np.array([1, 4]))
-        for b in (sharded, single):
-            b.apply_targets(worlds, targets)
-            b.step(1)
+    _drive_alike(pair, seed=5, ticks=40, k=3, step=1, resets=[1, 4])  # 3 worlds span both shards
     np.testing.assert_array_equal(sharded.qpos(), single.qpos())
     asked = np.array([5, 0, 3, 4])  # both shards, out of order: rows come back as asked
     np.testing.assert_array_equal(sharded.render_state(asked), single.qpos()[asked])
@@ -58,16 +62,7 @@ def test_an_engine_kept_apart_steps_bit_identically_to_one_batch_in_this_process
     apart, single = ShardedBatch(NWORLD, shards=2, local=False), WorldBatch(NWORLD)
     try:
         assert not apart.health() and apart.spec == single.spec
-        rng = np.random.default_rng(9)
-        for tick in range(12):
-            worlds = rng.choice(NWORLD, size=2, replace=False)
-            targets = single.home_target + rng.uniform(-0.3, 0.3, size=(2, 7))
-            if tick == 6:
-                for b in (apart, single):
-                    b.reset(np.array([0, 5]))
-            for b in (apart, single):
-                b.apply_targets(worlds, targets)
-                b.step(2)
+        _drive_alike((apart, single), seed=9, ticks=12, k=2, step=2, resets=[0, 5])
         np.testing.assert_array_equal(apart.qpos(), single.qpos())
         np.testing.assert_array_equal(apart.render_state(np.array([4, 1])), single.qpos()[[4, 1]])
         a, b = apart.snapshot(), single.snapshot()

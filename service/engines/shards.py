@@ -15,7 +15,6 @@ one. Losing and rebuilding workers is `shard_recovery.py`.
 from __future__ import annotations
 
 import dataclasses
-import logging
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -36,8 +35,6 @@ from service.engines.sharding import (
     stage_model,
 )
 from service.engines.warp import WorldBatch
-
-log = logging.getLogger("armfleet.shards")
 
 # Below this many worlds per shard the pipe round trip (~0.1 ms) outweighs the second core.
 MIN_WORLDS_PER_SHARD = 16
@@ -79,7 +76,8 @@ class ShardedBatch(HostMirror, WorkerRecovery, Batch, Restorable, Supervised, Re
         facts = local_facts or replies[0][-1]
         for name in FACTS:
             setattr(self, name, facts[name])
-        self._captured = bool(facts.get("captured", False))  # the local one's: its own
+        # what a local shard answers itself (the properties below), a worker said when ready
+        self._captured = bool(facts.get("captured", False))
         self._shapes = facts.get("physics_shapes", {})
         self._init_mirror(nworld)  # its tick and faults are the shards' own
         self._staged = StagedCommands(shards)
