@@ -26,11 +26,7 @@ class _Contiguous(pickle.Pickler):
     buffer) as a contiguous copy, which pickle would otherwise copy in band, byte by byte."""
 
     def reducer_override(self, obj: Any) -> Any:
-        if (
-            isinstance(obj, np.ndarray)
-            and not obj.flags.c_contiguous
-            and obj.dtype.hasobject is False
-        ):
+        if isinstance(obj, np.ndarray) and not obj.flags.c_contiguous and not obj.dtype.hasobject:
             return np.ascontiguousarray, (np.ascontiguousarray(obj),)
         return NotImplemented
 

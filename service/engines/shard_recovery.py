@@ -57,7 +57,8 @@ class WorkerRecovery:
         self._fault_base = [np.zeros(int(n), dtype=np.int64) for n in self._sizes]
         self.restarts = 0
         self._copies: dict[int, tuple[float, BatchState]] = {}  # shard → (when, its state)
-        self._receivers: dict[int, ArrayReceiver] = {}  # shard → its worker's shared block
+        # shard → its worker's shared block (a rebuilt worker's new block is opened by name)
+        self._receivers = {i: ArrayReceiver() for i in self._workers()}
 
     def _conn(self, i: int) -> Connection:
         """Worker shard i's pipe."""
@@ -65,8 +66,7 @@ class WorkerRecovery:
 
     def _recv_big(self, i: int) -> Any:
         """Worker shard i's reply of arrays (a snapshot, a state), through shared memory."""
-        receiver = self._receivers.setdefault(i, ArrayReceiver())
-        return receiver.recv(self._conn(i))
+        return self._receivers[i].recv(self._conn(i))
 
     def _workers(self) -> range:
         """The shard numbers held by worker processes."""
