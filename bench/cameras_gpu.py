@@ -55,8 +55,8 @@ FITS_BEFORE = Path(__file__).parent / "results" / "cameras_gpu_cuda.json"
 
 def _mjm_and_spec(width: int, height: int) -> tuple[Any, Any]:
     """The service's scene model and its wrist camera at width x height, RGB only."""
-    from service.core.cameras import camera_specs
-    from service.core.robot import load_robot
+    from service.core.cameras.catalog import camera_specs
+    from service.core.sim.robot import load_robot
 
     mjm = load_robot().mjm
     specs = camera_specs(mjm, f"{width}x{height}", "rgb")

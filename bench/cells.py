@@ -73,7 +73,7 @@ def _build(engine: str, n: int) -> Any:
 
 def stepping(engine: str, n: int, windows: int, ticks: int) -> dict[str, Any]:
     """Ticks/s of the shared model and of every parameter batched, alternating windows."""
-    from service.core.batch import TickWrites
+    from service.core.sim.batch import TickWrites
 
     shared, batched = _build(engine, n), _build(engine, n)
     t0 = time.perf_counter()
@@ -203,7 +203,7 @@ def step_cost(scenes: dict[str, str | None], n: int, windows: int, ticks: int) -
 def randomize_draw(n: int) -> dict[str, Any]:
     """Draw and validate a randomisation of `n` worlds (no engine stepped: the command alone)."""
     from service.core.commands.randomize import Randomize
-    from service.core.robot import load_robot
+    from service.core.sim.robot import load_robot
 
     robot = load_robot()
     batch = SimpleNamespace(robot=robot, spec=robot.spec, nworld=n)

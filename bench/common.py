@@ -22,7 +22,7 @@ from typing import Any
 
 import httpx
 
-from service.core.physics import DEFAULT_PHYSICS_DT
+from service.core.sim.physics import DEFAULT_PHYSICS_DT
 from service.engines.cores import usable_cores
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"

@@ -83,8 +83,8 @@ class _Rollout:
         import numpy as np
         from mujoco import rollout
 
-        from service.core.physics import configure
-        from service.core.robot import load_robot
+        from service.core.sim.physics import configure
+        from service.core.sim.robot import load_robot
 
         robot = load_robot()
         self.mjm = mjm = robot.mjm
@@ -199,7 +199,9 @@ def engines(ctx: Context) -> Result:
                     out[f"{engine}_service"] = asyncio.run(
                         _served_vs_rollout(server, rollout, rounds, window, block_s)
                     )
-                    if engine == "mujoco":  # the same server, binary frames (service/core/wire.py)
+                    if (
+                        engine == "mujoco"
+                    ):  # the same server, binary frames (service/core/streams/wire.py)
                         out["mujoco_service_binary"] = asyncio.run(
                             _served_vs_rollout(server, rollout, rounds, window, block_s, "binary")
                         )
@@ -260,7 +262,7 @@ def engines(ctx: Context) -> Result:
 
 
 def _default_step() -> tuple[int, float]:
-    from service.core.physics import tick_timing
+    from service.core.sim.physics import tick_timing
 
     return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
 
@@ -268,7 +270,7 @@ def _default_step() -> tuple[int, float]:
 @section(12, "physics_step", "Physics step: before (2.083 ms) vs today's default, engine alone")
 def physics_step(ctx: Context) -> Result:
     """Each engine alone at the old and the new step: ticks/s and 60 Hz worlds that rate holds."""
-    from service.core.physics import tick_timing
+    from service.core.sim.physics import tick_timing
 
     sizes = ctx.sizes((64, 1024), (64,))
     block_s, rounds = ctx.pick((1.0, 5), (0.3, 2))

@@ -34,7 +34,7 @@ def _build(engine: str, n: int, device: str) -> Any:
 
 def _frame(batch: Any, ids: np.ndarray, entities: bool) -> tuple[float, float, float]:
     """One frame of `ids`: seconds on the sim thread, for JSON and for binary serialisation."""
-    from service.core import entity_frames, frames
+    from service.core.streams import entity_frames, frames
 
     t0 = time.perf_counter()
     data = frames.pack(batch, ids, json=True)

@@ -156,7 +156,7 @@ def recording(ctx: Context) -> Result:
 
 
 def _substeps(ctx: Context) -> int:
-    from service.core.physics import DEFAULT_PHYSICS_DT, tick_timing
+    from service.core.sim.physics import DEFAULT_PHYSICS_DT, tick_timing
 
     return tick_timing(60.0, DEFAULT_PHYSICS_DT)[0]
 

@@ -161,9 +161,9 @@ def rate(batch: Any, seconds: float = 3.0) -> dict[str, float]:
 
 def record_and_replay(mode: str, nworld: int, path: Path) -> dict[str, Any]:
     """Record `nworld` worlds driven through the control layer, replay on the same GPU."""
-    from service.core.control import Control
-    from service.core.loop import SimLoop
-    from service.core.types import Mode
+    from service.core.commands.control import Control
+    from service.core.sim.loop import SimLoop
+    from service.core.sim.types import Mode
     from service.persistence.recorder import Recorder
     from service.persistence.replay import replay
 

@@ -59,7 +59,7 @@ DESCRIPTIONS = {
 
 def physics_dt() -> tuple[int, float]:
     """(substeps, physics_dt) of the engine's defaults, exactly as WorldBatch derives them."""
-    from service.core.physics import tick_timing
+    from service.core.sim.physics import tick_timing
 
     return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
 
@@ -127,14 +127,14 @@ def bench_engine_cores(nworld: int, device: str, min_time: float, warmup_time: f
 def engine_model(device: str = "cpu"):
     """(MjModel, home key id) configured exactly as the engine configures its own.
 
-    Both engines load the robot and set their options with `service.core.physics.configure` at
+    Both engines load the robot and set their options with `service.core.sim.physics.configure` at
     the default step: doing the same here keeps the baselines on the same physics whatever the
     engine changes, without building (and on a GPU run compiling CPU kernels for) a batch.
     `device` is accepted for the callers' symmetry; the model is host data. A fresh model each
     call.
     """
-    from service.core.physics import configure
-    from service.core.robot import load_robot
+    from service.core.sim.physics import configure
+    from service.core.sim.robot import load_robot
 
     robot = load_robot()
     configure(robot.mjm, physics_dt()[1])

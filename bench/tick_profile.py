@@ -90,10 +90,10 @@ def profile(
     """
     import numpy as np
 
-    from service.core import frames, wire
-    from service.core.hub import StreamHub, Subscription
-    from service.core.loop import SimLoop
-    from service.core.types import Mode
+    from service.core.sim.loop import SimLoop
+    from service.core.sim.types import Mode
+    from service.core.streams import frames, wire
+    from service.core.streams.hub import StreamHub, Subscription
 
     batch = _build(n, device)
     batch.step(SETTLE_TICKS)  # settled worlds, as the service runs them (section 17)

@@ -64,11 +64,11 @@ def _long_body(home: np.ndarray, names: list[str], swing: float) -> dict[str, An
 
 def tracking(engine: str) -> dict[str, Any]:
     """Largest path error and the error 0.5 s after the end, stepping a paused loop."""
-    from service.core.control import Control
-    from service.core.loop import SimLoop
+    from service.core.commands.control import Control
+    from service.core.commands.trajectory import parse
     from service.core.settings import Settings
-    from service.core.trajectory import parse
-    from service.core.types import Mode
+    from service.core.sim.loop import SimLoop
+    from service.core.sim.types import Mode
     from service.engines.choice import build_batch
 
     batch = build_batch(Settings(engine=engine, worlds=2, shards=1))  # one process, one thread
@@ -99,10 +99,10 @@ def cpu_ratio(engine: str, ticks: int, rounds: int) -> dict[str, Any]:
     """CPU seconds per tick of 1024 worlds in process, no trajectory vs one holding the pose on
     every world (rounds interleaved): the trajectory work's cost, robust to a loaded machine in
     a way wall-clock rates are not (what other processes take is not counted)."""
-    from service.core.control import Control
-    from service.core.loop import SimLoop
-    from service.core.trajectory import parse
-    from service.core.types import Mode
+    from service.core.commands.control import Control
+    from service.core.commands.trajectory import parse
+    from service.core.sim.loop import SimLoop
+    from service.core.sim.types import Mode
 
     if engine == "warp":
         from service.engines.warp import WorldBatch

@@ -36,7 +36,9 @@ from clients.models import (
 CLOSE_TRY_AGAIN = 1013  # still starting
 CLOSE_POLICY = 1008  # unknown world / bad world list
 
-BINARY_MAGIC = b"AFS1"  # batch frames sent with format=binary (layout in service/core/wire.py)
+BINARY_MAGIC = (
+    b"AFS1"  # batch frames sent with format=binary (layout in service/core/streams/wire.py)
+)
 MAX_SIZE = 64 << 20  # a frame of thousands of worlds is several MiB
 # What opening or reading a socket raises when the server is not (or no longer) there.
 DROPPED = (OSError, InvalidHandshake, TimeoutError)
@@ -79,7 +81,8 @@ def ws_url(
 
 
 def parse_binary_states(data: bytes) -> BatchStates:
-    """A binary batch frame (`format=binary`; layout in service/core/wire.py) as BatchStates."""
+    """A binary batch frame (`format=binary`; layout in service/core/streams/wire.py) as
+    BatchStates."""
     hlen = int.from_bytes(data[4:8], "little")
     header = orjson.loads(data[8 : 8 + hlen])
     n = header["n"]

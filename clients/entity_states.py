@@ -51,7 +51,7 @@ class EntityStates:
     @classmethod
     def from_block(cls, header: Mapping[str, Any], data: bytes, at: int, n: int) -> EntityStates:
         """A binary frame's entity block: float32[n, ne, width] at byte `at` of `data`,
-        `header` its {"name", "columns"} (layout in service/core/wire.py)."""
+        `header` its {"name", "columns"} (layout in service/core/streams/wire.py)."""
         names = tuple(header["name"])
         width = sum(w for _, w in header["columns"])
         block = np.frombuffer(data, "<f4", n * len(names) * width, at)

@@ -1,6 +1,6 @@
 """The camera stream's binary message (`/v1/ws/cameras`, GET /v1/cameras/{name}/images), read:
 `AFIM`, a little-endian u32 header length, the JSON header (tick, worlds, camera, ..., `sizes`),
-then the images back to back. The service writes it (service/core/camera_wire.py); clients,
+then the images back to back. The service writes it (service/core/cameras/wire.py); clients,
 the ROS node and tests read it with `unpack`."""
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 """What the service returns, as typed results built from its JSON.
 
-Each class follows one reply schema of the server (service/core/schemas.py); `from_json` reads the
-fields it knows and ignores the rest, so a newer server that adds a field does not break an
-older client. Nothing about the robot is written here: joint names, limits and home come from
-`/v1/info` (`Info.joints`, each a `JointSpec`, the class the service itself describes joints
-with) and every state carries its joint names (`name`).
+Each class follows one reply schema of the server (service/core/contract/replies.py);
+`from_json` reads the fields it knows and ignores the rest, so a newer server that adds a field
+does not break an older client. Nothing about the robot is written here: joint names, limits and
+home come from `/v1/info` (`Info.joints`, each a `JointSpec`, the class the service itself
+describes joints with) and every state carries its joint names (`name`).
 
 Arrays are numpy float64; JSON null (a NaN on the server side) becomes NaN.
 """
@@ -49,8 +49,8 @@ def joint_index(names: Sequence[str], joint: JointRef) -> int:
 @dataclass(frozen=True)
 class JointSpec:
     """One commanded joint as the outside world sees it: `/v1/info` lists these. The service
-    builds its robot description from this very class (service.core.types imports it from here), so
-    the two cannot drift apart, and the client needs nothing of the service.
+    builds its robot description from this very class (service.core.sim.types imports it from
+    here), so the two cannot drift apart, and the client needs nothing of the service.
 
     name: joint name, as in sensor_msgs/JointState and the MJCF
     lower, upper: joint range [rad]; targets are clamped to it

@@ -11,6 +11,6 @@ never above (scripts/import_graph.py checks it, tests/test_layout.py runs it):
   the `armfleet` command
 """
 
-from service.core.pythonpath import scrub as _scrub_ros_pythonpath
+from service.core.process.pythonpath import scrub as _scrub_ros_pythonpath
 
-_scrub_ros_pythonpath()  # before anything else is imported: see service/core/pythonpath.py
+_scrub_ros_pythonpath()  # before anything else is imported: see service/core/process/pythonpath.py

@@ -32,10 +32,10 @@ from service.api import (
     ws,
     ws_bulk,
 )
-from service.core import access
+from service.core.access import policy as access
+from service.core.contract.replies import ANY, errors, fit_openapi
 from service.core.errors import ArmfleetError, BadCommand
 from service.core.metrics import CommandCounter
-from service.core.schemas import ANY, errors, fit_openapi
 from service.core.settings import Settings
 from service.runtime import Runtime
 
@@ -53,11 +53,12 @@ WebSocket streams (not listed by OpenAPI):
 * `/v1/ws?worlds=0-63&rate=10`: `{"op": "states", ...}` frames, column-wise over the listed
   worlds; commands carry `"world"`.
 * `/v1/ws/view?worlds=0-63&focus=3&rate=30`: the browser page's socket: binary pose frames
-  (every body of every listed world, plus the focus world's state; layout in service/core/wire.py)
+  (every body of every listed world, plus the focus world's state; layout in
+  service/core/streams/wire.py)
   drawn with the geoms of `GET /v1/scene`; commands carry `"world"`.
 
 * `/v1/ws/cameras?camera=wrist&worlds=0-15&rate=10&format=jpeg`: binary messages of camera
-  images, one render of the listed worlds at one tick each (layout in service/core/camera_wire.py;
+  images, one render of the listed worlds at one tick each (layout in service/core/cameras/wire.py;
   `pull=true`: one per text message sent).
 
 Leases (`armfleet serve --leases optional|required`): `POST /v1/leases` lends worlds with a
@@ -145,7 +146,7 @@ async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
 def create_app(settings: Settings | None = None) -> FastAPI:
     """The service as an ASGI app; ValueError when the settings are unsafe (see access)."""
     settings = settings or Settings()
-    access.check_bind(settings)
+    access.check_bind(settings.host, settings)
     runtime = Runtime(settings)
 
     @contextlib.asynccontextmanager

@@ -18,7 +18,7 @@ from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import typer
 
-from service.core.types import Mode
+from service.core.sim.types import Mode
 
 # Nothing here renders with MuJoCo's OpenGL: without this, `import mujoco` loads GLFW (~0.1-0.3 s
 # of every start). A value the user set wins.

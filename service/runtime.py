@@ -15,20 +15,20 @@ from typing import Any
 
 import orjson
 
-from service.core.access import ClientSlots, RateLimiter
-from service.core.batch import Batch, Supervised
-from service.core.callers import Gate
-from service.core.camera_feed import CameraFeed
-from service.core.control import Accepted, Control
+from service.core.access.callers import Gate
+from service.core.access.lease_metrics import LeaseCollector
+from service.core.access.leases import LeaseBook
+from service.core.access.policy import ClientSlots, RateLimiter
+from service.core.cameras.feed import CameraFeed
+from service.core.commands.control import Accepted, Control
 from service.core.errors import ArmfleetError, Conflict, NotFound
-from service.core.hub import StreamHub
-from service.core.lease_metrics import LeaseCollector
-from service.core.leases import LeaseBook
-from service.core.loop import SimLoop
 from service.core.metrics import Metrics
-from service.core.randomizations import Randomized
+from service.core.process.stopping import reclaim_stop_signals
 from service.core.settings import Settings
-from service.core.stopping import reclaim_stop_signals
+from service.core.sim.batch import Batch, Supervised
+from service.core.sim.loop import SimLoop
+from service.core.sim.randomizations import Randomized
+from service.core.streams.hub import StreamHub
 from service.core.surface import Finishing, SurfaceContext
 from service.engines.camera_render import camera_feed
 from service.engines.choice import build_batch
@@ -50,7 +50,7 @@ class Runtime:
         # Before the surfaces: `--record`'s file is opened here, so one that cannot be written
         # stops the start before anything is built (CannotWrite, raised by create_app).
         self.persistence = Persistence(settings)
-        self.cameras: CameraFeed | None = None  # built with the loop (service/core/camera_feed)
+        self.cameras: CameraFeed | None = None  # built with the loop (service/core/cameras/feed)
         self.surfaces = build_surfaces(settings)
         self.error: str | None = None
         self.metrics = Metrics()
@@ -61,7 +61,7 @@ class Runtime:
         self._restored_randomized: dict[int, Randomized] = {}  # `--restore`'s randomisations
         self._register_levels()
         self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
-        self.leases: LeaseBook | None = None  # worlds lent (service.core.leases); None: off
+        self.leases: LeaseBook | None = None  # worlds lent (service.core.access.leases); None: off
         self.metrics.registry.register(LeaseCollector(lambda: self.control and self.control.gate))
 
     @property

@@ -2,8 +2,8 @@
 
 uvicorn's own handlers stop on the first SIGINT, skip the application's shutdown on a second
 one (where `latest` is saved), and re-raise the signal afterwards, so the exit status never said
-whether saving worked. Here `service.core.stopping.StopSignals` owns both signals: the first closes
-every stream with 1001 (going away, not 1012 restarting) and then asks uvicorn to stop, which
+whether saving worked. Here `service.core.process.stopping.StopSignals` owns both signals: the first
+closes every stream with 1001 (going away, not 1012 restarting) and then asks uvicorn to stop, which
 runs the application's shutdown (`Runtime.stop`: recordings finished, `latest` saved); a second
 signal exits at once. The exit status is 1 when stopping left something unsaved.
 """
@@ -17,9 +17,9 @@ from collections.abc import Awaitable, Callable, Iterator
 import uvicorn
 
 from service import heap
-from service.core import redact
+from service.core.access import redact
+from service.core.process.stopping import StopSignals
 from service.core.settings import Settings
-from service.core.stopping import StopSignals
 from service.runtime import Runtime
 
 GOING_AWAY_S = 1.0  # how long closing the streams may hold up the stop

@@ -24,7 +24,7 @@ import roslibpy
 from clients import ArmfleetClient, WorldState, headless
 from clients import pytest_plugin as armfleet_plugin
 from clients.testing import Server, free_port, serve
-from service.core.robot import load_robot
+from service.core.sim.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -13,7 +13,7 @@ from conftest import ROOT, running_server, wait_for
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
-from service.core import access
+from service.core.access import policy as access
 from service.core.settings import Settings
 
 TOKEN = "s3cret-token"
@@ -37,10 +37,10 @@ def test_only_loopback_addresses_count_as_private(host, loopback):
 
 def test_a_public_bind_needs_a_token_or_insecure():
     with pytest.raises(ValueError, match="--token"):
-        access.check_bind(settings(host="0.0.0.0"))
-    access.check_bind(settings(host="0.0.0.0", token=TOKEN))
-    access.check_bind(settings(host="0.0.0.0", insecure=True))
-    access.check_bind(settings(host="127.0.0.1"))
+        access.check_bind("0.0.0.0", settings())
+    access.check_bind("0.0.0.0", settings(token=TOKEN))
+    access.check_bind("0.0.0.0", settings(insecure=True))
+    access.check_bind("127.0.0.1", settings())
 
 
 def test_http_writes_need_the_bearer_token_and_reads_only_with_token_reads():

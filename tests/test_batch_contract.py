@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from mjcf import SCENE_XML
-from service.core.batch import Batch, StateWrite, TickWrites
 from service.core.errors import Conflict
+from service.core.sim.batch import Batch, StateWrite, TickWrites
 from service.engines.native import NativeBatch
 from service.engines.shards import ShardedBatch
 from service.engines.warp import WorldBatch

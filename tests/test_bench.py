@@ -12,7 +12,7 @@ import math
 import pytest
 
 from bench import common, registry, runner, throughput
-from service.core.physics import tick_timing
+from service.core.sim.physics import tick_timing
 
 
 def test_every_section_is_registered_once_with_a_stable_file_name():

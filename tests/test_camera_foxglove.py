@@ -23,7 +23,7 @@ from PIL import Image
 from websockets.sync.client import connect
 
 from clients.testing import free_port, serve
-from service.core.robot import load_robot
+from service.core.sim.robot import load_robot
 from tests.conftest import wait_for
 from tests.test_foxglove import SUBPROTOCOL, FoxgloveClient
 

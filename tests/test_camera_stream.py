@@ -105,7 +105,7 @@ def test_pull_sends_one_fresh_picture_per_request_and_nothing_else(server: Serve
 
 def test_readers_of_one_camera_at_one_rate_share_renders(server: Server) -> None:
     """Three sockets, each asking its own world of the wrist camera at 10 Hz: one clock draws
-    them (service/api/camera_clock.py), one render per instant for all three; each still gets
+    them (service/core/cameras/clock.py), one render per instant for all three; each still gets
     only its own world, at one tick per picture."""
     urls = [
         f"{server.ws_url}/v1/ws/cameras?camera=wrist&worlds={w}&rate=10&format=raw"
@@ -131,9 +131,9 @@ def test_readers_of_one_camera_at_one_rate_share_renders(server: Server) -> None
 def test_a_clock_draws_its_readers_worlds_once_and_hands_each_its_own() -> None:
     """The union the clock asks for, and each reader's rows in it: readers of ranges in order
     get slices (views, no search); overlapping readers are found among the distinct worlds."""
-    from service.api.camera_clock import Reader, _union
-    from service.core.camera_feed import Shot
-    from service.core.cameras import CameraSpec
+    from service.core.cameras.catalog import CameraSpec
+    from service.core.cameras.clock import Reader, _union
+    from service.core.cameras.feed import Shot
 
     ranges = [Reader(np.arange(0, 4), False), Reader(np.arange(4, 9), False)]
     ids, rows = _union(ranges)
@@ -153,9 +153,9 @@ def test_a_tick_is_pushed_once_but_pulled_as_often_as_asked() -> None:
     """Two pictures of one tick (two asks met at one tick boundary, or a paused service): a
     push reader is sent it once; a pull reader gets each picture it asked for (dropping one
     would leave the client waiting for ever)."""
-    from service.api.camera_clock import Reader
-    from service.core.camera_feed import Shot
-    from service.core.cameras import CameraSpec
+    from service.core.cameras.catalog import CameraSpec
+    from service.core.cameras.clock import Reader
+    from service.core.cameras.feed import Shot
 
     shot = Shot(7, CameraSpec.__new__(CameraSpec), np.array([0]), None, None, None)
     for pull, sent in ((False, 1), (True, 2)):
@@ -177,9 +177,9 @@ def test_a_reader_whose_send_is_young_stays_ready_while_a_picture_waits() -> Non
     skipping the instant would cost a picture every time sends and draws overlap."""
     import asyncio
 
-    from service.api.camera_clock import Reader
-    from service.core.camera_feed import Shot
-    from service.core.cameras import CameraSpec
+    from service.core.cameras.catalog import CameraSpec
+    from service.core.cameras.clock import Reader
+    from service.core.cameras.feed import Shot
 
     period = 1 / 30
 

@@ -22,8 +22,8 @@ from PIL import Image
 
 from clients.images import unpack
 from clients.testing import Server, serve
-from service.core.camera_feed import rows_of
-from service.core.robot import load_robot
+from service.core.cameras.feed import rows_of
+from service.core.sim.robot import load_robot
 from tests.conftest import ROOT, wait_for
 
 ROBOT = load_robot()

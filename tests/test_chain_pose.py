@@ -8,8 +8,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from service.core.robot import load_robot
-from service.core.types import Poses
+from service.core.sim.robot import load_robot
+from service.core.sim.types import Poses
 from service.engines.chain_pose import ChainPose
 
 

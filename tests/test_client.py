@@ -102,7 +102,7 @@ def test_client_models_follow_the_server_schemas() -> None:
     """Every reply field the server documents is a field of the client's result type (the
     client's Info once lacked `shards`): a field added on one side only fails here."""
     from clients import models
-    from service.core import schemas
+    from service.core.contract import replies as schemas
 
     pairs = [
         (models.Info, schemas.Info, set()),

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from service.core.commands import arithmetic as commands
 from service.core.errors import BadCommand
-from service.core.robot import load_robot
+from service.core.sim import arithmetic as commands
+from service.core.sim.robot import load_robot
 
 SPEC = load_robot().spec
 HOME = SPEC.home

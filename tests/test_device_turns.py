@@ -1,4 +1,4 @@
-"""DeviceTurns (service/core/device_turns.py): the loop's thread and the camera renderer take
+"""DeviceTurns (service/core/sim/device_turns.py): the loop's thread and the camera renderer take
 turns launching on a shared device; a waiting renderer goes before the loop's next turn."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import threading
 import time
 
-from service.core.device_turns import DeviceTurns
+from service.core.sim.device_turns import DeviceTurns
 
 
 def test_a_waiting_render_goes_before_the_loops_next_turn() -> None:

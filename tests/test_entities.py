@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 from websockets.sync.client import connect
 
-from service.core.batch import TickWrites
-from service.core.commands.entities import SetEntities, entity_table
-from service.core.robot import load_robot
+from service.core.commands.entities import SetEntities
+from service.core.sim.batch import TickWrites
+from service.core.sim.entities import entity_table
+from service.core.sim.robot import load_robot
 
 ROBOT = load_robot()
 TABLE = entity_table(ROBOT.mjm)

@@ -20,7 +20,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from clients import ArmfleetClient, AsyncArmfleetClient, _stream
-from service.core import entity_frames, frames, wire
+from service.core.streams import entity_frames, frames, wire
 
 S = math.sqrt(0.5)
 POSE = {"position": [0.3, -0.5, 1.2], "orientation": [S, 0, 0, S]}

@@ -22,8 +22,8 @@ import pytest
 from conftest import running_server, wait_for
 from websockets.sync.client import connect
 
-from service.core.loop import SimLoop
-from service.core.types import Mode
+from service.core.sim.loop import SimLoop
+from service.core.sim.types import Mode
 from service.engines.warp import WorldBatch
 
 

@@ -22,7 +22,7 @@ from conftest import ELBOW, FINGER, Server, free_port, serve, wait_for
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from websockets.sync.client import ClientConnection, connect
 
-from service.core.robot import load_robot
+from service.core.sim.robot import load_robot
 
 NWORLD = 3
 SUBPROTOCOL = "foxglove.sdk.v1"

@@ -21,7 +21,7 @@ from websockets.sync.client import connect
 
 from clients import ArmfleetClient, point
 from clients.testing import serve
-from service.core import frames, wire
+from service.core.streams import frames, wire
 from service.engines.native import NativeBatch
 from service.engines.warp import WorldBatch
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.core.hub import Subscription
-from service.core.types import Poses, Snapshot
+from service.core.sim.types import Poses, Snapshot
+from service.core.streams.hub import Subscription
 
 
 def snap(tick: int) -> Snapshot:

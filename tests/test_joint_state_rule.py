@@ -1,6 +1,6 @@
 """One JointState rule, one answer: the same bad messages fed to every surface that takes
 JointState-shaped commands (HTTP, both WebSocket protocols, rosbridge, Foxglove) are refused
-with the same words, the rule's (service.core.commands.rules.joint_state), and change nothing;
+with the same words, the rule's (service.core.sim.rules.joint_state), and change nothing;
 a nameless message of all seven positions is accepted by every one of them.
 
 rosbridge and Foxglove frames are written by hand here as their clients put them on the wire
@@ -19,8 +19,8 @@ from conftest import Server, free_port, serve, wait_for
 from test_foxglove import SUBPROTOCOL, FoxgloveClient
 from websockets.sync.client import connect
 
-from service.core.commands.rules import BadJointState, joint_state
-from service.core.robot import load_robot
+from service.core.sim.robot import load_robot
+from service.core.sim.rules import BadJointState, joint_state
 
 SPEC = load_robot().spec
 # (name, position): each breaks the rule in its own way

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from service.core.batch import Batch, Renderable, Restorable, Supervised
 from service.core.settings import Settings
+from service.core.sim.batch import Batch, Renderable, Restorable, Supervised
 from service.core.surface import Routed, Surface
 from service.surfaces.registry import REGISTRY, build_surfaces
 from tests import ros2_judge
@@ -34,7 +34,7 @@ def _import_graph():
 def test_the_import_graph_has_no_cycles_and_no_upward_imports() -> None:
     ig = _import_graph()
     graph = ig.graph()
-    assert "service.core.loop" in graph and "service.surfaces.registry" in graph
+    assert "service.core.sim.loop" in graph and "service.surfaces.registry" in graph
     assert ig.cycles(graph) == []
     assert ig.upward(graph) == []
 
@@ -63,7 +63,7 @@ def test_no_module_over_the_line_limit() -> None:
 
 def test_importing_the_contract_and_building_the_app_compile_no_model() -> None:
     code = (
-        "import service.core.schemas, service.app, service.core.robot as r;"
+        "import service.core.contract.replies, service.app, service.core.sim.robot as r;"
         "service.app.create_app();"
         "print(r.default_spec.cache_info().currsize)"
     )

@@ -1,6 +1,6 @@
-"""The LeaseBook on its own (service.core.leases): what a lease token is and what is kept of it,
-first come first served from many threads, waiting, the reasons of refusals, and the order in
-which an ending lease stops working, resets its worlds and frees them."""
+"""The LeaseBook on its own (service.core.access.leases): what a lease token is and what is
+kept of it, first come first served from many threads, waiting, the reasons of refusals,
+and the order in which an ending lease stops working, resets its worlds and frees them."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import time
 
 import pytest
 
-from service.core.callers import Caller, Forbidden, Gate
+from service.core.access.callers import Caller, Forbidden, Gate
+from service.core.access.leases import LeaseBook, digest
 from service.core.errors import BadCommand, Conflict, Unavailable
-from service.core.leases import LeaseBook, digest
 from service.core.settings import Settings
 
 
@@ -146,8 +146,8 @@ class _Always:
 
 
 def test_a_lease_has_one_rate_limit_over_all_its_connections() -> None:
-    from service.core.access import RateLimiter
-    from service.core.callers import OverRate
+    from service.core.access.callers import OverRate
+    from service.core.access.policy import RateLimiter
 
     b, _ = book(2)
     lease, _ = b.grant(count=1, ttl_s=60)

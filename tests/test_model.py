@@ -1,7 +1,7 @@
 """Behavioural tests of the MJCF work cell (UR10e + Robotiq 2F-140, table, cube).
 
 Native ``mujoco`` only.  Dynamic tests run at the engine's timestep and solver options
-(service/core/physics.py), so that they judge the physics the service steps.
+(service/core/sim/physics.py), so that they judge the physics the service steps.
 """
 
 import sys
@@ -16,7 +16,7 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from mjcf import MJCF_DIR, ROBOT_XML, SCENE_XML  # noqa: E402
-from service.core.physics import DEFAULT_PHYSICS_DT, configure, tick_timing  # noqa: E402
+from service.core.sim.physics import DEFAULT_PHYSICS_DT, configure, tick_timing  # noqa: E402
 from tests.rclpy import ur_joints  # noqa: E402
 
 ENGINE_DT = tick_timing(60.0, DEFAULT_PHYSICS_DT)[1]

@@ -15,7 +15,7 @@ import pytest
 from conftest import ELBOW, HOME, Server, serve, wait_for
 from websockets.sync.client import connect
 
-from service.core import wire
+from service.core.streams import wire
 from service.engines.cores import usable_cores
 from service.engines.native import NativeBatch, auto_threads
 

@@ -69,7 +69,7 @@ def http(srv):
 
 
 def read_pose_frame(data: bytes) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray]:
-    """Parse an AFP1 frame by the layout documented in service/core/wire.py."""
+    """Parse an AFP1 frame by the layout documented in service/core/streams/wire.py."""
     assert data[:4] == b"AFP1"
     hlen = int.from_bytes(data[4:8], "little")
     assert hlen % 4 == 0

@@ -20,10 +20,10 @@ import pytest
 from test_model import solve_ik
 from websockets.sync.client import connect
 
-from service.core.batch import TickWrites
 from service.core.commands.entities import SetEntities
 from service.core.commands.params import SetParams, param_table, read
-from service.core.types import MODEL_PREFIX
+from service.core.sim.batch import TickWrites
+from service.core.sim.types import MODEL_PREFIX
 
 HEAVY = {"cube.mass": 0.3, "cube.friction": 0.4}
 
@@ -86,7 +86,7 @@ def _reference(mjm, batch, ticks):
 
 
 def test_the_table_names_each_parameter_with_its_range():
-    from service.core.robot import load_robot
+    from service.core.sim.robot import load_robot
 
     robot = load_robot()
     table = param_table(robot.mjm, robot.spec.names)

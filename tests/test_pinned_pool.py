@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from service.core.device_turns import DeviceTurns
+from service.core.sim.device_turns import DeviceTurns
 from service.engines.warp_frames import PinnedPool
 
 

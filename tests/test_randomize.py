@@ -14,8 +14,8 @@ from websockets.sync.client import connect
 
 from bench.cells import SPEC  # the spec the cells bench draws for 10,000 worlds
 from clients.testing import serve
-from service.core.batch import TickWrites
 from service.core.commands.randomize import Randomize
+from service.core.sim.batch import TickWrites
 
 
 def _batch(engine: str, nworld: int):

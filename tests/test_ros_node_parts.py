@@ -10,7 +10,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from service.core import pythonpath
+from service.core.process import pythonpath
 from tests.conftest import JOINTS, ROOT
 from tests.pythons import interpreter
 

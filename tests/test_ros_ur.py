@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from urdf_parser_py.urdf import URDF
 
-from service.core.robot import load_robot
+from service.core.sim.robot import load_robot
 from service.surfaces.ros import urdf
 from service.surfaces.ros.tf_frames import FrameTree
 from tests.conftest import JOINTS

@@ -1,4 +1,5 @@
-"""service/core/scene.py: the drawable scene is the compiled model's visible geoms, nothing else."""
+"""service/core/sim/scene.py: the drawable scene is the compiled model's visible geoms, nothing
+else."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import numpy as np
 import pytest
 
 from mjcf import ROBOT_XML, SCENE_XML
-from service.core.scene import VISIBLE_GROUPS, describe
+from service.core.sim.scene import VISIBLE_GROUPS, describe
 
 
 @pytest.fixture(scope="module")

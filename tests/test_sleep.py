@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from mjcf import MJCF_DIR
-from service.core.batch import StateWrite
-from service.core.robot import load_robot
+from service.core.sim.batch import StateWrite
+from service.core.sim.robot import load_robot
 from service.engines.native import NativeBatch
 from tests.test_model import solve_ik
 

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from service.core.types import PHYSICS_FIELDS, BatchState
+from service.core.sim.types import PHYSICS_FIELDS, BatchState
 from service.engines.shards import ShardedBatch
 from service.engines.warp import WorldBatch
 

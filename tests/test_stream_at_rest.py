@@ -1,7 +1,7 @@
 """A batch subscriber sees where time stopped. Paused, a burst of steps (`POST /v1/sim/step`)
 ends between two frames of a slow stream (1 Hz here), and no later tick comes to carry the
 state: the stream must still send the tick the step's reply names, in every format, binary
-included (packed frames, service/core/frames.py). Likewise a pause from realtime."""
+included (packed frames, service/core/streams/frames.py). Likewise a pause from realtime."""
 
 from __future__ import annotations
 

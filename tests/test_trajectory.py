@@ -11,11 +11,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from service.core.control import Control
-from service.core.errors import BadCommand
-from service.core.loop import SimLoop
-from service.core.settings import Settings
-from service.core.trajectory import (
+from service.core.commands.control import Control
+from service.core.commands.trajectory import (
     MAX_DURATION_S,
     MAX_POINTS,
     AbortReason,
@@ -25,8 +22,11 @@ from service.core.trajectory import (
     TrajectoryState,
     parse,
 )
-from service.core.trajectory.table import TrajectoryTable
-from service.core.types import Mode
+from service.core.commands.trajectory.table import TrajectoryTable
+from service.core.errors import BadCommand
+from service.core.settings import Settings
+from service.core.sim.loop import SimLoop
+from service.core.sim.types import Mode
 from service.engines.choice import build_batch
 from tests.conftest import HOME, JOINTS, SPEC
 

@@ -16,7 +16,7 @@ import pytest
 
 from clients.testing import serve
 from mjcf import MJCF_DIR
-from service.core.scene_check import MAX_CONTACTS, SceneError, check_scene
+from service.core.sim.scene_check import MAX_CONTACTS, SceneError, check_scene
 from service.engines.warp import NCONMAX
 from service.surfaces.ros.tf_frames import FrameTree
 from service.surfaces.ros.urdf import generate

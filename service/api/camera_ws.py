@@ -3,9 +3,9 @@
     /v1/ws/cameras?camera=wrist&worlds=0-15&rate=10&image=rgb&format=jpeg
 
 Each binary message is one render of every listed world at one tick, laid out as
-service/core/camera_wire.py's `pack` (header JSON with `tick`, `worlds`, sizes; then the
+service/core/cameras/wire.py's `pack` (header JSON with `tick`, `worlds`, sizes; then the
 images). Pictures are drawn at the instants of the rate's grid by one clock per camera and rate
-(service/api/camera_clock.py): every reader of that camera at that rate ready for a picture is
+(service/core/cameras/clock.py): every reader of that camera at that rate ready for a picture is
 in the same render, and gets its own worlds of it. Newest only: the next picture is drawn
 while the last one is being sent, and no other until that send is done, so a slow reader
 holds its own drawing back instead of piling images up in the service (at most one message
@@ -30,12 +30,13 @@ from typing import Annotated
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
 from service.api import ws_bulk
-from service.api.camera_clock import Reader, clock_for
 from service.api.ws_bulk import BulkSocket
-from service.core import access, camera_wire
-from service.core.camera_feed import CameraFeed
+from service.core.access import policy as access
+from service.core.cameras import wire as camera_wire
+from service.core.cameras.clock import Reader, clock_for
+from service.core.cameras.feed import CameraFeed
 from service.core.errors import ArmfleetError
-from service.core.worlds import parse_worlds
+from service.core.sim.worlds import parse_worlds
 
 router = APIRouter(prefix="/v1")
 
@@ -126,7 +127,7 @@ class _AsgiSocket:
 async def _send(
     link: BulkSocket | _AsgiSocket, reader: Reader, image: str, fmt: str, quality: int
 ) -> None:
-    """Send each picture the clock draws for this reader (service/api/camera_clock.py): the
+    """Send each picture the clock draws for this reader (service/core/cameras/clock.py): the
     next one is drawn while this one is packed and sent, and none beyond it, so a slow reader
     holds back its own drawing and nothing piles up."""
     while True:

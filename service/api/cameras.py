@@ -1,7 +1,7 @@
 """Cameras over HTTP: the list with intrinsics, one world's image, many worlds' in one reply.
 
 Nothing is drawn until one of these is asked; a reply's `X-Armfleet-Tick` says which tick the
-image shows. Formats and the many-image layout: service/core/camera_wire.py.
+image shows. Formats and the many-image layout: service/core/cameras/wire.py.
 """
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
 from service.api.deps import World, get_runtime
-from service.core import camera_wire
-from service.core.camera_feed import CameraFeed
+from service.core.cameras import wire as camera_wire
+from service.core.cameras.feed import CameraFeed
+from service.core.contract.replies import errors
 from service.core.errors import Unavailable
-from service.core.schemas import errors
-from service.core.worlds import WORLDS_PATTERN, parse_worlds
+from service.core.sim.worlds import WORLDS_PATTERN, parse_worlds
 from service.runtime import Runtime
 
 router = APIRouter(prefix="/v1", tags=["cameras"])

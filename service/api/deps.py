@@ -11,11 +11,11 @@ from typing import Annotated, Any
 
 from fastapi import Depends, Path, Request
 
-from service.core.commands import rules
-from service.core.control import Control
+from service.core.commands.control import Control
+from service.core.contract.replies import ErrorReply
 from service.core.errors import Unavailable
-from service.core.loop import SimLoop
-from service.core.schemas import ErrorReply
+from service.core.sim import rules
+from service.core.sim.loop import SimLoop
 from service.runtime import Runtime
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from service.api.deps import Loop
-from service.core.schemas import Info
+from service.core.contract.replies import Info
 
 router = APIRouter(prefix="/v1", tags=["info"])
 

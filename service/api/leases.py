@@ -2,7 +2,8 @@
 
 Asking needs what any write needs (the administrator's token where the service has one); a
 lease token may list, renew and release its own lease only. The rules, waits and refusals are
-service.core.leases; these routes translate. Asking may wait (`wait_s`), polling on the event loop.
+service.core.access.leases; these routes translate. Asking may wait (`wait_s`), polling on
+the event loop.
 """
 
 from __future__ import annotations
@@ -13,11 +14,11 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Path, Request
 
 from service.api.deps import get_runtime
-from service.core.callers import Caller, Forbidden
+from service.core.access.callers import Caller, Forbidden
+from service.core.access.leases import LeaseBook
+from service.core.contract.leases import LeaseList, LeaseReply, LeaseRequest, RenewRequest
+from service.core.contract.replies import errors
 from service.core.errors import Conflict, NotFound, Unavailable
-from service.core.lease_schemas import LeaseList, LeaseReply, LeaseRequest, RenewRequest
-from service.core.leases import LeaseBook
-from service.core.schemas import errors
 from service.runtime import Runtime
 
 # Every route answers 404 when leases are off (armfleet serve --leases optional|required).

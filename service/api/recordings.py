@@ -8,8 +8,9 @@ from typing import Annotated
 from fastapi import APIRouter, Depends
 
 from service.api.deps import CANNOT_WRITE, Loop, get_runtime
+from service.core.contract.replies import errors
+from service.core.contract.snapshots import RecordingRequest, RecordingStatus
 from service.core.errors import NotFound
-from service.core.schemas import RecordingRequest, RecordingStatus, errors
 from service.persistence.recorder import Recorder
 from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime

@@ -1,4 +1,4 @@
-"""GET /v1/scene: what to draw, from the compiled model (see service/core/scene.py)."""
+"""GET /v1/scene: what to draw, from the compiled model (see service/core/sim/scene.py)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
 from service.api.deps import Loop
-from service.core import scene, wire
-from service.core.scene_schemas import Scene
+from service.core.contract.scene import Scene
+from service.core.sim import scene
+from service.core.streams import wire
 
 router = APIRouter(prefix="/v1", tags=["scene"])
 

@@ -8,9 +8,9 @@ from fastapi import APIRouter
 
 from service.api.deps import Ctl
 from service.core.commands.base import HTTP
-from service.core.commands.world import Step
-from service.core.schemas import ModeRequest, SimReply, StepRequest, errors
-from service.core.types import Mode
+from service.core.commands.world import ModeRequest, Step, StepRequest
+from service.core.contract.replies import SimReply, errors
+from service.core.sim.types import Mode
 
 router = APIRouter(prefix="/v1/sim", tags=["sim"])
 

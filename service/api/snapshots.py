@@ -8,9 +8,13 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Path
 
 from service.api.deps import CANNOT_WRITE, Loop, get_runtime
+from service.core.contract.snapshots import (
+    RestoreReply,
+    SnapshotInfo,
+    SnapshotName,
+    SnapshotRequest,
+)
 from service.core.errors import Conflict
-from service.core.schemas import SnapshotName, SnapshotRequest
-from service.core.snapshot_schemas import RestoreReply, SnapshotInfo
 from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
 

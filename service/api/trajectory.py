@@ -15,20 +15,20 @@ from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
 from service.api.deps import CommandWorld, Ctl, World
-from service.core import wire
 from service.core.commands.base import HTTP
-from service.core.control import Control
-from service.core.errors import BadCommand, Conflict, NotFound
-from service.core.schemas import errors
-from service.core.trajectory import TrajectoryStatus, parse
-from service.core.trajectory.schemas import (
+from service.core.commands.control import Control
+from service.core.commands.trajectory import TrajectoryStatus, parse
+from service.core.commands.trajectory.schemas import (
     BatchStartedReply,
     BatchTrajectoryBody,
     StartedReply,
     TrajectoryBody,
     TrajectoryStatusReply,
 )
-from service.core.worlds import parse_worlds
+from service.core.contract.replies import errors
+from service.core.errors import BadCommand, Conflict, NotFound
+from service.core.sim.worlds import parse_worlds
+from service.core.streams import wire
 
 # Every route here names worlds, so each can answer 404 for an unknown one.
 router = APIRouter(prefix="/v1", tags=["trajectories"], responses=errors(404))

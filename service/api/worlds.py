@@ -1,7 +1,8 @@
 """Per-world state and commands: read JointState, press Up/Down, set targets, reset.
 
 Routes only translate HTTP to the control layer and back; validation, staging and the reply
-shape live in service/core/control.py and service/core/wire.py, errors are mapped by the app.
+shape live in service/core/commands/control.py and service/core/streams/wire.py, errors are
+mapped by the app.
 """
 
 from __future__ import annotations
@@ -15,28 +16,27 @@ from fastapi import APIRouter, Body, Query
 from fastapi.responses import Response
 
 from service.api.deps import CommandWorld, Ctl, Loop, World
-from service.core import entity_frames, wire
 from service.core.commands import entities, params, randomize
 from service.core.commands.base import HTTP
+from service.core.commands.control import Control
+from service.core.commands.targets import BatchTargets, IncrementRequest, JointTargets
+from service.core.commands.world import ResetRequest
 from service.core.commands.writes import ManyWrites
-from service.core.control import Control
-from service.core.errors import Unavailable
-from service.core.loop import SimLoop
-from service.core.schemas import (
+from service.core.contract.replies import (
     BatchCommandReply,
-    BatchTargets,
     CommandReply,
-    IncrementRequest,
-    JointTargets,
     ResetReply,
-    ResetRequest,
     WorldState,
     WorldStates,
     errors,
 )
-from service.core.snapshot_schemas import WorldRandomization
-from service.core.types import Mode, Snapshot
-from service.core.worlds import WORLDS_PATTERN, parse_worlds
+from service.core.contract.snapshots import WorldRandomization
+from service.core.errors import Unavailable
+from service.core.sim import entities as entity_table
+from service.core.sim.loop import SimLoop
+from service.core.sim.types import Mode, Snapshot
+from service.core.sim.worlds import WORLDS_PATTERN, parse_worlds
+from service.core.streams import entity_frames, wire
 
 # Every route here names worlds, so each can answer 404 for an unknown one.
 router = APIRouter(prefix="/v1", tags=["worlds"], responses=errors(404))
@@ -169,14 +169,14 @@ async def reset_many(
     return ResetReply(worlds=done.worlds, tick=done.tick)
 
 
-# -- entities: the scene's named free bodies (service/core/commands/entities.py) -----------
+# -- entities: the scene's named free bodies (core/sim/entities.py, core/commands/entities.py)
 
 
 async def _entities(loop: SimLoop, worlds: list[int]) -> dict[str, Any]:
     """Read-your-writes: wait for the tick every accepted write of `worlds` is in, then read
     the entities on the sim thread between two ticks."""
     await _read(loop, worlds)
-    return await asyncio.wrap_future(loop.call(lambda batch: entities.read(batch, worlds)))
+    return await asyncio.wrap_future(loop.call(lambda batch: entity_table.read(batch, worlds)))
 
 
 def _written(control: Control, command: type[ManyWrites[Any]], items: list[Any]) -> Response:
@@ -199,7 +199,7 @@ async def get_entities(loop: Loop, world: World) -> Response:
     summary="Pose and twist of one entity of one world",
 )
 async def get_entity(loop: Loop, world: World, name: str) -> Response:
-    index = entities.entity_table(loop.batch.robot.mjm).index(name)
+    index = entity_table.entity_table(loop.batch.robot.mjm).index(name)
     got = await _entities(loop, [world])
     return _json({"tick": got["tick"], "world": world, **got["worlds"][0]["entities"][index]})
 

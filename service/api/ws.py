@@ -17,14 +17,15 @@ import numpy as np
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
 from service.api import ws_ops
-from service.core import access, entity_frames, frames, wire
+from service.core.access import policy as access
 from service.core.commands.base import BROWSER, WS
-from service.core.control import Control
+from service.core.commands.control import Control
 from service.core.errors import ArmfleetError, BadCommand
-from service.core.hub import StreamHub, Subscription
-from service.core.loop import SimLoop
-from service.core.types import Snapshot
-from service.core.worlds import parse_worlds
+from service.core.sim.loop import SimLoop
+from service.core.sim.types import Snapshot
+from service.core.sim.worlds import parse_worlds
+from service.core.streams import entity_frames, frames, wire
+from service.core.streams.hub import StreamHub, Subscription
 
 router = APIRouter(prefix="/v1")
 T = TypeVar("T")
@@ -35,7 +36,7 @@ _CLOSE_TRY_AGAIN = 1013
 _CLOSE_POLICY = 1008
 
 
-# `entities=true`: each frame carries the worlds' entities (service/core/entity_frames.py).
+# `entities=true`: each frame carries the worlds' entities (service/core/streams/entity_frames.py).
 Entities = Annotated[
     str | None,
     Query(description="true: each frame carries every entity's pose and twist"),
@@ -100,7 +101,7 @@ async def batch_socket(
     rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
     format: Annotated[
         Literal["json", "binary"],
-        Query(description="binary: float32 rows, see service/core/wire.py"),
+        Query(description="binary: float32 rows, see service/core/streams/wire.py"),
     ] = "json",
     entities: Entities = None,
 ) -> None:
@@ -117,7 +118,7 @@ async def batch_socket(
     loop, control, hub, (ids, with_entities) = opened
     names = loop.spec.names
     # Packed: the sim thread gathers these worlds' rows and a thread of the hub serialises them
-    # (service.core.frames); the renderers make the first frame, from the latest snapshot.
+    # (service.core.streams.frames); the renderers make the first frame, from the latest snapshot.
     if format == "binary":
         render = wire.batch_frame_binary
         sub = Subscription(

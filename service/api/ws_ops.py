@@ -12,10 +12,10 @@ from typing import Any
 
 import orjson
 
-from service.core import wire
+from service.core.commands.control import Control
 from service.core.commands.registry import BY_OP
-from service.core.control import Control
 from service.core.errors import ArmfleetError, BadCommand
+from service.core.streams import wire
 
 
 def handle_text(

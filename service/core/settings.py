@@ -11,10 +11,10 @@ from typing import Literal
 from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from service.core.physics import DEFAULT_PHYSICS_DT
-from service.core.scene_check import check_scene
-from service.core.types import Mode
-from service.core.worlds import world_list
+from service.core.sim.physics import DEFAULT_PHYSICS_DT
+from service.core.sim.scene_check import check_scene
+from service.core.sim.types import Mode
+from service.core.sim.worlds import world_list
 
 MAX_RENDER_PIXELS = 1 << 26  # one camera's render batch: colour, depth, rays, ~12 bytes a pixel
 
@@ -90,7 +90,7 @@ class Settings(BaseSettings):
     log_level: Literal["debug", "info", "warning", "error"] = Field(
         "info", description="debug, info, warning or error"
     )
-    # -- access (service/core/access.py) --
+    # -- access (service/core/access/policy.py) --
     token: str | None = Field(
         None, description="token that writes (and with token_reads, reads) must present"
     )
@@ -166,7 +166,7 @@ class Settings(BaseSettings):
     ros2_python: str | None = Field(
         None, description="Python of the ROS 2 installation for --ros2 (default: the sourced one's)"
     )
-    # -- cameras (service/core/cameras.py): the renderer is built for these once, at start --
+    # -- cameras (core/cameras/catalog.py): the renderer is built for these once, at start --
     camera_size: str = Field(
         "128x96", description="image size of every camera, WIDTHxHEIGHT (1..4096 a side)"
     )
@@ -208,7 +208,12 @@ class Settings(BaseSettings):
 
     @model_validator(mode="after")
     def _cameras_parse(self) -> Settings:
-        from service.core.cameras import parse_outputs, parse_overrides, parse_size, scene_cameras
+        from service.core.cameras.catalog import (
+            parse_outputs,
+            parse_overrides,
+            parse_size,
+            scene_cameras,
+        )
 
         w, h = parse_size(self.camera_size, "camera_size")  # ValueError names setting + limit
         parse_outputs(self.camera_outputs, "camera_outputs")

@@ -17,13 +17,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
-from service.core.access import ClientSlots
-from service.core.camera_feed import CameraFeed
-from service.core.control import Control
-from service.core.hub import StreamHub
-from service.core.loop import SimLoop
+from service.core.access.policy import ClientSlots
+from service.core.cameras.feed import CameraFeed
+from service.core.commands.control import Control
 from service.core.metrics import Metrics
 from service.core.settings import Settings
+from service.core.sim.loop import SimLoop
+from service.core.streams.hub import StreamHub
 
 
 @dataclass(frozen=True, eq=False)  # eq=False: hashed by identity (one per service)

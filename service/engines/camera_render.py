@@ -29,11 +29,11 @@ import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
-from service.core.camera_feed import CameraFeed
-from service.core.cameras import CameraSpec, camera_specs
-from service.core.device_turns import DeviceTurns
-from service.core.loop import SimLoop
+from service.core.cameras.catalog import CameraSpec, camera_specs
+from service.core.cameras.feed import CameraFeed
 from service.core.settings import Settings
+from service.core.sim.device_turns import DeviceTurns
+from service.core.sim.loop import SimLoop
 from service.engines.cuda_streams import render_stream
 
 
@@ -164,7 +164,7 @@ class BatchRenderer:
         turns: DeviceTurns | None = None,
     ) -> None:
         """`turns`: the engine's, where it steps on the same CUDA device: the renderer then
-        launches on a stream of its own, in its turns (service/core/device_turns.py)."""
+        launches on a stream of its own, in its turns (service/core/sim/device_turns.py)."""
         self.cameras = {c.name: c for c in cameras}
         self.slots = int(slots)
         self.device = wp.get_device(device)
@@ -359,7 +359,7 @@ def camera_feed(loop: SimLoop, settings: Settings) -> CameraFeed:
     """The service's cameras: the scene's cameras at the sizes and outputs of the settings,
     drawn by a BatchRenderer on --camera-device, else on the engine's device (CPU engines:
     warp's CPU device), built and warmed on the feed's own thread. On a device of its own the
-    renderer takes no turns with the engine (service/core/device_turns.py): nothing else
+    renderer takes no turns with the engine (service/core/sim/device_turns.py): nothing else
     launches there."""
     batch = loop.batch
     mjm = batch.robot.mjm

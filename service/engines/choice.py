@@ -6,8 +6,8 @@ imported only for `--ray`.
 
 from __future__ import annotations
 
-from service.core.batch import Batch
 from service.core.settings import Settings
+from service.core.sim.batch import Batch
 
 
 def build_batch(s: Settings) -> Batch:

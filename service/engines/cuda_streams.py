@@ -15,14 +15,14 @@ starving the ticks starves the pictures too.)
 Warp's current stream is one per device, not one per thread, so the engine's stream is made
 the device's current stream once, when the engine is built (every launch, capture and copy
 of the engine goes there without naming it), and the renderer makes its own stream current
-only for its launches, in turns with the loop's thread (service/core/device_turns.py).
+only for its launches, in turns with the loop's thread (service/core/sim/device_turns.py).
 """
 
 from __future__ import annotations
 
 import warp as wp
 
-from service.core.device_turns import DeviceTurns
+from service.core.sim.device_turns import DeviceTurns
 
 HIGH, LOW = -1, 0  # CUDA stream priorities as Warp takes them (a lower number goes first)
 

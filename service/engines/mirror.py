@@ -20,9 +20,9 @@ from collections.abc import Callable, Sequence
 import mujoco
 import numpy as np
 
-from service.core.batch import ModelWrite, StateWrite, TickWrites
-from service.core.robot import LoadedRobot
-from service.core.types import MODEL_PREFIX, NJOINT, BatchState, RobotSpec
+from service.core.sim.batch import ModelWrite, StateWrite, TickWrites
+from service.core.sim.robot import LoadedRobot
+from service.core.sim.types import MODEL_PREFIX, NJOINT, BatchState, RobotSpec
 
 # Model fields that mj_setConst reads: after writing one, the constants derived from it
 # (subtree masses, inverse weights at qpos0, actuator_acc0) are computed again, per world.
@@ -70,7 +70,7 @@ class HostMirror:
         return self._targets.copy()
 
     def write(self, writes: TickWrites) -> None:
-        """The engines' one door (service.core.batch): resets, then state, then targets."""
+        """The engines' one door (service.core.sim.batch): resets, then state, then targets."""
         self.write_before_targets(writes.resets, writes.model, writes.state)
         if writes.worlds.size:
             self.apply_targets(writes.worlds, writes.targets, writes.velocities)

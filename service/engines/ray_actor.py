@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import ray
 
-from service.core.types import BatchState
+from service.core.sim.types import BatchState
 from service.engines.sharding import Shipment, apply_and_step
 from service.engines.shards import MIN_WORLDS_PER_SHARD
 from service.engines.warp import WorldBatch

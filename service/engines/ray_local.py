@@ -8,7 +8,7 @@ Ctrl-C reaches them all; Ray blocks SIGINT in them, but SIGTERM to the group (a 
 the shards' actors lose their raylet while the service is still saving their state. Ray gives
 the actor workers sessions of their own, not the rest: while the instance starts (`starting`),
 every process Ray launches gets a new session, so the service's process group is the service
-alone and stopping stays its decision (service/core/stopping.py).
+alone and stopping stays its decision (service/core/process/stopping.py).
 
 Ray's own shutdown stops the processes with SIGTERM and a second's grace each, and its agents,
 once the raylet and GCS are gone, linger for a minute or more; the driver also waits up to 5 s to

@@ -28,11 +28,11 @@ import ray
 from ray.exceptions import RayActorError
 
 from mjcf import SCENE_XML
-from service.core.batch import Batch, Restorable, StateWrite
 from service.core.errors import Unavailable
-from service.core.physics import configure
-from service.core.robot import load_robot
-from service.core.types import BatchState, Snapshot
+from service.core.sim.batch import Batch, Restorable, StateWrite
+from service.core.sim.physics import configure
+from service.core.sim.robot import load_robot
+from service.core.sim.types import BatchState, Snapshot
 from service.engines.mirror import HostMirror
 from service.engines.ray_actor import NEVER, RemoteShard, Shard, connect, ray_auto_shards
 from service.engines.sharding import (
@@ -58,8 +58,8 @@ MAX_REBUILD_ATTEMPTS = 3
 class RayBatch(HostMirror, Batch, Restorable):
     """N worlds as k contiguous shards, each a Ray actor holding a WorldBatch.
 
-    Implements the Batch protocol (service/core/types.py). `address` is as in `connect`; None uses
-    the Ray connection this process already has, or starts a local instance.
+    Implements the Batch protocol (service/core/sim/batch.py). `address` is as in `connect`;
+    None uses the Ray connection this process already has, or starts a local instance.
     """
 
     def __init__(

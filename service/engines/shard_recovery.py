@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from service.core.types import BatchState, Snapshot
+from service.core.sim.types import BatchState, Snapshot
 from service.engines.shard_arrays import ArrayReceiver
 from service.engines.shard_worker import ready_reply, spawn
 from service.engines.sharding import NOTHING, ShardPlan, StagedCommands, with_model

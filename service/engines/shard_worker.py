@@ -10,7 +10,7 @@ import multiprocessing as mp
 from multiprocessing.connection import Connection
 from typing import Any
 
-from service.core.stopping import start_worker
+from service.core.process.stopping import start_worker
 from service.engines.shard_arrays import ArraySender
 from service.engines.sharding import apply_and_step
 from service.engines.warp import WorldBatch

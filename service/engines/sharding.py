@@ -14,8 +14,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from service.core.batch import ModelWrite, StateWrite
-from service.core.types import MODEL_PREFIX, BatchState, Poses, Snapshot
+from service.core.sim.batch import ModelWrite, StateWrite
+from service.core.sim.types import MODEL_PREFIX, BatchState, Poses, Snapshot
 from service.engines.warp import WorldBatch
 
 _EMPTY = np.zeros(0, dtype=np.int64)

@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from service.core.batch import Batch, Renderable, Restorable, StateWrite, Supervised
-from service.core.types import BatchState, Snapshot
+from service.core.sim.batch import Batch, Renderable, Restorable, StateWrite, Supervised
+from service.core.sim.types import BatchState, Snapshot
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
 from service.engines.shard_recovery import WorkerRecovery

@@ -20,11 +20,11 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
-from service.core.batch import Batch, Renderable, Restorable, StateWrite
-from service.core.packed_rows import PackedRows
-from service.core.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
-from service.core.robot import LoadedRobot, load_robot
-from service.core.types import PHYSICS_FIELDS, BatchState, Snapshot
+from service.core.sim.batch import Batch, Renderable, Restorable, StateWrite
+from service.core.sim.packed_rows import PackedRows
+from service.core.sim.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
+from service.core.sim.robot import LoadedRobot, load_robot
+from service.core.sim.types import PHYSICS_FIELDS, BatchState, Snapshot
 from service.engines import warp_frames as frames
 from service.engines.cuda_streams import engine_streams
 from service.engines.mirror import HostMirror

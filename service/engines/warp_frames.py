@@ -11,7 +11,7 @@ thread. The sim thread only launches: the next tick never waits for a frame beyo
 Snapshots (what HTTP reads and the other sinks get) come through pinned buffers too, handed out
 as views and reused once nothing holds them, so that a snapshot is one copy and no allocation.
 Nothing here is thread-safe on its own: `pack` and `PinnedPool.copy_out` run on the sim thread,
-a `PackedRows` is waited on and released by one consumer (service.core.frames.FrameSender).
+a `PackedRows` is waited on and released by one consumer (service.core.streams.frames.FrameSender).
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ import sys
 import numpy as np
 import warp as wp
 
-from service.core.device_turns import DeviceTurns
-from service.core.packed_rows import PackedRows
+from service.core.sim.device_turns import DeviceTurns
+from service.core.sim.packed_rows import PackedRows
 
 NCOL = 37  # sim_time, position 7, velocity 7, effort 7, target 7, flange xyz, flange wxyz, faults
 RING = 3  # frames in flight per world selection (being copied or serialised)
@@ -80,7 +80,7 @@ class PinnedPool:
     MAX_PER_SHAPE = 12  # beyond this many live snapshots, plain (pageable) copies are made
 
     def __init__(self, turns: DeviceTurns | None = None) -> None:
-        self._turns = turns  # lent while the copies are waited for (service/core/device_turns.py)
+        self._turns = turns  # lent while the copies are waited for (core/sim/device_turns.py)
         self._bufs: dict[tuple[int, ...], list[tuple[wp.array, np.ndarray]]] = {}
 
     def _take(self, src: wp.array, pinned: bool) -> tuple[wp.array, np.ndarray] | None:

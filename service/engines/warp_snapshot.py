@@ -9,7 +9,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from service.core.types import Poses, Snapshot
+from service.core.sim.types import Poses, Snapshot
 
 NJOINT = 7
 # Columns of the gathered state array, one row per world.

@@ -15,7 +15,7 @@ import mujoco
 import numpy as np
 
 if TYPE_CHECKING:
-    from service.core.batch import Batch
+    from service.core.sim.batch import Batch
 
 _PACKAGES = ("mujoco", "mujoco-warp", "warp-lang", "numpy", "armfleet")
 

@@ -32,10 +32,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from service.core.commands.registry import BY_KIND
-from service.core.commands.trajectory import ResumeTrajectory
-from service.core.schemas import RecordingStatus
-from service.core.types import BatchState, Snapshot
-from service.core.worlds import pick_worlds
+from service.core.commands.trajectory.commands import ResumeTrajectory
+from service.core.contract.snapshots import RecordingStatus
+from service.core.sim.types import BatchState, Snapshot
+from service.core.sim.worlds import pick_worlds
 from service.persistence.mcap_log import COMMANDS, RESTORES, STATUS, McapLog
 from service.persistence.provenance import batch_header
 from service.persistence.snapshots import encode_state
@@ -43,8 +43,8 @@ from service.persistence.storage import GuardedWriter, cannot_write, describe, o
 
 if TYPE_CHECKING:
     from service.core.commands.base import Accepted
+    from service.core.commands.trajectory.status import Resumable
     from service.core.surface import SurfaceContext
-    from service.core.trajectory.status import Resumable
 
 log = logging.getLogger("armfleet.recorder")
 

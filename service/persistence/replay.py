@@ -26,15 +26,15 @@ import numpy as np
 from mcap.records import Attachment, Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 
-from service.core.access import ClientSlots
+from service.core.access.policy import ClientSlots
 from service.core.commands.base import REPLAY
+from service.core.commands.control import Control
 from service.core.commands.registry import BY_KIND
-from service.core.control import Control
-from service.core.loop import SimLoop
 from service.core.metrics import Metrics
 from service.core.settings import Settings
+from service.core.sim.loop import SimLoop
+from service.core.sim.types import BatchState, Mode
 from service.core.surface import SurfaceContext
-from service.core.types import BatchState, Mode
 from service.persistence.mcap_log import (
     COMMANDS,
     METADATA,

@@ -26,12 +26,11 @@ from typing import Any
 
 import numpy as np
 
-from service.core import randomizations
-from service.core.batch import Batch, Restorable
+from service.core.contract.snapshots import SNAPSHOT_NAME, RandomizationGroup, SnapshotInfo
 from service.core.errors import BadCommand, CannotWrite, Conflict, NotFound
-from service.core.schemas import SNAPSHOT_NAME
-from service.core.snapshot_schemas import RandomizationGroup, SnapshotInfo
-from service.core.types import PHYSICS_FIELDS, BatchState
+from service.core.sim import randomizations
+from service.core.sim.batch import Batch, Restorable
+from service.core.sim.types import PHYSICS_FIELDS, BatchState
 from service.persistence.provenance import mismatch
 from service.persistence.storage import describe
 

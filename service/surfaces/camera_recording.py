@@ -17,8 +17,8 @@ from typing import Any
 
 import foxglove
 
+from service.core.sim.worlds import world_list
 from service.core.surface import SurfaceContext
-from service.core.worlds import world_list
 from service.surfaces.camera_topics import CameraTopics
 
 log = logging.getLogger("armfleet.cameras")

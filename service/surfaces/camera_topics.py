@@ -23,9 +23,9 @@ import foxglove
 from foxglove.channels import CameraCalibrationChannel, CompressedImageChannel
 from foxglove.messages import CameraCalibration, CompressedImage, Timestamp
 
-from service.core.camera_feed import CameraFeed
-from service.core.camera_wire import encode
-from service.core.cameras import CameraSpec
+from service.core.cameras.catalog import CameraSpec
+from service.core.cameras.feed import CameraFeed
+from service.core.cameras.wire import encode
 from service.core.errors import ArmfleetError
 
 log = logging.getLogger("armfleet.cameras")

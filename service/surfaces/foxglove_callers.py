@@ -3,7 +3,7 @@
 Foxglove's WebSocket handshake has no place for a token (its app opens the socket itself), so
 a client presents one by setting that parameter; the live surface answers with no parameters,
 so the value is never published to any client. A client that presents none is the tokenless
-caller (service.core.callers.identify), refused where the service has a token. Each client
+caller (service.core.access.callers.identify), refused where the service has a token. Each client
 has its own command rate limiter, as each socket of the other surfaces does.
 """
 
@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from collections import OrderedDict
 
-from service.core.access import RateLimiter
-from service.core.callers import BadToken, Caller, identify
-from service.core.leases import LeaseBook
+from service.core.access.callers import BadToken, Caller, identify
+from service.core.access.leases import LeaseBook
+from service.core.access.policy import RateLimiter
 from service.core.settings import Settings
 
 TOKEN_PARAMETER = "armfleet.token"

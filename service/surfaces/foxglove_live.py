@@ -16,7 +16,7 @@ with source `foxglove`, so it is validated, clamped and recorded like any other 
 Foxglove's handshake has no place for a token, so a client presents one (the administrator's or
 a lease's) by setting the parameter `armfleet.token`; the server keeps who that client is and
 never publishes the value back. A command on a world its caller may not command is refused
-by Control (service/core/callers.py) and reported in a status message naming the world.
+by Control (service/core/access/callers.py) and reported in a status message naming the world.
 
 A thread of its own samples the batch at `rate` Hz (one request to the loop per frame, served
 between ticks) and does all encoding; the SDK keeps a bounded queue per client and drops the
@@ -46,9 +46,9 @@ from foxglove.messages import (
     Vector3,
 )
 
-from service.core.callers import book_of
+from service.core.access.callers import book_of
 from service.core.errors import ArmfleetError
-from service.core.worlds import pick_worlds
+from service.core.sim.worlds import pick_worlds
 from service.surfaces.foxglove_callers import TOKEN_PARAMETER, ClientCallers
 from service.surfaces.foxglove_scene import geom_entities, quat_msg, vec_msg, world_offset
 
@@ -56,8 +56,8 @@ if TYPE_CHECKING:
     from foxglove.websocket import ChannelView, Client, ClientChannel
 
     from service.core.settings import Settings
+    from service.core.sim.types import Snapshot
     from service.core.surface import SurfaceContext
-    from service.core.types import Snapshot
 
 FOXGLOVE = "foxglove"  # the label of commands that came from a Foxglove client
 log = logging.getLogger("armfleet.foxglove")

@@ -20,7 +20,7 @@ To add a command:
    `from_record` as it needs;
 2. add it to `registry.COMMANDS`;
 3. only if it writes a kind of engine state no command wrote before: add that to
-   `service.core.batch.TickWrites` (what every engine applies at a tick boundary).
+   `service.core.sim.batch.TickWrites` (what every engine applies at a tick boundary).
 
 An HTTP route, if it has one, is a few lines in `service/api` calling `Control.run`.
 """

@@ -18,13 +18,13 @@ from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
-from service.core import wire
 from service.core.errors import BadCommand
-from service.core.types import NJOINT, RobotSpec
+from service.core.sim.types import NJOINT, RobotSpec
+from service.core.streams import wire
 
 if TYPE_CHECKING:
-    from service.core.loop import SimLoop
-    from service.core.trajectory.manager import TrajectoryManager
+    from service.core.commands.trajectory.manager import TrajectoryManager
+    from service.core.sim.loop import SimLoop
 
 R = TypeVar("R")
 

@@ -2,7 +2,7 @@
 `set_params`, which gives worlds their own values at one tick boundary.
 
 The table (`param_table`, read from the model) names every parameter, its unit, its range and
-the MjModel entries it edits; a value is written as `ModelWrite`s (service.core.batch), which
+the MjModel entries it edits; a value is written as `ModelWrite`s (service.core.sim.batch), which
 every engine applies per world (MuJoCo Warp batches only the fields some world changed;
 native MuJoCo expands them per world). The entries are edited as one would edit an `MjModel`
 by hand, and nothing else: what `mj_setConst` derives from them (`body_invweight0`, ...) keeps
@@ -36,14 +36,14 @@ import mujoco
 import numpy as np
 from pydantic import Field
 
-from service.core.batch import Batch, ModelWrite
-from service.core.commands import rules
 from service.core.commands.base import Door, world_ack
-from service.core.commands.entities import entity_table
+from service.core.commands.fields import FiniteFloat, Strict, WorldId, example_config
 from service.core.commands.writes import MAX_WRITES, ManyWrites, batch_config
 from service.core.errors import BadCommand
-from service.core.robot import FLANGE_SITE
-from service.core.schema_fields import FiniteFloat, Strict, WorldId, example_config
+from service.core.sim import rules
+from service.core.sim.batch import Batch, ModelWrite
+from service.core.sim.entities import entity_table
+from service.core.sim.robot import FLANGE_SITE
 
 __all__ = ["Param", "SetParams", "param_table", "read"]
 

@@ -25,12 +25,13 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import Field
 
-from service.core.commands import rules
 from service.core.commands.base import Announcement, Command, Door, world_ack
-from service.core.commands.entities import SetEntities, entity_table
+from service.core.commands.entities import SetEntities
+from service.core.commands.fields import Strict, WorldId, example_config
 from service.core.commands.params import SetParams, param_table
 from service.core.errors import BadCommand
-from service.core.schema_fields import Strict, WorldId, example_config
+from service.core.sim import rules
+from service.core.sim.entities import entity_table
 
 __all__ = ["Randomize", "RandomizeAck", "RandomizeRequest"]
 

@@ -13,7 +13,11 @@ from service.core.commands.entities import SetEntities
 from service.core.commands.params import SetParams
 from service.core.commands.randomize import Randomize
 from service.core.commands.targets import Increment, SetMany, SetTargets
-from service.core.commands.trajectory import CancelTrajectory, ResumeTrajectory, StartTrajectory
+from service.core.commands.trajectory.commands import (
+    CancelTrajectory,
+    ResumeTrajectory,
+    StartTrajectory,
+)
 from service.core.commands.world import Reset, SetMode, Step
 
 COMMANDS: tuple[type[Command], ...] = (

@@ -6,19 +6,179 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
-from pydantic import ValidationError
+from pydantic import ConfigDict, Field, ValidationError, model_validator
+from pydantic_core import PydanticCustomError
 
-from service.core.commands import arithmetic, rules
 from service.core.commands.base import Announcement, Command, Door, result_ack
+from service.core.commands.fields import (
+    Delta,
+    FiniteFloat,
+    JointKey,
+    JointRef,
+    Paired,
+    Strict,
+    WorldId,
+    default_spec,
+    equal_lengths,
+    joint_names,
+    non_null,
+    paired_config,
+)
 from service.core.errors import BadCommand
-from service.core.loop_types import CommandResult
-from service.core.schemas import IncrementRequest, JointTargets
-from service.core.types import RobotSpec
+from service.core.sim import arithmetic, rules
+from service.core.sim.loop_types import CommandResult
+from service.core.sim.rules import BadJointState, joint_state
+from service.core.sim.types import NJOINT, RobotSpec
 
 __all__ = ["Increment", "SetMany", "SetTargets"]
+
+
+# -- request bodies (HTTP; the WebSocket ops validate with the same models) ----------------------
+#
+# The JSON Schema of every request states every rule the server enforces (joint names, equal
+# lengths, which of increment's two shapes, strict integers), so that what the schema calls
+# valid is accepted and what it calls invalid is refused: schemathesis holds us to that
+# (tests/test_contract.py).
+
+MAX_BATCH_WORLDS = 64  # worlds per POST /v1/targets; the schema lists every allowed length
+
+
+class IncrementRequest(Strict):
+    """One joint (`joint` + `delta`) or several (`deltas`): the seed's Up/Down buttons."""
+
+    joint: JointRef | None = None
+    delta: Delta | None = None
+    deltas: Annotated[dict[JointKey, Delta], Field(min_length=1)] | None = None
+
+    @staticmethod
+    def _schema(schema: dict[str, Any]) -> None:
+        # Exactly one of the two shapes, and no nulls (the validator below refuses them too).
+        props = schema.pop("properties")
+        plain = {k: non_null(v) for k, v in props.items()}
+        schema.pop("additionalProperties", None)
+        schema["oneOf"] = [
+            {
+                "title": "one joint",
+                "type": "object",
+                "properties": {"joint": plain["joint"], "delta": plain["delta"]},
+                "required": ["joint", "delta"],
+                "additionalProperties": False,
+            },
+            {
+                "title": "several joints",
+                "type": "object",
+                "properties": {"deltas": plain["deltas"]},
+                "required": ["deltas"],
+                "additionalProperties": False,
+            },
+        ]
+        schema["examples"] = [
+            {"joint": "elbow_joint", "delta": 0.1},
+            {"deltas": {"elbow_joint": 0.1, "finger_joint": -0.1}},
+        ]
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_schema)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_nulls(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            for key in ("joint", "delta", "deltas"):
+                if key in data and data[key] is None:
+                    raise ValueError(f"`{key}` may be left out but not null")
+        return data
+
+    @model_validator(mode="after")
+    def _one_form(self) -> IncrementRequest:
+        single = self.joint is not None or self.delta is not None
+        if single == (self.deltas is not None):
+            raise ValueError("give either `joint` and `delta`, or `deltas`")
+        if single and (self.joint is None or self.delta is None):
+            raise ValueError("`joint` and `delta` go together")
+        return self
+
+    def as_mapping(self) -> dict[str | int, float]:
+        if self.deltas is not None:
+            return dict(self.deltas)
+        assert self.joint is not None and self.delta is not None
+        return {self.joint: self.delta}
+
+
+class JointTargets(Strict):
+    """sensor_msgs/JointState-shaped: a subset of names is allowed, others keep their targets;
+    with no names (left out or empty), one position per joint in joint order, as the seed's
+    Isaac subscriber read them. The rule is service.core.sim.rules.joint_state."""
+
+    name: list[JointKey] = Field(
+        default_factory=list, max_length=NJOINT, json_schema_extra={"uniqueItems": True}
+    )
+    position: list[FiniteFloat] = Field(min_length=1, max_length=NJOINT)
+
+    @staticmethod
+    def _schema(schema: dict[str, Any]) -> None:
+        branches = equal_lengths("name", "position", range(1, NJOINT + 1))
+        for branch in branches:
+            branch["required"] = ["name"]
+        nameless = {"minItems": NJOINT, "maxItems": NJOINT}
+        branches.append({"properties": {"name": {"maxItems": 0}, "position": nameless}})
+        schema["oneOf"] = branches
+        # A joint named twice, once by name and once by index ("5" is wrist_3_joint), is a
+        # repeat too: JSON Schema's uniqueItems cannot see it, so each such pair is excluded.
+        schema["not"] = {
+            "anyOf": [
+                {
+                    "required": ["name"],
+                    "properties": {
+                        "name": {
+                            "allOf": [{"contains": {"const": n}}, {"contains": {"const": str(i)}}]
+                        }
+                    },
+                }
+                for i, n in enumerate(joint_names())
+            ]
+        }
+        schema["examples"] = [
+            {"name": ["elbow_joint", "finger_joint"], "position": [1.2, 0.35]},
+            {"position": [0, -1.57, 1.57, -1.57, -1.57, 0, 0]},
+        ]
+
+    # JointState also carries header/velocity/effort: allowed, and ignored
+    model_config = ConfigDict(extra="allow", json_schema_extra=_schema)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _the_rule(cls, data: Any) -> Any:
+        """The one JointState rule, so that HTTP refuses with the same words as every surface."""
+        if isinstance(data, dict):
+            try:
+                joint_state(default_spec(), data.get("name", []), data.get("position"))
+            except BadJointState as exc:
+                raise PydanticCustomError("joint_state", "{rule}", {"rule": str(exc)}) from None
+        return data
+
+
+class BatchTargets(Paired):
+    """Full 7-joint targets for many worlds in one request, applied at one tick boundary."""
+
+    PAIR = ("worlds", "position")
+    worlds: list[WorldId] = Field(
+        min_length=1,
+        max_length=MAX_BATCH_WORLDS,
+        json_schema_extra={"uniqueItems": True},
+        description=f"distinct world ids, at most {MAX_BATCH_WORLDS} per request",
+    )
+    position: list[Annotated[list[FiniteFloat], Field(min_length=7, max_length=7)]] = Field(
+        min_length=1, max_length=MAX_BATCH_WORLDS, description="one row of 7 targets per world"
+    )
+
+    model_config = paired_config(
+        PAIR,
+        MAX_BATCH_WORLDS,
+        {"worlds": [0, 1], "position": [[0, -1.57, 1.57, -1.57, -1.57, 0, 0]] * 2},
+    )
 
 
 def _validation_detail(exc: ValidationError) -> str:

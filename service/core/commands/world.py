@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
+from pydantic import ConfigDict, Field
 
-from service.core.commands import rules
 from service.core.commands.base import (
     Announcement,
     Command,
@@ -19,10 +19,35 @@ from service.core.commands.base import (
     no_worlds,
     result_ack,
 )
-from service.core.loop_types import CommandResult
-from service.core.types import Mode
+from service.core.commands.fields import Strict, WorldId, json_int
+from service.core.sim import rules
+from service.core.sim.loop_types import CommandResult
+from service.core.sim.types import Mode
 
 __all__ = ["Reset", "ResetResult", "SetMode", "Step"]
+
+MAX_STEP_TICKS = 100_000
+
+
+# -- request bodies ----------------------------------------------------------------------------
+
+
+class ResetRequest(Strict):
+    worlds: list[WorldId] | None = Field(default=None, description="omit for all worlds")
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"worlds": [0, 3]}]})
+
+
+class ModeRequest(Strict):
+    mode: Mode
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"mode": "fast"}]})
+
+
+class StepRequest(Strict):
+    ticks: json_int(minimum=1, maximum=MAX_STEP_TICKS) = 1  # type: ignore[valid-type]
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"ticks": 60}]})
 
 
 @dataclass(frozen=True)

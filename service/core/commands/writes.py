@@ -15,10 +15,10 @@ from typing import Any, Protocol, Self, TypeVar
 import numpy as np
 from pydantic import ConfigDict
 
-from service.core.batch import ModelWrite, StateWrite
 from service.core.commands.base import Announcement, Command, Door
+from service.core.commands.fields import example_config
 from service.core.errors import BadCommand
-from service.core.schema_fields import example_config
+from service.core.sim.batch import ModelWrite, StateWrite
 
 __all__ = ["MAX_WRITES", "ManyWrites", "Written", "batch_config"]
 

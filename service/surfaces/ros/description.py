@@ -14,7 +14,7 @@ from typing import Any
 
 import mujoco
 
-from service.core.types import RobotSpec
+from service.core.sim.types import RobotSpec
 from service.surfaces.ros.tf_frames import FrameTree
 from service.surfaces.ros.urdf import ROOT_LINK, free_floating, generate
 

@@ -9,13 +9,13 @@ import enum
 import math
 from typing import Any
 
-from service.core.errors import ArmfleetError
-from service.core.trajectory import (
+from service.core.commands.trajectory import (
     JointTolerance,
     JointTrajectorySpec,
     TrajectoryPoint,
     TrajectoryStatus,
 )
+from service.core.errors import ArmfleetError
 from service.surfaces.ros import topics
 
 FJT_TYPE = "control_msgs/action/FollowJointTrajectory"

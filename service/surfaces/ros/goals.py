@@ -34,9 +34,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from service.core.control import Control
+from service.core.commands.control import Control
+from service.core.commands.trajectory import AbortReason, TrajectoryStatus
 from service.core.surface import SurfaceContext
-from service.core.trajectory import AbortReason, TrajectoryStatus
 from service.surfaces.ros import topics
 from service.surfaces.ros.goal_msgs import (
     FEEDBACK_HZ,

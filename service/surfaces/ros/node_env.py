@@ -20,7 +20,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from service.core.pythonpath import ORIGINAL
+from service.core.process.pythonpath import ORIGINAL
 
 log = logging.getLogger("armfleet.ros")
 

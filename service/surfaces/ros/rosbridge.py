@@ -26,13 +26,13 @@ import numpy as np
 import orjson
 from fastapi import WebSocket
 
-from service.core import access
-from service.core.callers import Forbidden, book_of
-from service.core.commands.rules import BadJointState
+from service.core.access import policy as access
+from service.core.access.callers import Forbidden, book_of
 from service.core.errors import ArmfleetError
-from service.core.hub import StreamHub, Subscription
+from service.core.sim.rules import BadJointState
+from service.core.sim.types import Snapshot
+from service.core.streams.hub import StreamHub, Subscription
 from service.core.surface import SurfaceContext
-from service.core.types import Snapshot
 from service.surfaces.ros import rosapi, rosbridge_actions, sim_entities, topics
 from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, same_type, topic_name
 from service.surfaces.ros.rosbridge_frames import (
@@ -95,8 +95,8 @@ class Session:
         self.loop = ctx.loop
         self.hub: StreamHub = ctx.hub
         settings = ctx.settings
-        # One access policy for every surface (service/core/access.py): may it publish, how fast;
-        # which worlds: Control checks each command for this socket's caller (core/callers.py).
+        # One access policy for every surface (core/access/policy.py): may it publish, how fast;
+        # which worlds: Control checks each command for this socket's caller (access/callers.py).
         self.grant = access.check_websocket(settings, ws, book_of(ctx.control))
         self.control = ctx.control.acting_for(self.grant.caller)
         self.joints = tuple(self.loop.spec.names)
@@ -186,7 +186,7 @@ class Session:
         if unknown:
             raise BadMessage("unknown_field", f"JointState has no field {unknown[0]!r}")
         name, position = body.get("name", []), body.get("position", [])
-        try:  # the JointState rule of every surface (service.core.commands.rules)
+        try:  # the JointState rule of every surface (service.core.sim.rules)
             self.control.command_targets(world, name, position, ROSBRIDGE)
         except BadJointState as exc:
             raise BadMessage(exc.reason, str(exc)) from None

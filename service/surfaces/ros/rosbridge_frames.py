@@ -12,8 +12,8 @@ from typing import Any
 
 import orjson
 
-from service.core.loop import SimLoop
-from service.core.types import Snapshot
+from service.core.sim.loop import SimLoop
+from service.core.sim.types import Snapshot
 from service.surfaces.ros import description, topics
 from service.surfaces.ros.tf_frames import FrameTree
 

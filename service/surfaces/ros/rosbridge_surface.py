@@ -18,11 +18,11 @@ from typing import TYPE_CHECKING, Any
 from fastapi import APIRouter, HTTPException, WebSocket, WebSocketDisconnect
 from pydantic import BaseModel, Field, StrictBool
 
-from service.core import access
-from service.core.schema_fields import example_config, json_int
+from service.core.access import policy as access
+from service.core.commands.fields import example_config, json_int
 from service.core.settings import Settings
+from service.core.sim.worlds import world_list
 from service.core.surface import SurfaceContext
-from service.core.worlds import world_list
 from service.surfaces.ros import description
 from service.surfaces.ros.rosbridge import RosbridgeServer, Session
 from service.surfaces.ros.topics import TopicMap

@@ -24,6 +24,7 @@ import numpy as np
 
 from service.core.commands import entities
 from service.core.errors import ArmfleetError, BadCommand
+from service.core.sim import entities as entity_table
 from service.surfaces.ros import topics
 from service.surfaces.ros.rosbridge_base import ROSBRIDGE
 
@@ -71,7 +72,7 @@ def set_state(session: Any, world: int, args: Any) -> dict[str, Any]:
         if not isinstance(args, dict) or not isinstance(args.get("state"), dict):
             raise BadCommand("state", "SetEntityState takes {entity, state: {pose, twist}}")
         state, item = args["state"], {"world": world, "name": args.get("entity")}
-        table = entities.entity_table(session.loop.batch.robot.mjm)
+        table = entity_table.entity_table(session.loop.batch.robot.mjm)
         table.index(item["name"], "entity")
         quat = None
         if (pose := state.get("pose")) is not None:
@@ -99,7 +100,7 @@ def set_state(session: Any, world: int, args: Any) -> dict[str, Any]:
 def get_state(session: Any, world: int, args: Any, reply: Reply) -> None:
     """GetEntityState: `reply(values)` once the engine was read (from the event loop)."""
     name = args.get("entity") if isinstance(args, dict) else None
-    table = entities.entity_table(session.loop.batch.robot.mjm)
+    table = entity_table.entity_table(session.loop.batch.robot.mjm)
     try:
         index = table.index(name, "entity")
     except BadCommand as exc:
@@ -134,6 +135,6 @@ def get_state(session: Any, world: int, args: Any, reply: Reply) -> None:
         aio.call_soon_threadsafe(reply, {**_result(OK), "state": state})
 
     def fresh(_: Any) -> None:  # read-your-writes: the tick of its last command, then the read
-        loop.call(lambda batch: entities.read(batch, [world])).add_done_callback(done)
+        loop.call(lambda batch: entity_table.read(batch, [world])).add_done_callback(done)
 
     loop.fresh_snapshot([world]).add_done_callback(fresh)

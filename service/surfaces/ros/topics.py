@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from service.core.types import Snapshot
+from service.core.sim.types import Snapshot
 
 log = logging.getLogger("armfleet.ros")
 

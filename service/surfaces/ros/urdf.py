@@ -27,8 +27,8 @@ from xml.sax.saxutils import quoteattr
 import mujoco
 import numpy as np
 
-from service.core.scene import VISIBLE_GROUPS
-from service.core.types import RobotSpec
+from service.core.sim.scene import VISIBLE_GROUPS
+from service.core.sim.types import RobotSpec
 
 ROOT_LINK = "world"
 

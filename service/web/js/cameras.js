@@ -1,7 +1,7 @@
 // The camera pane of the world view: what one camera of the focused world sees, live.
 // It pulls (/v1/ws/cameras?pull=true): one JPEG is asked for when the last one is shown, so
 // a slow page never makes the service draw pictures nobody sees; closed in the fleet view and
-// while the tab is hidden. Message layout: service/core/camera_wire.py (b"AFIM", u32 header
+// while the tab is hidden. Message layout: service/core/cameras/wire.py (b"AFIM", u32 header
 // length, JSON header, images).
 
 const RATE = 10; // pictures a second at most

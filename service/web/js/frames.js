@@ -1,4 +1,4 @@
-// Pose frames (layout: service/core/wire.py, "AFP1") and smoothing between them.
+// Pose frames (layout: service/core/streams/wire.py, "AFP1") and smoothing between them.
 
 const MAGIC = 'AFP1';
 // Changes smaller than this (m, or quaternion units: ~0.1 mm, ~0.01°) since the last full draw

@@ -1,0 +1,301 @@
+"""Batch state frames without a full snapshot: packed where the engine is, serialised off-loop.
+
+A subscriber of many worlds used to cost a full snapshot (every field of every world copied to
+the host) plus, on the event loop, cutting and serialising it. Now the sim thread asks the
+engine for the rows of exactly the subscribed worlds (`pack_rows`: a kernel and one pinned copy
+on a GPU, a few vectorised gathers on the CPU) and hands them to `FrameSender`, a thread of its
+own that waits for the copy with the GIL released, builds the frame bytes and passes them to
+the event loop, which only sends. The bytes are exactly those of `service.wire.batch_frame` and
+`batch_frame_binary` for the same tick (tests/test_frames.py holds them to it).
+
+Large JSON frames are serialised in a helper process (from BIG_JSON_ROWS worlds), smaller ones
+in slices of rows letting the GIL go between slices: the sim thread is never held up for
+longer than one slice.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import logging
+import multiprocessing
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from service.core.sim.batch import Batch, PacksFrames
+from service.core.sim.packed_rows import PackedRows
+from service.core.sim.types import EntityFrame, Snapshot
+from service.core.streams import wire
+
+log = logging.getLogger("armfleet.frames")
+
+# From this many worlds a JSON frame is serialised in a helper process (spawned at the first
+# one): tens of ms of orjson per frame would otherwise hold the GIL against the sim thread.
+BIG_JSON_ROWS = 4096
+JSON_PROCESSES = 2  # helpers, so that one frame is serialised while the next is
+JSON_SLICE = 2048  # rows serialised per GIL hold in a JSON frame (~3 ms of orjson on a GPU host)
+# While frames are serialised, a thread waiting for the GIL asks for it after this long (Python's
+# default is 5 ms): the sim thread gets it back between two slices instead of a few slices later.
+SWITCH_INTERVAL_S = 0.0005
+_NOOP: Callable[[], None] = lambda: None  # noqa: E731
+
+
+@dataclass
+class FrameData:
+    """One tick's frame for one world selection: the rows, and for JSON the host columns that
+    JSON reports at full precision (sim_time and target as float64, faults as integers)."""
+
+    packed: PackedRows
+    sim_time: np.ndarray | None = None
+    target: np.ndarray | None = None
+    faults: np.ndarray | None = None
+    extra: dict[str, Any] | None = None  # JSON's last fields (None: DEFAULT_EXTRA)
+    entities: EntityFrame | None = None  # read when a subscriber asked (JSON_ENTITIES)
+
+    @property
+    def tick(self) -> int:
+        return self.packed.tick
+
+    @property
+    def ids(self) -> np.ndarray:
+        return self.packed.ids
+
+
+def rows_of(snap: Snapshot, ids: np.ndarray) -> np.ndarray:
+    """The binary frame's rows of `ids` cut from a snapshot (engines without `pack_rows`)."""
+    cols = (snap.sim_time[ids, None], snap.position[ids], snap.velocity[ids], snap.effort[ids])
+    rest = (snap.target[ids], snap.flange_pos[ids], snap.flange_quat[ids], snap.faults[ids, None])
+    return np.concatenate((*cols, *rest), axis=1, dtype="<f4")
+
+
+def pack(batch: Batch, ids: np.ndarray, json: bool) -> FrameData | None:
+    """Rows of worlds `ids` at the batch's last tick (sim thread, between ticks).
+
+    Engines that `PacksFrames` (warp, native) gather on their side; others are cut from a
+    snapshot. `json` adds the host columns. None when the engine has no buffer free for this
+    selection (its frames are still being sent): the frame is skipped, the tick goes on.
+    """
+    if not isinstance(batch, PacksFrames):
+        snap = batch.snapshot()
+        data = FrameData(PackedRows(snap.tick, ids, rows_of(snap, ids)))
+        if json:
+            data.sim_time, data.target, data.faults = (
+                snap.sim_time[ids],
+                snap.target[ids],
+                snap.faults[ids],
+            )
+        return data
+    packed = batch.pack_rows(ids)
+    if packed is None:
+        return None
+    data = FrameData(packed)
+    if json:
+        data.sim_time, data.target, data.faults = batch.host_columns(ids)
+    return data
+
+
+# -- serialising -------------------------------------------------------------------------------
+
+
+def binary(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
+    """`wire.batch_frame_binary`'s bytes from packed rows (one copy of them)."""
+    header = wire.dumps(wire.binary_header(data.tick, len(data.ids), names))
+    ids = data.ids.astype("<i4").tobytes()
+    size = len(header).to_bytes(4, "little")
+    return b"".join((wire.BINARY_MAGIC, size, header, ids, memoryview(rows)))
+
+
+def binary_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
+    """`wire.batch_frame_binary(..., entities=True)`'s bytes: the rows, then the entities."""
+    assert data.entities is not None
+    header = wire.dumps(wire.binary_header(data.tick, len(data.ids), names, data.entities))
+    ids = data.ids.astype("<i4").tobytes()
+    size = len(header).to_bytes(4, "little")
+    block = wire.entity_block(data.entities)
+    return b"".join((wire.BINARY_MAGIC, size, header, ids, memoryview(rows), block))
+
+
+def _array(values: np.ndarray, sliced: bool) -> bytes:
+    """orjson's text of a numpy array; `sliced`: a slice of rows at a time (see module doc)."""
+    if not sliced or len(values) <= JSON_SLICE:
+        return wire.dumps(np.ascontiguousarray(values))
+    parts = []
+    for lo in range(0, len(values), JSON_SLICE):
+        parts.append(wire.dumps(np.ascontiguousarray(values[lo : lo + JSON_SLICE]))[1:-1])
+        time.sleep(0)  # lets the sim thread take the GIL between slices
+    return b"[" + b",".join(parts) + b"]"
+
+
+# What `wire.batch_frame` ends with when no trajectory has run in the frame's worlds.
+DEFAULT_EXTRA: dict[str, Any] = {"trajectories": {}}
+
+_JSON_COLUMNS = (
+    ("position", slice(1, 8)),
+    ("velocity", slice(8, 15)),
+    ("effort", slice(15, 22)),
+    ("target", None),
+    ("flange_position", slice(29, 32)),
+    ("flange_quaternion", slice(32, 36)),
+)
+
+
+def json_bytes(
+    tick: int,
+    names: list[str],
+    ids: np.ndarray,
+    sim_time: np.ndarray,
+    rows: np.ndarray,
+    target: np.ndarray,
+    faults: np.ndarray,
+    sliced: bool = True,
+    extra: dict[str, Any] | None = None,
+) -> bytes:
+    """`wire.batch_frame`'s bytes from packed rows plus the host columns (a module function:
+    the helper process runs it too)."""
+    head = wire.dumps({"op": "states", "tick": tick, "name": names})[:-1]
+    parts = [head, b',"worlds":', _array(ids, sliced), b',"sim_time":', _array(sim_time, sliced)]
+    for name, cols in _JSON_COLUMNS:
+        values = target if cols is None else rows[:, cols]
+        parts += [b',"', name.encode(), b'":', _array(values, sliced)]
+    parts += [b',"faults":', _array(faults, sliced)]
+    for name, value in (DEFAULT_EXTRA if extra is None else extra).items():
+        parts += [b',"', name.encode(), b'":', wire.dumps(value)]
+    return b"".join((*parts, b"}"))
+
+
+def json(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
+    """`wire.batch_frame`'s bytes from packed rows, serialised on this thread."""
+    assert data.sim_time is not None and data.target is not None and data.faults is not None
+    return json_bytes(
+        data.tick, names, data.ids, data.sim_time, rows, data.target, data.faults, True, data.extra
+    )
+
+
+def json_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
+    """`wire.batch_frame(..., entities=True)`'s bytes: the JSON frame, then `entities`."""
+    assert data.sim_time is not None and data.target is not None and data.faults is not None
+    assert data.entities is not None
+    extra = {**(DEFAULT_EXTRA if data.extra is None else data.extra)}
+    extra["entities"] = wire.entity_columns(data.entities)
+    return json_bytes(
+        data.tick, names, data.ids, data.sim_time, rows, data.target, data.faults, True, extra
+    )
+
+
+# The frame formats with each world's entities too (`entities=true`).
+JSON_ENTITIES, BINARY_ENTITIES = "json+entities", "binary+entities"
+WITH_ENTITIES = (JSON_ENTITIES, BINARY_ENTITIES)
+ENCODERS: dict[str, Callable[[FrameData, np.ndarray, list[str]], bytes]] = {
+    "binary": binary,
+    "json": json,
+    JSON_ENTITIES: json_entities,
+    BINARY_ENTITIES: binary_entities,
+}
+
+
+# -- the sender thread -------------------------------------------------------------------------
+
+
+@dataclass
+class Job:
+    """Frames of one tick and selection to serialise in `formats`, for `targets` to deliver."""
+
+    data: FrameData
+    formats: Sequence[str]
+    targets: Any  # passed back to `deliver` untouched (the subscriptions that asked)
+    names: list[str]  # the joint names the frames carry
+
+
+class FrameSender:
+    """Serialises packed frames on a thread of its own and hands the bytes to `deliver`.
+
+    At most one job per selection waits: a newer one replaces it (its buffer released), so a
+    slow consumer costs frames, never memory or the sim thread's time.
+    """
+
+    def __init__(self, deliver: Callable[[Job, dict[str, bytes]], None]) -> None:
+        self._deliver = deliver
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
+        self._cv = threading.Condition()
+        self._jobs: dict[bytes, Job] = {}
+        self._running = True
+        self.replaced = 0  # jobs dropped for a newer one of the same selection (metrics)
+        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+        self._json_in_flight = 0  # big JSON frames in the helpers (this thread and callbacks)
+        self._thread = threading.Thread(target=self._run, name="armfleet-frames", daemon=True)
+        self._thread.start()
+
+    def _in_process(self, job: Job, rows: np.ndarray) -> list[str]:
+        """Hand a big frame's JSON formats to the helper processes (several frames in flight,
+        delivered when done, in order of completion); the formats handed (or dropped because
+        every helper is busy), none when the frame is serialised here instead."""
+        asked = [f for f in job.formats if f in ("json", JSON_ENTITIES)]
+        if not asked or len(job.data.ids) < BIG_JSON_ROWS:
+            return []
+        if self._pool is None:
+            ctx = multiprocessing.get_context("spawn")  # never fork a process holding CUDA
+            self._pool = concurrent.futures.ProcessPoolExecutor(JSON_PROCESSES, mp_context=ctx)
+        d = job.data
+        rows = np.array(rows)  # a copy: the pinned buffer goes back to the engine at once
+        for f in asked:
+            if self._json_in_flight >= JSON_PROCESSES:
+                self.replaced += 1  # all helpers busy: dropped (the next frame is newer)
+                continue
+            extra = d.extra
+            if f == JSON_ENTITIES and d.entities is not None:
+                extra = {**(DEFAULT_EXTRA if extra is None else extra)}
+                extra["entities"] = wire.entity_columns(d.entities)
+            args = (d.tick, job.names, d.ids, d.sim_time, rows, d.target, d.faults, False, extra)
+            self._json_in_flight += 1
+            fut = self._pool.submit(json_bytes, *args)
+            fut.add_done_callback(lambda done, f=f: self._json_done(job, f, done))
+        return asked
+
+    def _json_done(self, job: Job, fmt: str, fut: concurrent.futures.Future[bytes]) -> None:
+        self._json_in_flight -= 1
+        if not fut.cancelled() and fut.exception() is None:
+            self._deliver(job, {fmt: fut.result()})
+
+    def submit(self, job: Job) -> None:
+        key = job.data.ids.tobytes()
+        with self._cv:
+            old = self._jobs.get(key)
+            self._jobs[key] = job
+            self._cv.notify()
+        if old is not None:
+            self.replaced += 1
+            old.data.packed.release()
+
+    def stop(self) -> None:
+        with self._cv:
+            self._running = False
+            self._cv.notify()
+        self._thread.join(timeout=5)
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+
+    def _run(self) -> None:
+        while True:
+            with self._cv:
+                while self._running and not self._jobs:
+                    self._cv.wait()
+                if not self._running:
+                    return
+                _, job = self._jobs.popitem()
+            try:
+                rows = job.data.packed.wait()
+                handed = self._in_process(job, rows)
+                formats = [f for f in job.formats if f not in handed]
+                out = {f: ENCODERS[f](job.data, rows, job.names) for f in formats}
+            except Exception:
+                log.exception("a frame could not be serialised")
+                continue
+            finally:
+                job.data.packed.release()
+            if out:
+                self._deliver(job, out)
