@@ -197,11 +197,11 @@ class Runtime:
         self.hub = hub = StreamHub(asyncio.get_running_loop())
         loop = SimLoop(batch, s.mode, (hub,))
         loop.randomizations.replace(self._restored_randomized)
-        loop.add_restore_listener(lambda _tick, _state, _name: hub.restored())
+        loop.listeners.add_restore_listener(lambda _tick, _state, _name: hub.restored())
         self.control = Control(loop)
         self.control.add_listener(self._count_accepted)
         self._lend(batch.nworld)
-        loop.add_tick_listener(self.metrics.on_tick)
+        loop.listeners.add_tick_listener(self.metrics.on_tick)
         loop.start()
         self.cameras = camera_feed(loop, s)
         self.loop = loop

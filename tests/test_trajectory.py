@@ -174,11 +174,11 @@ def test_bad_trajectories_are_rejected_naming_the_field_and_limit(body, field, w
 
 def test_a_rejected_trajectory_changes_nothing(sim):
     loop, control = sim
-    before = loop.pending_targets(np.arange(4))
+    before = loop.commands.pending_targets(np.arange(4))
     with pytest.raises(BadCommand):
         parse(SPEC, _body(joint_names=["nope"]))
     assert control.trajectories.status(0) is None or control.trajectories.status(0).done
-    np.testing.assert_array_equal(loop.pending_targets(np.arange(4)), before)
+    np.testing.assert_array_equal(loop.commands.pending_targets(np.arange(4)), before)
 
 
 def test_spec_round_trips_through_json():
@@ -263,7 +263,7 @@ def test_manual_command_stops_the_trajectory_and_holds(sim):
     started = control.start_trajectory([0], three_points(), "http")[0]
     stepped(30, loop)
     outcome = control.trajectories.wait(started.id)
-    held = loop.pending_targets(0)
+    held = loop.commands.pending_targets(0)
     result = control.increment(0, {"elbow_joint": 0.1}, "browser")
     assert outcome.done()  # told at once, though no tick has run since (paused)
     status = control.trajectories.status(0)
@@ -314,7 +314,7 @@ def test_a_newer_trajectory_preempts_and_starts_where_the_old_one_was(sim):
     loop, control = sim
     first = control.start_trajectory([0], three_points(), "http")[0]
     stepped(20, loop)
-    where = loop.pending_targets(0)
+    where = loop.commands.pending_targets(0)
     hold = JointTrajectorySpec.build(
         SPEC, ["elbow_joint"], [TrajectoryPoint([float(where[2])], 0.5)]
     )

@@ -68,7 +68,9 @@ async def _read(
     except TimeoutError:
         why = loop.failure or "no tick completed"
         raise Unavailable(f"the engine is not advancing ({why}); see /readyz") from None
-    pending = loop.pending_targets(np.asarray(worlds)) if loop.mode is Mode.PAUSED else None
+    pending = (
+        loop.commands.pending_targets(np.asarray(worlds)) if loop.mode is Mode.PAUSED else None
+    )
     return snap, pending
 
 

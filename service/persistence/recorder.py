@@ -34,6 +34,7 @@ import numpy as np
 from service.core.commands.registry import BY_KIND
 from service.core.commands.trajectory.commands import ResumeTrajectory
 from service.core.contract.snapshots import RecordingStatus
+from service.core.sim.loop_types import SnapshotSink
 from service.core.sim.types import BatchState, Snapshot
 from service.core.sim.worlds import pick_worlds
 from service.persistence.mcap_log import COMMANDS, RESTORES, STATUS, McapLog
@@ -57,7 +58,7 @@ def every_ticks(rate: float, control_hz: float) -> int:
     return max(1, round(control_hz / rate))
 
 
-class Recorder:
+class Recorder(SnapshotSink):
     """One recording from `start` to `stop` (or until it fails); persistence/service.py holds
     the running one as a surface."""
 
@@ -112,7 +113,7 @@ class Recorder:
         # Listen first: a command accepted while the state is being taken is then either in the
         # state (applied before it) or in the queue (tick after it); the writer sorts them out.
         control.add_listener(self._on_command)
-        loop.add_restore_listener(self._on_restore)
+        loop.listeners.add_restore_listener(self._on_restore)
         try:
             # The state and the trajectories running in it, at one tick boundary.
             taken = loop.call(lambda b: (loop.state_of(b), control.trajectories.running()))
@@ -132,7 +133,7 @@ class Recorder:
             target=self._run, args=(out,), name="armfleet-recorder", daemon=True
         )
         self._thread.start()
-        loop.add_sink(self)
+        loop.listeners.add_sink(self)
         log.info(
             "recording worlds %s every %d ticks to %s from tick %d",
             _ranges(self._worlds),
@@ -178,8 +179,8 @@ class Recorder:
         if ctx is None:
             return
         ctx.control.remove_listener(self._on_command)
-        ctx.loop.remove_restore_listener(self._on_restore)
-        ctx.loop.remove_sink(self)
+        ctx.loop.listeners.remove_restore_listener(self._on_restore)
+        ctx.loop.listeners.remove_sink(self)
 
     @property
     def status(self) -> RecordingStatus:

@@ -35,7 +35,8 @@ from service.core.commands.trajectory.manager import TrajectoryManager
 from service.core.commands.trajectory.status import Resumable
 from service.core.commands.world import Reset, ResetResult, SetMode
 from service.core.sim import rules
-from service.core.sim.loop import CommandResult, SimLoop
+from service.core.sim.loop import SimLoop
+from service.core.sim.loop_types import CommandResult
 from service.core.sim.types import Mode
 
 log = logging.getLogger("armfleet.control")

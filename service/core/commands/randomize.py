@@ -214,7 +214,7 @@ class Randomize(Command[RandomizeResult]):
             *(self.entities.writes if self.entities else ()),
         ]
         # one boundary for the reset and the draws; the loop notes seed and spec with its tick
-        tick = door.loop.reset(self.worlds, writes, (self.seed, self.spec))
+        tick = door.loop.commands.reset(self.worlds, writes, (self.seed, self.spec))
         return RandomizeResult(tick, self.worlds)
 
     def announce(self, door: Door, result: RandomizeResult) -> Announcement:

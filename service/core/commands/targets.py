@@ -214,7 +214,7 @@ class _OneWorld(Command[CommandResult]):
 
     def stage(self, door: Door, source: str) -> CommandResult:
         spec = door.spec
-        return door.loop.stage_rows(
+        return door.loop.commands.stage_rows(
             [self.world], lambda _, row: self.update(spec, row), self.values
         )[0]
 
@@ -334,7 +334,7 @@ class SetMany(Command[list[CommandResult]]):
             values = dict(zip(named, self.rows[index[world], named].tolist(), strict=True))
             return arithmetic.replace_targets(spec, row, values)
 
-        return door.loop.stage_rows(self.worlds, update, named)
+        return door.loop.commands.stage_rows(self.worlds, update, named)
 
     def announce(self, door: Door, result: list[CommandResult]) -> Announcement | None:
         if not result:

@@ -84,7 +84,7 @@ class Reset(Command[ResetResult]):
 
     def stage(self, door: Door, source: str) -> ResetResult:
         ids = list(range(door.nworld)) if self.worlds is None else self.worlds
-        tick = door.loop.reset(ids)
+        tick = door.loop.commands.reset(ids)
         return ResetResult(ids, tick, np.tile(door.loop.batch.home_target, (len(ids), 1)))
 
     def announce(self, door: Door, result: ResetResult) -> Announcement:

@@ -70,9 +70,9 @@ class ManyWrites(Command[R]):
 
     def staged(self, door: Door) -> tuple[int, list[int]]:
         """Stage the writes: the tick they take effect at, and the worlds they write."""
-        return door.loop.stage_state(self.writes), sorted({w.world for w in self.writes})
+        return door.loop.commands.stage_state(self.writes), sorted({w.world for w in self.writes})
 
     def announce(self, door: Door, result: R) -> Announcement:
         worlds = np.array(result.worlds, dtype=np.int64)
-        targets = door.loop.pending_targets(worlds)
+        targets = door.loop.commands.pending_targets(worlds)
         return Announcement(worlds, targets, result.tick, {"writes": list(self.items)})

@@ -1,7 +1,9 @@
-"""The simulation: the engine protocol (`batch`), domain types, the robot and physics read
-from the MJCF, the scene and its entity table, the loop that owns the batch on a thread of its
-own (`loop`, `boundary`, `loop_types`, `staging`), and the rules the loop applies to what it is
-given (`rules`: world ids and the JointState rule; `arithmetic`: clamped target updates).
+"""The simulation: the engine protocol (`batch`), domain types, the robot and physics read from
+the MJCF, the scene and its entity table (`entities`), the loop that owns the batch on a thread
+of its own (`loop`; what it hands out and takes in, `loop_types`; its command side,
+`command_desk` over `staging`'s table; who hears from it, `listeners`; what other threads wait
+on, `waiters`; how it keeps and reports time, `pace`), and the rules the loop applies to what it
+is given (`rules`: world ids and the JointState rule; `arithmetic`: clamped target updates).
 
 May import: `service.core.errors`, `service.core.process`; nothing else of the core.
 """

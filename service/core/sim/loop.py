@@ -11,42 +11,40 @@ reply; the first snapshot whose `tick` is >= it carries the new target.
 from __future__ import annotations
 
 import concurrent.futures
-import contextlib
+import dataclasses
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from typing import Any
+from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 
 from service.core.errors import NotPaused
-from service.core.sim.arithmetic import TargetUpdate
-from service.core.sim.batch import Batch, ModelWrite, StateWrite, TickWrites
+from service.core.sim.batch import Batch, TickWrites
+from service.core.sim.command_desk import CommandDesk
 from service.core.sim.device_turns import DeviceTurns
-from service.core.sim.loop_boundary import TickBoundary
-from service.core.sim.loop_types import (  # re-exported: the loop's vocabulary
-    CommandResult,
+from service.core.sim.listeners import Listeners
+from service.core.sim.loop_types import (
     LoopStats,
-    RestoreListener,
     SnapshotSink,
-    TickListener,
     resolve,
+    run_request,
 )
-from service.core.sim.randomizations import RandomizationBook, Randomized
-from service.core.sim.staging import CommandTable, Override, Staging, TrajectoryHook
-from service.core.sim.types import Mode, Snapshot
+from service.core.sim.pace import Cadence, FailureLog, RateWindow
+from service.core.sim.staging import CommandTable, Staging, TrajectoryHook
+from service.core.sim.types import BatchState, Mode, Snapshot
+from service.core.sim.waiters import Waiters
 
 log = logging.getLogger("armfleet.loop")
+T = TypeVar("T")
 
 # Snapshots are taken when a sink wants one, a reader waits for one, or at least this often so
 # that `latest` is never older than this; readers that need the current tick ask for one.
 _IDLE_SNAPSHOT_PERIOD = 0.1
-_MAX_LAG_S = 0.1  # real time catches up after hiccups (a shared core paused) up to this far
-_STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
 
 
-class SimLoop(TickBoundary):
+class SimLoop:
     """Advance a Batch in realtime, fast or paused mode and serialise commands into it."""
 
     def __init__(
@@ -57,7 +55,7 @@ class SimLoop(TickBoundary):
     ):
         self.batch = batch
         self.spec = batch.spec
-        self._sinks = tuple(sinks)  # replaced, never mutated: read by the sim thread
+        self.listeners = Listeners(sinks)  # sinks, tick and restore listeners
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._mode = Mode(mode)
@@ -65,27 +63,24 @@ class SimLoop(TickBoundary):
         self._thread: threading.Thread | None = None
         # Everything below is guarded by _lock.
         self._table = CommandTable(batch.targets, batch.home_target)  # what commands staged
-        self._traj: TrajectoryHook | None = None
+        # Commands (any thread) fold into the table through the desk; see command_desk.py.
+        self.commands = CommandDesk(
+            self._lock, self._table, batch.nworld, self._accept_tick, lambda: self._tick
+        )
         self._stepping = False
         self._tick = batch.tick
         self._step_goal = self._tick  # paused mode: run until the tick counter reaches this
-        self._step_waiters: list[tuple[int, concurrent.futures.Future[int]]] = []
-        # Readers waiting for a snapshot of at least this tick (read-your-writes).
-        self._snapshot_waiters: list[tuple[int, concurrent.futures.Future[Snapshot]]] = []
-        self._tick_listeners: tuple[TickListener, ...] = ()
-        self.failure: str | None = None  # why the last tick failed; None while ticks succeed
+        # Work between ticks, `step` futures, readers waiting for a tick (read-your-writes).
+        self._waiters = Waiters()
+        self._failures = FailureLog()
         self.engine_seconds = 0.0  # wall time in batch.step, all ticks: the rest is the loop's
         self._latest = batch.snapshot()
         self._last_snapshot_wall = 0.0
-        self._stats = LoopStats(self._tick, self._mode, 0.0, 0.0)
-        self._window: tuple[float, int] = (time.monotonic(), self._tick)
-        # Work for the sim thread between two ticks (state, restore, reads of the batch).
-        self._requests: list[tuple[Callable[[Batch], Any], concurrent.futures.Future[Any]]] = []
+        self._rate = RateWindow(self._tick, self._mode, batch.tick_dt)
+        self._cadence = Cadence(batch.tick_dt)
         # launches on a device shared with the camera renderer go in turns (device_turns.py)
         self._turns: DeviceTurns = getattr(batch, "device_turns", None) or DeviceTurns()
-        self._restore_listeners: tuple[RestoreListener, ...] = ()
-        # Per world, the last randomisation (seed, spec) and its tick: snapshots name it.
-        self.randomizations = RandomizationBook()
+        self.randomizations = self.commands.randomizations
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -94,13 +89,6 @@ class SimLoop(TickBoundary):
         self._thread = threading.Thread(target=self._run, name="armfleet-sim", daemon=True)
         self._thread.start()
 
-    def add_sink(self, sink: SnapshotSink) -> None:
-        """Also publish snapshots to `sink` (from the next tick on)."""
-        self._sinks = (*self._sinks, sink)
-
-    def remove_sink(self, sink: SnapshotSink) -> None:
-        self._sinks = tuple(s for s in self._sinks if s is not sink)
-
     def stop(self) -> None:
         with self._wake:
             self._running = False
@@ -108,80 +96,17 @@ class SimLoop(TickBoundary):
         if self._thread is not None:
             self._thread.join(timeout=10)
         self._serve_requests()  # the thread is gone: requests that raced the stop are served here
-        for _, fut in (*self._step_waiters, *self._snapshot_waiters):
-            fut.cancel()
+        self._waiters.cancel_all()
 
-    # -- commands (any thread) --------------------------------------------------------------
+    # -- commands (any thread: `commands`, the desk) ----------------------------------------
+
+    @property
+    def _traj(self) -> TrajectoryHook | None:
+        return self.commands.traj
 
     def _accept_tick(self) -> int:
         """The tick whose stepping first uses a command accepted now (lock held)."""
         return self._tick + (2 if self._stepping else 1)
-
-    def stage_rows(
-        self,
-        worlds: Sequence[int],
-        update: Callable[[int, np.ndarray], TargetUpdate],
-        joints: Iterable[int],
-    ) -> list[CommandResult]:
-        """Stage new target rows for `worlds` (valid ids: commands checked them), each made by
-        `update(world, its latest row)` under the command lock so that commands compose; a
-        trajectory stops only if it drives one of `joints` (indices)."""
-        named = np.fromiter(joints, dtype=np.int64)
-        with self._lock:
-            out = self._table.stage_rows(worlds, update, self._accept_tick())
-            if self._traj is not None and out:
-                self._traj.overridden(np.asarray(worlds), Override.MANUAL, named)
-            return out
-
-    def reset(
-        self,
-        worlds: list[int] | None = None,
-        writes: Sequence[StateWrite | ModelWrite] = (),
-        randomized: tuple[int, dict[str, Any]] | None = None,
-    ) -> int:
-        """Reset worlds (all when None) to home, state and targets; returns the effective tick.
-
-        A randomisation's draws (`writes`) are staged for the same boundary, after the reset,
-        and its (seed, spec) goes into `randomizations` with that tick, under the same lock.
-        """
-        idx = np.arange(self.batch.nworld) if worlds is None else np.asarray(worlds, dtype=int)
-        with self._lock:
-            tick = self._accept_tick()
-            self._table.stage_reset(idx, tick)
-            if writes:
-                self._table.stage_state(writes, tick)
-            if randomized is not None:
-                entry = Randomized(tick, *randomized)
-                self.randomizations.record(idx.tolist(), entry, self._tick)
-            if self._traj is not None:
-                self._traj.overridden(idx, Override.RESET)
-            return tick
-
-    def stage_state(self, writes: Sequence[StateWrite | ModelWrite]) -> int:
-        """Stage qpos/qvel slices or per-world model values (validated by their command) for
-        the next tick boundary, after that boundary's resets; the tick they take effect at."""
-        with self._lock:
-            tick = self._accept_tick()
-            self._table.stage_state(writes, tick)
-            return tick
-
-    def attach_trajectories(self, hook: TrajectoryHook) -> None:
-        """Let `hook` run trajectories: it is called at every stage of a tick (see staging)."""
-        self._traj = hook
-
-    @contextlib.contextmanager
-    def staging(self, worlds: np.ndarray | None = None) -> Iterator[Staging]:
-        """Hold the command lock and lend the pending tables; `worlds` get the effective tick."""
-        with self._lock:
-            st = self._staged()
-            yield st
-            if worlds is not None:
-                self._table.effective[worlds] = st.tick
-
-    def pending_targets(self, world: int | np.ndarray) -> np.ndarray:
-        """Targets as of every command accepted so far (some may not be in effect yet)."""
-        with self._lock:
-            return self._table.pending[world].copy()
 
     # -- time control -----------------------------------------------------------------------
 
@@ -192,7 +117,7 @@ class SimLoop(TickBoundary):
     def set_mode(self, mode: Mode) -> None:
         with self._wake:
             self._mode = Mode(mode)
-            self._window = (time.monotonic(), self._tick)
+            self._rate.restart(self._tick)
             self._wake.notify_all()
             waiters = self._stranded_waiters()
         for fut in waiters:  # paused: the ticks they waited for will not come
@@ -200,12 +125,11 @@ class SimLoop(TickBoundary):
 
     def step(self, ticks: int) -> concurrent.futures.Future[int]:
         """Paused only: advance exactly `ticks`; the future resolves with the tick reached."""
-        fut: concurrent.futures.Future[int] = concurrent.futures.Future()
         with self._wake:
             if self._mode is not Mode.PAUSED:
                 raise NotPaused(f"step needs mode 'paused' (mode is {self._mode.value!r})")
             self._step_goal = max(self._step_goal, self._tick) + ticks
-            self._step_waiters.append((self._step_goal, fut))
+            fut = self._waiters.add_step(self._step_goal)
             self._wake.notify_all()
         return fut
 
@@ -220,23 +144,136 @@ class SimLoop(TickBoundary):
     def latest(self) -> Snapshot:
         return self._latest
 
-    def add_tick_listener(self, listener: TickListener) -> None:
-        """Call `listener(tick, seconds, faulted_count)` on the sim thread after every tick.
-
-        For counters (metrics): it must be quick and must not block.
-        """
-        self._tick_listeners = (*self._tick_listeners, listener)
+    @property
+    def failure(self) -> str | None:
+        """Why the last tick failed; None while ticks succeed."""
+        return self._failures.why
 
     @property
     def stats(self) -> LoopStats:
         if self._mode is Mode.PAUSED:
             return LoopStats(self._tick, self._mode, 0.0, 0.0)
-        return self._stats
+        return self._rate.stats
+
+    # -- between two ticks: work, restores and fresh reads for other threads ---------------
+
+    def call(self, fn: Callable[[Batch], T]) -> concurrent.futures.Future[T]:
+        """Run `fn(batch)` on the sim thread between two ticks; the future gets its result.
+
+        The batch belongs to the sim thread, so this is how other threads read or change it. In
+        paused mode the request is served at once. Never wait on it from the sim thread itself.
+        """
+        with self._wake:
+            if self._running:
+                fut = self._waiters.add_request(fn)
+                self._wake.notify_all()
+                return fut
+        fut = concurrent.futures.Future()
+        with self._turns.loop_turn():  # not running: no other thread touches the batch
+            run_request(fn, fut, self.batch)
+        return fut
+
+    def request_state(self) -> concurrent.futures.Future[BatchState]:
+        """Every world's full state at the next tick boundary (`state_of`)."""
+        return self.call(self.state_of)
+
+    def state_of(self, batch: Batch) -> BatchState:
+        """`batch.get_state()` with the randomisations it holds (sim thread, or a stopped
+        loop): a snapshot's header names them."""
+        return dataclasses.replace(batch.get_state(), randomized=self.randomizations.at(batch.tick))
+
+    def restore(self, state: BatchState, name: str = "") -> concurrent.futures.Future[int]:
+        """Continue from `state` at the next tick boundary; the future gets the restored tick.
+
+        Commands accepted but not yet applied are dropped (they belonged to the replaced state);
+        step requests waiting in paused mode complete at the restored tick. A state that does not
+        fit fails the future with ValueError, and nothing changes.
+        """
+        return self.call(lambda batch: self._restore(batch, state, name))
+
+    def _restore(self, batch: Batch, state: BatchState, name: str) -> int:
+        tick_before = batch.tick
+        batch.set_state(state)  # checks everything before changing anything
+        with self._lock:
+            self._tick = batch.tick
+            self._step_goal = self._tick
+            self._table.restored(batch.targets, self._tick)
+            self.randomizations.replace(state.randomized)
+            if self._traj is not None:
+                self._traj.restored()
+            self._rate.restart(self._tick)
+            waiting = self._waiters.take_steps()
+        self.listeners.restored(tick_before, state, name)
+        if self._traj is not None:  # the trajectories the restore stopped, told now
+            self._traj.dispatch()
+        self._publish(time.monotonic())
+        with self._lock:  # readers waiting for a tick of the old timeline get the restored state
+            readers = self._waiters.take_readers()
+        for reader in readers:
+            resolve(reader, self._latest)
+        for fut in waiting:
+            fut.set_result(self._tick)
+        return self._tick
+
+    def _serve_requests(self) -> None:
+        with self._lock:
+            requests = self._waiters.take_requests()
+        for fn, fut in requests:
+            run_request(fn, fut, self.batch)
+
+    def fresh_snapshot(
+        self, worlds: np.ndarray | list[int] | None = None
+    ) -> concurrent.futures.Future[Snapshot]:
+        """A snapshot that includes every command accepted for `worlds` (all when None) so far.
+
+        Read-your-writes: it waits for the tick from which the latest accepted command of those
+        worlds is in effect (at most the tick in progress and the next one while running), and
+        never returns a tick older than the last completed one. While paused those ticks do not
+        come: the latest snapshot is returned at once and the caller shows `pending_targets`.
+        """
+        with self._wake:
+            need = self._tick + (1 if self._stepping else 0)
+            effective = self._table.effective
+            if effective.size:
+                chosen = effective if worlds is None else effective[worlds]
+                need = max(need, int(chosen.max(initial=0)))
+            if self._latest.tick >= need or not self._running or self._will_not_advance():
+                fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
+                fut.set_result(self._latest)
+            else:
+                fut = self._waiters.add_reader(need)
+                self._wake.notify_all()  # a paused loop wakes to publish the tick it stopped at
+        return fut
+
+    def _release_step_waiters(self) -> None:
+        """Resolve the `step` futures whose goal tick has been reached (sim thread)."""
+        with self._lock:
+            done = self._waiters.steps_reached(self._tick)
+        for fut in done:
+            fut.set_result(self._tick)
+
+    def _will_not_advance(self) -> bool:
+        """Paused with no step requested, no tick in progress, and `latest` showing the last
+        tick (lock held). Realtime does not snapshot every tick, so a pause can find `latest`
+        behind: the sim thread then publishes once more, and readers wait for that."""
+        return (
+            self._mode is Mode.PAUSED
+            and self._tick >= self._step_goal
+            and not self._stepping
+            and self._latest.tick >= self._tick
+        )
+
+    def _stranded_waiters(self) -> list[concurrent.futures.Future[Snapshot]]:
+        """Readers whose tick will not come because time stands still (lock held)."""
+        if not self._will_not_advance():
+            return []
+        return self._waiters.take_readers()
 
     # -- the loop thread --------------------------------------------------------------------
 
     def _run(self) -> None:
-        next_deadline = time.perf_counter()
+        cadence = self._cadence
+        cadence.restart()
         turns = self._turns
         while True:
             with turns.loop_turn():  # the device's launches (service/core/sim/device_turns.py)
@@ -244,16 +281,16 @@ class SimLoop(TickBoundary):
             with self._wake:
                 if not self._running:
                     return
-                if self._requests:  # arrived while serving: serve before waiting or stepping
+                if self._waiters.requests_waiting:  # arrived while serving: serve them first
                     continue
                 mode = self._mode
                 idle = mode is Mode.PAUSED and self._tick >= self._step_goal
                 if idle and self._latest.tick >= self._tick:
                     self._wake.wait()
-                    next_deadline = time.perf_counter()
+                    cadence.restart()
                     continue
                 if mode is Mode.REALTIME:
-                    delay = next_deadline - time.perf_counter()
+                    delay = cadence.delay()
                     if delay > 0:
                         self._wake.wait(delay)
                         continue
@@ -269,30 +306,16 @@ class SimLoop(TickBoundary):
                 self._tick_failed(exc)
                 time.sleep(0.1)
             else:
-                if self.failure is not None:
-                    log.warning("ticks succeed again after: %s", self.failure)
-                    self.failure = None
+                self._failures.succeeded()
             if mode is Mode.REALTIME:
-                # Keep the cadence: overrun ticks are made up at once, up to _MAX_LAG_S (or
-                # one tick) behind; further behind, time is given up (the RTF shows it).
-                next_deadline += self.batch.tick_dt
-                now = time.perf_counter()
-                if now - next_deadline > max(self.batch.tick_dt, _MAX_LAG_S):
-                    next_deadline = now
+                cadence.ticked()
 
     def _tick_failed(self, exc: Exception) -> None:
-        """Log the first failure with its traceback, then stay quiet until ticks succeed."""
+        """Report the failure (pace.FailureLog) and tell the tick listeners."""
         with self._lock:
             self._stepping = False
-        why = f"{type(exc).__name__}: {exc}"
-        if self.failure is None:
-            log.error("tick failed; the service is not ready until ticks succeed", exc_info=exc)
-        elif why != self.failure:
-            log.error("tick still failing, now with: %s", why)
-        self.failure = why
-        for listener in self._tick_listeners:
-            with contextlib.suppress(Exception):
-                listener(self._tick, 0.0, -1)  # -1: the tick failed
+        self._failures.failed(exc)
+        self.listeners.counted(self._tick, 0.0, -1)  # -1: the tick failed
 
     def _tick_once(self, mode: Mode) -> None:
         """One tick as named stages, each holding the lock only for its own bookkeeping."""
@@ -306,21 +329,15 @@ class SimLoop(TickBoundary):
         now = time.monotonic()
         if self._finish_tick(faulted, mode, now):
             self._publish(now)
-        for sink in self._sinks:  # sinks need not subclass SnapshotSink: on_tick is optional
-            if (on_tick := getattr(sink, "on_tick", None)) is not None:
-                on_tick(self.batch, now)
+        self.listeners.ticked(self.batch, now)
         if mode is Mode.PAUSED and self._tick >= self._step_goal:  # a step burst's last tick
             self._at_rest(now)
         self._release_step_waiters()
-        self._update_stats(now)
+        self._rate.update(now, self._tick, self._mode)
         seconds = time.perf_counter() - t0
         if self._traj is not None:
             self._traj.dispatch()
-        for listener in self._tick_listeners:
-            try:
-                listener(self._tick, seconds, int(faulted.size))
-            except Exception:
-                log.exception("tick listener %r failed", listener)
+        self.listeners.counted(self._tick, seconds, int(faulted.size))
 
     def _take_commands(self) -> TickWrites:
         """Take what is pending from under the lock as the engine's `TickWrites` (velocity
@@ -334,7 +351,7 @@ class SimLoop(TickBoundary):
 
     def _staged(self) -> Staging:
         """The pending tables for the hook (lock held)."""
-        return self._table.view(self._accept_tick())
+        return self.commands.view()
 
     def _finish_tick(self, faulted: np.ndarray, mode: Mode, now: float) -> bool:
         """Count the tick, forget targets of worlds reset for faults; is a snapshot wanted?"""
@@ -349,41 +366,26 @@ class SimLoop(TickBoundary):
             return (
                 traj
                 or (mode is Mode.PAUSED and self._tick >= self._step_goal)
-                or bool(self._snapshot_waiters)
+                or self._waiters.readers_waiting
                 or now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
-                or any(sink.wants_snapshot(now) for sink in self._sinks)
+                or self.listeners.wants_snapshot(now)
             )
 
     def _publish(self, now: float) -> None:
         """Take a snapshot, wake the readers waiting for one, hand it to every sink."""
         snap = self.batch.snapshot()
-        for sink in self._sinks:  # what a sink's clients asked for besides (the hub: entities)
-            if (extend := getattr(sink, "extend_snapshot", None)) is not None:
-                snap = extend(snap, self.batch)
+        snap = self.listeners.extend(snap, self.batch)
         with self._lock:
             self._latest = snap
             self._last_snapshot_wall = now
             if self._traj is not None:
                 self._traj.observe(snap, self._staged())
-            ready = [f for need, f in self._snapshot_waiters if need <= snap.tick]
-            self._snapshot_waiters = [(n, f) for n, f in self._snapshot_waiters if n > snap.tick]
-            ready += self._stranded_waiters()
+            ready = self._waiters.readers_served_by(snap.tick) + self._stranded_waiters()
         for fut in ready:
             resolve(fut, snap)
-        for sink in self._sinks:
-            sink.publish(snap)
+        self.listeners.publish(snap)
 
     def _at_rest(self, now: float) -> None:
         """Tell the sinks that time stopped here (they may stream at a cadence of their own,
         which a burst of steps ends between)."""
-        for sink in self._sinks:
-            if (at_rest := getattr(sink, "at_rest", None)) is not None:
-                at_rest(self.batch, now)
-
-    def _update_stats(self, now: float) -> None:
-        t0, tick0 = self._window
-        if now - t0 < _STATS_WINDOW:
-            return
-        rate = (self._tick - tick0) / (now - t0)
-        self._stats = LoopStats(self._tick, self._mode, rate, rate * self.batch.tick_dt)
-        self._window = (now, self._tick)
+        self.listeners.at_rest(self.batch, now)

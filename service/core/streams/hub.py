@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from service.core.sim.batch import Batch
-from service.core.sim.loop import SnapshotSink
+from service.core.sim.loop_types import SnapshotSink
 from service.core.sim.types import Snapshot
 from service.core.streams import entity_frames, frames
 

@@ -17,7 +17,7 @@ from service.core.errors import ArmfleetError
 from service.core.sim.types import EntityFrame, Snapshot
 
 if TYPE_CHECKING:
-    from service.core.sim.loop import CommandResult
+    from service.core.sim.loop_types import CommandResult
 
 _OPTS = orjson.OPT_SERIALIZE_NUMPY
 

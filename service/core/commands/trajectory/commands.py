@@ -59,7 +59,9 @@ class StartTrajectory(Command[list[Started]]):
             return None
         worlds = np.array(self.worlds, dtype=np.int64)
         record = {"trajectory": self.spec.to_json()}
-        return Announcement(worlds, door.loop.pending_targets(worlds), result[0].start_tick, record)
+        return Announcement(
+            worlds, door.loop.commands.pending_targets(worlds), result[0].start_tick, record
+        )
 
     def ack(self, door: Door, msg_id: Any, world: int, result: list[Started]) -> dict[str, Any]:
         started = result[0]
@@ -102,7 +104,7 @@ class CancelTrajectory(Command[list[TrajectoryStatus]]):
             return None
         worlds = np.array([s.world for s in result], dtype=np.int64)
         tick = int(result[0].finished_tick or 0) + 1  # the hold starts here
-        return Announcement(worlds, door.loop.pending_targets(worlds), tick)
+        return Announcement(worlds, door.loop.commands.pending_targets(worlds), tick)
 
     def ack(
         self, door: Door, msg_id: Any, world: int, result: list[TrajectoryStatus]

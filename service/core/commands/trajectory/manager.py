@@ -88,7 +88,7 @@ class TrajectoryManager:
             np.zeros((0, 7)),
         )
         self._dispatching = threading.Lock()
-        loop.attach_trajectories(self)
+        loop.commands.attach_trajectories(self)
 
     # -- the API (any thread) ---------------------------------------------------------------
 
@@ -107,7 +107,7 @@ class TrajectoryManager:
         e.g. after releasing a lock of its own).
         """
         ids = np.asarray(worlds, dtype=np.int64)
-        with self.loop.staging(ids) as st:
+        with self.loop.commands.staging(ids) as st:
             out = self._install(st, ids, spec, source, st.tick, st.pending[ids], st.velocity[ids])
         if dispatch:
             self.dispatch()
@@ -118,14 +118,14 @@ class TrajectoryManager:
         replay installs what ran at its start tick), sampled exactly as it was from then on.
         Returns it and the tick it is sampled again from."""
         world = np.array([run.world], dtype=np.int64)
-        with self.loop.staging(world) as st:
+        with self.loop.commands.staging(world) as st:
             pos, vel = np.array([run.target]), np.array([run.velocity])
             (started,) = self._install(st, world, run.spec, source, run.start_tick, pos, vel)
         return started, st.tick  # a preempted one is told at the next `dispatch`
 
     def running(self) -> list[Resumable]:
         """What `resume` needs to put back every running trajectory (take it at a boundary)."""
-        with self.loop.staging() as _:
+        with self.loop.commands.staging() as _:
             t = self.table
             return [
                 Resumable(int(w), self._runs[i].spec, int(s), p.tolist(), v.tolist())
@@ -159,7 +159,7 @@ class TrajectoryManager:
     def cancel(self, worlds: Sequence[int], dispatch: bool = True) -> list[TrajectoryStatus]:
         """Stop the running trajectories of `worlds` and hold; the statuses of those stopped."""
         ids = np.asarray(worlds, dtype=np.int64)
-        with self.loop.staging(ids) as st:
+        with self.loop.commands.staging(ids) as st:
             stopped = self._abort(st, ids, AbortReason.CANCELLED, "cancelled by request")
         if dispatch:
             self.dispatch()
@@ -172,7 +172,7 @@ class TrajectoryManager:
 
     def get(self, traj_id: int) -> TrajectoryStatus | None:
         """A trajectory's status by id (None when unknown or long forgotten)."""
-        with self.loop.staging() as _:
+        with self.loop.commands.staging() as _:
             run = self._runs.get(traj_id)
             if run is not None:
                 return self._live(run)
@@ -189,7 +189,7 @@ class TrajectoryManager:
 
         For state frames of many worlds: running ones come from the table in one pass."""
         out: dict[str, dict[str, Any]] = {}
-        with self.loop.staging() as _:
+        with self.loop.commands.staging() as _:
             t = self.table
             elapsed = (max(self._last_tick, 0) - t.start_tick + 1) * t.tick_dt
             progress = np.clip(elapsed / np.maximum(t.duration, 1e-9), 0.0, 1.0)
@@ -207,7 +207,7 @@ class TrajectoryManager:
     def wait(self, traj_id: int) -> concurrent.futures.Future[TrajectoryStatus]:
         """A future that gets the trajectory's final status (at once if it has finished)."""
         fut: concurrent.futures.Future[TrajectoryStatus] = concurrent.futures.Future()
-        with self.loop.staging() as _:
+        with self.loop.commands.staging() as _:
             run = self._runs.get(traj_id)
             if run is not None:
                 run.waiters.append(fut)
@@ -305,7 +305,7 @@ class TrajectoryManager:
     def dispatch(self) -> None:
         """Hand finished trajectories to waiters and listeners (no lock held)."""
         with self._dispatching:
-            with self.loop.staging() as _:
+            with self.loop.commands.staging() as _:
                 done, self._done = self._done, []
             for run in done:
                 for fut in run.waiters:

@@ -1,0 +1,83 @@
+"""How the loop keeps time and reports it: the real-time cadence, the tick rate over a window,
+and a failing tick's log line.
+
+Why apart from the loop: each is a small rule with state of its own (a deadline, a window, the
+last failure), read by the loop thread only; the loop says when, these say how much.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+from service.core.sim.loop_types import LoopStats
+from service.core.sim.types import Mode
+
+log = logging.getLogger("armfleet.loop")
+
+MAX_LAG_S = 0.1  # real time catches up after hiccups (a shared core paused) up to this far
+STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
+
+
+class Cadence:
+    """Real time: one tick every `tick_dt` of wall time. Overrun ticks are made up at once, up
+    to `MAX_LAG_S` (or one tick) behind; further behind, time is given up (the RTF shows it)."""
+
+    def __init__(self, tick_dt: float) -> None:
+        self.tick_dt = tick_dt
+        self._deadline = time.perf_counter()
+
+    def restart(self) -> None:
+        self._deadline = time.perf_counter()
+
+    def delay(self) -> float:
+        """Seconds until the next tick is due (<= 0: due now)."""
+        return self._deadline - time.perf_counter()
+
+    def ticked(self) -> None:
+        self._deadline += self.tick_dt
+        now = time.perf_counter()
+        if now - self._deadline > max(self.tick_dt, MAX_LAG_S):
+            self._deadline = now
+
+
+class RateWindow:
+    """Ticks per second and the real-time factor, measured over `STATS_WINDOW` of wall time."""
+
+    def __init__(self, tick: int, mode: Mode, tick_dt: float) -> None:
+        self._tick_dt = tick_dt
+        self.stats = LoopStats(tick, mode, 0.0, 0.0)
+        self._start = (time.monotonic(), tick)
+
+    def restart(self, tick: int) -> None:
+        """Measure from now (a mode change or a restore: the old window means nothing)."""
+        self._start = (time.monotonic(), tick)
+
+    def update(self, now: float, tick: int, mode: Mode) -> None:
+        t0, tick0 = self._start
+        if now - t0 < STATS_WINDOW:
+            return
+        rate = (tick - tick0) / (now - t0)
+        self.stats = LoopStats(tick, mode, rate, rate * self._tick_dt)
+        self._start = (now, tick)
+
+
+class FailureLog:
+    """A failing tick is logged once with its traceback, then only when its reason changes, and
+    once more when ticks succeed again: a tick that fails 60 times a second never floods."""
+
+    def __init__(self) -> None:
+        self.why: str | None = None  # why the last tick failed; None while ticks succeed
+
+    def failed(self, exc: Exception) -> None:
+        why = f"{type(exc).__name__}: {exc}"
+        if self.why is None:
+            log.error("tick failed; the service is not ready until ticks succeed", exc_info=exc)
+        elif why != self.why:
+            log.error("tick still failing, now with: %s", why)
+        self.why = why
+
+    def succeeded(self) -> None:
+        if self.why is not None:
+            log.warning("ticks succeed again after: %s", self.why)
+            self.why = None
