@@ -19,6 +19,7 @@ Standalone: ``python -m bench.tick_profile --device cuda --worlds 16384 65536``.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import statistics
 import threading
 import time
@@ -93,6 +94,7 @@ def profile(
     from service.core.sim.loop import SimLoop
     from service.core.sim.types import Mode
     from service.core.streams import frames, wire
+    from service.core.streams.formats import FrameFormat
     from service.core.streams.hub import StreamHub, Subscription
 
     batch = _build(n, device)
@@ -122,10 +124,11 @@ def profile(
     ids = np.arange(n)
     names = batch.spec.names
     render = wire.batch_frame_binary if fmt == "binary" else wire.batch_frame
-    packed = fmt if path == "packed" else None
-    sub = Subscription(
-        ids, 30.0, lambda s: render(s, ids, names), fmt, fmt == "binary", packed, names
-    )
+    make = FrameFormat.batch_binary if fmt == "binary" else FrameFormat.batch
+    form = make(tuple(names))
+    if path != "packed":  # rendered from snapshots on the event loop instead
+        form = dataclasses.replace(form, packed=None, trajectories=False)
+    sub = Subscription(ids, 30.0, form, lambda s: render(s, ids, names))
     got = {"n": 0, "bytes": 0}
     stop = asyncio.Event()
 

@@ -29,7 +29,7 @@ from service.core.sim.batch import Batch, Supervised
 from service.core.sim.loop import SimLoop
 from service.core.sim.randomizations import Randomized
 from service.core.streams.hub import StreamHub
-from service.core.surface import Finishing, SurfaceContext
+from service.core.surface import Finishing, SurfaceContext, Watched
 from service.engines.camera_render import camera_feed
 from service.engines.choice import build_batch
 from service.persistence import provenance
@@ -78,7 +78,8 @@ class Runtime:
         if isinstance(self.loop.batch, Supervised):
             out += self.loop.batch.health()
         for surface in self.surfaces:  # a supervised child that is down (the ROS 2 node)
-            out += getattr(surface, "problems", list)()
+            if isinstance(surface, Watched):
+                out += surface.problems()
         return out
 
     async def _watch(self, period: float = 0.1) -> None:
@@ -194,11 +195,13 @@ class Runtime:
         if s.restore and not await asyncio.to_thread(self._restore_at_start, batch, s.restore):
             batch.close()
             return
-        self.hub = hub = StreamHub(asyncio.get_running_loop())
-        loop = SimLoop(batch, s.mode, (hub,))
+        loop = SimLoop(batch, s.mode)
         loop.randomizations.replace(self._restored_randomized)
-        loop.listeners.add_restore_listener(lambda _tick, _state, _name: hub.restored())
         self.control = Control(loop)
+        # Packed JSON frames say where each world's trajectory is: the manager's briefs.
+        self.hub = hub = StreamHub(asyncio.get_running_loop(), self.control.trajectories)
+        loop.listeners.add_sink(hub)
+        loop.listeners.add_restore_listener(lambda _tick, _state, _name: hub.restored())
         self.control.add_listener(self._count_accepted)
         self._lend(batch.nworld)
         loop.listeners.add_tick_listener(self.metrics.on_tick)

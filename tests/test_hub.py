@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from service.core.sim.types import Poses, Snapshot
+from service.core.streams.formats import FrameFormat
 from service.core.streams.hub import Subscription
 
 
@@ -24,7 +25,7 @@ def snap(tick: int) -> Snapshot:
 
 
 def test_a_slow_stream_takes_frames_only_at_its_rate():
-    sub = Subscription(np.array([0]), 1.0, lambda s: b"", "single")
+    sub = Subscription(np.array([0]), 1.0, FrameFormat.single(), lambda s: b"")
     assert sub.wants(snap(1), now=10.0)
     sub.offer(snap(1), now=10.0)
     assert not sub.wants(snap(2), now=10.5)
@@ -32,7 +33,7 @@ def test_a_slow_stream_takes_frames_only_at_its_rate():
 
 
 def test_an_owed_frame_goes_out_at_once_without_moving_the_cadence():
-    sub = Subscription(np.array([0]), 1.0, lambda s: b"", "single")
+    sub = Subscription(np.array([0]), 1.0, FrameFormat.single(), lambda s: b"")
     sub.offer(snap(1), now=10.0)  # next regular frame at 11.0
     sub.owe(5)
     assert not sub.wants(snap(4), now=10.05)  # before the command's tick: nothing owed yet

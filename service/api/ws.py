@@ -24,7 +24,8 @@ from service.core.errors import ArmfleetError, BadCommand
 from service.core.sim.loop import SimLoop
 from service.core.sim.types import Snapshot
 from service.core.sim.worlds import parse_worlds
-from service.core.streams import entity_frames, frames, wire
+from service.core.streams import entity_frames, wire
+from service.core.streams.formats import FrameFormat
 from service.core.streams.hub import StreamHub, Subscription
 
 router = APIRouter(prefix="/v1")
@@ -56,14 +57,6 @@ def flag(value: str | None, field: str) -> bool:
     raise BadCommand(field, f"{value[:40]!r} is not a flag: give true or false")
 
 
-def _with_entities(sub: Subscription, kind: str) -> None:
-    """Frames of `sub` carry entities: their own serialisation key, and no frame from a
-    snapshot taken before anyone asked (the next one carries them)."""
-    sub.entities = True
-    sub.key = (f"{kind}+entities", sub.key[1])
-    sub.skip = lambda snap: snap.entities is None
-
-
 @router.websocket("/ws/worlds/{world}")
 async def world_socket(
     ws: WebSocket,
@@ -81,17 +74,12 @@ async def world_socket(
         return
     loop, control, hub, (world, with_entities) = opened
     names = loop.spec.names
-    sub = Subscription(
-        np.array([world]),
-        rate,
-        lambda s: wire.single_frame(
-            s, world, names, control.trajectories.brief(world), with_entities
-        ),
-        "single",
-    )
-    if with_entities:
-        _with_entities(sub, "single")
-    await _serve(ws, loop, control, hub, sub, default_world=world)
+
+    def render(s: Snapshot) -> bytes:
+        return wire.single_frame(s, world, names, control.trajectories.brief(world), with_entities)
+
+    fmt = FrameFormat.single(with_entities)
+    await _serve(ws, loop, control, hub, (np.array([world]), rate, fmt, render), world)
 
 
 @router.websocket("/ws")
@@ -118,35 +106,21 @@ async def batch_socket(
     loop, control, hub, (ids, with_entities) = opened
     names = loop.spec.names
     # Packed: the sim thread gathers these worlds' rows and a thread of the hub serialises them
-    # (service.core.streams.frames); the renderers make the first frame, from the latest snapshot.
+    # (service.core.streams.frames); `render` makes the first frame, from the latest snapshot.
     if format == "binary":
-        render = wire.batch_frame_binary
-        sub = Subscription(
-            ids,
-            rate,
-            lambda s: render(s, ids, names, with_entities),
-            "binary",
-            True,
-            "binary",
-            names,
-        )
-        if with_entities:
-            _with_entities(sub, "binary")
-            sub.packed = frames.BINARY_ENTITIES
+        fmt = FrameFormat.batch_binary(tuple(names), with_entities)
+
+        def render(s: Snapshot) -> bytes:
+            return wire.batch_frame_binary(s, ids, names, with_entities)
+
     else:
+        fmt = FrameFormat.batch(tuple(names), with_entities)
         briefs = control.trajectories.briefs
-        sub = Subscription(
-            ids,
-            rate,
-            lambda s: wire.batch_frame(s, ids, names, briefs(ids), with_entities),
-            "batch",
-            False,
-        )
-        sub.packed, sub.names, sub.extra = "json", names, lambda: {"trajectories": briefs(ids)}
-        if with_entities:
-            _with_entities(sub, "batch")
-            sub.packed = frames.JSON_ENTITIES
-    await _serve(ws, loop, control, hub, sub, default_world=None)
+
+        def render(s: Snapshot) -> bytes:
+            return wire.batch_frame(s, ids, names, briefs(ids), with_entities)
+
+    await _serve(ws, loop, control, hub, (ids, rate, fmt, render), None)
 
 
 class StillFilter:
@@ -229,9 +203,8 @@ async def view_socket(
         }
         return wire.pose_frame(snap, ids, names, focus, stats)
 
-    sub = Subscription(ids, rate, render, f"view:{focus}", binary=True)
-    sub.skip = StillFilter(ids)
-    await _serve(ws, loop, control, hub, sub, default_world=None, source=BROWSER)
+    stream = (ids, rate, FrameFormat.view(focus), render)
+    await _serve(ws, loop, control, hub, stream, None, BROWSER, StillFilter(ids))
 
 
 async def _open(
@@ -267,10 +240,13 @@ async def _serve(
     loop: SimLoop,
     control: Control,
     hub: StreamHub,
-    sub: Subscription,
+    stream: tuple[np.ndarray, float | None, FrameFormat, Callable[[Snapshot], bytes]],
     default_world: int | None,
     source: str = WS,
+    skip: Callable[[Snapshot], bool] | None = None,
 ) -> None:
+    """Serve one socket: its Subscription to `stream` (worlds, rate, frame format, renderer),
+    built whole here with the socket's closer, and its commands."""
     runtime = ws.app.state.runtime
     grant = _grant(ws)
     limiter = access.RateLimiter(runtime.settings.command_rate, runtime.settings.command_burst)
@@ -281,13 +257,11 @@ async def _serve(
     async def close(code: int, reason: str) -> None:
         await ws.close(code=code, reason=reason[:120])
 
-    sub.close = close
-    sub.status_frames = True
+    worlds, rate, fmt, render = stream
+    sub = Subscription(worlds, rate, fmt, render, skip=skip, close=close)
     first = loop.latest
     if sub.entities and first.entities is None:  # nobody asked before: read them at a boundary
-        first = await asyncio.wrap_future(
-            loop.call(lambda b: entity_frames.attach(b.snapshot(), b))
-        )
+        first = await asyncio.wrap_future(loop.call(entity_frames.snapshot_with_entities))
     hub.add(sub)
     sub.offer(first, time.monotonic())  # the current state at once, then the stream
     writer = asyncio.create_task(_write(ws, hub, sub))

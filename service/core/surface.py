@@ -66,3 +66,11 @@ class Finishing(Protocol):
     """A surface that writes files: after `stop`, what it could not finish (the exit status)."""
 
     def unfinished(self) -> list[str]: ...
+
+
+@runtime_checkable
+class Watched(Protocol):
+    """A surface with a part that can be down while the service runs (the ROS 2 node's
+    supervised child): what is wrong now, for /readyz and the status frames."""
+
+    def problems(self) -> list[str]: ...

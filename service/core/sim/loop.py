@@ -129,7 +129,7 @@ class SimLoop:
             if self._mode is not Mode.PAUSED:
                 raise NotPaused(f"step needs mode 'paused' (mode is {self._mode.value!r})")
             self._step_goal = max(self._step_goal, self._tick) + ticks
-            fut = self._waiters.add_step(self._step_goal)
+            fut = self._waiters.steps.add(self._step_goal)
             self._wake.notify_all()
         return fut
 
@@ -202,13 +202,13 @@ class SimLoop:
             if self._traj is not None:
                 self._traj.restored()
             self._rate.restart(self._tick)
-            waiting = self._waiters.take_steps()
+            waiting = self._waiters.steps.take()
         self.listeners.restored(tick_before, state, name)
         if self._traj is not None:  # the trajectories the restore stopped, told now
             self._traj.dispatch()
         self._publish(time.monotonic())
         with self._lock:  # readers waiting for a tick of the old timeline get the restored state
-            readers = self._waiters.take_readers()
+            readers = self._waiters.readers.take()
         for reader in readers:
             resolve(reader, self._latest)
         for fut in waiting:
@@ -241,14 +241,14 @@ class SimLoop:
                 fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
                 fut.set_result(self._latest)
             else:
-                fut = self._waiters.add_reader(need)
+                fut = self._waiters.readers.add(need)
                 self._wake.notify_all()  # a paused loop wakes to publish the tick it stopped at
         return fut
 
     def _release_step_waiters(self) -> None:
         """Resolve the `step` futures whose goal tick has been reached (sim thread)."""
         with self._lock:
-            done = self._waiters.steps_reached(self._tick)
+            done = self._waiters.steps.reached(self._tick)
         for fut in done:
             fut.set_result(self._tick)
 
@@ -267,7 +267,7 @@ class SimLoop:
         """Readers whose tick will not come because time stands still (lock held)."""
         if not self._will_not_advance():
             return []
-        return self._waiters.take_readers()
+        return self._waiters.readers.take()
 
     # -- the loop thread --------------------------------------------------------------------
 
@@ -366,7 +366,7 @@ class SimLoop:
             return (
                 traj
                 or (mode is Mode.PAUSED and self._tick >= self._step_goal)
-                or self._waiters.readers_waiting
+                or bool(self._waiters.readers)
                 or now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
                 or self.listeners.wants_snapshot(now)
             )
@@ -380,7 +380,7 @@ class SimLoop:
             self._last_snapshot_wall = now
             if self._traj is not None:
                 self._traj.observe(snap, self._staged())
-            ready = self._waiters.readers_served_by(snap.tick) + self._stranded_waiters()
+            ready = self._waiters.readers.reached(snap.tick) + self._stranded_waiters()
         for fut in ready:
             resolve(fut, snap)
         self.listeners.publish(snap)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import concurrent.futures
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, Generic, TypeVar
 
 from service.core.sim.batch import Batch
 from service.core.sim.types import Snapshot
@@ -20,13 +20,40 @@ T = TypeVar("T")
 Request = tuple[Callable[[Batch], Any], concurrent.futures.Future[Any]]
 
 
+class TickQueue(Generic[T]):
+    """Futures each waiting for some tick: `step` goals, or readers of a snapshot of at least
+    a tick. What a tick reaches is taken out in one pass."""
+
+    def __init__(self) -> None:
+        self._waiting: list[tuple[int, concurrent.futures.Future[T]]] = []
+
+    def __bool__(self) -> bool:
+        return bool(self._waiting)
+
+    def add(self, tick: int) -> concurrent.futures.Future[T]:
+        fut: concurrent.futures.Future[T] = concurrent.futures.Future()
+        self._waiting.append((tick, fut))
+        return fut
+
+    def reached(self, tick: int) -> list[concurrent.futures.Future[T]]:
+        """The futures waiting for `tick` or earlier, taken out of the queue."""
+        done = [f for need, f in self._waiting if need <= tick]
+        self._waiting = [(need, f) for need, f in self._waiting if need > tick]
+        return done
+
+    def take(self) -> list[concurrent.futures.Future[T]]:
+        """Every future, whatever its tick."""
+        taken, self._waiting = [f for _, f in self._waiting], []
+        return taken
+
+
 class Waiters:
     """The queues of requests, step futures and snapshot readers (the loop's lock guards them)."""
 
     def __init__(self) -> None:
         self._requests: list[Request] = []
-        self._steps: list[tuple[int, concurrent.futures.Future[int]]] = []
-        self._readers: list[tuple[int, concurrent.futures.Future[Snapshot]]] = []
+        self.steps: TickQueue[int] = TickQueue()  # `step`: a future per goal tick
+        self.readers: TickQueue[Snapshot] = TickQueue()  # a snapshot of at least a tick
 
     # -- work for the sim thread between two ticks --------------------------------------------
 
@@ -43,47 +70,7 @@ class Waiters:
         requests, self._requests = self._requests, []
         return requests
 
-    # -- `step`: a future per goal tick -------------------------------------------------------
-
-    def add_step(self, goal: int) -> concurrent.futures.Future[int]:
-        fut: concurrent.futures.Future[int] = concurrent.futures.Future()
-        self._steps.append((goal, fut))
-        return fut
-
-    def steps_reached(self, tick: int) -> list[concurrent.futures.Future[int]]:
-        """The step futures whose goal `tick` reaches, taken out of the queue."""
-        done = [f for g, f in self._steps if g <= tick]
-        self._steps = [(g, f) for g, f in self._steps if g > tick]
-        return done
-
-    def take_steps(self) -> list[concurrent.futures.Future[int]]:
-        """Every step future (a restore completes them at the restored tick)."""
-        steps, self._steps = [f for _, f in self._steps], []
-        return steps
-
-    # -- readers of a snapshot of at least some tick ------------------------------------------
-
-    def add_reader(self, need: int) -> concurrent.futures.Future[Snapshot]:
-        fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
-        self._readers.append((need, fut))
-        return fut
-
-    @property
-    def readers_waiting(self) -> bool:
-        return bool(self._readers)
-
-    def readers_served_by(self, tick: int) -> list[concurrent.futures.Future[Snapshot]]:
-        """The readers a snapshot of `tick` satisfies, taken out of the queue."""
-        ready = [f for need, f in self._readers if need <= tick]
-        self._readers = [(n, f) for n, f in self._readers if n > tick]
-        return ready
-
-    def take_readers(self) -> list[concurrent.futures.Future[Snapshot]]:
-        """Every reader (time stands still, or a restore replaced the timeline)."""
-        readers, self._readers = [f for _, f in self._readers], []
-        return readers
-
     def cancel_all(self) -> None:
         """The loop stopped: nobody will serve what still waits (call without the lock)."""
-        for fut in (*self.take_steps(), *self.take_readers()):
+        for fut in (*self.steps.take(), *self.readers.take()):
             fut.cancel()

@@ -18,7 +18,7 @@ from service.core.sim.batch import Batch
 from service.core.sim.entities import read_frame as read
 from service.core.sim.types import Snapshot
 
-__all__ = ["attach", "read"]
+__all__ = ["attach", "read", "snapshot_with_entities"]
 
 log = logging.getLogger("armfleet.entities")
 
@@ -32,3 +32,9 @@ def attach(snap: Snapshot, batch: Batch) -> Snapshot:
     except Exception:
         log.exception("the entities of tick %d could not be read", snap.tick)
         return snap
+
+
+def snapshot_with_entities(batch: Batch) -> Snapshot:
+    """A snapshot of the batch's tick with every world's entities (for `SimLoop.call`: the
+    first frame of a socket that asked for entities before anyone else did)."""
+    return attach(batch.snapshot(), batch)

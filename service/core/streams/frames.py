@@ -31,6 +31,7 @@ from service.core.sim.batch import Batch, PacksFrames
 from service.core.sim.packed_rows import PackedRows
 from service.core.sim.types import EntityFrame, Snapshot
 from service.core.streams import wire
+from service.core.streams.formats import BINARY, BINARY_ENTITIES, JSON, JSON_ENTITIES
 
 log = logging.getLogger("armfleet.frames")
 
@@ -187,12 +188,9 @@ def json_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
     )
 
 
-# The frame formats with each world's entities too (`entities=true`).
-JSON_ENTITIES, BINARY_ENTITIES = "json+entities", "binary+entities"
-WITH_ENTITIES = (JSON_ENTITIES, BINARY_ENTITIES)
 ENCODERS: dict[str, Callable[[FrameData, np.ndarray, list[str]], bytes]] = {
-    "binary": binary,
-    "json": json,
+    BINARY: binary,
+    JSON: json,
     JSON_ENTITIES: json_entities,
     BINARY_ENTITIES: binary_entities,
 }
@@ -234,7 +232,7 @@ class FrameSender:
         """Hand a big frame's JSON formats to the helper processes (several frames in flight,
         delivered when done, in order of completion); the formats handed (or dropped because
         every helper is busy), none when the frame is serialised here instead."""
-        asked = [f for f in job.formats if f in ("json", JSON_ENTITIES)]
+        asked = [f for f in job.formats if f in (JSON, JSON_ENTITIES)]
         if not asked or len(job.data.ids) < BIG_JSON_ROWS:
             return []
         if self._pool is None:

@@ -7,8 +7,8 @@ delays nobody else; a fast one gets every frame it asked for, at most one per ti
 Batch subscriptions (`packed`: many worlds, binary or JSON) never need a snapshot: on the sim
 thread, after each tick, the hub asks the engine for the rows of the worlds they watch (once
 per selection, however many sockets share it) and its FrameSender thread serialises them
-(service.frames); the event loop only sends. The other subscriptions (one world, the page's
-pose frames) are rendered from snapshots, as is every subscription's first frame.
+(service.core.streams.frames); the event loop only sends. The other subscriptions (one world,
+the page's pose frames) are rendered from snapshots, as is every subscription's first frame.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Awaitable, Callable
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -27,8 +27,20 @@ from service.core.sim.batch import Batch
 from service.core.sim.loop_types import SnapshotSink
 from service.core.sim.types import Snapshot
 from service.core.streams import entity_frames, frames
+from service.core.streams.formats import WITH_ENTITIES, FrameFormat
 
 log = logging.getLogger("armfleet.hub")
+
+
+class TrajectoryBriefs(Protocol):
+    """Where packed JSON frames get the worlds' trajectory briefs (the trajectory manager)."""
+
+    def briefs(self, worlds: np.ndarray) -> dict[str, dict[str, Any]]: ...
+
+
+def _without_entities(snap: Snapshot) -> bool:
+    """A snapshot taken before a subscriber asked for entities has none: the next one will."""
+    return snap.entities is None
 
 
 class Subscription:
@@ -38,42 +50,40 @@ class Subscription:
         self,
         worlds: np.ndarray,
         rate: float | None,
+        fmt: FrameFormat,
         render: Callable[[Snapshot], bytes],
-        kind: str,
-        binary: bool = False,
-        packed: str | None = None,
-        names: list[str] | None = None,
-        entities: bool = False,
+        *,
+        skip: Callable[[Snapshot], bool] | None = None,
+        close: Callable[[int, str], Awaitable[None]] | None = None,
+        ready: asyncio.Event | None = None,
     ):
+        """`fmt` says what the frames are (formats.py); `render` makes one from a snapshot
+        (the first frame, and every frame of a format that is not packed). `skip`: the writer
+        drops a frame it says so of (the page's socket: nothing moved); frames with entities
+        skip snapshots taken before anyone asked for them. `close`: closes the owning socket
+        (code, reason), e.g. 1001 at shutdown. `ready`: an event shared with other
+        subscriptions of one socket (rosbridge: one writer for every topic)."""
         self.worlds = worlds
-        # Frames carry the worlds' entities too (`entities=true`): packed ones in a format of
-        # frames.WITH_ENTITIES, rendered ones from snapshots that carry them.
-        self.entities = entities
-        self.binary = binary  # frames go out as binary WebSocket messages
-        # "binary" / "json" (or either "+entities"): frames come packed from the sim thread
-        # (service.frames), not rendered from snapshots; `names` are the joint names they carry.
-        self.packed = packed
-        self.names = names or []
-        self.frame: bytes | None = None  # the newest packed frame not yet sent
-        self.claimed_tick = -1  # the tick of the last packed frame asked for (sim thread)
-        # JSON frames' fields after the state columns, taken when a frame is packed
-        # (the trajectories of the worlds); None: frames.DEFAULT_EXTRA.
-        self.extra: Callable[[], dict[str, Any]] | None = None
-        self._owed_lock = threading.Lock()  # owed_tick is read on the sim thread too
+        self.format = fmt
+        self.entities = fmt.entities
+        self.binary = fmt.binary  # frames go out as binary WebSocket messages
+        self.packed = fmt.packed
+        self.names = list(fmt.names)
+        self.status_frames = fmt.status_frames
         # Sockets with the same kind of frame over the same worlds share one serialisation.
-        self.key = (kind, worlds.tobytes())
+        self.key = (fmt.key, worlds.tobytes())
         self.period = 1.0 / rate if rate else 0.0  # 0: every tick
         self.render = render
+        self.skip = skip if skip is not None or not fmt.entities else _without_entities
+        self.close = close
+        self.ready = ready if ready is not None else asyncio.Event()
+        self.frame: bytes | None = None  # the newest packed frame not yet sent
+        self.claimed_tick = -1  # the tick of the last packed frame asked for (sim thread)
+        self._owed_lock = threading.Lock()  # owed_tick is read on the sim thread too
         self.next_due = 0.0
         self.latest: Snapshot | None = None
         self.owed_tick: int | None = None  # the earliest tick an acked command takes effect
         self.acks: deque[bytes] = deque()
-        self.ready = asyncio.Event()
-        # Set by the socket that owns it: close the socket (code, reason), e.g. 1001 at shutdown.
-        self.close: Callable[[int, str], Awaitable[None]] | None = None
-        self.status_frames = False  # the socket speaks our protocol: send it status frames
-        # The writer drops a frame when this says so (the page's socket: nothing moved).
-        self.skip: Callable[[Snapshot], bool] | None = None
 
     def due(self, now: float) -> bool:
         # A little slack so that a 30 Hz stream on a 60 Hz loop really gets every other tick.
@@ -144,8 +154,9 @@ class Subscription:
 class StreamHub(SnapshotSink):
     """The loop's snapshot sink: decides demand on the sim thread, delivers on the event loop."""
 
-    def __init__(self, aio_loop: asyncio.AbstractEventLoop):
+    def __init__(self, aio_loop: asyncio.AbstractEventLoop, briefs: TrajectoryBriefs | None = None):
         self._aio = aio_loop
+        self._briefs = briefs  # what packed JSON frames say of the worlds' trajectories
         self._subs: tuple[Subscription, ...] = ()  # replaced, never mutated: read from two threads
         self._lock = threading.Lock()
         self._incoming: Snapshot | None = None
@@ -204,10 +215,9 @@ class StreamHub(SnapshotSink):
             if data is None or self._sender is None:
                 self.frames_skipped += len(group)
                 continue
-            extra = next((s.extra for s in group if s.extra), None) if json else None
-            if extra is not None:
-                data.extra = extra()
-            asked = [f for f in formats if f in frames.WITH_ENTITIES]
+            if json and self._briefs is not None and any(s.format.trajectories for s in group):
+                data.extra = {"trajectories": self._briefs.briefs(group[0].worlds)}
+            asked = [f for f in formats if f in WITH_ENTITIES]
             if asked and not self._read_entities(batch, data):
                 formats = [f for f in formats if f not in asked]
                 self.frames_skipped += sum(s.packed in asked for s in group)

@@ -31,6 +31,7 @@ from service.core.access.callers import Forbidden, book_of
 from service.core.errors import ArmfleetError
 from service.core.sim.rules import BadJointState
 from service.core.sim.types import Snapshot
+from service.core.streams.formats import FrameFormat
 from service.core.streams.hub import StreamHub, Subscription
 from service.core.surface import SurfaceContext
 from service.surfaces.ros import rosapi, rosbridge_actions, sim_entities, topics
@@ -258,8 +259,9 @@ class Session:
         if existing is not None:
             self.hub.remove(existing.hub_sub)
         render, world, _ = self._renderer(topic)
-        sub = Subscription(np.array([world]), rate, render, f"rosbridge {topic}")
-        sub.ready = self.ready  # one writer per socket wakes for replies and any topic
+        fmt = FrameFormat.rosbridge(topic)
+        # one writer per socket wakes for replies and any topic: the socket's `ready`
+        sub = Subscription(np.array([world]), rate, fmt, render, ready=self.ready)
         self.subs[topic] = _TopicSub(sub, ids)
         self.hub.add(sub)
         if existing is None:
