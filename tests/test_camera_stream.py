@@ -75,6 +75,12 @@ def test_a_slow_reader_holds_drawing_back(server: Server) -> None:
         ("camera=wrist&worlds=7", "world"),
         ("camera=wrist&image=seg", "seg"),
         ("camera=wrist&format=gif", "format"),
+        # issue 38, item 3: these were refused at the handshake with a bare 403
+        ("camera=wrist&rate=100", "rate"),
+        ("camera=wrist&rate=abc", "rate"),
+        ("camera=wrist&quality=0", "quality"),
+        ("camera=wrist&pull=maybe", "pull"),
+        ("worlds=0", "camera"),
     ],
 )
 def test_bad_stream_queries_close_with_the_reason(server: Server, query: str, named: str) -> None:

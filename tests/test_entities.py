@@ -91,7 +91,14 @@ def test_bad_values_are_refused_with_the_field_and_the_limit(paused, body, field
 
 def test_an_unknown_entity_or_one_bad_write_of_many_changes_nothing(paused):
     with httpx.Client(base_url=paused.url, timeout=10) as http:
+        # an unknown entity in the path is a resource that is not there: 404 (issue 38, item 4)
         reply = http.put("/v1/worlds/0/entities/sphere", json={"position": [0.6, 0.1, 1]})
+        assert reply.status_code == 404 and "no entity 'sphere'" in reply.text
+        assert "cube" in reply.text  # it names the entities there are
+        reply = http.get("/v1/worlds/1/entities/no_such_part")
+        assert reply.status_code == 404 and "no entity 'no_such_part'" in reply.json()["detail"]
+        # in a body, an unknown name is a bad field of the request: 422
+        reply = http.post("/v1/entities", json={"writes": [{"world": 0, "name": "sphere"}]})
         assert reply.status_code == 422 and "unknown entity 'sphere'" in reply.text
         before = http.get("/v1/worlds/3/entities/cube").json()
         writes = [

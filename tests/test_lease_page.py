@@ -68,3 +68,23 @@ def test_the_page_asks_for_a_token_and_says_when_a_lease_is_over(srv, page) -> N
     )
     page.reload()  # the tab kept the lease; it has ended since
     expect(page.locator("#banner")).to_contain_text("lease not usable", timeout=15_000)
+
+
+def test_the_student_link_is_logged_with_its_token_blanked(srv, page) -> None:  # noqa: F811
+    """Issue 38, item 2: the documented link /?lease=<token>, opened in Chromium, gives uvicorn's
+    access line with the token blanked, and no `--- Logging error ---` traceback (the filter
+    once dropped the record's arguments, which uvicorn's access formatter unpacks)."""
+    lease = lend(srv, [3])
+    start = srv.log_path.stat().st_size
+    open_page(page, srv, f"?lease={lease['token']}")
+    expect(page.locator("#world")).to_have_value("3")
+
+    def access_line() -> str | None:
+        new = srv.log_path.read_bytes()[start:].decode(errors="replace")
+        return next((ln for ln in new.splitlines() if '"GET /?lease=' in ln), None)
+
+    line = wait_for(access_line, "the page's access line")
+    assert "lease=<redacted>" in line and " 200" in line, line
+    logged = srv.log_path.read_bytes()[start:].decode(errors="replace")
+    assert lease["token"] not in logged
+    assert "Logging error" not in logged and "Traceback" not in logged, logged[-2000:]

@@ -25,17 +25,19 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from typing import Annotated
+import math
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
 from service.api import ws_bulk
+from service.api.ws import flag
 from service.api.ws_bulk import BulkSocket
 from service.core.access import policy as access
 from service.core.cameras import wire as camera_wire
 from service.core.cameras.clock import Reader, clock_for
 from service.core.cameras.feed import CameraFeed
-from service.core.errors import ArmfleetError
+from service.core.errors import ArmfleetError, BadCommand
 from service.core.sim.worlds import parse_worlds
 
 router = APIRouter(prefix="/v1")
@@ -48,14 +50,19 @@ _CLOSE_POLICY = 1008
 @router.websocket("/ws/cameras")
 async def camera_socket(
     ws: WebSocket,
-    camera: Annotated[str, Query(description="camera name, as GET /v1/cameras lists it")],
+    camera: Annotated[
+        str | None, Query(description="camera name, as GET /v1/cameras lists it")
+    ] = None,
     worlds: Annotated[str, Query(description="e.g. 0-15,20")] = "0",
-    rate: Annotated[float, Query(gt=0, le=MAX_RATE)] = 10.0,
+    rate: Annotated[str, Query(description=f"pictures a second, 0 < rate <= {MAX_RATE}")] = "10",
     image: Annotated[str, Query(description="rgb, depth or seg")] = "rgb",
     format: Annotated[str | None, Query(description="png, jpeg (rgb) or raw")] = None,
-    quality: Annotated[int, Query(ge=1, le=100)] = 80,
-    pull: Annotated[bool, Query(description="one picture per text message sent")] = False,
+    quality: Annotated[str, Query(description="JPEG quality, 1..100")] = "80",
+    pull: Annotated[str, Query(description="one picture per text message sent")] = "false",
 ) -> None:
+    """Pictures of `camera` for `worlds`. Every query value is read here, after the handshake,
+    so that a bad one closes the socket with 1008 and a reason naming it and its limit (a
+    check in the route's signature would refuse the handshake itself, with a bare 403)."""
     runtime = ws.app.state.runtime
     grant = access.check_websocket(runtime.settings, ws)
     feed: CameraFeed | None = runtime.cameras
@@ -65,6 +72,11 @@ async def camera_socket(
     if feed is None:
         return await ws.close(code=_CLOSE_TRY_AGAIN, reason="simulation is starting")
     try:
+        if not camera:
+            raise BadCommand("query.camera", "give the camera's name (GET /v1/cameras lists them)")
+        hz = _number(rate, "query.rate", float, 0.0, MAX_RATE, above=True)
+        quality_ = _number(quality, "query.quality", int, 1, 100)
+        pull_ = flag(pull, "query.pull")
         fmt = camera_wire.choose(image, format, None)
         feed.want(camera, image)
         ids = parse_worlds(worlds, feed.loop.batch.nworld)
@@ -76,13 +88,13 @@ async def camera_socket(
     else:
         feed.streams_direct += 1
     feed.streams.add(link)
-    reader = Reader(ids, pull)
-    clock = clock_for(feed, camera, rate)
+    reader = Reader(ids, pull_)
+    clock = clock_for(feed, camera, hz)
     clock.join(reader)
-    sender = asyncio.create_task(_send(link, reader, image, fmt, quality))
+    sender = asyncio.create_task(_send(link, reader, image, fmt, quality_))
     try:
         while await link.receive() is not None:  # pull requests; None: the client left
-            if pull:
+            if pull_:
                 reader.ask()
                 clock.poke()
     finally:
@@ -92,6 +104,25 @@ async def camera_socket(
         with contextlib.suppress(BaseException):
             await sender
         await link.finish()
+
+
+def _number(
+    text: str,
+    field: str,
+    kind: type[int] | type[float],
+    low: float,
+    high: float,
+    above: bool = False,
+) -> Any:
+    """A query number, or BadCommand naming `field` and its range (`above`: `low` excluded)."""
+    limits = f"{low:g} < value <= {high:g}" if above else f"{low:g} <= value <= {high:g}"
+    try:
+        value = kind(text)
+    except ValueError:
+        raise BadCommand(field, f"{text[:40]!r} is not a number ({limits})") from None
+    if not math.isfinite(value) or value > high or (value <= low if above else value < low):
+        raise BadCommand(field, f"{text[:40]} is out of range ({limits})")
+    return value
 
 
 class _AsgiSocket:

@@ -31,7 +31,7 @@ from service.core.contract.replies import (
     errors,
 )
 from service.core.contract.snapshots import WorldRandomization
-from service.core.errors import Unavailable
+from service.core.errors import NotFound, Unavailable
 from service.core.sim import entities as entity_table
 from service.core.sim.loop import SimLoop
 from service.core.sim.types import Mode, Snapshot
@@ -181,6 +181,15 @@ async def _entities(loop: SimLoop, worlds: list[int]) -> dict[str, Any]:
     return await asyncio.wrap_future(loop.call(lambda batch: entity_table.read(batch, worlds)))
 
 
+def _entity(loop: SimLoop, name: str) -> int:
+    """The index of the entity a path names; an unknown one is a resource that is not there:
+    404 naming the entities there are (in a body, an unknown name is a bad field: 422)."""
+    table = entity_table.entity_table(loop.batch.robot.mjm)
+    if name not in table.names:
+        raise NotFound(f"no entity {name!r}; entities are {list(table.names)}", "name")
+    return table.names.index(name)
+
+
 def _written(control: Control, command: type[ManyWrites[Any]], items: list[Any]) -> Response:
     """Run an entity or parameter write command; the reply is its result's fields (the tick
     the writes take effect at, the worlds written, and what the command adds)."""
@@ -201,7 +210,7 @@ async def get_entities(loop: Loop, world: World) -> Response:
     summary="Pose and twist of one entity of one world",
 )
 async def get_entity(loop: Loop, world: World, name: str) -> Response:
-    index = entity_table.entity_table(loop.batch.robot.mjm).index(name)
+    index = _entity(loop, name)
     got = await _entities(loop, [world])
     return _json({"tick": got["tick"], "world": world, **got["worlds"][0]["entities"][index]})
 
@@ -214,6 +223,7 @@ async def get_entity(loop: Loop, world: World, name: str) -> Response:
 async def put_entity(
     control: Ctl, world: World, name: str, body: entities.EntityValues
 ) -> Response:
+    _entity(control.loop, name)
     item = {**body.model_dump(exclude_none=True), "world": world, "name": name}
     return _written(control, entities.SetEntities, [item])
 

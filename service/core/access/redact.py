@@ -24,17 +24,36 @@ def redact(text: str) -> str:
     return _LEASE.sub(rf"\1{REDACTED}", text)
 
 
+def _clean(value: object) -> object:
+    return redact(value) if isinstance(value, str) else value
+
+
 class RedactTokens(logging.Filter):
-    """Rewrites each record's message with `redact` (formatting its arguments first)."""
+    """Blanks tokens in each record: in its format string and in each of its arguments, which
+    keep their shape. Why not the formatted line alone: a formatter may read the arguments
+    themselves (uvicorn's access formatter unpacks (client, method, path, version, status)), so
+    a record whose arguments were dropped breaks it. Only where a token survives that (inside
+    an argument that is not a string) is the record collapsed to its redacted line."""
 
     def filter(self, record: logging.LogRecord) -> bool:
         try:
             message = record.getMessage()
         except Exception:  # a broken format: leave it to the handler to report
             return True
-        clean = redact(message)
-        if clean != message:
-            record.msg, record.args = clean, None
+        if redact(message) == message:
+            return True
+        if isinstance(record.msg, str):
+            record.msg = redact(record.msg)
+        if isinstance(record.args, tuple):
+            record.args = tuple(_clean(a) for a in record.args)
+        elif isinstance(record.args, dict):
+            record.args = {k: _clean(v) for k, v in record.args.items()}
+        try:
+            again = record.getMessage()
+        except Exception:
+            again = None
+        if again is None or redact(again) != again:
+            record.msg, record.args = redact(message), ()
         return True
 
 
