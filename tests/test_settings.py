@@ -7,7 +7,7 @@ import pytest
 from pydantic import ValidationError
 
 from clients.testing import ServerFailed, serve
-from service.core.settings import Settings
+from service.settings import Settings
 
 
 def test_environment_applies_and_a_typed_option_overrides_it(tmp_path, monkeypatch):
@@ -30,4 +30,4 @@ def test_a_bad_environment_value_stops_start_up_naming_the_variable(tmp_path, mo
 def test_ray_with_the_native_engine_is_refused_naming_the_field():
     with pytest.raises(ValidationError, match="ray: Ray actors run the warp engine only"):
         Settings(ray="local", engine="mujoco")
-    assert Settings(ray="local").ray == "local"
+    assert Settings(ray="local").engine.ray == "local"

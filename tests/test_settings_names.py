@@ -222,8 +222,11 @@ def _plain(value: Any) -> Any:
 
 
 def _read(settings: Any, name: str) -> Any:
-    """The value the flat name `name` set."""
-    return _plain(getattr(settings, name))
+    """The value the flat name `name` set: the field of its section (service/settings.py)."""
+    from service.settings import flat_fields
+
+    section, field, _ = flat_fields()[name]
+    return _plain(getattr(getattr(settings, section), field))
 
 
 def _flag(name: str, text: str) -> list[str]:
@@ -250,7 +253,7 @@ def test_every_serve_option_of_today_is_still_there() -> None:
 
 @pytest.mark.parametrize(("name", "env_text", "env_value"), [r[:3] for r in VALUES])
 def test_each_variable_sets_what_it_set(monkeypatch, name: str, env_text: str, env_value) -> None:
-    from service.core.settings import Settings
+    from service.settings import Settings
 
     monkeypatch.setenv(f"ARMFLEET_{name.upper()}", _here(env_text))
     settings = Settings(**NEEDS.get(name, {}))
@@ -284,7 +287,7 @@ def test_each_option_sets_what_it_set_over_the_variable(
 
 
 def test_unset_everything_is_the_default() -> None:
-    from service.core.settings import Settings
+    from service.settings import Settings
 
     settings = Settings()
     assert {name: _read(settings, name) for name in DEFAULTS} == DEFAULTS

@@ -57,7 +57,7 @@ async def camera_socket(
     pull: Annotated[bool, Query(description="one picture per text message sent")] = False,
 ) -> None:
     runtime = ws.app.state.runtime
-    grant = access.check_websocket(runtime.settings, ws)
+    grant = access.check_websocket(runtime.settings.access, ws)
     feed: CameraFeed | None = runtime.cameras
     await ws.accept(subprotocol=grant.subprotocol)
     if not grant.read:
