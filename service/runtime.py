@@ -55,9 +55,8 @@ class Runtime:
         self.surfaces = build_surfaces(settings)
         self.error: str | None = None
         self.metrics = Metrics()
-        self.slots = ClientSlots(
-            settings.access.max_clients
-        )  # shared by HTTP and every socket surface
+        # shared by HTTP and every socket surface
+        self.slots = ClientSlots(settings.access.max_clients)
         self._problems: list[str] = []
         self._watchdog: asyncio.Task[None] | None = None
         self.stop_problems: list[str] = []  # what `stop` could not save (the exit status)

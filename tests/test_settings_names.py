@@ -291,3 +291,13 @@ def test_unset_everything_is_the_default() -> None:
 
     settings = Settings()
     assert {name: _read(settings, name) for name in DEFAULTS} == DEFAULTS
+
+
+@pytest.mark.parametrize(("name", "env_text", "env_value"), [r[:3] for r in VALUES])
+def test_each_flat_keyword_sets_what_it_set(name: str, env_text: str, env_value) -> None:
+    """`Settings(worlds=4, foxglove=True)`: tests and bench build settings by flat names."""
+    from service.settings import Settings
+
+    value = [env_text[2:-2]] if name == "allow_origins" else _here(env_text)
+    settings = Settings(**{name: value}, **NEEDS.get(name, {}))
+    assert _read(settings, name) == _here(env_value)
