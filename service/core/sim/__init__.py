@@ -1,7 +1,8 @@
 """The simulation: the engine protocol (`batch`), domain types, the robot and physics read
 from the MJCF, the scene and its entity table, the loop that owns the batch on a thread of its
 own (`loop`, `boundary`, `loop_types`, `staging`), and the rules the loop applies to what it is
-given (`rules`: world ids and the JointState rule; `arithmetic`: clamped target updates).
+given (`rules`: world ids and the JointState rule; `arithmetic`: clamped target updates), and
+what the simulation is asked to be (`settings`: worlds, scene, mode, rates).
 
 May import: `service.core.errors`, `service.core.process`; nothing else of the core.
 """
