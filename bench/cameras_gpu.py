@@ -41,7 +41,7 @@ FIT_SIZES = ((64, 64), (128, 128), (256, 256))
 FIT_MAX_WORLDS = 1 << 22  # the doubling stops here even when memory is left
 STREAMS = (("realtime", 1), ("realtime", 8), ("fast", 8))  # (mode, client processes)
 # On a machine of two GPUs or more, also these, with the cameras on the second GPU (the engine
-# then steps in a worker process of its own on the first: `Settings.engine_apart`)
+# then steps in a worker process of its own on the first: `EngineSettings.apart`)
 APART_STREAMS = (("realtime", 8, "cuda:1"), ("fast", 8, "cuda:1"))
 # ARMFLEET_BENCH_CLIENT=websockets: the stream clients use the websockets sync client (else aiohttp)
 # ARMFLEET_BENCH_FITS=0: take the largest fits from the last run's file instead of searching

@@ -27,7 +27,8 @@ from service.engines.cores import usable_cores
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 
-# The engine's defaults (service.core.settings.Settings): 60 Hz control, the default physics step.
+# The simulation's defaults (service.core.sim.settings.SimSettings): 60 Hz control, the
+# default physics step.
 CONTROL_HZ = 60.0
 PHYSICS_DT = DEFAULT_PHYSICS_DT
 # The physics step before the step study of issue 13 (8 substeps of 2.083 ms per 60 Hz tick).

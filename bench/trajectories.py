@@ -66,12 +66,14 @@ def tracking(engine: str) -> dict[str, Any]:
     """Largest path error and the error 0.5 s after the end, stepping a paused loop."""
     from service.core.commands.control import Control
     from service.core.commands.trajectory import parse
-    from service.core.settings import Settings
     from service.core.sim.loop import SimLoop
+    from service.core.sim.settings import SimSettings
     from service.core.sim.types import Mode
     from service.engines.choice import build_batch
+    from service.engines.settings import EngineSettings
 
-    batch = build_batch(Settings(engine=engine, worlds=2, shards=1))  # one process, one thread
+    # one process, one thread
+    batch = build_batch(EngineSettings(kind=engine, shards=1), SimSettings(worlds=2))
     loop = SimLoop(batch, Mode.PAUSED)
     control = Control(loop)
     loop.start()

@@ -32,7 +32,6 @@ LAYERS: tuple[tuple[str, int], ...] = (
     ("service.core.commands", 5),
     ("service.core.cameras", 6),
     ("service.core.contract", 7),
-    ("service.core.settings", 8),
     ("service.core.metrics", 8),
     ("service.core.surface", 9),
     ("service.engines", 10),

@@ -36,8 +36,8 @@ from service.core.access import policy as access
 from service.core.contract.replies import ANY, errors, fit_openapi
 from service.core.errors import ArmfleetError, BadCommand
 from service.core.metrics import CommandCounter
-from service.core.settings import Settings
 from service.runtime import Runtime
+from service.settings import Settings
 
 DESCRIPTION = """
 Many simulated UR10e + Robotiq 2F-140 worlds stepped together by MuJoCo Warp.
@@ -146,7 +146,7 @@ async def _armfleet_error(request: Request, exc: Exception) -> JSONResponse:
 def create_app(settings: Settings | None = None) -> FastAPI:
     """The service as an ASGI app; ValueError when the settings are unsafe (see access)."""
     settings = settings or Settings()
-    access.check_bind(settings.host, settings)
+    access.check_bind(settings.server.host, settings.access)
     runtime = Runtime(settings)
 
     @contextlib.asynccontextmanager
@@ -169,11 +169,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         },
     )
     app.state.runtime = runtime
-    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(BodySizeLimit, max_bytes=settings.server.max_body_bytes)
     # Added last = runs first: count refused commands, then check token, origin and slots.
     app.add_middleware(
         access.AccessMiddleware,
-        settings=settings,
+        settings=settings.access,
         slots=runtime.slots,
         leases=lambda: runtime.leases,
     )
@@ -203,7 +203,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
-            app.openapi_schema = fit_openapi(generate(), settings.worlds)
+            app.openapi_schema = fit_openapi(generate(), settings.sim.worlds)
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]

@@ -32,14 +32,15 @@ app = typer.Typer(
 
 
 def _opt(name: str) -> Any:
-    """A `serve` option documented from its Settings field (one description, one default).
+    """A `serve` option documented from its settings field (one description, one default);
+    `name` is the field's flat name (service/settings.py: `flat_fields`).
 
     Options default to None so that only what the user typed overrides the settings, which
     themselves come from ARMFLEET_* variables or the field defaults.
     """
-    from service.core.settings import Settings
+    from service.settings import flat_fields
 
-    field = Settings.model_fields[name]
+    field = flat_fields()[name][2]
     default = field.default.value if isinstance(field.default, Mode) else field.default
     return typer.Option(
         help=f"{field.description or name} (default {default}; env ARMFLEET_{name.upper()})",
@@ -73,10 +74,10 @@ def _cli_type(annotation: Any) -> Any:
 
 
 def _serve_signature(fn: Callable[..., None]) -> Callable[..., None]:
-    """Give `serve` one option per Settings field (`--worlds`, `--foxglove-port`, ...): the
-    options are derived from the settings model, never listed again here, so a setting a
-    surface adds is an option and an ARMFLEET_* variable at once."""
-    from service.core.settings import Settings
+    """Give `serve` one option per settings field, by its flat name (`--worlds`,
+    `--foxglove-port`, ...): the options are derived from the settings' sections, never listed
+    again here, so a setting a surface adds is an option and an ARMFLEET_* variable at once."""
+    from service.settings import flat_fields
 
     fn.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
         [
@@ -86,7 +87,7 @@ def _serve_signature(fn: Callable[..., None]) -> Callable[..., None]:
                 default=None,
                 annotation=Annotated[_cli_type(field.annotation) | None, _opt(name)],
             )
-            for name, field in Settings.model_fields.items()
+            for name, (_, _, field) in flat_fields().items()
         ]
     )
     return fn
@@ -103,19 +104,21 @@ def serve(**options: Any) -> None:
 
     from service.app import create_app
     from service.core.errors import ArmfleetError
-    from service.core.settings import Settings
     from service.serving import serve_until_stopped
+    from service.settings import Settings, flat_name
 
     try:
         settings = Settings(**given)
     except ValueError as exc:  # pydantic's ValidationError: each problem in words
         for err in exc.errors() if hasattr(exc, "errors") else [{"msg": str(exc), "loc": ()}]:
-            where = ".".join(str(x) for x in err["loc"])  # the setting (ARMFLEET_<NAME>)
+            where = flat_name(tuple(err["loc"]))  # the setting (ARMFLEET_<NAME>, --<name>)
             what = err["msg"].removeprefix("Value error, ")
             typer.echo(f"armfleet serve: {where + ': ' if where else ''}{what}", err=True)
         raise typer.Exit(2) from None
-    _check_port_free(settings.host, settings.port)
-    logging.basicConfig(level=settings.log_level.upper(), format="%(asctime)s %(name)s %(message)s")
+    _check_port_free(settings.server.host, settings.server.port)
+    logging.basicConfig(
+        level=settings.server.log_level.upper(), format="%(asctime)s %(name)s %(message)s"
+    )
     try:
         service = create_app(settings)
     except (ValueError, ArmfleetError) as exc:  # an unsafe bind, a --record file not writable

@@ -24,17 +24,17 @@ from service.core.commands.control import Accepted, Control
 from service.core.errors import ArmfleetError, Conflict, NotFound
 from service.core.metrics import Metrics
 from service.core.process.stopping import reclaim_stop_signals
-from service.core.settings import Settings
 from service.core.sim.batch import Batch, Supervised
 from service.core.sim.loop import SimLoop
 from service.core.sim.randomizations import Randomized
 from service.core.streams.hub import StreamHub
 from service.core.surface import Finishing, SurfaceContext, Watched
 from service.engines.camera_render import camera_feed
-from service.engines.choice import build_batch
+from service.engines.choice import build_batch, check_devices
 from service.persistence import provenance
 from service.persistence.service import Persistence
 from service.persistence.snapshots import LATEST, check_state_support
+from service.settings import Settings
 from service.surfaces.registry import build_surfaces
 
 log = logging.getLogger("armfleet")
@@ -44,17 +44,19 @@ LEASE = "lease"  # the source of the resets that start and end leases
 class Runtime:
     def __init__(self, settings: Settings):
         self.settings = settings
+        check_devices(settings.cameras.device)  # ValueError naming the setting, before serving
         self.loop: SimLoop | None = None
         self.control: Control | None = None
         self.hub: StreamHub | None = None
         # Before the surfaces: `--record`'s file is opened here, so one that cannot be written
         # stops the start before anything is built (CannotWrite, raised by create_app).
-        self.persistence = Persistence(settings)
+        self.persistence = Persistence(settings.persistence)
         self.cameras: CameraFeed | None = None  # built with the loop (service/core/cameras/feed)
         self.surfaces = build_surfaces(settings)
         self.error: str | None = None
         self.metrics = Metrics()
-        self.slots = ClientSlots(settings.max_clients)  # shared by HTTP and every socket surface
+        # shared by HTTP and every socket surface
+        self.slots = ClientSlots(settings.access.max_clients)
         self._problems: list[str] = []
         self._watchdog: asyncio.Task[None] | None = None
         self.stop_problems: list[str] = []  # what `stop` could not save (the exit status)
@@ -185,17 +187,18 @@ class Runtime:
     async def _start(self) -> None:
         s = self.settings
         try:
-            batch = await asyncio.to_thread(build_batch, s)
+            batch = await asyncio.to_thread(build_batch, s.engine, s.sim, s.cameras.device)
         except Exception as exc:
             self.error = f"{type(exc).__name__}: {exc}"
             log.exception("engine failed to start")
             return
         reclaim_stop_signals()  # building may have loaded a library that took them (Ray)
         self.header = provenance.batch_header(batch)
-        if s.restore and not await asyncio.to_thread(self._restore_at_start, batch, s.restore):
+        restore = s.persistence.restore
+        if restore and not await asyncio.to_thread(self._restore_at_start, batch, restore):
             batch.close()
             return
-        loop = SimLoop(batch, s.mode)
+        loop = SimLoop(batch, s.sim.mode)
         loop.randomizations.replace(self._restored_randomized)
         self.control = Control(loop)
         # Packed JSON frames say where each world's trajectory is: the manager's briefs.
@@ -206,19 +209,19 @@ class Runtime:
         self._lend(batch.nworld)
         loop.listeners.add_tick_listener(self.metrics.on_tick)
         loop.start()
-        self.cameras = camera_feed(loop, s)
+        self.cameras = camera_feed(loop, s.cameras)
         self.loop = loop
         self._watchdog = asyncio.create_task(self._watch())
         ctx = SurfaceContext(
-            loop, self.control, self.hub, s, self.slots, self.metrics, self.cameras
+            loop, self.control, self.hub, s.access, self.slots, self.metrics, self.cameras
         )
         self.surfaces.start(ctx)
         self.persistence.start(ctx)
         log.info(
             "armfleet ready at http://%s:%d (docs /docs): %d worlds on %s (%d shard%s), "
             "%d substeps of %.3f ms per %.0f Hz tick, mode %s; compile %.1f s, capture %.2f s%s",
-            s.host,
-            s.port,
+            s.server.host,
+            s.server.port,
             batch.nworld,
             batch.device_name,
             batch.shards,
@@ -235,7 +238,7 @@ class Runtime:
     def _lend(self, nworld: int) -> None:
         """The LeaseBook and the Gate Control checks every caller's commands with (leases on).
         Leases live in memory only: every lease ends when the service stops (see leases)."""
-        s, control = self.settings, self.control
+        s, control = self.settings.access, self.control
         if s.leases == "off" or control is None:
             return
         reset_at = {"both": ("start", "end"), "none": ()}.get(s.lease_reset, (s.lease_reset,))
@@ -302,7 +305,7 @@ class Runtime:
             self.loop.stop()
             if self.hub is not None:
                 self.hub.stop()
-            if self.settings.save_on_exit and self._can_save():
+            if self.settings.persistence.save_on_exit and self._can_save():
                 self._save_latest()
             self.loop.batch.close()
 

@@ -19,8 +19,8 @@ import uvicorn
 from service import heap
 from service.core.access import redact
 from service.core.process.stopping import StopSignals
-from service.core.settings import Settings
 from service.runtime import Runtime
+from service.settings import Settings
 
 GOING_AWAY_S = 1.0  # how long closing the streams may hold up the stop
 
@@ -69,19 +69,21 @@ def serve_until_stopped(app: object, runtime: Runtime, settings: Settings) -> li
     heap.keep_large_blocks()  # big camera messages and frames: no page faults per message
     config = uvicorn.Config(
         app,  # type: ignore[arg-type]
-        host=settings.host,
-        port=settings.port,
-        log_level=settings.log_level,
+        host=settings.server.host,
+        port=settings.server.port,
+        log_level=settings.server.log_level,
         ws_max_size=1 << 20,
         # Browsers offer permessage-deflate on every socket; deflating binary frames for each
         # viewer was the largest server cost of many viewers (bench section 9).
-        ws_per_message_deflate=settings.ws_compression,
+        ws_per_message_deflate=settings.server.ws_compression,
         timeout_graceful_shutdown=3,
     )
     # uvicorn prints paths with their query: a socket's ?token= or the page's ?lease= (after
     # Config, which sets its loggers up).
     redact.install("", "uvicorn", "uvicorn.access", "uvicorn.error")
-    if settings.ray == "local":  # a private instance: it goes with us, even on a second signal
+    if (
+        settings.engine.ray == "local"
+    ):  # a private instance: it goes with us, even on a second signal
         from service.engines import ray_local
 
         _Server(config, runtime.going_away, ray_local.kill_local_instance).run()

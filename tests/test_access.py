@@ -14,13 +14,13 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from service.core.access import policy as access
-from service.core.settings import Settings
+from service.core.access.settings import AccessSettings
 
 TOKEN = "s3cret-token"
 
 
-def settings(**kw) -> Settings:
-    return Settings(**kw)
+def settings(**kw) -> AccessSettings:
+    return AccessSettings(**kw)
 
 
 # --------------------------------------------------------------------------- the policy alone

@@ -84,7 +84,7 @@ def test_an_engine_in_its_own_process_serves_commands_pictures_and_survives_a_ki
 
 def test_cameras_on_the_engines_own_device_keep_the_engine_in_the_server():
     """`--camera-device` naming the engine's device is no reason to move the engine."""
-    from service.core.settings import Settings
+    from service.settings import Settings
 
     assert not Settings(camera_device="cpu").engine_apart()
     assert Settings(engine_worker=True).engine_apart()

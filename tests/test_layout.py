@@ -13,10 +13,12 @@ from pathlib import Path
 
 import pytest
 
-from service.core.settings import Settings
 from service.core.sim.batch import Batch, Renderable, Restorable, Supervised
+from service.core.sim.settings import SimSettings
 from service.core.surface import Routed, Surface
+from service.settings import Settings
 from service.surfaces.registry import REGISTRY, build_surfaces
+from service.surfaces.ros.settings import Ros2Settings
 from tests import ros2_judge
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -85,7 +87,7 @@ def test_the_registry_builds_what_the_settings_ask_for(monkeypatch: pytest.Monke
     full = build_surfaces(
         Settings(worlds=4, foxglove=True, ros2_worlds="0-1", camera_record=Path("c.mcap"), **ros)
     )
-    wanted = [name for name, _ in REGISTRY if judge or name != "ros2"]
+    wanted = [e.name for e in REGISTRY if judge or e.name != "ros2"]
     assert [s.name for s in full] == wanted
     for surface in full:
         assert isinstance(surface, Surface)
@@ -96,7 +98,10 @@ def test_the_registry_builds_what_the_settings_ask_for(monkeypatch: pytest.Monke
 
 def test_a_bad_world_list_is_refused_before_anything_is_built() -> None:
     with pytest.raises(ValueError, match="ros2_worlds"):
-        build_surfaces(Settings.model_construct(worlds=4, ros2_worlds="9", ros2_rate=60.0))
+        unchecked = Settings.model_construct(
+            sim=SimSettings(worlds=4), ros2=Ros2Settings(worlds="9")
+        )
+        build_surfaces(unchecked)
 
 
 def test_engines_declare_their_capabilities() -> None:

@@ -12,8 +12,8 @@ import pytest
 
 from service.core.access.callers import Caller, Forbidden, Gate
 from service.core.access.leases import LeaseBook, digest
+from service.core.access.settings import AccessSettings
 from service.core.errors import BadCommand, Conflict, Unavailable
-from service.core.settings import Settings
 
 
 class Resets:
@@ -114,7 +114,7 @@ def test_an_ending_lease_stops_working_then_resets_then_frees() -> None:
 def test_the_gate_checks_worlds_for_each_kind_of_caller() -> None:
     b, _ = book(4)
     lease, _ = b.grant(worlds=[2], ttl_s=60)
-    s = Settings(token="admin", leases="optional")
+    s = AccessSettings(token="admin", leases="optional")
     gate = Gate(s, b, 4, lambda: _Always())
     holder, anyone = Caller("lease", lease.id), Caller("open")
     gate.check(holder, [2], "ws")
@@ -132,7 +132,7 @@ def test_the_gate_checks_worlds_for_each_kind_of_caller() -> None:
     b.release(lease.id)
     with pytest.raises(Forbidden, match="has ended"):
         gate.check(holder, [2], "ws")
-    required = Gate(Settings(token="admin", leases="required"), b, 4, lambda: _Always())
+    required = Gate(AccessSettings(token="admin", leases="required"), b, 4, lambda: _Always())
     with pytest.raises(Forbidden, match="need a lease"):
         required.check(anyone, [0], "http")
     b.stop()
@@ -151,7 +151,7 @@ def test_a_lease_has_one_rate_limit_over_all_its_connections() -> None:
 
     b, _ = book(2)
     lease, _ = b.grant(count=1, ttl_s=60)
-    gate = Gate(Settings(leases="optional"), b, 2, lambda: RateLimiter(1.0, 2))
+    gate = Gate(AccessSettings(leases="optional"), b, 2, lambda: RateLimiter(1.0, 2))
     holder = Caller("lease", lease.id)
     gate.check(holder, [0], "ws")  # one connection
     gate.check(holder, [0], "http")  # another: the same bucket

@@ -15,9 +15,9 @@ from mcap.reader import make_reader
 
 from clients.testing import stop
 from service.core.errors import Conflict
-from service.core.settings import Settings
 from service.persistence.snapshots import decode_state, encode_state, read_header
 from service.runtime import Runtime
+from service.settings import Settings
 
 NWORLD = 4
 

@@ -24,10 +24,11 @@ from service.core.commands.trajectory import (
 )
 from service.core.commands.trajectory.table import TrajectoryTable
 from service.core.errors import BadCommand
-from service.core.settings import Settings
 from service.core.sim.loop import SimLoop
+from service.core.sim.settings import SimSettings
 from service.core.sim.types import Mode
 from service.engines.choice import build_batch
+from service.engines.settings import EngineSettings
 from tests.conftest import HOME, JOINTS, SPEC
 
 ARM = JOINTS[:6]
@@ -59,7 +60,7 @@ def stepped(ticks: int, loop: SimLoop) -> None:
 @pytest.fixture(scope="module", params=["warp", "mujoco"])
 def engine(request: pytest.FixtureRequest) -> Iterator[tuple[SimLoop, Control]]:
     # the engine `serve --engine X --shards 1` runs: one process, one thread
-    batch = build_batch(Settings(engine=request.param, worlds=4, shards=1))
+    batch = build_batch(EngineSettings(kind=request.param, shards=1), SimSettings(worlds=4))
     loop = SimLoop(batch, Mode.PAUSED)
     control = Control(loop)
     loop.start()

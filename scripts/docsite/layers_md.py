@@ -23,9 +23,17 @@ def import_graph() -> ModuleType:
     return module
 
 
+def _path(prefix: str) -> Path:
+    """The file that speaks for a layer: a package's `__init__.py`, or a module ranked alone
+    (`service.core.metrics`) itself."""
+    if prefix in DOC_OF:
+        return ROOT / DOC_OF[prefix]
+    package = ROOT / prefix.replace(".", "/") / "__init__.py"
+    return package if package.exists() else package.parent.with_suffix(".py")
+
+
 def _docstring(package: str) -> str:
-    path = ROOT / DOC_OF.get(package, package.replace(".", "/") + "/__init__.py")
-    return ast.get_docstring(ast.parse(path.read_text())) or ""
+    return ast.get_docstring(ast.parse(_path(package).read_text())) or ""
 
 
 def _paragraphs(text: str) -> list[str]:
@@ -44,9 +52,9 @@ def render() -> str:
         may = found.group(1) if found else ""
         what = re.sub(r"\s*May import.*", "", paras[0]) if paras else ""
         folder = (
-            "`service/` (api/, app, runtime, serving, cli)"
+            "`service/` (api/, app, runtime, serving, settings, cli)"
             if prefix == "service"
-            else (f"`{prefix.replace('.', '/')}/`")
+            else f"`{_path(prefix).relative_to(ROOT).as_posix().removesuffix('__init__.py')}`"
         )
         lines.append(f"| {rank} | {folder} | {what} | {may} |")
     return "\n".join(lines)

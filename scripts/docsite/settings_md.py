@@ -1,12 +1,15 @@
-"""Settings and ARMFLEET_* environment variables as Markdown, from the pydantic Settings model.
+"""Settings and ARMFLEET_* environment variables as Markdown, from the pydantic settings models.
 
-Why from the model: the variable names, types, defaults, limits and descriptions are those the
-service validates at start, and `armfleet serve`'s options are built from the same fields.
+Why from the models: the variable names, types, defaults, limits and descriptions are those the
+service validates at start, and `armfleet serve`'s options are built from the same fields. The
+fields live in sections beside their owners (service/settings.py says which); users type flat
+names, so the table is flat, with the section and the module each field is read from.
 """
 
 from __future__ import annotations
 
 import enum
+import inspect
 import re
 from typing import Any
 
@@ -48,25 +51,31 @@ def _cell(text: str) -> str:
 
 def render() -> str:
     from service.cli import app
-    from service.core.settings import Settings
+    from service.settings import ENV_PREFIX, Settings, flat_fields
 
     serve = next(
         c for c in app.registered_commands if c.callback and c.callback.__name__ == "serve"
     )
-    options = set(serve.callback.__annotations__) if serve.callback else set()
-    prefix = Settings.model_config.get("env_prefix", "")
+    # serve's options are its signature's parameters (cli._serve_signature), not annotations
+    options = set(inspect.signature(serve.callback).parameters) if serve.callback else set()
+    prefix = ENV_PREFIX
     lines = [
-        "Generated from the settings model (`service/core/settings.py`). Every field is read "
-        f"from an environment variable `{prefix}NAME`; an `armfleet serve` option the user "
-        "typed wins over the variable, which wins over the default.",
+        "Generated from the settings models (the sections of `service/settings.py`, each "
+        "beside its owner; the table says where). Every field is read from an environment "
+        f"variable `{prefix}NAME`; an `armfleet serve` option the user typed wins over the "
+        "variable, which wins over the default. In code a field is `settings.SECTION.FIELD` "
+        "(the column *in code*).",
         "",
-        "| variable | `serve` option | type | default | limits | what |",
-        "|---|---|---|---|---|---|",
+        "| variable | `serve` option | in code | type | default | limits | what |",
+        "|---|---|---|---|---|---|---|",
     ]
-    for name, field in Settings.model_fields.items():
+    for name, (section, attr, field) in flat_fields().items():
         option = f"`--{name.replace('_', '-')}`" if name in options else "–"
+        model = Settings.model_fields[section].annotation
+        where = f"{model.__module__}.{model.__name__}" if model is not None else section
         lines.append(
-            f"| `{prefix}{name.upper()}` | {option} | `{_type(field.annotation)}` "
+            f"| `{prefix}{name.upper()}` | {option} | `{section}.{attr}` "
+            f"<br><small>`{where}`</small> | `{_type(field.annotation)}` "
             f"| `{_default(field.default)}` | {_limits(field)} | {_cell(field.description or '')} |"
         )
     return "\n".join(lines)

@@ -64,7 +64,7 @@ async def camera_socket(
     so that a bad one closes the socket with 1008 and a reason naming it and its limit (a
     check in the route's signature would refuse the handshake itself, with a bare 403)."""
     runtime = ws.app.state.runtime
-    grant = access.check_websocket(runtime.settings, ws)
+    grant = access.check_websocket(runtime.settings.access, ws)
     feed: CameraFeed | None = runtime.cameras
     await ws.accept(subprotocol=grant.subprotocol)
     if not grant.read:

@@ -29,7 +29,7 @@ LeaseId = Annotated[str, Path(description="the lease's id", max_length=64)]
 
 async def get_book(runtime: Annotated[Runtime, Depends(get_runtime)]) -> LeaseBook:
     if runtime.leases is None:
-        if runtime.settings.leases == "off":
+        if runtime.settings.access.leases == "off":
             raise NotFound("leases are off on this service (armfleet serve --leases optional)")
         raise Unavailable(runtime.error or "simulation is starting; see /readyz")
     return runtime.leases
@@ -83,7 +83,7 @@ async def grant(book: Book, body: LeaseRequest) -> LeaseReply:
 )
 async def list_leases(book: Book, request: Request) -> LeaseList:
     caller = _caller(request)
-    if caller is None and request.app.state.runtime.settings.token:
+    if caller is None and request.app.state.runtime.settings.access.token:
         raise Forbidden("listing leases needs the administrator's token or a lease's")
     own = caller.lease_id if caller is not None and caller.kind == "lease" else None
     views = book.views(own) if own else book.views()

@@ -35,7 +35,7 @@ async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingSta
     path = runtime.persistence.recordings_dir / f"{body.name}.mcap"
     # Opening and starting write the file's beginning before answering: a file that cannot be
     # written is a 507 naming the cause, never an "active" recording that is not.
-    queue_items = runtime.settings.record_queue
+    queue_items = runtime.settings.persistence.record_queue
     recorder = await asyncio.to_thread(Recorder, path, body.worlds, body.rate, queue_items)
     # Conflict while one runs; waits for a tick boundary (off the event loop).
     await asyncio.to_thread(runtime.persistence.begin, recorder)

@@ -232,7 +232,7 @@ async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
 
 def _grant(ws: WebSocket) -> access.Grant:
     runtime = ws.app.state.runtime
-    return access.check_websocket(runtime.settings, ws, runtime.leases)
+    return access.check_websocket(runtime.settings.access, ws, runtime.leases)
 
 
 async def _serve(
@@ -249,7 +249,9 @@ async def _serve(
     built whole here with the socket's closer, and its commands."""
     runtime = ws.app.state.runtime
     grant = _grant(ws)
-    limiter = access.RateLimiter(runtime.settings.command_rate, runtime.settings.command_burst)
+    limiter = access.RateLimiter(
+        runtime.settings.access.command_rate, runtime.settings.access.command_burst
+    )
     metrics = runtime.metrics
     control = control.acting_for(grant.caller)  # each command checked for its worlds
     await ws.accept(subprotocol=grant.subprotocol)

@@ -7,15 +7,18 @@ Rooms, lowest first; a room may import the rooms below it, never one above
 - `process/`: the service's process: who stops on SIGINT/SIGTERM, a ROS shell's PYTHONPATH.
 - `sim/`: the simulation: domain types, the engine protocol (`batch`), the robot and physics
   read from the MJCF, the scene, the entity table, the loop and its command table, the
-  JointState rule and the target arithmetic the loop applies.
+  JointState rule and the target arithmetic the loop applies; its settings (`sim/settings`).
 - `streams/`: state out to sockets: the hub, frames and their wire forms.
 - `commands/`: one class per command kind with its own request body, `Control` (the one door),
   trajectories.
-- `cameras/`: which cameras the scene has, pictures on request, their wire form and clocks.
-- `access/`: who may read and command: tokens, leases, the middlewares, the redacting filter.
+- `cameras/`: which cameras the scene has, pictures on request, their wire form and clocks;
+  their settings (`cameras/settings`).
+- `access/`: who may read and command: tokens, leases, the middlewares, the redacting filter;
+  their settings (`access/settings`).
 - `contract/`: the HTTP contract's reply models and the OpenAPI fit.
-- `settings`, `metrics`, `surface` (flat, on top): what the service is asked to be, what it
-  counts, and the plug-in point of surfaces.
+- `metrics`, `surface` (flat, on top): what the service counts, and the plug-in point of
+  surfaces (what a surface is built from and started with). The service's settings as a whole
+  are service/settings.py: their sections live beside their owners, some above the core.
 
 May import: the standard library, third-party packages, `mjcf` and the client's public
 modules (`clients.models`, `clients.wire`: the wire's own description); never engines,

@@ -5,7 +5,7 @@ recording together), snapshot files (`snapshots`) and the batch header a state m
 (`provenance`), MCAP recordings (`recorder` writes one off the sim thread, `mcap_log` is the
 layout) and `armfleet replay` (`replay`, which gives its recorder the same `SurfaceContext` a
 service would), and files opened for writing so that failures name their cause and a stuck
-reader cannot hang a writer (`storage`).
+reader cannot hang a writer (`storage`), and what persistence is asked to keep (`settings`).
 
 May import: `service.core` and `service.engines`; never surfaces, api or the app.
 """

@@ -27,11 +27,11 @@ from mcap.records import Attachment, Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 
 from service.core.access.policy import ClientSlots
+from service.core.access.settings import AccessSettings
 from service.core.commands.base import REPLAY
 from service.core.commands.control import Control
 from service.core.commands.registry import BY_KIND
 from service.core.metrics import Metrics
-from service.core.settings import Settings
 from service.core.sim.loop import SimLoop
 from service.core.sim.types import BatchState, Mode
 from service.core.surface import SurfaceContext
@@ -260,8 +260,7 @@ def replay_recording(
 def _context(loop: SimLoop, control: Control) -> SurfaceContext:
     """The context a surface gets in a service, for the recorder that writes the replayed run:
     the same loop and control; no sockets (no hub, no clients), metrics nobody reads."""
-    settings = Settings.model_construct(worlds=loop.batch.nworld, mode=Mode.PAUSED)
-    return SurfaceContext(loop, control, None, settings, ClientSlots(0), Metrics())
+    return SurfaceContext(loop, control, None, AccessSettings(), ClientSlots(0), Metrics())
 
 
 def _replay_segment(

@@ -14,9 +14,9 @@ import logging
 import threading
 
 from service.core.errors import ArmfleetError, Conflict, Unavailable
-from service.core.settings import Settings
 from service.core.surface import SurfaceContext
 from service.persistence.recorder import Recorder
+from service.persistence.settings import PersistenceSettings
 from service.persistence.snapshots import SnapshotStore
 
 log = logging.getLogger("armfleet.recorder")
@@ -25,8 +25,7 @@ log = logging.getLogger("armfleet.recorder")
 class Persistence:
     """Snapshots and the recording of one service (it records only when asked to)."""
 
-    def __init__(self, settings: Settings) -> None:
-        self._settings = settings
+    def __init__(self, settings: PersistenceSettings) -> None:
         self.snapshots = SnapshotStore(settings.data_dir)
         self.recordings_dir = self.snapshots.dir.parent / "recordings"
         self._ctx: SurfaceContext | None = None

@@ -1,75 +1,113 @@
 """Which surfaces a service has, and the settings that ask for each: the one list to extend.
 
 Adding a surface is one module (a class with `name`, `start(ctx)` and `stop()`, see
-core/surface.py) plus one entry in `REGISTRY` below, and its options as fields of
-core/settings.py (each an `ARMFLEET_*` variable; an `armfleet serve` option is one `_opt` line
-in cli.py). The registry builds them in order, each builder
-seeing the surfaces built before it (rosbridge reports the ROS 2 node's process); the runtime
-starts them in that order once the loop runs and stops them in reverse. A builder imports its
-surface only when the settings ask for it, so an unused surface costs nothing (no ROS 2 node,
-no Foxglove SDK).
+core/surface.py), its settings model beside it (each field an `ARMFLEET_*` variable and an
+`armfleet serve` option once it is a section of service/settings.py's `Settings`), and one
+`Entry` in `REGISTRY` below: (name, module, settings model, build). A builder gets its own
+settings and the `ServiceFacts` (core/surface.py: where the service listens, the worlds,
+access, the camera rate), never the whole settings, and imports its module only when its
+settings ask for it, so an unused surface costs nothing (no ROS 2 node, no Foxglove SDK).
+The registry builds them in order, each builder seeing the surfaces built before it
+(rosbridge reports the ROS 2 node's process); the runtime starts them in that order once the
+loop runs and stops them in reverse.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Protocol, TypeVar
 
-from service.core.settings import Settings
-from service.core.surface import Routed, Surface, SurfaceContext
+from pydantic import BaseModel
+
+from service.core.surface import Routed, ServiceFacts, Surface, SurfaceContext
+from service.surfaces.foxglove.settings import CameraRecordSettings, FoxgloveSettings
+from service.surfaces.ros.settings import Ros2Settings
 
 log = logging.getLogger("armfleet")
+M = TypeVar("M", bound=BaseModel)
 
-Builder = Callable[[Settings, Mapping[str, Surface]], Surface | None]
+
+class Sections(Protocol):
+    """The service's settings as the registry reads them (service/settings.py's `Settings`,
+    which ranks above surfaces: so the registry names what it uses, not that class)."""
+
+    def section(self, model: type[M]) -> M: ...
+
+    def facts(self) -> ServiceFacts: ...
 
 
-def _foxglove(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
-    if not s.foxglove:
+# build(its settings, the facts, the surfaces built before it) -> the surface, or None where
+# its settings do not ask for it
+Build = Callable[[Any, ServiceFacts, Mapping[str, Surface]], Surface | None]
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One surface: its `name`, the module that holds its class (the builder imports it only
+    when the settings ask for the surface; `build_surfaces` checks that it did), the settings
+    model it is built from, and how."""
+
+    name: str
+    module: str
+    settings: type[BaseModel]
+    build: Build
+
+
+def _foxglove(
+    own: FoxgloveSettings, facts: ServiceFacts, built: Mapping[str, Surface]
+) -> Surface | None:
+    if not own.enabled:
         return None
-    from service.surfaces.foxglove_live import FoxgloveLive
+    from service.surfaces.foxglove.live import FoxgloveLive
 
     # A client presents its token (the administrator's or a lease's) as a parameter.
     return FoxgloveLive(
-        s.host,
-        s.foxglove_port,
-        s.foxglove_worlds,
-        s.foxglove_rate,
-        cameras=(s.foxglove_cameras, s.camera_rate),
-        settings=s,
+        facts.host,
+        own.port,
+        own.worlds,
+        own.rate,
+        cameras=(own.cameras, facts.camera_rate),
+        access=facts.access,
     )
 
 
-def _camera_recording(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
-    if s.camera_record is None:
+def _camera_recording(
+    own: CameraRecordSettings, facts: ServiceFacts, built: Mapping[str, Surface]
+) -> Surface | None:
+    if own.path is None:
         return None
-    from service.surfaces.camera_recording import CameraRecording
+    from service.surfaces.foxglove.camera_recording import CameraRecording
 
-    return CameraRecording(
-        s.camera_record, s.camera_record_worlds, s.camera_record_cameras, s.camera_rate
-    )
+    return CameraRecording(own.path, own.worlds, own.cameras, facts.camera_rate)
 
 
-def _ros2(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
-    if not s.ros2:
+def _ros2(own: Ros2Settings, facts: ServiceFacts, built: Mapping[str, Surface]) -> Surface | None:
+    if not own.enabled:
         return None
     from service.surfaces.ros.node_process import RosNode
 
-    return RosNode(s)  # ValueError (one line) where no ROS 2 is found
+    return RosNode(own, facts)  # ValueError (one line) where no ROS 2 is found
 
 
-def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
+def _rosbridge(own: Ros2Settings, facts: ServiceFacts, built: Mapping[str, Surface]) -> Surface:
     from service.surfaces.ros.rosbridge_surface import RosbridgeSurface
 
-    return RosbridgeSurface(s, built.get("ros2"))  # always on; reports the ROS 2 node too
+    return RosbridgeSurface(own, facts, built.get("ros2"))  # always on; reports the ROS 2 node
 
 
-# (name, builder), in start order. The names are the surfaces' `name`s.
-REGISTRY: tuple[tuple[str, Builder], ...] = (
-    ("foxglove", _foxglove),
-    ("camera_recording", _camera_recording),
-    ("ros2", _ros2),
-    ("rosbridge", _rosbridge),
+# In start order. The names are the surfaces' `name`s.
+REGISTRY: tuple[Entry, ...] = (
+    Entry("foxglove", "service.surfaces.foxglove.live", FoxgloveSettings, _foxglove),
+    Entry(
+        "camera_recording",
+        "service.surfaces.foxglove.camera_recording",
+        CameraRecordSettings,
+        _camera_recording,
+    ),
+    Entry("ros2", "service.surfaces.ros.node_process", Ros2Settings, _ros2),
+    Entry("rosbridge", "service.surfaces.ros.rosbridge_surface", Ros2Settings, _rosbridge),
 )
 
 
@@ -99,11 +137,13 @@ class SurfaceSet:
                 log.exception("surface %s failed to stop", surface.name)
 
 
-def build_surfaces(settings: Settings) -> SurfaceSet:
+def build_surfaces(settings: Sections) -> SurfaceSet:
     """The surfaces the settings ask for (ValueError where their options are invalid)."""
+    facts = settings.facts()
     built: dict[str, Surface] = {}
-    for name, build in REGISTRY:
-        surface = build(settings, built)
+    for entry in REGISTRY:
+        surface = entry.build(settings.section(entry.settings), facts, built)
         if surface is not None:
-            built[name] = surface
+            assert type(surface).__module__ == entry.module, (entry.name, type(surface))
+            built[entry.name] = surface
     return SurfaceSet(list(built.values()))

@@ -24,9 +24,9 @@ import threading
 import time
 from typing import Any
 
-from service.core.settings import Settings
-from service.core.surface import SurfaceContext
+from service.core.surface import ServiceFacts, SurfaceContext
 from service.surfaces.ros.node_env import NodeEnv, node_env
+from service.surfaces.ros.settings import Ros2Settings
 
 log = logging.getLogger("armfleet.ros")
 
@@ -46,9 +46,11 @@ class RosNode:
 
     name = "ros2"
 
-    def __init__(self, settings: Settings, prepared: NodeEnv | None = None) -> None:
-        self.settings = settings
-        self.node = prepared or node_env(settings.ros2_python)
+    def __init__(
+        self, settings: Ros2Settings, facts: ServiceFacts, prepared: NodeEnv | None = None
+    ) -> None:
+        self.settings, self.facts = settings, facts
+        self.node = prepared or node_env(settings.python)
         self.process: subprocess.Popen[bytes] | None = None
         self.restarts = 0
         self.last_exit: int | None = None
@@ -57,13 +59,11 @@ class RosNode:
         self._thread: threading.Thread | None = None
 
     def command(self) -> list[str]:
-        s = self.settings
-        host = "127.0.0.1" if s.host in ("0.0.0.0", "::", "") else s.host
-        url = f"http://{host}:{s.port}"
-        params = [f"url:={url}", f"worlds:={s.ros2_worlds}", f"rate:={float(s.ros2_rate)}"]
-        cameras = ",".join(c.strip() for c in s.ros2_cameras.split(",") if c.strip())
+        s, facts = self.settings, self.facts
+        params = [f"url:={facts.url}", f"worlds:={s.worlds}", f"rate:={float(s.rate)}"]
+        cameras = ",".join(c.strip() for c in s.cameras.split(",") if c.strip())
         if cameras:
-            params += [f"cameras:={cameras}", f"camera_rate:={float(s.camera_rate)}"]
+            params += [f"cameras:={cameras}", f"camera_rate:={float(facts.camera_rate)}"]
         args = [self.node.python, "-m", "armfleet_ros.node", "--ros-args"]
         for p in params:
             args += ["-p", p]
@@ -79,8 +79,8 @@ class RosNode:
         """The node's environment: the ROS one, and the token it presents (or none at all)."""
         env = dict(self.node.env)
         env.pop(TOKEN_ENV, None)
-        if self.settings.token:
-            env[TOKEN_ENV] = self.settings.token
+        if self.facts.access.token:
+            env[TOKEN_ENV] = self.facts.access.token
         return env
 
     def _spawn(self) -> None:

@@ -95,7 +95,7 @@ class Session:
         self.ctx = ctx
         self.loop = ctx.loop
         self.hub: StreamHub = ctx.hub
-        settings = ctx.settings
+        settings = ctx.access
         # One access policy for every surface (core/access/policy.py): may it publish, how fast;
         # which worlds: Control checks each command for this socket's caller (access/callers.py).
         self.grant = access.check_websocket(settings, ws, book_of(ctx.control))

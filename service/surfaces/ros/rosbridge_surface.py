@@ -20,11 +20,11 @@ from pydantic import BaseModel, Field, StrictBool
 
 from service.core.access import policy as access
 from service.core.commands.fields import example_config, json_int
-from service.core.settings import Settings
 from service.core.sim.worlds import world_list
-from service.core.surface import SurfaceContext
+from service.core.surface import ServiceFacts, SurfaceContext
 from service.surfaces.ros import description
 from service.surfaces.ros.rosbridge import RosbridgeServer, Session
+from service.surfaces.ros.settings import Ros2Settings
 from service.surfaces.ros.topics import TopicMap
 
 if TYPE_CHECKING:
@@ -70,10 +70,12 @@ class RosbridgeSurface:
 
     name = "rosbridge"
 
-    def __init__(self, settings: Settings, node: Surface | None = None) -> None:
-        worlds = world_list(settings.ros2_worlds, settings.worlds, "ros2_worlds")
-        self.server = RosbridgeServer(TopicMap(worlds), settings.ros2_rate)
-        self.settings = settings
+    def __init__(
+        self, settings: Ros2Settings, facts: ServiceFacts, node: Surface | None = None
+    ) -> None:
+        worlds = world_list(settings.worlds, facts.worlds, "ros2_worlds")
+        self.server = RosbridgeServer(TopicMap(worlds), settings.rate)
+        self.access = facts.access
         self.node = node  # the ROS 2 node's supervisor (`--ros2`), if any
         self.ctx: SurfaceContext | None = None
         self.node_report: dict[str, Any] | None = None
@@ -128,7 +130,7 @@ class RosbridgeSurface:
         return self.ctx.loop
 
     async def _serve(self, ws: WebSocket) -> None:
-        await ws.accept(subprotocol=access.check_websocket(self.settings, ws).subprotocol)
+        await ws.accept(subprotocol=access.check_websocket(self.access, ws).subprotocol)
         ctx = self.ctx
         if ctx is None or ctx.hub is None:
             await ws.close(code=1013, reason="simulation is starting")

@@ -49,13 +49,13 @@ from foxglove.messages import (
 from service.core.access.callers import book_of
 from service.core.errors import ArmfleetError
 from service.core.sim.worlds import pick_worlds
-from service.surfaces.foxglove_callers import TOKEN_PARAMETER, ClientCallers
-from service.surfaces.foxglove_scene import geom_entities, quat_msg, vec_msg, world_offset
+from service.surfaces.foxglove.callers import TOKEN_PARAMETER, ClientCallers
+from service.surfaces.foxglove.scene import geom_entities, quat_msg, vec_msg, world_offset
 
 if TYPE_CHECKING:
     from foxglove.websocket import ChannelView, Client, ClientChannel
 
-    from service.core.settings import Settings
+    from service.core.access.settings import AccessSettings
     from service.core.sim.types import Snapshot
     from service.core.surface import SurfaceContext
 
@@ -97,13 +97,12 @@ class FoxgloveLive:
         rate: float = 30.0,
         commands: bool = True,
         cameras: tuple[str, float] = ("", 10.0),  # camera names, images a second
-        settings: Settings | None = None,
+        access: AccessSettings | None = None,  # None: anyone may command (tests)
     ):
         self._host, self._port, self._worlds_spec = host, port, worlds
         self._cameras, self._camera_topics = cameras, None
         self._commands = commands
-        self._settings = settings
-        self._callers = None if settings is None else ClientCallers(settings)
+        self._callers = None if access is None else ClientCallers(access)
         self._period = 1.0 / rate
         self._stop = threading.Event()
         self._scene_wanted = threading.Event()
@@ -135,7 +134,7 @@ class FoxgloveLive:
         self._scene = SceneUpdateChannel("/scene", context=self._ctx)
         names = [c.strip() for c in self._cameras[0].split(",") if c.strip()]
         if names and ctx.cameras is not None:  # camera_topics.py: images + calibrations
-            from service.surfaces.camera_topics import CameraTopics
+            from service.surfaces.foxglove.camera_topics import CameraTopics
 
             self._camera_topics = CameraTopics(
                 self._ctx, ctx.cameras, self.worlds, names, self._cameras[1], self._hz

@@ -1,6 +1,6 @@
 """What Foxglove draws of a world: its geoms as scene entities in their bodies' frames, and where
 each shown world sits in the shared `world` frame. Pure functions of the model, for the live
-server (foxglove_live.py)."""
+server (live.py)."""
 
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ import foxglove
 
 from service.core.sim.worlds import world_list
 from service.core.surface import SurfaceContext
-from service.surfaces.camera_topics import CameraTopics
+from service.surfaces.foxglove.camera_topics import CameraTopics
 
 log = logging.getLogger("armfleet.cameras")
 

@@ -14,7 +14,7 @@ from collections import OrderedDict
 from service.core.access.callers import BadToken, Caller, identify
 from service.core.access.leases import LeaseBook
 from service.core.access.policy import RateLimiter
-from service.core.settings import Settings
+from service.core.access.settings import AccessSettings
 
 TOKEN_PARAMETER = "armfleet.token"
 _MAX_KEPT = 1024  # clients remembered (the SDK does not tell when one leaves): the oldest go
@@ -24,14 +24,14 @@ class ClientCallers:
     """client id → (its caller, its rate limiter); thread-safe enough for the SDK's threads
     (one dict operation at a time)."""
 
-    def __init__(self, settings: Settings) -> None:
-        self.settings = settings
+    def __init__(self, access: AccessSettings) -> None:
+        self.access = access
         self._known: OrderedDict[int, tuple[Caller, RateLimiter]] = OrderedDict()
 
     def present(self, client_id: int, token: object, book: LeaseBook | None) -> None:
         """The client set `armfleet.token`; BadToken (it is then tokenless again) if wrong."""
         self._known.pop(client_id, None)
-        caller = identify(self.settings, book, token if isinstance(token, str) else None)
+        caller = identify(self.access, book, token if isinstance(token, str) else None)
         self._keep(client_id, caller)
 
     def of(self, client_id: int, book: LeaseBook | None) -> tuple[Caller, RateLimiter]:
@@ -40,7 +40,7 @@ class ClientCallers:
         if known is not None:
             return known
         try:
-            caller = identify(self.settings, book, None)
+            caller = identify(self.access, book, None)
         except BadToken as exc:
             raise BadToken(f"{exc.detail}: set the parameter {TOKEN_PARAMETER}") from None
         return self._keep(client_id, caller)
@@ -48,6 +48,6 @@ class ClientCallers:
     def _keep(self, client_id: int, caller: Caller) -> tuple[Caller, RateLimiter]:
         while len(self._known) >= _MAX_KEPT:
             self._known.popitem(last=False)
-        known = (caller, RateLimiter(self.settings.command_rate, self.settings.command_burst))
+        known = (caller, RateLimiter(self.access.command_rate, self.access.command_burst))
         self._known[client_id] = known
         return known

@@ -1,0 +1,38 @@
+"""What the simulation is asked to be: how many worlds, of which scene, at what rates, and how
+time advances. Why a model of its own: the engine and the loop read these and nothing else of
+the service's settings; the scene is checked here, before anything is built.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from service.core.sim.physics import DEFAULT_PHYSICS_DT
+from service.core.sim.scene_check import check_scene
+from service.core.sim.types import Mode
+
+
+class SimSettings(BaseModel):
+    """The simulation (`--worlds`, `--scene`, `--mode`, `--control-hz`, `--physics-dt`)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    worlds: int = Field(16, ge=1, le=1_048_576, description="number of parallel worlds")
+    scene: Path | None = Field(
+        None,
+        description="your cell's MJCF, which brings the arm in with <include "
+        'file="ur10e_2f140.xml"/> (default: the table and cube); checked before serving',
+    )
+    mode: Mode = Field(Mode.REALTIME, description="how time advances: realtime, fast or paused")
+    control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
+    physics_dt: float = Field(
+        DEFAULT_PHYSICS_DT, gt=0, le=0.01, description="approximate physics step [s]"
+    )
+
+    @model_validator(mode="after")
+    def _scene_can_be_served(self) -> SimSettings:
+        if self.scene is not None:
+            check_scene(self.scene)  # SceneError (a ValueError) says what is wrong
+        return self
