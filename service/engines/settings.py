@@ -10,7 +10,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, Field, model_validator
+
+from service.core.process.flat_names import BY_BOTH, flat
 
 
 def cuda_name(device: str) -> str:
@@ -21,12 +23,12 @@ def cuda_name(device: str) -> str:
 class EngineSettings(BaseModel):
     """The engine (`--engine`, `--device`, `--shards`, `--engine-worker`, `--ray`, ...)."""
 
-    model_config = ConfigDict(extra="forbid", validate_by_name=True, validate_by_alias=True)
+    model_config = BY_BOTH
 
-    kind: Literal["warp", "mujoco"] = Field(
+    kind: Literal["warp", "mujoco"] = flat(
+        "engine",
         "warp",
-        validation_alias="engine",
-        description="warp: MuJoCo Warp (CPU or GPU, the default); "
+        "warp: MuJoCo Warp (CPU or GPU, the default); "
         "mujoco: native MuJoCo on every CPU core (fastest on a CPU-only machine)",
     )
     device: str = Field("cpu", description="warp device: cpu, cuda or cuda:N")
@@ -36,10 +38,10 @@ class EngineSettings(BaseModel):
         le=256,
         description="warp: CPU worker processes (one per core), mujoco: threads; 0 = auto",
     )
-    worker: bool = Field(
+    worker: bool = flat(
+        "engine_worker",
         False,
-        validation_alias="engine_worker",
-        description="warp: step the engine in a worker process of its own (always so when "
+        "warp: step the engine in a worker process of its own (always so when "
         "--camera-device names another device); the server outlives an engine crash, and the "
         "engine is rebuilt from its last state copy",
     )

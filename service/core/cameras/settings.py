@@ -11,50 +11,50 @@ by the service's `Settings`, which holds both. A field's `validation_alias` is i
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, model_validator
+
+from service.core.process.flat_names import BY_BOTH, flat
 
 
 class CameraSettings(BaseModel):
     """The cameras (`--camera-size`, `--camera-outputs`, `--cameras`, `--camera-batch`, ...)."""
 
-    model_config = ConfigDict(extra="forbid", validate_by_name=True, validate_by_alias=True)
+    model_config = BY_BOTH
 
-    size: str = Field(
-        "128x96",
-        validation_alias="camera_size",
-        description="image size of every camera, WIDTHxHEIGHT (1..4096 a side)",
+    size: str = flat(
+        "camera_size", "128x96", "image size of every camera, WIDTHxHEIGHT (1..4096 a side)"
     )
-    outputs: str = Field(
+    outputs: str = flat(
+        "camera_outputs",
         "rgb,depth",
-        validation_alias="camera_outputs",
-        description="what cameras draw unless --cameras says otherwise: rgb, depth, seg",
+        "what cameras draw unless --cameras says otherwise: rgb, depth, seg",
     )
-    per_camera: str = Field(
+    per_camera: str = flat(
+        "cameras",
         "",
-        validation_alias="cameras",
-        description="per camera: NAME=WxH[:OUTPUTS] or NAME=off, comma-separated, e.g. "
+        "per camera: NAME=WxH[:OUTPUTS] or NAME=off, comma-separated, e.g. "
         "wrist=320x240:rgb+depth,overview=off (OUTPUTS joined by +)",
     )
-    batch: int = Field(
+    batch: int = flat(
+        "camera_batch",
         16,
+        "worlds one render draws at once (more are drawn in turn)",
         ge=1,
         le=65_536,
-        validation_alias="camera_batch",
-        description="worlds one render draws at once (more are drawn in turn)",
     )
-    device: str = Field(
+    device: str = flat(
+        "camera_device",
         "",
-        pattern=r"^(|cpu|cuda(:[0-9]+)?)$",
-        validation_alias="camera_device",
-        description="device the cameras draw on: cpu, cuda or cuda:N, e.g. a GPU of their own "
+        "device the cameras draw on: cpu, cuda or cuda:N, e.g. a GPU of their own "
         "beside the engine's (default: the engine's GPU; CPU engines: warp's CPU device)",
+        pattern=r"^(|cpu|cuda(:[0-9]+)?)$",
     )
-    rate: float = Field(
+    rate: float = flat(
+        "camera_rate",
         10.0,
+        "images a second per camera on Foxglove and in --camera-record",
         gt=0,
         le=60,
-        validation_alias="camera_rate",
-        description="images a second per camera on Foxglove and in --camera-record",
     )
 
     @model_validator(mode="after")

@@ -12,62 +12,36 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel
 
-_BY_BOTH = ConfigDict(extra="forbid", validate_by_name=True, validate_by_alias=True)
+from service.core.process.flat_names import BY_BOTH, flat
 
 
 class FoxgloveSettings(BaseModel):
     """Foxglove live (`--foxglove`, `--foxglove-port`, `--foxglove-worlds`, ...)."""
 
-    model_config = _BY_BOTH
+    model_config = BY_BOTH
 
-    enabled: bool = Field(
-        False, validation_alias="foxglove", description="serve Foxglove's WebSocket protocol"
+    enabled: bool = flat("foxglove", False, "serve Foxglove's WebSocket protocol")
+    port: int = flat("foxglove_port", 8765, "Foxglove WebSocket port", ge=0, le=65535)
+    worlds: str | None = flat(
+        "foxglove_worlds", None, "worlds shown in Foxglove, e.g. 0-3 (default: first 8)"
     )
-    port: int = Field(
-        8765,
-        ge=0,
-        le=65535,
-        validation_alias="foxglove_port",
-        description="Foxglove WebSocket port",
-    )
-    worlds: str | None = Field(
-        None,
-        validation_alias="foxglove_worlds",
-        description="worlds shown in Foxglove, e.g. 0-3 (default: first 8)",
-    )
-    rate: float = Field(
-        30.0,
-        gt=0,
-        le=240,
-        validation_alias="foxglove_rate",
-        description="Foxglove frames per second",
-    )
-    cameras: str = Field(
+    rate: float = flat("foxglove_rate", 30.0, "Foxglove frames per second", gt=0, le=240)
+    cameras: str = flat(
+        "foxglove_cameras",
         "",
-        validation_alias="foxglove_cameras",
-        description="cameras shown in Foxglove for --foxglove-worlds, e.g. wrist,overview",
+        "cameras shown in Foxglove for --foxglove-worlds, e.g. wrist,overview",
     )
 
 
 class CameraRecordSettings(BaseModel):
     """The camera recording (`--camera-record`, `--camera-record-cameras`, ...-worlds)."""
 
-    model_config = _BY_BOTH
+    model_config = BY_BOTH
 
-    path: Path | None = Field(
-        None,
-        validation_alias="camera_record",
-        description="record camera images (JPEG) and calibrations to this MCAP file",
+    path: Path | None = flat(
+        "camera_record", None, "record camera images (JPEG) and calibrations to this MCAP file"
     )
-    cameras: str = Field(
-        "wrist",
-        validation_alias="camera_record_cameras",
-        description="cameras --camera-record records",
-    )
-    worlds: str = Field(
-        "0",
-        validation_alias="camera_record_worlds",
-        description="worlds --camera-record records, e.g. 0-3",
-    )
+    cameras: str = flat("camera_record_cameras", "wrist", "cameras --camera-record records")
+    worlds: str = flat("camera_record_worlds", "0", "worlds --camera-record records, e.g. 0-3")

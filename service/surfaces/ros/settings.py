@@ -10,38 +10,36 @@ which holds both. A field's `validation_alias` is its flat name (`ARMFLEET_ROS2_
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel
+
+from service.core.process.flat_names import BY_BOTH, flat
 
 
 class Ros2Settings(BaseModel):
     """ROS 2 (`--ros2`, `--ros2-rate`, `--ros2-worlds`, `--ros2-python`, `--ros2-cameras`)."""
 
-    model_config = ConfigDict(extra="forbid", validate_by_name=True, validate_by_alias=True)
+    model_config = BY_BOTH
 
-    enabled: bool = Field(
-        False,
-        validation_alias="ros2",
-        description="run the armfleet_ros node on the sourced ROS 2 (a supervised child)",
+    enabled: bool = flat(
+        "ros2", False, "run the armfleet_ros node on the sourced ROS 2 (a supervised child)"
     )
-    rate: float = Field(
+    rate: float = flat(
+        "ros2_rate",
         60.0,
+        "/joint_states, /clock and /tf rate of the ROS 2 node and rosbridge [Hz]",
         gt=0,
         le=1000,
-        validation_alias="ros2_rate",
-        description="/joint_states, /clock and /tf rate of the ROS 2 node and rosbridge [Hz]",
     )
-    worlds: str = Field(
-        "",
-        validation_alias="ros2_worlds",
-        description="worlds with /world_N/ topics, e.g. 0-7 (world 0 always has /joint_*)",
+    worlds: str = flat(
+        "ros2_worlds", "", "worlds with /world_N/ topics, e.g. 0-7 (world 0 always has /joint_*)"
     )
-    python: str | None = Field(
+    python: str | None = flat(
+        "ros2_python",
         None,
-        validation_alias="ros2_python",
-        description="Python of the ROS 2 installation for --ros2 (default: the sourced one's)",
+        "Python of the ROS 2 installation for --ros2 (default: the sourced one's)",
     )
-    cameras: str = Field(
+    cameras: str = flat(
+        "ros2_cameras",
         "",
-        validation_alias="ros2_cameras",
-        description="cameras on the ROS 2 graph (sensor_msgs/Image + CameraInfo), e.g. wrist",
+        "cameras on the ROS 2 graph (sensor_msgs/Image + CameraInfo), e.g. wrist",
     )
