@@ -16,7 +16,7 @@ from fastapi import APIRouter, Body, Query
 from fastapi.responses import Response
 
 from service.api.deps import CommandWorld, Ctl, Loop, World
-from service.core.commands import entities, params, randomize
+from service.core.commands import entities, params, payload, randomize
 from service.core.commands.base import HTTP
 from service.core.commands.control import Control
 from service.core.commands.targets import BatchTargets, IncrementRequest, JointTargets
@@ -262,6 +262,15 @@ async def get_params(loop: Loop, world: World) -> Response:
 )
 async def put_params(control: Ctl, world: World, body: params.ParamValues) -> Response:
     return _written(control, params.SetParams, [{"world": world, "params": body.params}])
+
+
+@router.put(
+    "/worlds/{world}/payload",
+    response_model=params.ParamsAck,
+    summary="Set the payload the arm carries (mass, centre of gravity), as UR's set_payload",
+)
+async def put_payload(control: Ctl, world: World, body: payload.PayloadValues) -> Response:
+    return _written(control, payload.SetPayload, [{"world": world, **body.model_dump()}])
 
 
 @router.post(

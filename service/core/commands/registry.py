@@ -11,6 +11,7 @@ from __future__ import annotations
 from service.core.commands.base import Command
 from service.core.commands.entities import SetEntities
 from service.core.commands.params import SetParams
+from service.core.commands.payload import SetPayload
 from service.core.commands.randomize import Randomize
 from service.core.commands.targets import Increment, SetMany, SetTargets
 from service.core.commands.trajectory.commands import (
@@ -32,6 +33,7 @@ COMMANDS: tuple[type[Command], ...] = (
     ResumeTrajectory,
     SetEntities,
     SetParams,
+    SetPayload,
     Randomize,
 )
 
