@@ -4,17 +4,19 @@ Rooms, lowest first; a room may import the rooms below it, never one above
 (`scripts/import_graph.py` ranks them, `tests/test_layout.py` holds the floors):
 
 - `errors` (flat): domain errors, mapped to a status once, in app.py.
-- `process/`: the service's process: who stops on SIGINT/SIGTERM, a ROS shell's PYTHONPATH.
+- `process/`: the service's process: who stops on SIGINT/SIGTERM, a ROS shell's PYTHONPATH,
+  and how a settings section declares its flat ARMFLEET_* names (`flat_names`).
 - `sim/`: the simulation: domain types, the engine protocol (`batch`), the robot and physics
-  read from the MJCF, the scene, the entity table, the loop and its command table, the
-  JointState rule and the target arithmetic the loop applies; its settings (`sim/settings`).
-- `streams/`: state out to sockets: the hub, frames and their wire forms.
+  read from the MJCF, the scene, the entity table, the loop and its parts (command desk,
+  waiters, listeners, pace), the JointState rule and the target arithmetic the loop applies;
+  its settings (`sim/settings`).
+- `access/`: who may read and command: tokens, leases, the middlewares, the redacting filter;
+  their settings (`access/settings`).
+- `streams/`: state out to sockets: the hub, frame formats, frames and their wire forms.
 - `commands/`: one class per command kind with its own request body, `Control` (the one door),
   trajectories.
 - `cameras/`: which cameras the scene has, pictures on request, their wire form and clocks;
   their settings (`cameras/settings`).
-- `access/`: who may read and command: tokens, leases, the middlewares, the redacting filter;
-  their settings (`access/settings`).
 - `contract/`: the HTTP contract's reply models and the OpenAPI fit.
 - `metrics`, `surface` (flat, on top): what the service counts, and the plug-in point of
   surfaces (what a surface is built from and started with). The service's settings as a whole
