@@ -74,7 +74,7 @@ class TrajectoryActions:
             body = trajectory_body(
                 goal.trajectory, goal.path_tolerance, goal.goal_tolerance, goal.goal_time_tolerance
             )
-            started = self.owner.http._call(tj.start_call(self.world, body))
+            started = self.owner.http.call(tj.start_call(self.world, body))
         except BadMessage as exc:
             self.owner.bad.report("rejected_goal", where, exc.detail)
             return GoalResponse.REJECT
@@ -92,16 +92,16 @@ class TrajectoryActions:
         result = FollowJointTrajectory.Result()
         while True:
             if handle.is_cancel_requested:
-                status = http._call(tj.by_id_call(traj_id))
+                status = http.call(tj.by_id_call(traj_id))
                 if not status.done:
-                    http._call(tj.cancel_call(self.world))
-                    status = http._call(tj.by_id_call(traj_id, 2.0))
+                    http.call(tj.cancel_call(self.world))
+                    status = http.call(tj.by_id_call(traj_id, 2.0))
                 if status.reason == "cancelled" or not status.done:
                     handle.canceled()
                     result.error_string = "cancelled"
                     return result
             else:
-                status = http._call(tj.by_id_call(traj_id, 1.0 / FEEDBACK_HZ))
+                status = http.call(tj.by_id_call(traj_id, 1.0 / FEEDBACK_HZ))
             if status.done:
                 break
             if status.actual.size:

@@ -34,7 +34,7 @@ from armfleet_ros.params import param
 from armfleet_ros.parts import slices
 from armfleet_ros.world import WorldTopics
 from clients import ArmfleetClient
-from clients._http import Call
+from clients.calls import Call
 from clients.errors import ArmfleetError
 
 NODE_NAME = "armfleet"
@@ -67,8 +67,8 @@ class ArmfleetNode:
         self.joints = info.names
         self.tick_dt = 1.0 / info.control_hz
         self.worlds = parse_worlds(spec, info.nworld)
-        self.urdf = self.http._call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
-        self.frames = self.http._call(Call("GET", "/v1/ros/frames", lambda d: d))
+        self.urdf = self.http.call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
+        self.frames = self.http.call(Call("GET", "/v1/ros/frames", lambda d: d))
         self.tree = TfTree(self.frames)
         self.bad = Counter(log)
         self.accepted = 0
@@ -148,7 +148,7 @@ class ArmfleetNode:
             return
         self._reported, self._reported_at = body, now
         with contextlib.suppress(ArmfleetError):
-            self.http._call(Call("PUT", "/v1/ros/node", lambda d: d, json=body))
+            self.http.call(Call("PUT", "/v1/ros/node", lambda d: d, json=body))
 
     def _publish(self, batch: Any) -> None:
         """A state frame arrived (the link's thread; a catch-up: an executor thread): `/clock`,

@@ -34,10 +34,11 @@ from websockets.sync.client import connect
 
 from armfleet_ros import auth, entities
 from armfleet_ros.convert import stamp
-from armfleet_ros.link import POSE_MAGIC, Poses
+from armfleet_ros.link import Poses
 from armfleet_ros.params import param
-from clients import _stream
+from clients import stream
 from clients.errors import ArmfleetError, Conflict
+from clients.wire import POSE_MAGIC
 
 F = SimulatorFeatures
 FEATURES = [
@@ -217,11 +218,11 @@ class WorldSim:
 
     def _poses(self) -> Poses:
         """This world's body poses now: one frame of the pose socket."""
-        url = _stream.ws_url(self.owner.url, None).replace("/v1/ws", "/v1/ws/view", 1)
+        url = stream.ws_url(self.owner.url, None).replace("/v1/ws", "/v1/ws/view", 1)
         url += ("&" if "?" in url else "?") + f"worlds={self.world}"
         with connect(
             url,
-            max_size=_stream.MAX_SIZE,
+            max_size=stream.MAX_SIZE,
             proxy=None,
             open_timeout=10,
             additional_headers=auth.headers(),
@@ -248,7 +249,7 @@ class WorldSim:
                 entities.fill(res.state, got, got["tick"], self.owner.tick_dt)
             else:
                 self._fill(res.state, self._poses(), req.entity)
-        except (OSError, ArmfleetError, *_stream.LOST) as exc:
+        except (OSError, ArmfleetError, *stream.LOST) as exc:
             return _result(res, Result.RESULT_OPERATION_FAILED, str(exc))
         return _result(res, Result.RESULT_OK)
 
@@ -261,7 +262,7 @@ class WorldSim:
             free = self.owner.http.entities(self.world) if self.free else {"entities": []}
         except re.error as exc:
             return _result(res, Result.RESULT_OPERATION_FAILED, f"filter: {exc}")
-        except (OSError, ArmfleetError, *_stream.LOST) as exc:
+        except (OSError, ArmfleetError, *stream.LOST) as exc:
             return _result(res, Result.RESULT_OPERATION_FAILED, str(exc))
         res.entities = names
         by_name = {e["name"]: e for e in free["entities"]}

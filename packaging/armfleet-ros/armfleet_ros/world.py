@@ -120,9 +120,9 @@ class WorldTopics:
             if extra:
                 raise convert.BadMessage("unknown_joint", f"joints {extra} are not the arm's {arm}")
             if not msg.points:
-                http._call(tj.cancel_call(self.world))  # no points: stop and hold
+                http.call(tj.cancel_call(self.world))  # no points: stop and hold
             else:
-                http._call(tj.start_call(self.world, convert.trajectory_body(msg)))
+                http.call(tj.start_call(self.world, convert.trajectory_body(msg)))
         except convert.BadMessage as exc:
             self.owner.bad.report(exc.kind, topic, exc.detail)
             return

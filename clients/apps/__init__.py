@@ -1,0 +1,9 @@
+"""The client library's apps, started by `armfleet controller` and `armfleet watch`
+(service/cli.py): the controller's model (`controller`) with its Tk (`tk_controller`) and
+terminal (`tui`) faces, the live table (`watch`), and a leased world for a session
+(`lease_session`).
+
+Why a folder of their own: they need Tk, Textual or Rich, which the client-only distribution
+(packaging/armfleet-client) does not install; it ships `clients/` without this folder. They
+import only the library's public modules.
+"""
