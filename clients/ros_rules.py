@@ -132,7 +132,7 @@ class FingerWatch:
         return abs(position - self.target) < GOAL_TOLERANCE
 
     def verdict(self, now: float, position: float, velocity: float) -> str | None:
-        """"reached", "stalled" or None (keep going) at simulated time `now`."""
+        """At simulated time `now`: "reached", "stalled" or None (keep going)."""
         self.moved_at = min(self.moved_at, now)
         if self.reached(position):
             return "reached"

@@ -59,7 +59,7 @@ def _ros2(s: Settings, built: Mapping[str, Surface]) -> Surface | None:
 
 
 def _rosbridge(s: Settings, built: Mapping[str, Surface]) -> Surface:
-    from service.surfaces.ros.rosbridge_surface import RosbridgeSurface
+    from service.surfaces.rosbridge.surface import RosbridgeSurface
 
     return RosbridgeSurface(s, built.get("ros2"))  # always on; reports the ROS 2 node too
 

@@ -14,8 +14,9 @@ import orjson
 
 from service.core.sim.loop import SimLoop
 from service.core.sim.types import Snapshot
-from service.surfaces.ros import description, topics
+from service.surfaces.ros import description
 from service.surfaces.ros.tf_frames import FrameTree
+from service.surfaces.rosbridge import topics
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 STRING_TYPE = "std_msgs/msg/String"

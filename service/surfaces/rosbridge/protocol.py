@@ -2,7 +2,7 @@
 
 roslibpy's `Ros('localhost', 8000)` dials `ws://localhost:8000/` and roslib.js takes any URL, so
 the socket is served at `/` (beside the browser page's GET) and at `/rosbridge`. The topics are
-the armfleet_ros node's (service/surfaces/ros/topics.py); commands go through the control layer
+the armfleet_ros node's (topics.py); commands go through the control layer
 (source `rosbridge`); states come from the stream hub with its latest-state delivery, so a slow
 client skips frames instead of queueing them, and every client subscribed to a topic shares one
 serialisation per tick.
@@ -33,16 +33,17 @@ from service.core.sim.rules import BadJointState
 from service.core.sim.types import Snapshot
 from service.core.streams.hub import StreamHub, Subscription
 from service.core.surface import SurfaceContext
-from service.surfaces.ros import rosapi, rosbridge_actions, sim_entities, topics
-from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, same_type, topic_name
-from service.surfaces.ros.rosbridge_frames import (
+from service.surfaces.rosbridge import actions as rosbridge_actions
+from service.surfaces.rosbridge import rosapi, sim_entities, topics
+from service.surfaces.rosbridge.base import ROSBRIDGE, ProtocolError, same_type, topic_name
+from service.surfaces.rosbridge.frames import (
     KINDS,
     LATCHED,
     TF_TYPE,
     RobotFrames,
     frame_topic,
 )
-from service.surfaces.ros.topics import (
+from service.surfaces.rosbridge.topics import (
     CLOCK_TOPIC,
     CLOCK_TYPE,
     JOINT_STATE_TYPE,

@@ -25,8 +25,8 @@ import numpy as np
 from service.core.commands import entities
 from service.core.errors import ArmfleetError, BadCommand
 from service.core.sim import entities as entity_table
-from service.surfaces.ros import topics
-from service.surfaces.ros.rosbridge_base import ROSBRIDGE
+from service.surfaces.rosbridge import topics
+from service.surfaces.rosbridge.base import ROSBRIDGE
 
 OK, NOT_FOUND, FAILED = 1, 2, 4
 _ZERO = {"x": 0.0, "y": 0.0, "z": 0.0}

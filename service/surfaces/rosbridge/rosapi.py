@@ -10,10 +10,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from service.surfaces.ros import rosbridge_actions, topics
-from service.surfaces.ros.goal_msgs import action_names
-from service.surfaces.ros.rosbridge_base import topic_name
-from service.surfaces.ros.topics import CLOCK_TYPE, JOINT_STATE_TYPE, STRING, TF
+from service.surfaces.rosbridge import actions as rosbridge_actions
+from service.surfaces.rosbridge import topics
+from service.surfaces.rosbridge.base import topic_name
+from service.surfaces.rosbridge.goal_msgs import action_names
+from service.surfaces.rosbridge.topics import CLOCK_TYPE, JOINT_STATE_TYPE, STRING, TF
 
 _RULE = "=" * 80
 

@@ -71,7 +71,7 @@ class TopicMap:
         """Topic name → ROS 2 type, everything armfleet has on the graph."""
         out = dict.fromkeys([*self.command_topics(), *self.state_topics()], JOINT_STATE_TYPE)
         out[CLOCK_TOPIC] = CLOCK_TYPE
-        for ns in self.namespaces():  # the robot topics (rosbridge_frames.py)
+        for ns in self.namespaces():  # the robot topics (frames.py)
             out |= {f"{ns}/tf": TF, f"{ns}/tf_static": TF, f"{ns}/robot_description": STRING}
         return dict(sorted(out.items()))
 

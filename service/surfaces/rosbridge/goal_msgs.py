@@ -16,7 +16,7 @@ from service.core.commands.trajectory import (
     TrajectoryStatus,
 )
 from service.core.errors import ArmfleetError
-from service.surfaces.ros import topics
+from service.surfaces.rosbridge import topics
 
 FJT_TYPE = "control_msgs/action/FollowJointTrajectory"
 GRIPPER_TYPE = "control_msgs/action/GripperCommand"

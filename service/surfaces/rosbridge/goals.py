@@ -37,8 +37,8 @@ from typing import Any
 from service.core.commands.control import Control
 from service.core.commands.trajectory import AbortReason, TrajectoryStatus
 from service.core.surface import SurfaceContext
-from service.surfaces.ros import topics
-from service.surfaces.ros.goal_msgs import (
+from service.surfaces.rosbridge import topics
+from service.surfaces.rosbridge.goal_msgs import (
     FEEDBACK_HZ,
     FJT_TYPE,
     GOAL_TOLERANCE,

@@ -9,7 +9,7 @@ result frame carries the result message in `values`, the final GoalStatus in `st
 command) gets `result: false` with the reason in `values` and status UNKNOWN, which roslibpy
 hands to its errback and roslib.js to its failed callback; nothing moves.
 
-The goals run in service/surfaces/ros/goals.py; its callbacks come from
+The goals run in service/surfaces/rosbridge/goals.py; its callbacks come from
 other threads, so frames are queued onto the socket's event loop.
 """
 
@@ -19,10 +19,10 @@ import asyncio
 from typing import Any
 
 from service.core.errors import ArmfleetError
-from service.surfaces.ros.goal_msgs import GoalRejected, Status, action_names
-from service.surfaces.ros.goals import Goal, runner_of
-from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, topic_name
-from service.surfaces.ros.topics import stamp
+from service.surfaces.rosbridge.base import ROSBRIDGE, ProtocolError, topic_name
+from service.surfaces.rosbridge.goal_msgs import GoalRejected, Status, action_names
+from service.surfaces.rosbridge.goals import Goal, runner_of
+from service.surfaces.rosbridge.topics import stamp
 
 
 def _type_matches(given: Any, kind: str) -> bool:
