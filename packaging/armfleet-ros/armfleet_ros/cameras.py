@@ -23,8 +23,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from websockets.sync.client import connect
 
 from armfleet_ros import auth
-from armfleet_ros.convert import stamp
-from clients import stream
+from clients import ros_rules, stream
 from clients.calls import Call
 from clients.wire import unpack_images as unpack
 
@@ -130,7 +129,7 @@ class CameraTopics:
             self._changed.wait(backoff.next())
 
     def _publish(self, header: dict, images: list[bytes]) -> None:
-        sec, nanosec = stamp(int(header["tick"]) * self.owner.tick_dt)
+        sec, nanosec = ros_rules.stamp(int(header["tick"]) * self.owner.tick_dt)
         width, height = int(header["width"]), int(header["height"])
         for world, data in zip(header["worlds"], images, strict=True):
             for image_pub, info_pub, frame in self.pubs.get(int(world), ()):

@@ -27,13 +27,12 @@ from rosgraph_msgs.msg import Clock
 
 from armfleet_ros import auth
 from armfleet_ros.cameras import camera_topics
-from armfleet_ros.convert import Counter, stamp
 from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
 from armfleet_ros.params import param
 from armfleet_ros.parts import slices
 from armfleet_ros.world import WorldTopics
-from clients import ArmfleetClient
+from clients import ArmfleetClient, ros_rules
 from clients.calls import Call
 from clients.errors import ArmfleetError
 
@@ -70,7 +69,7 @@ class ArmfleetNode:
         self.urdf = self.http.call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
         self.frames = self.http.call(Call("GET", "/v1/ros/frames", lambda d: d))
         self.tree = TfTree(self.frames)
-        self.bad = Counter(log)
+        self.bad = ros_rules.RefusalCounter("armfleet_ros", log.warning)
         self.accepted = 0
         self._publish_lock = threading.Lock()
         self._clock_tick = -1
@@ -160,7 +159,7 @@ class ArmfleetNode:
                 self._last_generation, self._clock_tick = gen, -1
                 self._world_tick = {}
             tick = batch.tick
-            sec, nanosec = stamp(tick * self.tick_dt)
+            sec, nanosec = ros_rules.stamp(tick * self.tick_dt)
             if tick > self._clock_tick:
                 self._clock_tick = tick
                 clock = Clock()

@@ -33,10 +33,9 @@ from simulation_interfaces.srv import (
 from websockets.sync.client import connect
 
 from armfleet_ros import auth, entities
-from armfleet_ros.convert import stamp
 from armfleet_ros.link import Poses
 from armfleet_ros.params import param
-from clients import stream
+from clients import ros_rules, stream
 from clients.errors import ArmfleetError, Conflict
 from clients.wire import POSE_MAGIC
 
@@ -235,7 +234,9 @@ class WorldSim:
     def _fill(self, state: Any, poses: Poses, name: str) -> None:
         row = poses.poses[poses.row[self.world], self.bodies[name]]
         state.header.frame_id = "world"
-        state.header.stamp.sec, state.header.stamp.nanosec = stamp(poses.tick * self.owner.tick_dt)
+        state.header.stamp.sec, state.header.stamp.nanosec = ros_rules.stamp(
+            poses.tick * self.owner.tick_dt
+        )
         p, q = state.pose.position, state.pose.orientation
         p.x, p.y, p.z = (float(v) for v in row[:3])
         q.w, q.x, q.y, q.z = (float(v) for v in row[3:])

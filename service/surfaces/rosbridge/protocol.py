@@ -26,6 +26,7 @@ import numpy as np
 import orjson
 from fastapi import WebSocket
 
+from clients.ros_rules import BadMessage, RefusalCounter
 from service.core.access import policy as access
 from service.core.access.callers import Forbidden, book_of
 from service.core.errors import ArmfleetError
@@ -43,14 +44,7 @@ from service.surfaces.rosbridge.frames import (
     RobotFrames,
     frame_topic,
 )
-from service.surfaces.rosbridge.topics import (
-    CLOCK_TOPIC,
-    CLOCK_TYPE,
-    JOINT_STATE_TYPE,
-    BadMessage,
-    BadMessageCounter,
-    TopicMap,
-)
+from service.surfaces.rosbridge.topics import CLOCK_TOPIC, CLOCK_TYPE, JOINT_STATE_TYPE, TopicMap
 
 log = logging.getLogger("armfleet.rosbridge")
 
@@ -71,7 +65,7 @@ class RosbridgeServer:
     def __init__(self, topic_map: TopicMap | None = None, max_rate: float = 60.0) -> None:
         self.topic_map = topic_map or TopicMap(())
         self.max_rate = max_rate  # states go out at most this often, like the ROS 2 node
-        self.bad = BadMessageCounter("rosbridge")
+        self.bad = RefusalCounter("rosbridge", log.warning)
         self.accepted = 0
         self.clients = 0
         self.frames: RobotFrames | None = None  # the robot topics' renderer, made on first use
@@ -187,7 +181,7 @@ class Session:
         if unknown:
             raise BadMessage("unknown_field", f"JointState has no field {unknown[0]!r}")
         name, position = body.get("name", []), body.get("position", [])
-        try:  # the JointState rule of every surface (service.core.sim.rules)
+        try:  # the JointState rule of every surface (clients/ros_rules.py, as the node's)
             self.control.command_targets(world, name, position, ROSBRIDGE)
         except BadJointState as exc:
             raise BadMessage(exc.reason, str(exc)) from None

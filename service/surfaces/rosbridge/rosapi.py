@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from clients import ros_rules
 from service.surfaces.rosbridge import actions as rosbridge_actions
 from service.surfaces.rosbridge import topics
 from service.surfaces.rosbridge.base import topic_name
@@ -67,7 +68,7 @@ def topic_type(session: Any, args: Any) -> dict[str, Any]:
 
 
 def get_time(session: Any, args: Any) -> dict[str, Any]:
-    sec, nanosec = topics.stamp(topics.sim_seconds(session.loop.latest, session.tick_dt))
+    sec, nanosec = ros_rules.stamp(topics.sim_seconds(session.loop.latest, session.tick_dt))
     return {"time": {"sec": sec, "nanosec": nanosec}}
 
 
