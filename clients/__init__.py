@@ -14,6 +14,8 @@ These library modules also install alone, on Python 3.10+ and without the servic
 (packaging/armfleet-client ships this folder, without its sub-packages), so they import nothing
 of `service` and keep to 3.10's language and standard library.
 
+May import: the standard library, httpx, websockets, numpy, orjson; never `service`.
+
 Sub-packages, imported on demand: `clients.apps` (the Tk and terminal controllers, `watch`) and
 `clients.testing` (a real server for your own tests; `armfleet_server` fixture for pytest).
 """

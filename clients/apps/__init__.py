@@ -4,6 +4,7 @@ terminal (`tui`) faces, the live table (`watch`), and a leased world for a sessi
 (`lease_session`).
 
 Why a folder of their own: they need Tk, Textual or Rich, which the client-only distribution
-(packaging/armfleet-client) does not install; it ships `clients/` without this folder. They
-import only the library's public modules.
+(packaging/armfleet-client) does not install; it ships `clients/` without this folder.
+
+May import: the client library's public modules, Tk, Textual and Rich; never `service`.
 """

@@ -12,7 +12,10 @@ from types import ModuleType
 
 ROOT = Path(__file__).resolve().parents[2]
 # The top layer is "everything else under service/"; its routes package speaks for it.
-DOC_OF = {"service": "service/api/__init__.py"}
+DOC_OF = {
+    "service": "service/api/__init__.py",
+    "armfleet_ros": "packaging/armfleet-ros/armfleet_ros/__init__.py",
+}
 
 
 def import_graph() -> ModuleType:
@@ -25,6 +28,8 @@ def import_graph() -> ModuleType:
 
 def _docstring(package: str) -> str:
     path = ROOT / DOC_OF.get(package, package.replace(".", "/") + "/__init__.py")
+    if not path.exists():  # a flat module of its own rank (service/core/settings.py)
+        path = path.parent.with_suffix(".py")
     return ast.get_docstring(ast.parse(path.read_text())) or ""
 
 
@@ -46,7 +51,9 @@ def render() -> str:
         folder = (
             "`service/` (api/, app, runtime, serving, cli)"
             if prefix == "service"
-            else (f"`{prefix.replace('.', '/')}/`")
+            else f"`{Path(DOC_OF[prefix]).parent}/`"
+            if prefix in DOC_OF
+            else f"`{prefix.replace('.', '/')}/`"
         )
         lines.append(f"| {rank} | {folder} | {what} | {may} |")
     return "\n".join(lines)
