@@ -22,8 +22,8 @@ import pytest
 import roslibpy
 
 from clients import ArmfleetClient, WorldState
-from clients import pytest_plugin as armfleet_plugin
 from clients.testing import Server, free_port, headless, serve
+from clients.testing import pytest_plugin as armfleet_plugin
 from service.core.sim.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
