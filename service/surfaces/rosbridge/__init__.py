@@ -4,7 +4,7 @@ clients (roslibpy, roslib.js), always on.
 - `surface`: the surface (its socket at `/` and `/rosbridge`, `GET /v1/ros` for both ROS faces,
   and what the ROS node reads or reports: `/v1/ros/robot_description`, `/v1/ros/frames`,
   `PUT /v1/ros/node`);
-- `protocol`: one client's session (ops, outbox); `base`: what every capability shares;
+- `protocol`: one client's connection (ops, outbox); `base`: what every capability shares;
 - `topics`: topic names ↔ worlds and the JointState and clock messages; `frames`: the robot
   topics (tf, tf_static, robot_description); `rosapi`: the rosapi services;
   `sim_entities`: simulation_interfaces' entity services;
