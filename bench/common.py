@@ -317,3 +317,26 @@ def console():
 
     c = Console()
     return c if c.is_terminal and c.width >= 120 else Console(width=max(120, c.width))
+
+
+# -- figures as text (bench/figures.py and bench/readme_tables.py write them alike) -------------
+
+
+def fmt_rate(x: float | None) -> str:
+    """World-steps/s as 4.73M / 812k."""
+    if x is None:
+        return "–"
+    return f"{x / 1e6:.2f}M" if x >= 1e6 else f"{x / 1e3:.0f}k"
+
+
+def fmt_ratio(x: float | None) -> str:
+    """A ratio as 1.02×."""
+    return "–" if x is None else f"{x:.2f}×"
+
+
+def md_table(head: list[str], rows: list[list[str]]) -> str:
+    """A Markdown table, the first column left-aligned, numbers right."""
+    align = ["---"] + ["---:"] * (len(head) - 1)
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(align) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)

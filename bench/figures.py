@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from bench import common, readme_tables
+from bench import common
 
 # Files of the figures of today; older result files (the 2.083 ms physics step, before the
 # engines were reworked) stay in bench/results for history but are not shown.
@@ -89,7 +89,7 @@ def _gpu_realtime_worlds() -> str:
 
 
 def _gpu(nworld: str, key: str, name: str = GPU_BINARY) -> Callable[[], str]:
-    return lambda: readme_tables._r(load(name)["results"][nworld][key])
+    return lambda: common.fmt_ratio(load(name)["results"][nworld][key])
 
 
 def _cpu(engine: str, key: str = "capacity_worlds") -> Callable[[], str]:
@@ -124,7 +124,7 @@ FIGURES: dict[str, Callable[[], str]] = {
     "cpu.warp_worlds": _cpu("warp"),
     "cpu.native_per_core": _per_core,
     "cpu.limit_worlds": lambda: _int(load(CPU_CAPACITY)["limit_worlds"]),
-    "cpu.native_share": lambda: readme_tables._r(load(CPU_CAPACITY)["mujoco"]["share_held"]),
+    "cpu.native_share": lambda: common.fmt_ratio(load(CPU_CAPACITY)["mujoco"]["share_held"]),
     "gpu.machine": lambda: _cores(load(GPU_BINARY)),
     "gpu.date": lambda: load(GPU_BINARY)["started"][:10],
     "gpu.realtime_worlds": _gpu_realtime_worlds,
@@ -134,12 +134,12 @@ FIGURES: dict[str, Callable[[], str]] = {
     "gpu.binary_65536": _gpu("65536", "ratio_to_engine"),
     "gpu.json_16384": _gpu("16384", "ratio_to_engine", GPU_JSON),
     "gpu.largest_fit": _largest_fit,
-    "ray.steps_two_vs_one": lambda: readme_tables._r(load("ray_cuda.json")["steps_scaling"]),
-    "ray.steps_two_vs_in_process": lambda: readme_tables._r(
+    "ray.steps_two_vs_one": lambda: common.fmt_ratio(load("ray_cuda.json")["steps_scaling"]),
+    "ray.steps_two_vs_in_process": lambda: common.fmt_ratio(
         load("ray_cuda.json")["steps_scaling_vs_in_process"]
     ),
-    "ray.snapshots_two_vs_one": lambda: readme_tables._r(load("ray_cuda.json")["scaling"]),
-    "ray.snapshots_two_vs_in_process": lambda: readme_tables._r(
+    "ray.snapshots_two_vs_one": lambda: common.fmt_ratio(load("ray_cuda.json")["scaling"]),
+    "ray.snapshots_two_vs_in_process": lambda: common.fmt_ratio(
         load("ray_cuda.json")["scaling_vs_in_process"]
     ),
     "ray.round_trip_p50_ms": lambda: f"{_ray_rt()['ray_overhead']['p50_ms']:.1f}",
@@ -172,7 +172,7 @@ def _cell(key: str, value: Any) -> str:
     if isinstance(value, int | float) and (
         "world-steps" in key or (isinstance(value, float) and abs(value) >= 1e5)
     ):
-        return readme_tables._m(value)
+        return common.fmt_rate(value)
     if isinstance(value, float):
         if abs(value) >= 100:
             return f"{value:,.0f}"
@@ -238,7 +238,7 @@ def section_table(name: str) -> str:
         head += [k for k in row if k not in head]
     body = [[_cell(k, row.get(k)) for k in head] for row in rows]
     names = [k.replace("|", "\\|") for k in head]
-    lines = [readme_tables._table(names, body), "", caption(payload)]
+    lines = [common.md_table(names, body), "", caption(payload)]
     lines += [f"\n{note}" for note in payload.get("notes") or []]
     return "\n".join(lines)
 

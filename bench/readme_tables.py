@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from bench import common
+from bench import common, figures
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -62,17 +62,6 @@ CAPACITY_HEAD = (
 )
 
 
-def _m(x: float | None) -> str:
-    """World-steps/s as 4.73M / 812k."""
-    if x is None:
-        return "–"
-    return f"{x / 1e6:.2f}M" if x >= 1e6 else f"{x / 1e3:.0f}k"
-
-
-def _r(x: float | None) -> str:
-    return "–" if x is None else f"{x:.2f}×"
-
-
 def _rtf(x: float) -> str:
     """A real-time factor to 3 decimals, rounded down: 0.98997 fails the 0.99 goal and shows
     0.989, not 0.990."""
@@ -81,13 +70,6 @@ def _rtf(x: float) -> str:
 
 def _load(name: str) -> dict[str, Any]:
     return common.read_json(name, common.RESULTS_DIR) or {}
-
-
-def _table(head: list[str], rows: list[list[str]]) -> str:
-    align = ["---"] + ["---:"] * (len(head) - 1)
-    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(align) + "|"]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
 
 
 def _machine(payload: dict[str, Any]) -> str:
@@ -109,13 +91,13 @@ def gpu() -> str:
         rows.append(
             [
                 f"{int(n):,}",
-                _m(eng),
-                _m(raw),
-                _r(eng / raw if eng and raw else None),
-                f"{_m(b.get('world_steps_per_s'))} ({b.get('frames_per_s', 0):.1f}/s)",
-                _r(b.get("ratio_to_engine")),
-                f"{_m(j.get('world_steps_per_s'))} ({j.get('frames_per_s', 0):.1f}/s)",
-                _r(j.get("ratio_to_engine")),
+                common.fmt_rate(eng),
+                common.fmt_rate(raw),
+                common.fmt_ratio(eng / raw if eng and raw else None),
+                f"{common.fmt_rate(b.get('world_steps_per_s'))} ({b.get('frames_per_s', 0):.1f}/s)",
+                common.fmt_ratio(b.get("ratio_to_engine")),
+                f"{common.fmt_rate(j.get('world_steps_per_s'))} ({j.get('frames_per_s', 0):.1f}/s)",
+                common.fmt_ratio(j.get("ratio_to_engine")),
             ]
         )
     head = list(GPU_HEAD)
@@ -131,7 +113,7 @@ def gpu() -> str:
             f"{min(big['ms_per_tick']):.0f} ms a tick fresh from home; "
             f"{failed} failed to allocate)."
         )
-    return _table(head, rows) + note
+    return common.md_table(head, rows) + note
 
 
 def profile() -> str:
@@ -148,7 +130,7 @@ def profile() -> str:
                     key,
                     f"{r['engine_ms_per_tick']:.1f}",
                     f"{r['served_ms_per_tick']:.1f}",
-                    _r(r["served_vs_engine"]),
+                    common.fmt_ratio(r["served_vs_engine"]),
                     f"{r['frames_per_s']:.1f}",
                     f"{s.get('snapshot', 0):.3f}",
                     f"{s.get('frames', 0):.3f}",
@@ -156,7 +138,7 @@ def profile() -> str:
                 ]
             )
     head = list(PROFILE_HEAD)
-    return _table(head, rows) + f"\n\n({_machine(tp)})"
+    return common.md_table(head, rows) + f"\n\n({_machine(tp)})"
 
 
 def baseline() -> str:
@@ -166,9 +148,17 @@ def baseline() -> str:
     for n, r in bl.get("results", {}).items():
         for k, ms in r["mean_ms_after_first_quarter"].items():
             quarters = " → ".join(f"{x:.1f}" for x in r["window_mean_ms"][k])
-            rows.append([f"{int(n):,}", k, f"{ms:.2f}", quarters, _r(r["engine_vs"].get(k, 1.0))])
+            rows.append(
+                [
+                    f"{int(n):,}",
+                    k,
+                    f"{ms:.2f}",
+                    quarters,
+                    common.fmt_ratio(r["engine_vs"].get(k, 1.0)),
+                ]
+            )
     head = list(BASELINE_HEAD)
-    return _table(head, rows) + f"\n\n({_machine(bl)})"
+    return common.md_table(head, rows) + f"\n\n({_machine(bl)})"
 
 
 def capacity() -> str:
@@ -191,11 +181,11 @@ def capacity() -> str:
                 e.get("format", "json"),
                 f"{e['share_held']:g}×" if e.get("share_held") else "–",
                 f"{best:,}" if best else "–",
-                _r(top.get("share_of_limit_beside")),
-                _r(best / limit if best and limit else None),
+                common.fmt_ratio(top.get("share_of_limit_beside")),
+                common.fmt_ratio(best / limit if best and limit else None),
                 f"{top['engine_share']:.3f}" if top.get("engine_share") else "–",
                 f"{nxt['nworld']:,}, {_rtf(nxt['realtime_factor'])}, "
-                f"{_r(nxt.get('share_of_limit_beside'))}"
+                f"{common.fmt_ratio(nxt.get('share_of_limit_beside'))}"
                 if nxt and nxt.get("realtime_factor")
                 else "–",
             ]
@@ -203,7 +193,7 @@ def capacity() -> str:
     head = list(CAPACITY_HEAD)
     load = cap.get("machine", {}).get("loadavg_at_start")
     best = f"best limit of the run {limit:,.0f} worlds" if limit else "no limit"
-    return _table(head, rows) + f"\n\n({_machine(cap)}; {best}; load at start {load})"
+    return common.md_table(head, rows) + f"\n\n({_machine(cap)}; {best}; load at start {load})"
 
 
 CAPACITY_RUNS = common.RESULTS_DIR / "issue20" / "capacity"  # every section 11 run kept
@@ -245,13 +235,11 @@ def capacity_runs() -> str:
                 f"{warp:,}" if warp else "–",
             ]
         )
-    return _table(list(RUNS_HEAD), rows)
+    return common.md_table(list(RUNS_HEAD), rows)
 
 
 def headline() -> str:
     """How many worlds in real time, CPU and GPU, as bench/figures.py words it."""
-    from bench import figures  # figures builds on this module's helpers
-
     return figures.headline()
 
 

@@ -30,6 +30,7 @@ import websockets.asyncio.client as ws_client
 
 from bench import common
 from bench.registry import Context, Result, section
+from clients.wire import BINARY_MAGIC
 
 CPU_SIZES = (1, 16, 64, 256, 1024, 4096)
 CPU_SIZES_QUICK = (16, 256)
@@ -45,7 +46,7 @@ _TICK = re.compile(r'"tick":(\d+)')
 
 def frame_tick(frame: str | bytes) -> int | None:
     """The `tick` of a state frame without parsing the whole (possibly MB-sized) frame."""
-    if isinstance(frame, bytes) and frame[:4] == b"AFS1":  # binary: JSON header after 8 bytes
+    if isinstance(frame, bytes) and frame[:4] == BINARY_MAGIC:  # binary: JSON header after 8 bytes
         frame = frame[8:104]
     head = frame[:96] if isinstance(frame, str) else frame[:96].decode(errors="replace")
     m = _TICK.search(head)

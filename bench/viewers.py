@@ -191,7 +191,7 @@ def measure(url: str, nworld: int, pages: int = PAGES, seconds: float = 10.0) ->
     """Every measurement of this section against one running realtime service."""
     from playwright.sync_api import sync_playwright
 
-    from clients import headless
+    from clients.testing import headless
 
     out: dict[str, Any] = {"nworld": nworld, "pages": pages, "rate": RATE, "seconds": seconds}
     out["alone"] = {"rtf": rtf_alone(url, nworld, seconds, moving=False)}
@@ -256,7 +256,7 @@ def rows(r: dict[str, Any]) -> list[dict[str, Any]]:
 @section(9, "viewers", "Many viewers: headless Chromium pages on a realtime service")
 def viewers(ctx: Context) -> Result:
     """Twenty pages (four with --quick) watching every world of a 64-world realtime service."""
-    from clients import headless
+    from clients.testing import headless
 
     reason = headless.why_unavailable()
     if reason:

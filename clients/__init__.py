@@ -5,16 +5,21 @@ and a live watcher.
     with ArmfleetClient("http://127.0.0.1:8000") as arm:
         ack = arm.increment(0, "elbow_joint", 0.1)
 
-The UIs (`clients.tk_controller`, `clients.tui`, `clients.watch`) are imported on demand, as
-is `clients.testing` (a real server for your own tests; `armfleet_server` fixture for pytest).
+Layout: `errors` (exceptions), `models` (typed replies), `calls` (each REST call as a `Call`:
+path, body, reply parsing, without I/O; `ArmfleetClient.call` runs any of them), `stream` (socket
+URLs, frames, commands, drops and reconnects, without I/O), `client` and `async_client` (the I/O
+twins), `trajectory` and `cell` (more calls), `wire` (the binary messages' magics and layouts,
+shared with the service), `ros_rules` (the ROS rulebook, shared by rosbridge and the ROS node).
+These library modules also install alone, on Python 3.10+ and without the service
+(packaging/armfleet-client ships this folder, without its sub-packages), so they import nothing
+of `service` and keep to 3.10's language and standard library.
 
-Layout: `errors` (exceptions), `models` (typed replies), `_http` and `_stream` (requests, frames
-and reconnects, without I/O), `client` and `async_client` (the I/O twins). Those library modules
-also install alone, on Python 3.10+ and without the service (packaging/armfleet-client), so they
-import nothing of `service` and keep to 3.10's language and standard library.
+May import: the standard library, httpx, websockets, numpy, orjson; never `service`.
+
+Sub-packages, imported on demand: `clients.apps` (the Tk and terminal controllers, `watch`) and
+`clients.testing` (a real server for your own tests; `armfleet_server` fixture for pytest).
 """
 
-from clients._stream import Backoff
 from clients.async_client import AsyncArmfleetClient, AsyncWorldSession
 from clients.client import ArmfleetClient, WorldSession
 from clients.entity_states import EntityStates
@@ -42,6 +47,7 @@ from clients.models import (
     SimStatus,
     WorldState,
 )
+from clients.stream import Backoff
 from clients.trajectory import (
     TrajectoriesStarted,
     TrajectoryStarted,

@@ -21,9 +21,9 @@ from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import InvalidURI
 
-from clients import _http, _stream, cell, models
+from clients import calls, cell, models, stream
 from clients import trajectory as tj
-from clients._http import DEFAULT_TIMEOUT, DEFAULT_URL, Call
+from clients.calls import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable, unreachable
 from clients.models import JointRef, WorldSpec
 
@@ -54,15 +54,17 @@ class AsyncArmfleetClient(_Closes):
         self.timeout = timeout
         self.token = token  # the administrator's or a lease's; sent with every request
         self.leased: models.Lease | None = None  # what the client `lease()` yields holds
-        headers = _http.auth_headers(token)
+        headers = calls.auth_headers(token)
         self._http = httpx.AsyncClient(base_url=self.url, timeout=timeout, headers=headers)
 
-    async def _call(self, call: Call) -> Any:
+    async def call(self, call: Call) -> Any:
+        """Run one `Call` (clients.calls): its parsed result, or the `ArmfleetError` the reply
+        means. Every method below is one of these; an endpoint without a method is one too."""
         kwargs = call.request_kwargs(self.timeout)
         try:
             reply = await self._http.request(call.method, call.path, **kwargs)
         except httpx.TransportError as exc:
-            raise _http.transport_error(self.url, exc) from exc
+            raise calls.transport_error(self.url, exc) from exc
         return call.result(reply)
 
     async def close(self) -> None:
@@ -71,61 +73,61 @@ class AsyncArmfleetClient(_Closes):
     # -- REST (docstrings on the sync twin) --------------------------------------------------
 
     async def info(self) -> models.Info:
-        return await self._call(_http.info_call())
+        return await self.call(calls.info_call())
 
     async def state(self, world: int, entities: bool = False) -> models.WorldState:
-        return await self._call(_http.state_call(world, entities))
+        return await self.call(calls.state_call(world, entities))
 
     async def states(self, worlds: WorldSpec = None, entities: bool = False) -> models.BatchStates:
-        return await self._call(_http.states_call(worlds, entities))
+        return await self.call(calls.states_call(worlds, entities))
 
     async def increment(self, world: int, joint: JointRef, delta: float) -> models.CommandAck:
-        return await self._call(_http.increment_call(world, joint, delta))
+        return await self.call(calls.increment_call(world, joint, delta))
 
     async def set_targets(self, world: int, targets: Mapping[JointRef, float]) -> models.CommandAck:
-        return await self._call(_http.set_targets_call(world, targets))
+        return await self.call(calls.set_targets_call(world, targets))
 
     async def set_many(self, worlds: Iterable[int], positions: Any) -> models.BatchAck:
-        return await self._call(_http.set_many_call(worlds, positions))
+        return await self.call(calls.set_many_call(worlds, positions))
 
     async def reset(self, world: int | Iterable[int] | None = None) -> models.ResetResult:
-        return await self._call(_http.reset_call(world))
+        return await self.call(calls.reset_call(world))
 
     # -- entities and physics parameters (as ArmfleetClient's ----------------------------
 
     async def entities(self, world: int) -> dict[str, Any]:
-        return await self._call(cell.entities_call(world))
+        return await self.call(cell.entities_call(world))
 
     async def entity(self, world: int, name: str) -> dict[str, Any]:
-        return await self._call(cell.entity_call(world, name))
+        return await self.call(cell.entity_call(world, name))
 
     async def set_entity(self, world: int, name: str, **values: Any) -> dict[str, Any]:
-        return await self._call(cell.set_entity_call(world, name, **values))
+        return await self.call(cell.set_entity_call(world, name, **values))
 
     async def set_entities(self, writes: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
-        return await self._call(cell.set_entities_call(writes))
+        return await self.call(cell.set_entities_call(writes))
 
     async def param_table(self) -> dict[str, Any]:
-        return await self._call(cell.param_table_call())
+        return await self.call(cell.param_table_call())
 
     async def params(self, world: int) -> dict[str, Any]:
-        return await self._call(cell.params_call(world))
+        return await self.call(cell.params_call(world))
 
     async def set_params(self, world: int, params: Mapping[str, Any]) -> dict[str, Any]:
-        return await self._call(cell.set_params_call(world, params))
+        return await self.call(cell.set_params_call(world, params))
 
     async def set_params_many(
         self, writes: Iterable[tuple[int, Mapping[str, Any]]]
     ) -> dict[str, Any]:
-        return await self._call(cell.set_params_many_call(writes))
+        return await self.call(cell.set_params_many_call(writes))
 
     async def randomize(
         self, seed: int, spec: Mapping[str, Any], worlds: Iterable[int] | None = None
     ) -> dict[str, Any]:
-        return await self._call(cell.randomize_call(seed, spec, worlds))
+        return await self.call(cell.randomize_call(seed, spec, worlds))
 
     async def randomization(self, world: int) -> dict[str, Any]:
-        return await self._call(cell.randomization_call(world))
+        return await self.call(cell.randomization_call(world))
 
     # -- trajectories: as ArmfleetClient's -------------------------------------------------
 
@@ -133,25 +135,25 @@ class AsyncArmfleetClient(_Closes):
         self, world: int, joint_names: Sequence[str], points: Iterable[Any], **options: Any
     ) -> tj.TrajectoryStarted:
         body = tj.trajectory_body(joint_names, points, **options)
-        return await self._call(tj.start_call(world, body))
+        return await self.call(tj.start_call(world, body))
 
     async def start_trajectories(
         self, worlds: WorldSpec, joint_names: Sequence[str], points: Iterable[Any], **options: Any
     ) -> tj.TrajectoriesStarted:
         body = tj.trajectory_body(joint_names, points, **options)
-        return await self._call(tj.start_many_call(worlds, body))
+        return await self.call(tj.start_many_call(worlds, body))
 
     async def trajectory(self, world: int, wait: float = 0.0) -> tj.TrajectoryStatus:
-        return await self._call(tj.status_call(world, wait))
+        return await self.call(tj.status_call(world, wait))
 
     async def cancel_trajectory(self, world: int) -> tj.TrajectoryStatus:
-        return await self._call(tj.cancel_call(world))
+        return await self.call(tj.cancel_call(world))
 
     async def wait_trajectory(
         self, traj_id: int, timeout: float | None = None
     ) -> tj.TrajectoryStatus:
         wait = tj.OutcomeWait(traj_id, timeout)
-        while not wait.finished(status := await self._call(wait.call())):
+        while not wait.finished(status := await self.call(wait.call())):
             pass
         return status
 
@@ -167,31 +169,31 @@ class AsyncArmfleetClient(_Closes):
         return await self.wait_trajectory(started.id, timeout)
 
     async def pause(self) -> models.SimStatus:
-        return await self._call(_http.pause_call())
+        return await self.call(calls.pause_call())
 
     async def resume(self) -> models.SimStatus:
-        return await self._call(_http.resume_call())
+        return await self.call(calls.resume_call())
 
     async def set_mode(self, mode: str) -> models.SimStatus:
-        return await self._call(_http.set_mode_call(mode))
+        return await self.call(calls.set_mode_call(mode))
 
     async def step(self, n: int = 1) -> models.SimStatus:
-        return await self._call(_http.step_call(n))
+        return await self.call(calls.step_call(n))
 
     async def ready(self) -> bool:
         try:
-            await self._call(_http.readyz_call())
-        except _http.NOT_YET:
+            await self.call(calls.readyz_call())
+        except calls.NOT_YET:
             return False
         return True
 
     async def wait_ready(self, timeout: float = 60.0, poll: float = 0.2) -> None:
-        wait = _http.ReadyWait(timeout)
+        wait = calls.ReadyWait(timeout)
         while True:
             try:
-                await self._call(_http.readyz_call())
+                await self.call(calls.readyz_call())
                 return
-            except _http.NOT_YET as exc:
+            except calls.NOT_YET as exc:
                 wait.failed(exc)
             await asyncio.sleep(poll)
 
@@ -205,23 +207,23 @@ class AsyncArmfleetClient(_Closes):
         wait_s: float = 0.0,
     ) -> AsyncIterator[AsyncArmfleetClient]:
         """Async twin of `ArmfleetClient.lease` (`async with client.lease() as mine:`)."""
-        held = await self._call(_http.lease_call(count, worlds, ttl_s, label, wait_s))
+        held = await self.call(calls.lease_call(count, worlds, ttl_s, label, wait_s))
         client = AsyncArmfleetClient(self.url, self.timeout, token=held.token)
         client.leased = held
         try:
             yield client
         finally:
             with contextlib.suppress(ArmfleetError):
-                await client._call(_http.release_call(held.id))
+                await client.call(calls.release_call(held.id))
             await client.close()
 
     async def leases(self) -> list[models.Lease]:
-        return await self._call(_http.leases_call())
+        return await self.call(calls.leases_call())
 
     async def renew_lease(self, ttl_s: float = 600.0) -> models.Lease:
         if self.leased is None:
             raise ValueError("this client holds no lease (use `async with client.lease() as c:`)")
-        return await self._call(_http.renew_call(self.leased.id, ttl_s))
+        return await self.call(calls.renew_call(self.leased.id, ttl_s))
 
     # -- WebSocket ---------------------------------------------------------------------------
 
@@ -229,10 +231,10 @@ class AsyncArmfleetClient(_Closes):
         self,
         worlds: WorldSpec,
         rate: float | None = None,
-        **options: Unpack[_stream.StreamOptions],
+        **options: Unpack[stream.StreamOptions],
     ) -> AsyncIterator[Any]:
         """Async twin of `ArmfleetClient.stream` (same arguments, same reconnect rules)."""
-        policy = _stream.Reconnector.for_stream(self.url, worlds, rate, options)
+        policy = stream.Reconnector.for_stream(self.url, worlds, rate, options)
         while True:
             try:
                 async with await _open(policy.url, self.timeout, self.token) as ws:
@@ -240,9 +242,9 @@ class AsyncArmfleetClient(_Closes):
                     async for text in ws:
                         if (msg := policy.frame(text)) is not None:
                             yield msg
-                    reason = _stream.close_reason(ws.close_code, ws.close_reason)
-            except _stream.LOST as exc:
-                reason = _stream.reason_for(exc)
+                    reason = stream.close_reason(ws.close_code, ws.close_reason)
+            except stream.LOST as exc:
+                reason = stream.reason_for(exc)
             await asyncio.sleep(policy.dropped(reason))
 
     async def connect(
@@ -250,7 +252,7 @@ class AsyncArmfleetClient(_Closes):
     ) -> AsyncWorldSession:
         """Open a WebSocket to one world (`async with await client.connect(0) as s:`);
         `entities=True`: its states carry the world's entities."""
-        url = _stream.ws_url(self.url, world, rate, entities=entities)
+        url = stream.ws_url(self.url, world, rate, entities=entities)
         session = AsyncWorldSession(url, world, self.timeout, self.token)
         await session.open()
         return session
@@ -261,9 +263,9 @@ async def _open(url: str, timeout: float, token: str | None = None) -> ClientCon
         return await ws_connect(
             url,
             open_timeout=timeout,
-            max_size=_stream.MAX_SIZE,
+            max_size=stream.MAX_SIZE,
             proxy=None,
-            additional_headers=_http.auth_headers(token),
+            additional_headers=calls.auth_headers(token),
         )
     except InvalidURI as exc:
         raise ArmfleetError(None, str(exc)) from exc
@@ -282,7 +284,7 @@ class AsyncWorldSession(_Closes):
         self.timeout = timeout
         self._token = token
         self.latest: models.WorldState | None = None
-        self._ids = _stream.CommandIds()
+        self._ids = stream.CommandIds()
         self._pending: dict[int, asyncio.Future[models.CommandAck]] = {}
         self._states: asyncio.Queue[models.WorldState | None] = asyncio.Queue(maxsize=256)
         self._ws: ClientConnection | None = None
@@ -292,11 +294,11 @@ class AsyncWorldSession(_Closes):
     async def open(self) -> None:
         try:
             self._ws = await _open(self.url, self.timeout, self._token)
-        except _stream.DROPPED as exc:
-            raise _stream.lost(self.url, exc) from exc
+        except stream.DROPPED as exc:
+            raise stream.lost(self.url, exc) from exc
         self._reader = asyncio.create_task(self._read())
 
-    def _route(self, msg: _stream.WsMessage | None) -> None:
+    def _route(self, msg: stream.WsMessage | None) -> None:
         """A state to the queue (dropping the oldest when full), an ack to its command."""
         if isinstance(msg, models.WorldState):
             self.latest = msg
@@ -306,7 +308,7 @@ class AsyncWorldSession(_Closes):
             if fut is None or fut.done():
                 return
             try:
-                fut.set_result(_stream.ack_or_raise(msg))
+                fut.set_result(stream.ack_or_raise(msg))
             except ArmfleetError as exc:
                 fut.set_exception(exc)
 
@@ -319,14 +321,14 @@ class AsyncWorldSession(_Closes):
         assert self._ws is not None
         try:
             async for text in self._ws:
-                self._route(_stream.parse(text))
-            why = _stream.close_reason(self._ws.close_code, self._ws.close_reason)
+                self._route(stream.parse(text))
+            why = stream.close_reason(self._ws.close_code, self._ws.close_reason)
             self._error = unreachable(self.url, why)
         except ArmfleetError as exc:  # NotFound: the server refused this world for good
             self._error = exc
-        except _stream.LOST as exc:
+        except stream.LOST as exc:
             try:
-                self._error = _stream.lost(self.url, exc)
+                self._error = stream.lost(self.url, exc)
             except ArmfleetError as err:
                 self._error = err
         finally:
@@ -344,9 +346,9 @@ class AsyncWorldSession(_Closes):
         self._pending[msg_id] = fut
         try:
             await self._ws.send(text)
-        except _stream.LOST as exc:
+        except stream.LOST as exc:
             self._pending.pop(msg_id, None)
-            raise unreachable(self.url, _stream.drop_reason(exc)) from exc
+            raise unreachable(self.url, stream.drop_reason(exc)) from exc
         try:
             return await asyncio.wait_for(fut, self.timeout)
         finally:

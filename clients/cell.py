@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
-from clients._http import Call
+from clients.calls import Call
 
 Vector = Sequence[float]
 

@@ -12,8 +12,8 @@ A world of a shared server, for as long as the block runs (reset to home, given 
         mine.increment(mine.leased.world, "elbow_joint", 0.1)
 
 The asynchronous twin, with the same methods, is `clients.async_client.AsyncArmfleetClient`.
-Both only do the I/O: requests and replies are built and read in `clients._http`, WebSocket
-frames and the reconnect policy in `clients._stream`.
+Both only do the I/O: requests and replies are built and read in `clients.calls`, WebSocket
+frames and the reconnect policy in `clients.stream`.
 """
 
 from __future__ import annotations
@@ -30,9 +30,9 @@ from websockets.exceptions import InvalidURI
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as ws_connect
 
-from clients import _http, _stream, cell, models
+from clients import calls, cell, models, stream
 from clients import trajectory as tj
-from clients._http import DEFAULT_TIMEOUT, DEFAULT_URL, Call
+from clients.calls import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable
 from clients.models import JointRef, WorldSpec
 
@@ -63,14 +63,16 @@ class ArmfleetClient(_Closes):
         self.timeout = timeout
         self.token = token  # the administrator's or a lease's; sent with every request
         self.leased: models.Lease | None = None  # what the client `lease()` yields holds
-        headers = _http.auth_headers(token)
+        headers = calls.auth_headers(token)
         self._http = httpx.Client(base_url=self.url, timeout=timeout, headers=headers)
 
-    def _call(self, call: Call) -> Any:
+    def call(self, call: Call) -> Any:
+        """Run one `Call` (clients.calls): its parsed result, or the `ArmfleetError` the reply
+        means. Every method below is one of these; an endpoint without a method is one too."""
         try:
             reply = self._http.request(call.method, call.path, **call.request_kwargs(self.timeout))
         except httpx.TransportError as exc:
-            raise _http.transport_error(self.url, exc) from exc
+            raise calls.transport_error(self.url, exc) from exc
         return call.result(reply)
 
     def close(self) -> None:
@@ -80,76 +82,76 @@ class ArmfleetClient(_Closes):
 
     def info(self) -> models.Info:
         """The robot (joint names, limits, home), batch size, device, mode and speed."""
-        return self._call(_http.info_call())
+        return self.call(calls.info_call())
 
     def state(self, world: int, entities: bool = False) -> models.WorldState:
         """One world; `entities=True`: its entities' pose and twist of the same tick too."""
-        return self._call(_http.state_call(world, entities))
+        return self.call(calls.state_call(world, entities))
 
     def states(self, worlds: WorldSpec = None, entities: bool = False) -> models.BatchStates:
         """Several worlds (None: all; or [0, 3], or "0-63") as column arrays; `entities=True`:
         their entities of the same tick too (`BatchStates.entities`)."""
-        return self._call(_http.states_call(worlds, entities))
+        return self.call(calls.states_call(worlds, entities))
 
     def increment(self, world: int, joint: JointRef, delta: float) -> models.CommandAck:
         """Add `delta` [rad] to one joint's target (the seed's Up/Down buttons)."""
-        return self._call(_http.increment_call(world, joint, delta))
+        return self.call(calls.increment_call(world, joint, delta))
 
     def set_targets(self, world: int, targets: Mapping[JointRef, float]) -> models.CommandAck:
         """Set some joints' targets, e.g. {"finger_joint": 0.7}; the others keep theirs."""
-        return self._call(_http.set_targets_call(world, targets))
+        return self.call(calls.set_targets_call(world, targets))
 
     def set_many(self, worlds: Iterable[int], positions: Any) -> models.BatchAck:
         """Full 7-joint targets for many worlds, applied at one tick; positions is (n, 7)."""
-        return self._call(_http.set_many_call(worlds, positions))
+        return self.call(calls.set_many_call(worlds, positions))
 
     def reset(self, world: int | Iterable[int] | None = None) -> models.ResetResult:
         """Reset one world, a list of worlds, or (None) all worlds to home."""
-        return self._call(_http.reset_call(world))
+        return self.call(calls.reset_call(world))
 
     # -- entities and physics parameters (calls: clients.cell) -----------------------------
 
     def entities(self, world: int) -> dict[str, Any]:
         """Pose and twist of every entity (named free body) of one world, and the tick."""
-        return self._call(cell.entities_call(world))
+        return self.call(cell.entities_call(world))
 
     def entity(self, world: int, name: str) -> dict[str, Any]:
-        return self._call(cell.entity_call(world, name))
+        return self.call(cell.entity_call(world, name))
 
     def set_entity(self, world: int, name: str, **values: Any) -> dict[str, Any]:
         """Any of position, orientation (w x y z), linear, angular; from the next tick."""
-        return self._call(cell.set_entity_call(world, name, **values))
+        return self.call(cell.set_entity_call(world, name, **values))
 
     def set_entities(self, writes: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
         """Entity writes of many worlds ({"world", "name", ...}), all at one tick."""
-        return self._call(cell.set_entities_call(writes))
+        return self.call(cell.set_entities_call(writes))
 
     def param_table(self) -> dict[str, Any]:
         """The parameters a world may have of its own, with units and ranges."""
-        return self._call(cell.param_table_call())
+        return self.call(cell.param_table_call())
 
     def params(self, world: int) -> dict[str, Any]:
-        return self._call(cell.params_call(world))
+        return self.call(cell.params_call(world))
 
     def set_params(self, world: int, params: Mapping[str, Any]) -> dict[str, Any]:
         """E.g. {"cube.mass": 0.3, "payload": [1.0, 0, 0, 0.05]}; from the next tick."""
-        return self._call(cell.set_params_call(world, params))
+        return self.call(cell.set_params_call(world, params))
 
     def set_params_many(self, writes: Iterable[tuple[int, Mapping[str, Any]]]) -> dict[str, Any]:
         """(world, params) pairs, all at one tick."""
-        return self._call(cell.set_params_many_call(writes))
+        return self.call(cell.set_params_many_call(writes))
 
     def randomize(
         self, seed: int, spec: Mapping[str, Any], worlds: Iterable[int] | None = None
     ) -> dict[str, Any]:
         """Reset worlds (None: all) with entity poses and parameters drawn from `spec` with
         `seed` (the same seed, the same worlds); the reply names the tick, seed and spec."""
-        return self._call(cell.randomize_call(seed, spec, worlds))
+        return self.call(cell.randomize_call(seed, spec, worlds))
 
     def randomization(self, world: int) -> dict[str, Any]:
         """A world's last randomisation (seed, spec, randomized_at; null when none), kept
         through snapshots and restores."""
-        return self._call(cell.randomization_call(world))
+        return self.call(cell.randomization_call(world))
 
     # -- trajectories (bodies and calls: clients.trajectory) ---------------------------------
 
@@ -159,27 +161,27 @@ class ArmfleetClient(_Closes):
         """Follow a JointTrajectory (`tj.point(...)`s); options: path_tolerance, goal_tolerance
         (`tj.tolerance(...)`s), goal_time_tolerance [s]. Replaces a running one."""
         body = tj.trajectory_body(joint_names, points, **options)
-        return self._call(tj.start_call(world, body))
+        return self.call(tj.start_call(world, body))
 
     def start_trajectories(
         self, worlds: WorldSpec, joint_names: Sequence[str], points: Iterable[Any], **options: Any
     ) -> tj.TrajectoriesStarted:
         """One trajectory on many worlds (ids, or "0-9999"), all from the same tick."""
         body = tj.trajectory_body(joint_names, points, **options)
-        return self._call(tj.start_many_call(worlds, body))
+        return self.call(tj.start_many_call(worlds, body))
 
     def trajectory(self, world: int, wait: float = 0.0) -> tj.TrajectoryStatus:
         """The world's running (else last) trajectory; `wait` s for its outcome at most."""
-        return self._call(tj.status_call(world, wait))
+        return self.call(tj.status_call(world, wait))
 
     def cancel_trajectory(self, world: int) -> tj.TrajectoryStatus:
         """Stop the world's trajectory; it holds where it was (Conflict if none runs)."""
-        return self._call(tj.cancel_call(world))
+        return self.call(tj.cancel_call(world))
 
     def wait_trajectory(self, traj_id: int, timeout: float | None = None) -> tj.TrajectoryStatus:
         """Block until the trajectory succeeds or aborts; TimeoutError after `timeout` s."""
         wait = tj.OutcomeWait(traj_id, timeout)
-        while not wait.finished(status := self._call(wait.call())):
+        while not wait.finished(status := self.call(wait.call())):
             pass
         return status
 
@@ -196,33 +198,33 @@ class ArmfleetClient(_Closes):
         return self.wait_trajectory(started.id, timeout)
 
     def pause(self) -> models.SimStatus:
-        return self._call(_http.pause_call())
+        return self.call(calls.pause_call())
 
     def resume(self) -> models.SimStatus:
-        return self._call(_http.resume_call())
+        return self.call(calls.resume_call())
 
     def set_mode(self, mode: str) -> models.SimStatus:
-        return self._call(_http.set_mode_call(mode))
+        return self.call(calls.set_mode_call(mode))
 
     def step(self, n: int = 1) -> models.SimStatus:
         """Paused only: advance exactly n ticks; returns once they are done."""
-        return self._call(_http.step_call(n))
+        return self.call(calls.step_call(n))
 
     def ready(self) -> bool:
         try:
-            self._call(_http.readyz_call())
-        except _http.NOT_YET:
+            self.call(calls.readyz_call())
+        except calls.NOT_YET:
             return False
         return True
 
     def wait_ready(self, timeout: float = 60.0, poll: float = 0.2) -> None:
         """Block until /readyz says ready; NotReady (with the last reason) after `timeout`."""
-        wait = _http.ReadyWait(timeout)
+        wait = calls.ReadyWait(timeout)
         while True:
             try:
-                self._call(_http.readyz_call())
+                self.call(calls.readyz_call())
                 return
-            except _http.NOT_YET as exc:
+            except calls.NOT_YET as exc:
                 wait.failed(exc)
             time.sleep(poll)
 
@@ -239,25 +241,25 @@ class ArmfleetClient(_Closes):
         holding the lease's token (its `.leased` says which worlds), reset to home; gives them
         back when the block ends. Conflict / NotReady (409 / 503) when none is free after
         `wait_s` seconds; `renew_lease` keeps a long block's lease alive."""
-        held = self._call(_http.lease_call(count, worlds, ttl_s, label, wait_s))
+        held = self.call(calls.lease_call(count, worlds, ttl_s, label, wait_s))
         client = ArmfleetClient(self.url, self.timeout, token=held.token)
         client.leased = held
         try:
             yield client
         finally:
             with contextlib.suppress(ArmfleetError):  # already ended (expired) is fine
-                client._call(_http.release_call(held.id))
+                client.call(calls.release_call(held.id))
             client.close()
 
     def leases(self) -> list[models.Lease]:
         """Every lease (the administrator's token), or this lease token's own."""
-        return self._call(_http.leases_call())
+        return self.call(calls.leases_call())
 
     def renew_lease(self, ttl_s: float = 600.0) -> models.Lease:
         """This client's lease lives `ttl_s` more seconds from now."""
         if self.leased is None:
             raise ValueError("this client holds no lease (use `with client.lease() as c:`)")
-        return self._call(_http.renew_call(self.leased.id, ttl_s))
+        return self.call(calls.renew_call(self.leased.id, ttl_s))
 
     # -- WebSocket ---------------------------------------------------------------------------
 
@@ -265,7 +267,7 @@ class ArmfleetClient(_Closes):
         self,
         worlds: WorldSpec,
         rate: float | None = None,
-        **options: Unpack[_stream.StreamOptions],
+        **options: Unpack[stream.StreamOptions],
     ) -> Iterator[Any]:
         """Yield states from the WebSocket: WorldState for one world (an int), BatchStates for
         a list / range string / None (all).
@@ -277,7 +279,7 @@ class ArmfleetClient(_Closes):
         BatchStates, a fraction of the bytes and parse time). `entities=True`: every state
         carries its worlds' entities (`.entities`, pose and twist of the same tick).
         """
-        policy = _stream.Reconnector.for_stream(self.url, worlds, rate, options)
+        policy = stream.Reconnector.for_stream(self.url, worlds, rate, options)
         while True:
             try:
                 with _open(policy.url, self.timeout, self.token) as ws:
@@ -285,9 +287,9 @@ class ArmfleetClient(_Closes):
                     for text in ws:
                         if (msg := policy.frame(text)) is not None:
                             yield msg
-                    reason = _stream.close_reason(ws.close_code, ws.close_reason)
-            except _stream.LOST as exc:
-                reason = _stream.reason_for(exc)
+                    reason = stream.close_reason(ws.close_code, ws.close_reason)
+            except stream.LOST as exc:
+                reason = stream.reason_for(exc)
             time.sleep(policy.dropped(reason))
 
     def connect(
@@ -295,7 +297,7 @@ class ArmfleetClient(_Closes):
     ) -> WorldSession:
         """Open a WebSocket to one world: send commands, get their acks, iterate states
         (`entities=True`: with the world's entities)."""
-        url = _stream.ws_url(self.url, world, rate, entities=entities)
+        url = stream.ws_url(self.url, world, rate, entities=entities)
         return WorldSession(url, world, self.timeout, self.token)
 
 
@@ -304,9 +306,9 @@ def _open(url: str, timeout: float, token: str | None = None) -> ClientConnectio
         return ws_connect(
             url,
             open_timeout=timeout,
-            max_size=_stream.MAX_SIZE,
+            max_size=stream.MAX_SIZE,
             proxy=None,
-            additional_headers=_http.auth_headers(token),
+            additional_headers=calls.auth_headers(token),
         )
     except InvalidURI as exc:
         raise ArmfleetError(None, str(exc)) from exc
@@ -328,22 +330,22 @@ class WorldSession(_Closes):
         self.url = url
         self.world = world
         self.timeout = timeout
-        self._ids = _stream.CommandIds()
+        self._ids = stream.CommandIds()
         self._states: deque[models.WorldState] = deque(maxlen=256)
         self._lock = threading.Lock()
         try:
             self._ws = _open(url, timeout, token).__enter__()  # closed by close()
-        except _stream.DROPPED as exc:
-            raise _stream.lost(url, exc) from exc
+        except stream.DROPPED as exc:
+            raise stream.lost(url, exc) from exc
         self.latest: models.WorldState | None = None
 
     def _recv(self, timeout: float | None) -> Any:
         try:
-            msg = _stream.parse(self._ws.recv(timeout))
+            msg = stream.parse(self._ws.recv(timeout))
         except TimeoutError:  # nothing came in time; the socket is fine (LOST has it too)
             raise TimeoutError(f"no message from {self.url} in {timeout:g} s") from None
-        except _stream.LOST as exc:
-            raise _stream.lost(self.url, exc) from exc
+        except stream.LOST as exc:
+            raise stream.lost(self.url, exc) from exc
         if isinstance(msg, models.WorldState):
             self.latest = msg
         return msg
@@ -352,8 +354,8 @@ class WorldSession(_Closes):
         with self._lock:
             try:
                 self._ws.send(text)
-            except _stream.LOST as exc:
-                raise _stream.lost(self.url, exc) from exc
+            except stream.LOST as exc:
+                raise stream.lost(self.url, exc) from exc
             deadline = time.monotonic() + self.timeout
             while True:
                 left = deadline - time.monotonic()
@@ -363,7 +365,7 @@ class WorldSession(_Closes):
                 if isinstance(msg, models.WorldState):
                     self._states.append(msg)
                 elif isinstance(msg, models.CommandAck | models.WsError) and msg.id == msg_id:
-                    return _stream.ack_or_raise(msg)
+                    return stream.ack_or_raise(msg)
 
     def increment(self, joint: JointRef, delta: float) -> models.CommandAck:
         return self._command(*self._ids.increment(joint, delta))

@@ -1,6 +1,6 @@
 """Trajectories from the client side: bodies, calls, replies, and waiting for the outcome.
 
-Like `clients._http`, nothing here does I/O: `ArmfleetClient` and `AsyncArmfleetClient` run
+Like `clients.calls`, nothing here does I/O: `ArmfleetClient` and `AsyncArmfleetClient` run
 these `Call`s, so the two twins share every path, body and parse. A trajectory is given as
 trajectory_msgs/JointTrajectory fields:
 
@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from clients._http import Call, worlds_param
+from clients.calls import Call, worlds_param
 from clients.models import WorldSpec
 
 MAX_WAIT_S = 30.0  # one long poll of GET .../trajectory?wait= (the server allows up to 60 s)

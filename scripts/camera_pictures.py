@@ -18,8 +18,7 @@ import httpx
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from clients import headless  # noqa: E402
-from clients.testing import serve  # noqa: E402
+from clients.testing import headless, serve  # noqa: E402
 
 DOCS = ROOT / "docs"
 

@@ -9,6 +9,8 @@ by an import that only runs on some path.
     python scripts/import_graph.py --edges    # every edge, one a line
 
 Layers, lowest first: a module may import its own layer and the ones below it, never above.
+Checked: `service`, `clients`, `bench` and the ROS node's `armfleet_ros` (packaging/armfleet-ros);
+and nothing outside `clients` imports the client's private modules (`clients._*`).
 """
 
 from __future__ import annotations
@@ -19,10 +21,22 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("service", "clients")
+# (folder the package is imported from, package): the ROS node's package is imported from its
+# colcon/pip project folder, the rest from the repository's root.
+PACKAGES: tuple[tuple[str, str], ...] = (
+    ("", "service"),
+    ("", "clients"),
+    ("", "bench"),
+    ("packaging/armfleet-ros", "armfleet_ros"),
+)
 
 # (prefix, rank): the longest matching prefix decides a module's layer.
 LAYERS: tuple[tuple[str, int], ...] = (
+    # the client library: under everything (the core reads its wire and ROS rules); its apps
+    # and test harness import only the library, and the CLI starts the apps
+    ("clients", -2),
+    ("clients.apps", -1),
+    ("clients.testing", -1),
     ("service.core", 0),  # errors: under every room
     # the rooms of the core, lowest first (service/core/__init__.py says what each holds)
     ("service.core.process", 1),
@@ -40,13 +54,19 @@ LAYERS: tuple[tuple[str, int], ...] = (
     # the app: everything else under service/ (api/, app, runtime, serving, cli), so that a
     # module added at the top is above every layer, never below one
     ("service", 13),
+    # the bench: beside the app (`armfleet bench` runs it; it drives the service's parts)
+    ("bench", 13),
+    # the ROS node, on top: it imports only the client library, and nothing imports it
+    ("armfleet_ros", 14),
 )
+# What the client library keeps to itself: nothing outside `clients` imports these.
+PRIVATE = "clients._"
 
 
-def module_name(path: Path) -> str:
+def module_name(path: Path, base: Path = ROOT) -> str:
     """`service/core/sim/loop.py` -> `service.core.sim.loop`; a package's `__init__` is the
-    package."""
-    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    package; `base`: the folder the package is imported from."""
+    parts = list(path.relative_to(base).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
     return ".".join(parts)
@@ -55,9 +75,10 @@ def module_name(path: Path) -> str:
 def discover() -> dict[str, Path]:
     """Every module of the packages, by dotted name."""
     found: dict[str, Path] = {}
-    for pkg in PACKAGES:
-        for path in sorted((ROOT / pkg).rglob("*.py")):
-            found[module_name(path)] = path
+    for folder, pkg in PACKAGES:
+        base = ROOT / folder
+        for path in sorted((base / pkg).rglob("*.py")):
+            found[module_name(path, base)] = path
     return found
 
 
@@ -163,6 +184,18 @@ def upward(g: dict[str, set[str]]) -> list[tuple[str, str]]:
     return sorted(bad)
 
 
+def private(g: dict[str, set[str]]) -> list[tuple[str, str]]:
+    """Edges from outside the client library into its private modules (`clients._*`): the
+    library's public face is what others may use (issue 37)."""
+    return sorted(
+        (src, dst)
+        for src, dsts in g.items()
+        if not (src == "clients" or src.startswith("clients."))
+        for dst in dsts
+        if dst.startswith(PRIVATE)
+    )
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--edges", action="store_true", help="print every edge")
@@ -177,12 +210,16 @@ def main() -> int:
     up = upward(g)
     for comp in cyc:
         print("cycle: " + " <-> ".join(comp))
+    hidden = private(g)
     for src, dst in up:
         print(f"upward: {src} -> {dst}")
+    for src, dst in hidden:
+        print(f"private: {src} -> {dst}")
     print(
         f"{len(g)} modules, {sum(map(len, g.values()))} edges, {len(cyc)} cycles, {len(up)} upward"
+        f", {len(hidden)} into the client's private modules"
     )
-    return 1 if cyc or up else 0
+    return 1 if cyc or up or hidden else 0
 
 
 if __name__ == "__main__":

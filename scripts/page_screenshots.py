@@ -23,7 +23,7 @@ from playwright.sync_api import sync_playwright
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from clients import headless  # noqa: E402
+from clients.testing import headless  # noqa: E402
 
 DOCS = ROOT / "docs"
 NWORLD = 16

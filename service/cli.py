@@ -234,19 +234,19 @@ def controller(
     ] = None,
 ) -> None:
     """The seed's button controller: seven joints, Up (+0.1) / Down (-0.1)."""
+    from clients.apps.lease_session import session_world
     from clients.errors import ArmfleetError
-    from clients.lease_session import session_world
 
     try:
         with session_world(url, token, world, lease, lease_token) as (world, token):
             if lease or lease_token:
                 typer.echo(f"armfleet controller: driving world {world} (leased)", err=True)
             if terminal:
-                from clients.tui import run_tui
+                from clients.apps.tui import run_tui
 
                 run_tui(url=url, world=world, token=token)
             else:
-                from clients.tk_controller import run_tk
+                from clients.apps.tk_controller import run_tk
 
                 run_tk(url=url, world=world, token=token)
     except ArmfleetError as exc:  # no world free, a wrong token, an ended lease
@@ -262,7 +262,7 @@ def watch(
     json: Annotated[bool, typer.Option("--json", help="one JSON line per frame")] = False,
 ) -> None:
     """Print a world's state stream as a live table (or JSON lines for piping)."""
-    from clients.watch import run_watch
+    from clients.apps.watch import run_watch
 
     run_watch(url=url, world=world, rate=rate, as_json=json)
 

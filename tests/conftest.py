@@ -1,5 +1,5 @@
 """Shared test helpers. Servers come from the harness we offer users (`clients.testing`,
-fixtures in `clients.pytest_plugin`): a real `armfleet serve` process on a free loopback
+fixtures in `clients.testing.pytest_plugin`): a real `armfleet serve` process on a free loopback
 port; end-to-end tests talk to it over real sockets and nothing of the engine is mocked.
 
 The joint names and home pose are read from the model (the one source of truth), so a test
@@ -21,9 +21,9 @@ import httpx
 import pytest
 import roslibpy
 
-from clients import ArmfleetClient, WorldState, headless
-from clients import pytest_plugin as armfleet_plugin
-from clients.testing import Server, free_port, serve
+from clients import ArmfleetClient, WorldState
+from clients.testing import Server, free_port, headless, serve
+from clients.testing import pytest_plugin as armfleet_plugin
 from service.core.sim.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -251,7 +251,7 @@ def test_rosbridge_publishes_follow_the_same_policy(guarded):
 
 def test_the_browser_page_takes_the_token_from_its_url(guarded):
     """Chromium judges: the page's socket presents ?token= from the page URL, else is refused."""
-    from clients import headless
+    from clients.testing import headless
 
     reason = headless.why_unavailable()
     if reason:

@@ -13,8 +13,8 @@ import pytest
 from PIL import Image
 from websockets.sync.client import connect
 
-from clients.images import unpack
 from clients.testing import Server, serve
+from clients.wire import unpack_images as unpack
 from tests.conftest import wait_for
 
 

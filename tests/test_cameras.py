@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from clients.images import unpack
 from clients.testing import Server, serve
+from clients.wire import unpack_images as unpack
 from service.core.cameras.feed import rows_of
 from service.core.sim.robot import load_robot
 from tests.conftest import ROOT, wait_for

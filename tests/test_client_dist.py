@@ -20,7 +20,16 @@ from conftest import ELBOW, HOME, JOINTS, Server
 from pythons import ROOT, interpreter
 
 PROJECT = ROOT / "packaging" / "armfleet-client"
-ABSENT = ("mujoco", "mujoco_warp", "warp", "service", "fastapi", "cyclonedds", "clients.testing")
+ABSENT = (
+    "mujoco",
+    "mujoco_warp",
+    "warp",
+    "service",
+    "fastapi",
+    "cyclonedds",
+    "clients.testing",
+    "clients.apps",
+)
 # Ubuntu 22.04's python3-numpy, which rclpy's messages use: the client must work beside it.
 HUMBLE_NUMPY = "numpy==1.21.5"
 PIP = [sys.executable, "-m", "pip", "--disable-pip-version-check"]
@@ -28,6 +37,7 @@ PIP = [sys.executable, "-m", "pip", "--disable-pip-version-check"]
 DRIVE = """
 import asyncio, json, sys
 import clients
+import clients.calls, clients.ros_rules, clients.stream, clients.wire  # the public modules
 from clients import ArmfleetClient, AsyncArmfleetClient
 
 url, world = sys.argv[1], int(sys.argv[2])

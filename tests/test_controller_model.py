@@ -6,7 +6,7 @@ import numpy as np
 from conftest import HOME, JOINTS
 
 from clients import CommandAck, ConnectionStatus, Info, JointInfo, ResetResult, WorldState
-from clients.controller import ControllerModel, Notice
+from clients.apps.controller import ControllerModel, Notice
 
 URL = "http://127.0.0.1:8000"
 

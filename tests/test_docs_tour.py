@@ -110,7 +110,7 @@ def test_the_pytest_step_passes_as_a_users_test_file(tmp_path: Path) -> None:
     )
     if "fixture 'armfleet_server' not found" in done.stdout:
         # a plain checkout, armfleet not installed: name the plugin its entry point would load
-        command[4:4] = ["-p", "clients.pytest_plugin"]
+        command[4:4] = ["-p", "clients.testing.pytest_plugin"]
         done = subprocess.run(
             command, capture_output=True, text=True, timeout=600, env=env, cwd=tmp_path
         )

@@ -19,7 +19,8 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
-from clients import ArmfleetClient, AsyncArmfleetClient, _stream
+from clients import ArmfleetClient, AsyncArmfleetClient
+from clients.stream import parse as parse_frame
 from service.core.streams import entity_frames, frames, wire
 
 S = math.sqrt(0.5)
@@ -216,7 +217,7 @@ def test_packed_frames_with_entities_are_the_snapshot_frames_byte_for_byte(engin
         doc = json.loads(packed)
         qpos = batch.qpos()
         adr = batch.robot.mjm.jnt_qposadr[batch.robot.mjm.joint("cube_joint").id]
-        parsed = _stream.parse(binary).entities  # the client's reading of the binary block
+        parsed = parse_frame(binary).entities  # the client's reading of the binary block
         for i, w in enumerate(ids):
             got = doc["entities"]["position"][i][0] + doc["entities"]["orientation"][i][0]
             np.testing.assert_array_equal(np.array(got, qpos.dtype), qpos[w, adr : adr + 7])

@@ -37,8 +37,26 @@ def test_the_import_graph_has_no_cycles_and_no_upward_imports() -> None:
     ig = _import_graph()
     graph = ig.graph()
     assert "service.core.sim.loop" in graph and "service.surfaces.registry" in graph
+    # the bench and the ROS node (packaging/armfleet-ros) are drawn too
+    assert "bench.figures" in graph and "armfleet_ros.node" in graph
     assert ig.cycles(graph) == []
     assert ig.upward(graph) == []
+
+
+def test_nothing_outside_the_client_imports_its_private_modules() -> None:
+    """The client's face is its public modules (`clients.calls`, `clients.stream`, ...): the
+    service, the ROS node, the bench and the tests use those, never `clients._*` (issue 37)."""
+    ig = _import_graph()
+    assert ig.private(ig.graph()) == []
+    # the graph holds no test module: read the tests' imports too
+    tests = {
+        m: ig.imports_of(m, p, {**ig.discover(), m: p})
+        for p in (ROOT / "tests").rglob("*.py")
+        for m in [f"tests.{p.stem}"]
+    }
+    assert ig.private(tests) == []
+    bad = {"armfleet_ros.x": {"clients._http"}, "clients.client": {"clients._http"}}
+    assert ig.private(bad) == [("armfleet_ros.x", "clients._http")]  # the check can fail
 
 
 def test_the_checker_sees_a_cycle_and_an_upward_import() -> None:
@@ -56,7 +74,7 @@ def test_the_checker_sees_a_cycle_and_an_upward_import() -> None:
 def test_no_module_over_the_line_limit() -> None:
     long = {
         str(p.relative_to(ROOT)): n
-        for folder in ("service", "clients")
+        for folder in ("service", "clients", "packaging")
         for p in (ROOT / folder).rglob("*.py")
         if (n := len(p.read_text().splitlines())) > MAX_LINES
     }

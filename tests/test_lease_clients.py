@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from clients import ArmfleetClient, AsyncArmfleetClient, Forbidden, Unauthorized
-from clients.lease_session import session_world
+from clients.apps.lease_session import session_world
 from clients.testing import LeasedWorld
 from tests.conftest import HOME, Server, serve
 

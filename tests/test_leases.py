@@ -247,7 +247,7 @@ def test_own_world(armfleet_world, i):
 
 
 XDIST_CONFTEST = """
-from clients import pytest_plugin
+from clients.testing import pytest_plugin
 
 
 def pytest_configure(config):  # as tests/conftest.py: the plugin, installed or not

@@ -13,8 +13,7 @@ from pathlib import Path
 import pytest
 from conftest import ROOT
 
-from clients import pytest_plugin
-from clients.testing import ServerFailed, serve, stop
+from clients.testing import ServerFailed, pytest_plugin, serve, stop
 
 
 # -- docs/guides/testing.md: "Testing your controller with pytest" ----------------------------

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import queue
 import signal
 import subprocess
 import sys
@@ -21,8 +22,10 @@ import mujoco
 import numpy as np
 import orjson
 import pytest
+import roslibpy
 from websockets.sync.client import connect
 
+from clients import ros_rules
 from tests import ros2_judge
 from tests.conftest import JOINTS, Server, free_port, serve, wait_for
 
@@ -131,6 +134,53 @@ def test_bad_messages_are_counted_and_change_nothing(ros: tuple[Server, httpx.Cl
         return r if all(r.get(k, 0) >= 1 for k in kinds) else None
 
     wait_for(counted, "the bad messages counted", 15)
+
+
+def test_both_ros_faces_refuse_a_bad_message_in_the_same_words(
+    ros: tuple[Server, httpx.Client],
+) -> None:
+    """One ROS rulebook (clients/ros_rules.py): the same bad JointState on world 1, published
+    over rosbridge by roslibpy and over DDS to the ROS node by a judge on a real rclpy, is
+    refused by both faces under the same kind in the same words (the rulebook's), and moves
+    nothing. The bad message names elbow_joint twice, once by its index: the node used to call
+    the index an unknown joint while rosbridge found the duplicate."""
+    srv, http = ros
+    names, positions = ["elbow_joint", "2"], [0.1, 0.2]
+    with pytest.raises(ros_rules.BadJointState) as rule:
+        ros_rules.joint_state(JOINTS, names, positions)
+    kind, words = rule.value.kind, rule.value.detail
+    assert (kind, words) == ("duplicate_joint", "name: joint 'elbow_joint' named twice")
+    before = targets(http, 1)
+
+    # rosbridge: roslibpy publishes; the `status` frame it gets back says why
+    statuses: queue.SimpleQueue[dict[str, Any]] = queue.SimpleQueue()
+    client = roslibpy.Ros("127.0.0.1", srv.port)
+    client.run(timeout=20)
+    try:
+        # roslibpy 2.1 reads no `status` op (its handler table holds a None placeholder that
+        # register_message_handlers refuses to replace): put ours in that slot
+        client.factory.on_ready(
+            lambda proto: proto._message_handlers.__setitem__("status", statuses.put)
+        )
+        topic = roslibpy.Topic(client, "/world_1/joint_commands", "sensor_msgs/msg/JointState")
+        topic.publish(roslibpy.Message({"name": names, "position": positions}))
+        status = statuses.get(timeout=10)
+    finally:
+        client.close()
+    assert status["level"] == "error"
+    assert status["msg"] == f"publish: {kind}: {words}"
+
+    # the ROS node: a judge publishes over DDS; the node's refusal is its log line
+    logged = len(srv.log())
+    assert judge("command", "/world_1", json.dumps(names), json.dumps(positions))["matched"]
+    prefix = f"armfleet_ros: refused on /world_1/joint_commands: {kind}: "
+
+    def node_words() -> str | None:
+        lines = srv.log()[logged:].splitlines()
+        return next((line.split(prefix, 1)[1] for line in lines if prefix in line), None)
+
+    assert wait_for(node_words, "the node's refusal logged", 15) == words
+    assert targets(http, 1) == before
 
 
 def test_ur_command_topics_move_the_arm(ros: tuple[Server, httpx.Client]) -> None:

@@ -10,6 +10,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from clients import ros_rules
 from service.core.process import pythonpath
 from tests.conftest import JOINTS, ROOT
 from tests.pythons import interpreter
@@ -82,3 +83,25 @@ def test_ros_pythonpath_is_kept_out(tmp_path: Path) -> None:
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=tmp_path
     )
     assert done.stdout.splitlines() == [str(ROOT), f"{ROOT}:{site}", "False"], done.stderr
+
+
+def test_the_rulebook_both_faces_apply() -> None:
+    """clients/ros_rules.py, which rosbridge and the node both import: result codes, the
+    gripper's reached / stalled rule, and a counter that counts all but logs a kind once."""
+    assert [ros_rules.result_code(r) for r in (None, "cancelled", "path_tolerance")] == [0, 0, -4]
+    assert [ros_rules.result_code(r) for r in ("goal_tolerance", "preempted")] == [-5, -1]
+    assert ros_rules.error_string("reset", "world 3 was reset") == "reset: world 3 was reset"
+    watch = ros_rules.FingerWatch(0.5)
+    assert watch.verdict(0.0, 0.1, 1.0) is None  # moving
+    assert watch.verdict(0.1, 0.2, 0.0) is None  # stopped, not for long
+    assert watch.verdict(0.1 + ros_rules.STALL_TIMEOUT_S, 0.2, 0.0) == "stalled"
+    assert ros_rules.FingerWatch(0.5).verdict(0.0, 0.495, 0.0) == "reached"
+    assert watch.taken_over(0.6) and not watch.taken_over(0.5 + 1e-7)
+    with pytest.raises(ros_rules.GoalRejected, match="max_effort must be >= 0"):
+        ros_rules.gripper_goal(0.3, -1.0)
+    lines: list[str] = []
+    counter = ros_rules.RefusalCounter("armfleet_ros", lines.append)
+    for _ in range(3):
+        counter.report("empty", "/joint_commands", "position: position is empty")
+    assert counter.counts() == {"empty": 3} and len(lines) == 1
+    assert lines == ["armfleet_ros: refused on /joint_commands: empty: position: position is empty"]

@@ -237,7 +237,7 @@ def test_throttle_rate_and_unsubscribe(server: Server) -> None:
 
 
 def test_nan_becomes_null_in_json() -> None:
-    from service.surfaces.ros import topics
+    from service.surfaces.rosbridge import topics
 
     assert topics._floats(np.array([1.0, math.nan, math.inf])) == [1.0, None, None]
 

@@ -12,7 +12,7 @@ import httpx
 import pytest
 from websockets.sync.client import ClientConnection, connect
 
-from clients import _stream
+from clients.stream import parse as parse_frame
 from tests.conftest import Server, serve
 
 
@@ -28,7 +28,7 @@ def newest_tick(ws: ClientConnection, wait_for: int, within: float = 5.0) -> int
     tick, end = -1, time.monotonic() + within
     while tick != wait_for and time.monotonic() < end:
         try:
-            msg = _stream.parse(ws.recv(timeout=max(0.01, end - time.monotonic())))
+            msg = parse_frame(ws.recv(timeout=max(0.01, end - time.monotonic())))
         except TimeoutError:
             break
         if msg is not None and hasattr(msg, "tick") and hasattr(msg, "worlds"):
@@ -43,7 +43,7 @@ def test_a_burst_of_steps_ends_with_a_frame_of_its_last_tick(paused: Server, fmt
         connect(f"{paused.ws_url}/v1/ws?{query}", max_size=None) as ws,
         httpx.Client(base_url=paused.url, timeout=30) as http,
     ):
-        first = _stream.parse(ws.recv(timeout=10))
+        first = parse_frame(ws.recv(timeout=10))
         assert first is not None and getattr(first, "tick", None) is not None
         for _ in range(3):
             tick = http.post("/v1/sim/step", json={"ticks": 25}).json()["tick"]

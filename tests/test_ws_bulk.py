@@ -18,8 +18,8 @@ from websockets.frames import Frame, Opcode
 from websockets.streams import StreamReader
 from websockets.sync.client import connect
 
-from clients.images import unpack
 from clients.testing import Server, serve
+from clients.wire import unpack_images as unpack
 from service.api.ws_bulk import frame_header
 from tests.conftest import wait_for
 

@@ -12,7 +12,10 @@ from types import ModuleType
 
 ROOT = Path(__file__).resolve().parents[2]
 # The top layer is "everything else under service/"; its routes package speaks for it.
-DOC_OF = {"service": "service/api/__init__.py"}
+DOC_OF = {
+    "service": "service/api/__init__.py",
+    "armfleet_ros": "packaging/armfleet-ros/armfleet_ros/__init__.py",
+}
 
 
 def import_graph() -> ModuleType:

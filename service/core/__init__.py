@@ -23,6 +23,7 @@ Rooms, lowest first; a room may import the rooms below it, never one above
   are service/settings.py: their sections live beside their owners, some above the core.
 
 May import: the standard library, third-party packages, `mjcf` and the client's public
-modules (`clients.models`, `clients.wire`: the wire's own description); never engines,
+modules (`clients.models`, `clients.wire`: the wire's own description; `clients.ros_rules`: the
+JointState rule every surface and the ROS node apply); never engines,
 persistence, surfaces, api or the app.
 """

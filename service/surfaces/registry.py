@@ -92,7 +92,7 @@ def _ros2(own: Ros2Settings, facts: ServiceFacts, built: Mapping[str, Surface]) 
 
 
 def _rosbridge(own: Ros2Settings, facts: ServiceFacts, built: Mapping[str, Surface]) -> Surface:
-    from service.surfaces.ros.rosbridge_surface import RosbridgeSurface
+    from service.surfaces.rosbridge.surface import RosbridgeSurface
 
     return RosbridgeSurface(own, facts, built.get("ros2"))  # always on; reports the ROS 2 node
 
@@ -107,7 +107,7 @@ REGISTRY: tuple[Entry, ...] = (
         _camera_recording,
     ),
     Entry("ros2", "service.surfaces.ros.node_process", Ros2Settings, _ros2),
-    Entry("rosbridge", "service.surfaces.ros.rosbridge_surface", Ros2Settings, _rosbridge),
+    Entry("rosbridge", "service.surfaces.rosbridge.surface", Ros2Settings, _rosbridge),
 )
 
 

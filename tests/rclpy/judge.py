@@ -1,13 +1,14 @@
 """Judge nodes on a real rclpy (../shared/ros2_judge): each subcommand plays a ROS user against
 the armfleet_ros node and prints one JSON line of what it saw; the pytest side decides.
 
-    python judge.py seed|actions|tf|description|graph|isaac|sim [args]
+    python judge.py seed|bad|command|actions|tf|description|graph|isaac|sim [args]
 
 Nothing of armfleet is imported here: only rclpy and the distribution's message packages.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 import threading
 import time
@@ -72,6 +73,21 @@ def bad(ns: str) -> None:
     sent += 1
     spin_until(node, lambda: False, 1.0)
     out(sent=sent)
+
+
+def command(ns: str, names: str, positions: str) -> None:
+    """One JointState (`names`, `positions` as JSON arrays) on joint_commands, as any ROS user
+    publishes it; what armfleet made of it is read back over its API."""
+    from sensor_msgs.msg import JointState
+
+    node = Node("judge_command")
+    pub = node.create_publisher(JointState, f"{ns}/joint_commands", 10)
+    spin_until(node, lambda: pub.get_subscription_count() > 0, 20)
+    msg = JointState()
+    msg.name, msg.position = json.loads(names), [float(v) for v in json.loads(positions)]
+    pub.publish(msg)
+    spin_until(node, lambda: False, 1.0)
+    out(sent=1, matched=pub.get_subscription_count())
 
 
 def topics(ns: str, which: str) -> None:
@@ -273,6 +289,8 @@ def main() -> None:
             topics(args[0], args[1])
         elif cmd == "bad":
             bad(args[0])
+        elif cmd == "command":
+            command(args[0], args[1], args[2])
         elif cmd == "actions":
             actions(args[0])
         elif cmd == "tf":

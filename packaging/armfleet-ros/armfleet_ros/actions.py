@@ -25,17 +25,21 @@ from typing import Any
 from control_msgs.action import FollowJointTrajectory, GripperCommand
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 
-from armfleet_ros.convert import ARM_JOINTS, BadMessage, stamp, trajectory_body
+from armfleet_ros.convert import trajectory_body
+from clients import ros_rules
 from clients import trajectory as tj
 from clients.errors import ArmfleetError
-
-FEEDBACK_HZ = 20.0  # joint_trajectory_controller's default action_monitor_rate
-GOAL_TOLERANCE = 0.01  # rad: GripperActionController's default goal_tolerance
-STALL_VELOCITY = 0.01  # rad/s: below this the finger counts as not moving
-STALL_TIMEOUT_S = 0.2  # simulated seconds short of the goal without motion: stalled
-FJT_ACTIONS = ("scaled_joint_trajectory_controller", "joint_trajectory_controller")
-GRIPPER_ACTION = "robotiq_gripper_controller/gripper_cmd"
-_CODES = {"path_tolerance": -4, "goal_tolerance": -5}  # else INVALID_GOAL (-1)
+from clients.ros_rules import (
+    ARM_JOINTS,
+    FEEDBACK_HZ,
+    FINGER,
+    FJT_CONTROLLERS,
+    GRIPPER_ACTION,
+    BadMessage,
+    FingerWatch,
+    GoalRejected,
+    stamp,
+)
 
 
 def _fill_point(point: Any, values: Any, elapsed: float) -> None:
@@ -61,20 +65,18 @@ class TrajectoryActions:
                 cancel_callback=lambda _h: CancelResponse.ACCEPT,
                 callback_group=part.group,
             )
-            for name in FJT_ACTIONS
+            for name in FJT_CONTROLLERS
         ]
 
     def _goal(self, goal: Any) -> GoalResponse:
         where = f"world {self.world} follow_joint_trajectory"
         arm = self.owner.joints[:ARM_JOINTS]
         try:
-            extra = [n for n in goal.trajectory.joint_names if n not in arm]
-            if extra:
-                raise BadMessage("rejected_goal", f"joints {extra} are not the arm's {arm}")
+            ros_rules.check_arm_joints(list(goal.trajectory.joint_names), arm)
             body = trajectory_body(
                 goal.trajectory, goal.path_tolerance, goal.goal_tolerance, goal.goal_time_tolerance
             )
-            started = self.owner.http._call(tj.start_call(self.world, body))
+            started = self.owner.http.call(tj.start_call(self.world, body))
         except BadMessage as exc:
             self.owner.bad.report("rejected_goal", where, exc.detail)
             return GoalResponse.REJECT
@@ -92,16 +94,16 @@ class TrajectoryActions:
         result = FollowJointTrajectory.Result()
         while True:
             if handle.is_cancel_requested:
-                status = http._call(tj.by_id_call(traj_id))
+                status = http.call(tj.by_id_call(traj_id))
                 if not status.done:
-                    http._call(tj.cancel_call(self.world))
-                    status = http._call(tj.by_id_call(traj_id, 2.0))
+                    http.call(tj.cancel_call(self.world))
+                    status = http.call(tj.by_id_call(traj_id, 2.0))
                 if status.reason == "cancelled" or not status.done:
                     handle.canceled()
                     result.error_string = "cancelled"
                     return result
             else:
-                status = http._call(tj.by_id_call(traj_id, 1.0 / FEEDBACK_HZ))
+                status = http.call(tj.by_id_call(traj_id, 1.0 / FEEDBACK_HZ))
             if status.done:
                 break
             if status.actual.size:
@@ -110,10 +112,9 @@ class TrajectoryActions:
             handle.succeed()
             return result
         reason = status.reason or "aborted"
-        result.error_code = _CODES.get(reason, -1)
-        result.error_string = f"{reason}: {status.detail}" if status.detail else reason
+        result.error_code = ros_rules.result_code(reason)
+        result.error_string = ros_rules.error_string(reason, status.detail)
         if reason == "cancelled":
-            result.error_code = 0
             handle.canceled()
         else:
             handle.abort()
@@ -137,7 +138,7 @@ class GripperAction:
 
     def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
         self.owner, self.world = owner, world
-        self.finger = owner.joints.index("finger_joint")
+        self.finger = owner.joints.index(FINGER)
         self.server = ActionServer(
             part.servers,
             GripperCommand,
@@ -149,28 +150,23 @@ class GripperAction:
         )
 
     def _goal(self, goal: Any) -> GoalResponse:
-        position, effort = goal.command.position, goal.command.max_effort
-        bad = None
-        if not (math.isfinite(position) and math.isfinite(effort)):
-            bad = f"command.position {position} and max_effort {effort} must be finite"
-        elif effort < 0:
-            bad = f"command.max_effort must be >= 0, got {effort}"
-        if bad is not None:
-            self.owner.bad.report("rejected_goal", f"world {self.world} gripper_cmd", bad)
+        try:
+            ros_rules.gripper_goal(goal.command.position, goal.command.max_effort)
+        except GoalRejected as exc:
+            self.owner.bad.report("rejected_goal", f"world {self.world} gripper_cmd", str(exc))
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
     def _execute(self, handle: Any) -> Any:
         link = self.owner.link
         try:
-            ack = link.set_targets(self.world, {"finger_joint": handle.request.command.position})
+            ack = link.set_targets(self.world, {FINGER: handle.request.command.position})
             ack = ack.result(timeout=5.0)
         except Exception as exc:
             self.owner.bad.report("rejected_goal", f"world {self.world} gripper_cmd", str(exc))
             handle.abort()
             return self._result(False)
-        target = float(ack.target[self.finger])
-        moved_at = math.inf
+        watch = FingerWatch(float(ack.target[self.finger]))
         period = 1.0 / FEEDBACK_HZ
         while True:
             time.sleep(period)
@@ -179,24 +175,19 @@ class GripperAction:
                 continue  # the new target is not stepped yet
             row = st.row(self.world)
             now = st.tick * self.owner.tick_dt
-            moved_at = min(moved_at, now)
             position = float(st.position[row, self.finger])
             if handle.is_cancel_requested:
-                link.set_targets(self.world, {"finger_joint": position})
+                link.set_targets(self.world, {FINGER: position})
                 handle.canceled()
                 return self._result(False, position, st.effort[row, self.finger])
-            if abs(float(st.target[row, self.finger]) - target) > 1e-5:
+            if watch.taken_over(float(st.target[row, self.finger])):
                 handle.abort()  # another command (or a newer goal) took the finger over
                 return self._result(False, position, st.effort[row, self.finger])
-            reached = abs(position - target) < GOAL_TOLERANCE
-            if reached:
+            verdict = watch.verdict(now, position, float(st.velocity[row, self.finger]))
+            if verdict is not None:
                 handle.succeed()
-                return self._result(False, position, st.effort[row, self.finger], True)
-            if abs(float(st.velocity[row, self.finger])) > STALL_VELOCITY:
-                moved_at = now
-            elif now - moved_at >= STALL_TIMEOUT_S:
-                handle.succeed()
-                return self._result(True, position, st.effort[row, self.finger], False)
+                stalled = verdict == "stalled"
+                return self._result(stalled, position, st.effort[row, self.finger], not stalled)
             fb = GripperCommand.Feedback()
             fb.position, fb.effort = position, float(st.effort[row, self.finger])
             fb.stalled, fb.reached_goal = False, False

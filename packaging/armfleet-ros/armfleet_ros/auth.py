@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 
-from clients._http import auth_headers
+from clients.calls import auth_headers
 
 TOKEN_ENV = "ARMFLEET_TOKEN"
 

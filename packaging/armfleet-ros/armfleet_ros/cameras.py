@@ -23,10 +23,9 @@ from sensor_msgs.msg import CameraInfo, Image
 from websockets.sync.client import connect
 
 from armfleet_ros import auth
-from armfleet_ros.convert import stamp
-from clients import _stream
-from clients._http import Call
-from clients.images import unpack
+from clients import ros_rules, stream
+from clients.calls import Call
+from clients.wire import unpack_images as unpack
 
 log = logging.getLogger("armfleet_ros")
 
@@ -88,7 +87,7 @@ class CameraTopics:
         self._thread.join(timeout=5)
 
     def _url(self, worlds: tuple[int, ...]) -> str:
-        base = _stream.ws_url(self.owner.url, None).replace("/v1/ws", "/v1/ws/cameras", 1)
+        base = stream.ws_url(self.owner.url, None).replace("/v1/ws", "/v1/ws/cameras", 1)
         query = {
             "camera": self.name,
             "worlds": ",".join(str(w) for w in worlds),
@@ -99,7 +98,7 @@ class CameraTopics:
         return f"{base}?{urlencode(query)}"
 
     def _run(self) -> None:
-        backoff = _stream.Backoff(maximum=2.0)
+        backoff = stream.Backoff(maximum=2.0)
         while not self._stop.is_set():
             self._changed.clear()
             worlds = self.listened
@@ -109,7 +108,7 @@ class CameraTopics:
             try:
                 with connect(
                     self._url(worlds),
-                    max_size=_stream.MAX_SIZE,
+                    max_size=stream.MAX_SIZE,
                     proxy=None,
                     open_timeout=10,
                     additional_headers=auth.headers(),
@@ -123,14 +122,14 @@ class CameraTopics:
                             self._publish(*unpack(data))
                             backoff.reset()
                     continue
-            except _stream.LOST as exc:
-                log.debug("camera %s: %s", self.name, _stream.reason_for(exc))
+            except stream.LOST as exc:
+                log.debug("camera %s: %s", self.name, stream.reason_for(exc))
             except Exception:
                 log.exception("camera %s: the stream failed", self.name)
             self._changed.wait(backoff.next())
 
     def _publish(self, header: dict, images: list[bytes]) -> None:
-        sec, nanosec = stamp(int(header["tick"]) * self.owner.tick_dt)
+        sec, nanosec = ros_rules.stamp(int(header["tick"]) * self.owner.tick_dt)
         width, height = int(header["width"]), int(header["height"])
         for world, data in zip(header["worlds"], images, strict=True):
             for image_pub, info_pub, frame in self.pubs.get(int(world), ()):
@@ -151,7 +150,7 @@ def camera_topics(owner: Any, names: list[str], rate: float) -> list[CameraTopic
     """The asked cameras armfleet serves (an unknown name is logged and left out)."""
     if not names:
         return []
-    specs = owner.http._call(Call("GET", "/v1/cameras", lambda d: d["cameras"]))
+    specs = owner.http.call(Call("GET", "/v1/cameras", lambda d: d["cameras"]))
     by_name = {str(s["name"]): s for s in specs}
     out = []
     for name in names:

@@ -1,7 +1,11 @@
-"""ROS messages to armfleet commands and back, checked before anything is sent.
+"""ROS messages to armfleet commands, checked before anything is sent.
 
 A message that cannot be applied whole raises `BadMessage` with a stable `kind` (the counter it
-goes to) and a sentence naming the field; nothing of it reaches armfleet, so nothing moves.
+goes to) and a sentence naming the field; nothing of it reaches armfleet, so nothing moves. The
+JointState rule, `BadMessage` and the rest that rosbridge shares are the ROS rulebook's
+(clients/ros_rules.py); what only this node takes (forward_position_controller's arrays,
+JointTrajectory on a topic) is here.
+
 armfleet validates again on its side and stays the authority (clamping, trajectory rules): its
 refusals come back as their own reasons. Plain Python over message attributes, so it is tested
 without ROS.
@@ -10,21 +14,11 @@ without ROS.
 from __future__ import annotations
 
 import math
-import threading
-import time
 from collections.abc import Sequence
 from typing import Any
 
-ARM_JOINTS = 6  # the UR arm's joints come first in armfleet's joint order; finger_joint last
-
-
-class BadMessage(ValueError):
-    """A message that changes nothing; `kind` is its counter, the text says why."""
-
-    def __init__(self, kind: str, detail: str) -> None:
-        super().__init__(f"{kind}: {detail}")
-        self.kind = kind
-        self.detail = detail
+from clients import ros_rules
+from clients.ros_rules import ARM_JOINTS, BadMessage
 
 
 def _finite(field: str, value: Any) -> float:
@@ -34,32 +28,13 @@ def _finite(field: str, value: Any) -> float:
     return v
 
 
-def joint_state_targets(
-    joints: Sequence[str], name: Sequence[str], position: Sequence[float]
-) -> dict[str, float]:
-    """sensor_msgs/JointState → {joint: target}. Named joints move, the others keep their
-    targets; no names = every joint in armfleet's order. Velocity and effort are ignored."""
-    if len(position) == 0:
-        raise BadMessage("empty", "position is empty; nothing to command")
-    if len(name) == 0:
-        if len(position) != len(joints):
-            raise BadMessage(
-                "length_mismatch",
-                f"without names, position needs all {len(joints)} joints (got {len(position)})",
-            )
-        name = joints
-    elif len(name) != len(position):
-        raise BadMessage(
-            "length_mismatch", f"name has {len(name)} entries but position has {len(position)}"
-        )
-    out: dict[str, float] = {}
-    for n, p in zip(name, position, strict=True):
-        if n not in joints:
-            raise BadMessage("unknown_joint", f"unknown joint {n!r}; joints are {list(joints)}")
-        if n in out:
-            raise BadMessage("duplicate_joint", f"joint {n!r} named twice")
-        out[n] = _finite(f"position of {n}", p)
-    return out
+def joint_state_targets(joints: Sequence[str], name: Any, position: Any) -> dict[str, float]:
+    """sensor_msgs/JointState → {joint: target}, by the JointState rule of every armfleet
+    surface (clients/ros_rules.py: rosbridge answers a bad message in the same words). Named
+    joints move, the others keep their targets; no names = every joint in armfleet's order.
+    Velocity and effort are ignored."""
+    targets = ros_rules.joint_state(joints, list(name), list(position))
+    return {joints[i]: v for i, v in targets.items()}
 
 
 def forward_targets(joints: Sequence[str], data: Sequence[float]) -> dict[str, float]:
@@ -105,33 +80,3 @@ def trajectory_body(traj: Any, path_tol: Any = (), goal_tol: Any = (), goal_time
         "goal_tolerance": tol(goal_tol),
         "goal_time_tolerance": 0.0 if goal_time is None else seconds(goal_time),
     }
-
-
-def stamp(sim_seconds: float) -> tuple[int, int]:
-    """Seconds → (sec, nanosec), never negative."""
-    ns = max(0, round(sim_seconds * 1e9))
-    return ns // 1_000_000_000, ns % 1_000_000_000
-
-
-class Counter:
-    """Refused messages and goals by kind; each kind logged at most once per second."""
-
-    def __init__(self, logger: Any, interval: float = 1.0) -> None:
-        self._logger = logger
-        self._interval = interval
-        self._lock = threading.Lock()
-        self._counts: dict[str, int] = {}
-        self._last: dict[str, float] = {}
-
-    def report(self, kind: str, where: str, detail: str) -> None:
-        now = time.monotonic()
-        with self._lock:
-            self._counts[kind] = self._counts.get(kind, 0) + 1
-            if now - self._last.get(kind, -math.inf) < self._interval:
-                return
-            self._last[kind] = now
-        self._logger.warning(f"refused on {where}: {kind}: {detail}")
-
-    def counts(self) -> dict[str, int]:
-        with self._lock:
-            return dict(self._counts)

@@ -18,7 +18,7 @@ from typing import Any
 
 from simulation_interfaces.msg import Result
 
-from armfleet_ros.convert import stamp
+from clients import ros_rules
 from clients.errors import ArmfleetError, Conflict
 
 
@@ -44,7 +44,7 @@ def _apply(r: list[list[float]], v: Sequence[float], transpose: bool = False) ->
 def fill(state: Any, entity: dict[str, Any], tick: int, tick_dt: float) -> None:
     """An EntityState from one armfleet entity reply (world-frame twist, stamped at `tick`)."""
     state.header.frame_id = "world"
-    state.header.stamp.sec, state.header.stamp.nanosec = stamp(tick * tick_dt)
+    state.header.stamp.sec, state.header.stamp.nanosec = ros_rules.stamp(tick * tick_dt)
     q = [float(v) for v in entity["orientation"]]
     p, o = state.pose.position, state.pose.orientation
     p.x, p.y, p.z = (float(v) for v in entity["position"])

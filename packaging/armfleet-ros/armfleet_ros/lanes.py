@@ -25,7 +25,7 @@ from typing import Any
 from websockets.asyncio.client import connect
 
 from armfleet_ros import auth
-from clients import _stream
+from clients import stream
 from clients.errors import CommandRejected, Unreachable
 from clients.models import BatchStates, CommandAck, WsError
 
@@ -49,7 +49,7 @@ class Lane:
         self._tokens = self.burst
         self._last = time.monotonic()
         self._ws: Any = None
-        self._ids = _stream.CommandIds()
+        self._ids = stream.CommandIds()
         self._pending: dict[int, list[Future]] = {}
         self._queued: dict[int, tuple[dict[str, float], list[Future]]] = {}
         self._wake: asyncio.Event | None = None
@@ -117,14 +117,14 @@ class Lane:
     async def run(self, stopping: Callable[[], bool]) -> None:
         self._wake = asyncio.Event()
         flusher = asyncio.ensure_future(self._flush())
-        url = _stream.ws_url(self.url, self.worlds, LANE_STATE_HZ, binary=True)
-        backoff = _stream.Backoff(maximum=1.0)
+        url = stream.ws_url(self.url, self.worlds, LANE_STATE_HZ, binary=True)
+        backoff = stream.Backoff(maximum=1.0)
         try:
             while not stopping():
                 try:
                     async with connect(
                         url,
-                        max_size=_stream.MAX_SIZE,
+                        max_size=stream.MAX_SIZE,
                         proxy=None,
                         additional_headers=auth.headers(),
                     ) as ws:
@@ -132,8 +132,8 @@ class Lane:
                         backoff.reset()
                         async for data in ws:
                             self._frame(data)
-                except _stream.LOST as exc:
-                    log.debug("command lane: %s", _stream.reason_for(exc))
+                except stream.LOST as exc:
+                    log.debug("command lane: %s", stream.reason_for(exc))
                 self._ws = None
                 for futs in self._pending.values():
                     self._fail(futs, "connection lost")
@@ -143,7 +143,7 @@ class Lane:
             flusher.cancel()
 
     def _frame(self, data: Any) -> None:
-        msg = _stream.parse(data)
+        msg = stream.parse(data)
         if isinstance(msg, BatchStates):
             try:
                 self.on_states(msg)

@@ -3,7 +3,7 @@
 Two sockets, both armfleet's public API read with armfleet's own client library (`clients`):
 
 - the batch socket `WS /v1/ws?worlds=...&format=binary` for every served world: float32 state
-  frames in (parsed by `clients._stream.parse`). One socket for 256 worlds costs one frame per
+  frames in (parsed by `clients.stream.parse`). One socket for 256 worlds costs one frame per
   tick instead of 256 JSON frames. Commands go out on command lanes (lanes.py).
 - the pose socket `WS /v1/ws/view` (every body's world pose), opened only for the worlds whose
   `/tf` somebody listens to, and reopened when that set changes.
@@ -27,12 +27,11 @@ from websockets.asyncio.client import connect
 
 from armfleet_ros import auth
 from armfleet_ros.lanes import lanes_for
-from clients import _stream
+from clients import stream
 from clients.models import BatchStates
+from clients.wire import POSE_MAGIC
 
 log = logging.getLogger("armfleet_ros")
-
-POSE_MAGIC = b"AFP1"
 
 
 class Poses:
@@ -124,23 +123,23 @@ class FleetLink:
     # -- the sockets ------------------------------------------------------------------------
 
     async def _states(self) -> None:
-        url = _stream.ws_url(self.url, self.worlds, self.rate, binary=True)
-        backoff = _stream.Backoff(maximum=1.0)
+        url = stream.ws_url(self.url, self.worlds, self.rate, binary=True)
+        backoff = stream.Backoff(maximum=1.0)
         while not self._stopping:
             try:
                 async with connect(
-                    url, max_size=_stream.MAX_SIZE, proxy=None, additional_headers=auth.headers()
+                    url, max_size=stream.MAX_SIZE, proxy=None, additional_headers=auth.headers()
                 ) as ws:
                     async for data in ws:
                         self._frame(data, backoff)
-                    reason = _stream.close_reason(ws.close_code, ws.close_reason)
-            except _stream.LOST as exc:
-                reason = _stream.reason_for(exc)
+                    reason = stream.close_reason(ws.close_code, ws.close_reason)
+            except stream.LOST as exc:
+                reason = stream.reason_for(exc)
             self._drop(reason)
             await asyncio.sleep(backoff.next())
 
-    def _frame(self, data: Any, backoff: _stream.Backoff) -> None:
-        msg = _stream.parse(data)
+    def _frame(self, data: Any, backoff: stream.Backoff) -> None:
+        msg = stream.parse(data)
         if isinstance(msg, BatchStates):
             if not self.connected:
                 self.connected = True
@@ -168,11 +167,11 @@ class FleetLink:
                 await self._pose_changed.wait()
                 continue
             spec = ",".join(str(w) for w in worlds)
-            url = _stream.ws_url(self.url, None).replace("/v1/ws", "/v1/ws/view", 1)
+            url = stream.ws_url(self.url, None).replace("/v1/ws", "/v1/ws/view", 1)
             url += ("&" if "?" in url else "?") + f"worlds={spec}&rate={self.rate:g}"
             try:
                 async with connect(
-                    url, max_size=_stream.MAX_SIZE, proxy=None, additional_headers=auth.headers()
+                    url, max_size=stream.MAX_SIZE, proxy=None, additional_headers=auth.headers()
                 ) as ws:
                     reader = asyncio.ensure_future(self._read_poses(ws))
                     changed = asyncio.ensure_future(self._pose_changed.wait())
@@ -181,8 +180,8 @@ class FleetLink:
                         task.cancel()
                     if changed.done() and not changed.cancelled():
                         continue
-            except _stream.LOST as exc:
-                log.debug("pose socket: %s", _stream.reason_for(exc))
+            except stream.LOST as exc:
+                log.debug("pose socket: %s", stream.reason_for(exc))
             await asyncio.sleep(0.5)
 
     async def _read_poses(self, ws: Any) -> None:

@@ -27,14 +27,13 @@ from rosgraph_msgs.msg import Clock
 
 from armfleet_ros import auth
 from armfleet_ros.cameras import camera_topics
-from armfleet_ros.convert import Counter, stamp
 from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
 from armfleet_ros.params import param
 from armfleet_ros.parts import slices
 from armfleet_ros.world import WorldTopics
-from clients import ArmfleetClient
-from clients._http import Call
+from clients import ArmfleetClient, ros_rules
+from clients.calls import Call
 from clients.errors import ArmfleetError
 
 NODE_NAME = "armfleet"
@@ -67,10 +66,10 @@ class ArmfleetNode:
         self.joints = info.names
         self.tick_dt = 1.0 / info.control_hz
         self.worlds = parse_worlds(spec, info.nworld)
-        self.urdf = self.http._call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
-        self.frames = self.http._call(Call("GET", "/v1/ros/frames", lambda d: d))
+        self.urdf = self.http.call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
+        self.frames = self.http.call(Call("GET", "/v1/ros/frames", lambda d: d))
         self.tree = TfTree(self.frames)
-        self.bad = Counter(log)
+        self.bad = ros_rules.RefusalCounter("armfleet_ros", log.warning)
         self.accepted = 0
         self._publish_lock = threading.Lock()
         self._clock_tick = -1
@@ -148,7 +147,7 @@ class ArmfleetNode:
             return
         self._reported, self._reported_at = body, now
         with contextlib.suppress(ArmfleetError):
-            self.http._call(Call("PUT", "/v1/ros/node", lambda d: d, json=body))
+            self.http.call(Call("PUT", "/v1/ros/node", lambda d: d, json=body))
 
     def _publish(self, batch: Any) -> None:
         """A state frame arrived (the link's thread; a catch-up: an executor thread): `/clock`,
@@ -160,7 +159,7 @@ class ArmfleetNode:
                 self._last_generation, self._clock_tick = gen, -1
                 self._world_tick = {}
             tick = batch.tick
-            sec, nanosec = stamp(tick * self.tick_dt)
+            sec, nanosec = ros_rules.stamp(tick * self.tick_dt)
             if tick > self._clock_tick:
                 self._clock_tick = tick
                 clock = Clock()

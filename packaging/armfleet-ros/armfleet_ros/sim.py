@@ -33,11 +33,11 @@ from simulation_interfaces.srv import (
 from websockets.sync.client import connect
 
 from armfleet_ros import auth, entities
-from armfleet_ros.convert import stamp
-from armfleet_ros.link import POSE_MAGIC, Poses
+from armfleet_ros.link import Poses
 from armfleet_ros.params import param
-from clients import _stream
+from clients import ros_rules, stream
 from clients.errors import ArmfleetError, Conflict
+from clients.wire import POSE_MAGIC
 
 F = SimulatorFeatures
 FEATURES = [
@@ -217,11 +217,11 @@ class WorldSim:
 
     def _poses(self) -> Poses:
         """This world's body poses now: one frame of the pose socket."""
-        url = _stream.ws_url(self.owner.url, None).replace("/v1/ws", "/v1/ws/view", 1)
+        url = stream.ws_url(self.owner.url, None).replace("/v1/ws", "/v1/ws/view", 1)
         url += ("&" if "?" in url else "?") + f"worlds={self.world}"
         with connect(
             url,
-            max_size=_stream.MAX_SIZE,
+            max_size=stream.MAX_SIZE,
             proxy=None,
             open_timeout=10,
             additional_headers=auth.headers(),
@@ -234,7 +234,9 @@ class WorldSim:
     def _fill(self, state: Any, poses: Poses, name: str) -> None:
         row = poses.poses[poses.row[self.world], self.bodies[name]]
         state.header.frame_id = "world"
-        state.header.stamp.sec, state.header.stamp.nanosec = stamp(poses.tick * self.owner.tick_dt)
+        state.header.stamp.sec, state.header.stamp.nanosec = ros_rules.stamp(
+            poses.tick * self.owner.tick_dt
+        )
         p, q = state.pose.position, state.pose.orientation
         p.x, p.y, p.z = (float(v) for v in row[:3])
         q.w, q.x, q.y, q.z = (float(v) for v in row[3:])
@@ -248,7 +250,7 @@ class WorldSim:
                 entities.fill(res.state, got, got["tick"], self.owner.tick_dt)
             else:
                 self._fill(res.state, self._poses(), req.entity)
-        except (OSError, ArmfleetError, *_stream.LOST) as exc:
+        except (OSError, ArmfleetError, *stream.LOST) as exc:
             return _result(res, Result.RESULT_OPERATION_FAILED, str(exc))
         return _result(res, Result.RESULT_OK)
 
@@ -261,7 +263,7 @@ class WorldSim:
             free = self.owner.http.entities(self.world) if self.free else {"entities": []}
         except re.error as exc:
             return _result(res, Result.RESULT_OPERATION_FAILED, f"filter: {exc}")
-        except (OSError, ArmfleetError, *_stream.LOST) as exc:
+        except (OSError, ArmfleetError, *stream.LOST) as exc:
             return _result(res, Result.RESULT_OPERATION_FAILED, str(exc))
         res.entities = names
         by_name = {e["name"]: e for e in free["entities"]}

@@ -18,7 +18,8 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
 from armfleet_ros import convert
-from armfleet_ros.actions import FJT_ACTIONS, GripperAction, TrajectoryActions
+from armfleet_ros.actions import GripperAction, TrajectoryActions
+from clients import ros_rules
 from clients import trajectory as tj
 from clients.errors import ArmfleetError
 
@@ -60,7 +61,7 @@ class WorldTopics:
                 callback_group=group,
             ),
         ]
-        for name in FJT_ACTIONS:
+        for name in ros_rules.FJT_CONTROLLERS:
             topic = f"{ns}/{name}/joint_trajectory"
             self.subs.append(
                 node.create_subscription(
@@ -98,7 +99,7 @@ class WorldTopics:
         topic = f"{self.ns}/joint_commands"
         try:
             targets = convert.joint_state_targets(self.owner.joints, msg.name, msg.position)
-        except convert.BadMessage as exc:
+        except ros_rules.BadMessage as exc:
             self.owner.bad.report(exc.kind, topic, exc.detail)
             return
         self._send(targets, topic)
@@ -107,23 +108,21 @@ class WorldTopics:
         topic = f"{self.ns}/forward_position_controller/commands"
         try:
             targets = convert.forward_targets(self.owner.joints, msg.data)
-        except convert.BadMessage as exc:
+        except ros_rules.BadMessage as exc:
             self.owner.bad.report(exc.kind, topic, exc.detail)
             return
         self._send(targets, topic)
 
     def _trajectory(self, msg: Any, topic: str) -> None:
         http = self.owner.http
-        arm = self.owner.joints[: convert.ARM_JOINTS]
+        arm = self.owner.joints[: ros_rules.ARM_JOINTS]
         try:
-            extra = [n for n in msg.joint_names if n not in arm]
-            if extra:
-                raise convert.BadMessage("unknown_joint", f"joints {extra} are not the arm's {arm}")
+            ros_rules.check_arm_joints(list(msg.joint_names), arm)
             if not msg.points:
-                http._call(tj.cancel_call(self.world))  # no points: stop and hold
+                http.call(tj.cancel_call(self.world))  # no points: stop and hold
             else:
-                http._call(tj.start_call(self.world, convert.trajectory_body(msg)))
-        except convert.BadMessage as exc:
+                http.call(tj.start_call(self.world, convert.trajectory_body(msg)))
+        except ros_rules.BadMessage as exc:
             self.owner.bad.report(exc.kind, topic, exc.detail)
             return
         except ArmfleetError as exc:

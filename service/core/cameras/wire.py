@@ -9,7 +9,9 @@ One image (GET /v1/worlds/{w}/cameras/{name}):
 
 Many (GET /v1/cameras/{name}/images, the camera WebSocket): one binary message,
 
-    b"AFIM" | u32 header length (little-endian) | header (JSON, UTF-8) | image 0 | image 1 ...
+    IMAGE_MAGIC | u32 header length (little-endian) | header (JSON, UTF-8) | image 0 | ...
+
+(the magic and the reader, `unpack_images`, in clients/wire.py),
 
 the header saying `tick`, `camera`, `image`, `format`, `content_type`, `width`, `height`,
 `worlds` and each image's `sizes` in bytes, in the order of `worlds`.
@@ -18,13 +20,12 @@ the header saying `tick`, `camera`, `image`, `format`, `content_type`, `width`, 
 from __future__ import annotations
 
 import io
-import struct
 
 import numpy as np
 import orjson
 from PIL import Image
 
-from clients.images import MAGIC
+from clients.wire import HEADER_LENGTH, IMAGE_MAGIC
 from service.core.cameras.feed import Shot
 from service.core.errors import BadCommand
 
@@ -108,4 +109,4 @@ def pack_parts(shot: Shot, image: str, fmt: str, quality: int = 90) -> list[byte
         "sizes": sizes,
     }
     head = orjson.dumps(header)
-    return [MAGIC + struct.pack("<I", len(head)) + head, body]
+    return [IMAGE_MAGIC + HEADER_LENGTH.pack(len(head)) + head, body]

@@ -2,23 +2,21 @@
 
 - `world_id` / `world_ids`: a world is an integer in 0..nworld-1 (404 naming every unknown one).
 - `joint_state`: a sensor_msgs/JointState-shaped command (`name`, `position`): the same answer
-  on every surface (HTTP, WebSocket, the page, rosbridge, Foxglove, the ROS node). Names and
-  positions pair up (a subset moves only those joints); with no names, one position per joint
-  in joint order, as the seed's Isaac subscriber read them; every name a joint's name or its
-  index as a digit string, no joint named twice (neither by the same name nor by its name and
-  its index); every position a finite number.
+  on every surface (HTTP, WebSocket, the page, rosbridge, Foxglove, the ROS node). The rule is
+  written once in the ROS rulebook (clients/ros_rules.py, which the ROS node imports too);
+  here it becomes a 422 naming the field.
 - Clamping to the joint ranges happens when a target is staged (`arithmetic`), once; the loop
   and the engines trust what was staged.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from clients import ros_rules
 from service.core.errors import BadCommand, UnknownWorld
 from service.core.sim.types import RobotSpec
 
@@ -59,43 +57,9 @@ class BadJointState(BadCommand):
 
 def joint_state(spec: RobotSpec, name: Any, position: Any) -> dict[int, float]:
     """A JointState command's (`name`, `position`) → {joint index: target}; BadJointState
-    naming the field otherwise. Velocity and effort are not commands; callers ignore them."""
-    for field, value in (("name", name), ("position", position)):
-        if not isinstance(value, list | tuple):
-            raise BadJointState("bad_type", field, f"{field} must be an array, got {value!r}")
-    if len(position) == 0:
-        raise BadJointState("empty", "position", "position is empty; nothing to command")
-    joints = spec.names
-    if len(name) == 0:
-        if len(position) != len(joints):
-            raise BadJointState(
-                "length_mismatch",
-                "position",
-                f"without names, position needs all {len(joints)} joints (got {len(position)})",
-            )
-        name = joints
-    elif len(name) != len(position):
-        raise BadJointState(
-            "length_mismatch",
-            "position",
-            f"name and position must have equal lengths ({len(name)} names, "
-            f"{len(position)} positions)",
-        )
-    out: dict[int, float] = {}
-    for n, p in zip(name, position, strict=True):
-        if not isinstance(n, str):
-            raise BadJointState("bad_type", "name", f"a joint is named by a string, got {n!r}")
-        try:  # a joint name, or its index as a string (how JSON object keys name joints)
-            index = spec.index(int(n) if isinstance(n, str) and n.isdigit() else n)
-        except (KeyError, TypeError):
-            why = f"unknown joint {n!r}; joints are {joints}"
-            raise BadJointState("unknown_joint", "name", why) from None
-        if index in out:  # the same name twice, or a name and that joint's index
-            why = f"joint {spec.names[index]!r} named twice"
-            raise BadJointState("duplicate_joint", "name", why)
-        if isinstance(p, bool) or not isinstance(p, int | float):
-            raise BadJointState("bad_type", f"position.{n}", f"must be a number, got {p!r}")
-        if not math.isfinite(p):
-            raise BadJointState("not_finite", f"position.{n}", f"{p} is not finite (no NaN or Inf)")
-        out[index] = float(p)
-    return out
+    naming the field otherwise. The rule itself is the ROS rulebook's (clients/ros_rules.py),
+    which the ROS node applies too, so every face answers a bad message in the same words."""
+    try:
+        return ros_rules.joint_state(spec.names, name, position)
+    except ros_rules.BadJointState as exc:
+        raise BadJointState(exc.kind, exc.field, exc.message) from None

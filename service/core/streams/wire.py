@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import orjson
 
+from clients.wire import BINARY_COLUMNS, BINARY_MAGIC, ENTITY_COLUMNS, POSE_MAGIC
 from service.core.errors import ArmfleetError
 from service.core.sim.types import EntityFrame, Snapshot
 
@@ -181,25 +182,7 @@ def batch_frame(
     return dumps(frame)
 
 
-# Binary batch frames: b"AFS1", uint32 header length, JSON header, int32 world ids, then one
-# float32 row per world holding these columns side by side (all little-endian). Asked with
-# `entities=true`, the header also has "entities": {"name": [...], "columns": ENTITY_COLUMNS}
-# and the rows are followed by float32[n, ne, 13]: per world, per entity (in `name` order) its
-# position, orientation (w x y z), linear and angular velocity side by side.
-BINARY_MAGIC = b"AFS1"
-BINARY_COLUMNS = (
-    ("sim_time", 1),
-    ("position", 7),
-    ("velocity", 7),
-    ("effort", 7),
-    ("target", 7),
-    ("flange_position", 3),
-    ("flange_quaternion", 4),
-    ("faults", 1),
-)
-
-
-ENTITY_COLUMNS = (("position", 3), ("orientation", 4), ("linear", 3), ("angular", 3))
+# Binary batch frames: layout, magic and columns in clients/wire.py (the readers' side too).
 
 
 def binary_header(
@@ -258,7 +241,7 @@ def batch_frame_binary(
 
 # Pose frames (the browser page's stream, WS /v1/ws/view): every body's world pose for the viewed
 # worlds, plus, in the header, the focused world's joint state and the loop's speed.
-#   b"AFP1"
+#   POSE_MAGIC (clients/wire.py)
 #   uint32 H: header length, a multiple of 4 (the JSON is padded with spaces) so that what
 #             follows is 4-byte aligned and can be viewed in place (Float32Array in a browser)
 #   H bytes of JSON: {"op": "poses", "tick", "n" (worlds), "nbody", "stats": {"mode",
@@ -270,7 +253,6 @@ def batch_frame_binary(
 #             x y z [m], then the orientation quaternion w x y z, world frame
 # All little-endian. 64 worlds of our 19-body scene: ~34 KB per frame. While nothing shown
 # changes (poses within 1e-4, targets, faults) the socket sends one frame every 0.5 s only.
-POSE_MAGIC = b"AFP1"
 
 
 def pose_frame(

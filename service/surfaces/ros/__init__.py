@@ -1,5 +1,8 @@
-"""ROS 2: the armfleet_ros node (packaging/armfleet-ros) as a supervised child on the user's ROS
-(`node_process`, `node_env`) and what it reads of the model (`description`: `urdf`, `tf_frames`);
-rosbridge (`rosbridge` the protocol, `rosbridge_surface` its socket and `/v1/ros`, `rosapi`,
-`rosbridge_actions` on `goals` / `goal_msgs`) with its topic names and JointState rules
-(`topics`). Imports as its parent package (surfaces)."""
+"""ROS 2 (`--ros2`): the armfleet_ros node (packaging/armfleet-ros) as a supervised child on the
+user's ROS (`node_process`, `node_env`), and the robot as ROS sees it, which the node reads over
+HTTP and rosbridge publishes (`description`: `urdf`, `tf_frames`).
+
+rosbridge, the other ROS face, is service/surfaces/rosbridge/; what a message or goal means is
+the ROS rulebook both faces import (clients/ros_rules.py). Imports as its parent package
+(surfaces).
+"""

@@ -2,7 +2,7 @@
 
 roslibpy's `Ros('localhost', 8000)` dials `ws://localhost:8000/` and roslib.js takes any URL, so
 the socket is served at `/` (beside the browser page's GET) and at `/rosbridge`. The topics are
-the armfleet_ros node's (service/surfaces/ros/topics.py); commands go through the control layer
+the armfleet_ros node's (topics.py); commands go through the control layer
 (source `rosbridge`); states come from the stream hub with its latest-state delivery, so a slow
 client skips frames instead of queueing them, and every client subscribed to a topic shares one
 serialisation per tick.
@@ -26,6 +26,7 @@ import numpy as np
 import orjson
 from fastapi import WebSocket
 
+from clients.ros_rules import BadMessage, RefusalCounter
 from service.core.access import policy as access
 from service.core.access.callers import Forbidden, book_of
 from service.core.errors import ArmfleetError
@@ -34,23 +35,17 @@ from service.core.sim.types import Snapshot
 from service.core.streams.formats import FrameFormat
 from service.core.streams.hub import StreamHub, Subscription
 from service.core.surface import SurfaceContext
-from service.surfaces.ros import rosapi, rosbridge_actions, sim_entities, topics
-from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, same_type, topic_name
-from service.surfaces.ros.rosbridge_frames import (
+from service.surfaces.rosbridge import actions as rosbridge_actions
+from service.surfaces.rosbridge import rosapi, sim_entities, topics
+from service.surfaces.rosbridge.base import ROSBRIDGE, ProtocolError, same_type, topic_name
+from service.surfaces.rosbridge.frames import (
     KINDS,
     LATCHED,
     TF_TYPE,
     RobotFrames,
     frame_topic,
 )
-from service.surfaces.ros.topics import (
-    CLOCK_TOPIC,
-    CLOCK_TYPE,
-    JOINT_STATE_TYPE,
-    BadMessage,
-    BadMessageCounter,
-    TopicMap,
-)
+from service.surfaces.rosbridge.topics import CLOCK_TOPIC, CLOCK_TYPE, JOINT_STATE_TYPE, TopicMap
 
 log = logging.getLogger("armfleet.rosbridge")
 
@@ -71,7 +66,7 @@ class RosbridgeServer:
     def __init__(self, topic_map: TopicMap | None = None, max_rate: float = 60.0) -> None:
         self.topic_map = topic_map or TopicMap(())
         self.max_rate = max_rate  # states go out at most this often, like the ROS 2 node
-        self.bad = BadMessageCounter("rosbridge")
+        self.bad = RefusalCounter("rosbridge", log.warning)
         self.accepted = 0
         self.clients = 0
         self.frames: RobotFrames | None = None  # the robot topics' renderer, made on first use
@@ -187,7 +182,7 @@ class Session:
         if unknown:
             raise BadMessage("unknown_field", f"JointState has no field {unknown[0]!r}")
         name, position = body.get("name", []), body.get("position", [])
-        try:  # the JointState rule of every surface (service.core.sim.rules)
+        try:  # the JointState rule of every surface (clients/ros_rules.py, as the node's)
             self.control.command_targets(world, name, position, ROSBRIDGE)
         except BadJointState as exc:
             raise BadMessage(exc.reason, str(exc)) from None

@@ -12,10 +12,12 @@ from typing import Any
 
 import orjson
 
+from clients import ros_rules
 from service.core.sim.loop import SimLoop
 from service.core.sim.types import Snapshot
-from service.surfaces.ros import description, topics
+from service.surfaces.ros import description
 from service.surfaces.ros.tf_frames import FrameTree
+from service.surfaces.rosbridge import topics
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 STRING_TYPE = "std_msgs/msg/String"
@@ -73,7 +75,7 @@ class RobotFrames:
 
         def render(s: Snapshot) -> bytes:
             pos, quat = tree.moving(s.body_pos[world], s.body_quat[world])
-            sec, nanosec = topics.stamp(topics.sim_seconds(s, tick_dt))
+            sec, nanosec = ros_rules.stamp(topics.sim_seconds(s, tick_dt))
             stamp = {"sec": sec, "nanosec": nanosec}
             pairs = zip(tree.moving_parents, tree.moving_children, pos, quat, strict=True)
             msg = {"transforms": [_transform(p, c, xyz, q, stamp) for p, c, xyz, q in pairs]}

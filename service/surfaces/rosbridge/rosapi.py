@@ -10,10 +10,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from service.surfaces.ros import rosbridge_actions, topics
-from service.surfaces.ros.goal_msgs import action_names
-from service.surfaces.ros.rosbridge_base import topic_name
-from service.surfaces.ros.topics import CLOCK_TYPE, JOINT_STATE_TYPE, STRING, TF
+from clients import ros_rules
+from service.surfaces.rosbridge import actions as rosbridge_actions
+from service.surfaces.rosbridge import topics
+from service.surfaces.rosbridge.base import topic_name
+from service.surfaces.rosbridge.goal_msgs import action_names
+from service.surfaces.rosbridge.topics import CLOCK_TYPE, JOINT_STATE_TYPE, STRING, TF
 
 _RULE = "=" * 80
 
@@ -66,7 +68,7 @@ def topic_type(session: Any, args: Any) -> dict[str, Any]:
 
 
 def get_time(session: Any, args: Any) -> dict[str, Any]:
-    sec, nanosec = topics.stamp(topics.sim_seconds(session.loop.latest, session.tick_dt))
+    sec, nanosec = ros_rules.stamp(topics.sim_seconds(session.loop.latest, session.tick_dt))
     return {"time": {"sec": sec, "nanosec": nanosec}}
 
 

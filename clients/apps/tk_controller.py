@@ -28,7 +28,7 @@ from collections.abc import Coroutine
 from pathlib import Path
 from typing import Any
 
-from clients.controller import (
+from clients.apps.controller import (
     STEP,
     TITLE,
     ControllerBackend,

@@ -1,8 +1,8 @@
 """The UR driver's action goals over rosbridge: accept, run, feed back, finish.
 
 A goal comes as the ROS message in JSON shape (what rosbridge carries) and gets feedback and
-the result back in the same shape; the rules (the armfleet_ros node keeps the same ones over
-the HTTP API):
+the result back in the same shape; the rules are the ROS rulebook's (clients/ros_rules.py),
+which the armfleet_ros node applies too, over the HTTP API:
 
 - `FollowJointTrajectory` (on `scaled_joint_trajectory_controller` and
   `joint_trajectory_controller`): the goal becomes a `JointTrajectorySpec` (validated before
@@ -24,7 +24,6 @@ queued to that thread, so no lock of ours is ever held while the manager holds i
 from __future__ import annotations
 
 import logging
-import math
 import queue
 import threading
 import time
@@ -34,23 +33,21 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from clients import ros_rules
+from clients.ros_rules import (
+    FEEDBACK_HZ,
+    FJT_TYPE,
+    GRIPPER_TYPE,
+    SUCCESSFUL,
+    FingerWatch,
+    GoalRejected,
+    Status,
+)
 from service.core.commands.control import Control
 from service.core.commands.trajectory import AbortReason, TrajectoryStatus
 from service.core.surface import SurfaceContext
-from service.surfaces.ros import topics
-from service.surfaces.ros.goal_msgs import (
-    FEEDBACK_HZ,
-    FJT_TYPE,
-    GOAL_TOLERANCE,
-    GOAL_TOLERANCE_VIOLATED,
-    GRIPPER_TYPE,
-    INVALID_GOAL,
-    PATH_TOLERANCE_VIOLATED,
-    STALL_TIMEOUT_S,
-    STALL_VELOCITY,
-    SUCCESSFUL,
-    GoalRejected,
-    Status,
+from service.surfaces.rosbridge import topics
+from service.surfaces.rosbridge.goal_msgs import (
     gripper_position,
     trajectory_feedback,
     trajectory_spec,
@@ -74,9 +71,8 @@ class Goal:
     key: Any = None  # the surface's id of the goal
     result: dict[str, Any] = field(default_factory=dict)
     traj_id: int | None = None
-    finger_target: float = 0.0
+    finger: FingerWatch | None = None  # a gripper goal's reached / stalled rule
     effective_tick: int = 0  # the gripper target is in effect from this tick
-    moved_at: float = 0.0  # simulated time the finger last moved
     cancel_requested: bool = False
 
 
@@ -138,9 +134,8 @@ class GoalRunner:
         else:
             position = gripper_position(goal)
             done = control.command_targets(world, ["finger_joint"], [position], source)
-            g.finger_target = float(done.target[self.finger])
+            g.finger = FingerWatch(float(done.target[self.finger]))
             g.effective_tick = done.tick
-            g.moved_at = math.inf  # counted from the first tick with the new target
         with self._lock:
             replaced = [
                 old
@@ -193,12 +188,9 @@ class GoalRunner:
         if status.reason is None:
             self._finish(g, Status.SUCCEEDED, {"error_code": SUCCESSFUL, "error_string": ""})
             return
-        code = {
-            AbortReason.PATH_TOLERANCE: PATH_TOLERANCE_VIOLATED,
-            AbortReason.GOAL_TOLERANCE: GOAL_TOLERANCE_VIOLATED,
-        }.get(status.reason, INVALID_GOAL if status.reason is not AbortReason.CANCELLED else 0)
+        code = ros_rules.result_code(status.reason.value)
         end = Status.CANCELED if status.reason is AbortReason.CANCELLED else Status.ABORTED
-        text = f"{status.reason.value}: {status.detail}" if status.detail else status.reason.value
+        text = ros_rules.error_string(status.reason.value, status.detail)
         self._finish(g, end, {"error_code": code, "error_string": text})
 
     def _finish(self, g: Goal, status: Status, result: dict[str, Any]) -> None:
@@ -245,31 +237,28 @@ class GoalRunner:
     def _gripper_state(self, g: Goal, stalled: bool) -> dict[str, Any]:
         snap = self.loop.latest
         position = float(snap.position[g.world, self.finger])
+        assert g.finger is not None  # a gripper goal's
         return {
             "position": position,
             "effort": float(snap.effort[g.world, self.finger]),
             "stalled": stalled,
-            "reached_goal": abs(position - g.finger_target) < GOAL_TOLERANCE,
+            "reached_goal": g.finger.reached(position),
         }
 
     def _tend_gripper(self, g: Goal) -> None:
         snap = self.loop.latest
         if snap.tick < g.effective_tick:
             return  # the new target is not stepped yet
+        assert g.finger is not None  # a gripper goal's
         now = topics.sim_seconds(snap, self.tick_dt)
-        g.moved_at = min(g.moved_at, now)
-        if abs(float(snap.target[g.world, self.finger]) - g.finger_target) > 1e-9:
-            result = self._gripper_state(g, stalled=False)
-            self._finish(g, Status.ABORTED, result)  # another command took the finger over
-            return
         state = self._gripper_state(g, stalled=False)
-        if state["reached_goal"]:
-            self._finish(g, Status.SUCCEEDED, state)
+        if g.finger.taken_over(float(snap.target[g.world, self.finger])):
+            self._finish(g, Status.ABORTED, state)  # another command took the finger over
             return
-        if abs(float(snap.velocity[g.world, self.finger])) > STALL_VELOCITY:
-            g.moved_at = now
-        elif now - g.moved_at >= STALL_TIMEOUT_S:
-            self._finish(g, Status.SUCCEEDED, {**state, "stalled": True})
+        velocity = float(snap.velocity[g.world, self.finger])
+        verdict = g.finger.verdict(now, state["position"], velocity)
+        if verdict is not None:
+            self._finish(g, Status.SUCCEEDED, {**state, "stalled": verdict == "stalled"})
             return
         g.on_feedback(g, state)
 

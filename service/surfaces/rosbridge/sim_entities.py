@@ -22,11 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from clients import ros_rules
 from service.core.commands import entities
 from service.core.errors import ArmfleetError, BadCommand
 from service.core.sim import entities as entity_table
-from service.surfaces.ros import topics
-from service.surfaces.ros.rosbridge_base import ROSBRIDGE
+from service.surfaces.rosbridge import topics
+from service.surfaces.rosbridge.base import ROSBRIDGE
 
 OK, NOT_FOUND, FAILED = 1, 2, 4
 _ZERO = {"x": 0.0, "y": 0.0, "z": 0.0}
@@ -118,7 +119,7 @@ def get_state(session: Any, world: int, args: Any, reply: Reply) -> None:
         e = got["worlds"][0]["entities"][index]
         q = e["orientation"]
         angular = (_rotation(np.array(q)) @ np.array(e["angular"])).tolist()
-        sec, nanosec = topics.stamp(topics.sim_seconds(loop.latest, session.tick_dt))
+        sec, nanosec = ros_rules.stamp(topics.sim_seconds(loop.latest, session.tick_dt))
         stamp = {"sec": sec, "nanosec": nanosec}
         state = {
             "header": {"stamp": stamp, "frame_id": "world"},

@@ -19,7 +19,7 @@ import numpy as np
 import orjson
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
 
-from clients._http import increment_body, targets_body, worlds_param
+from clients.calls import increment_body, targets_body, worlds_param
 from clients.entity_states import EntityStates
 from clients.errors import CommandRejected, NotFound, Unreachable, unreachable
 from clients.models import (
@@ -31,14 +31,12 @@ from clients.models import (
     WorldState,
     WsError,
 )
+from clients.wire import BINARY_MAGIC
 
 # WebSocket close codes the service uses.
 CLOSE_TRY_AGAIN = 1013  # still starting
 CLOSE_POLICY = 1008  # unknown world / bad world list
 
-BINARY_MAGIC = (
-    b"AFS1"  # batch frames sent with format=binary (layout in service/core/streams/wire.py)
-)
 MAX_SIZE = 64 << 20  # a frame of thousands of worlds is several MiB
 # What opening or reading a socket raises when the server is not (or no longer) there.
 DROPPED = (OSError, InvalidHandshake, TimeoutError)
@@ -81,7 +79,7 @@ def ws_url(
 
 
 def parse_binary_states(data: bytes) -> BatchStates:
-    """A binary batch frame (`format=binary`; layout in service/core/streams/wire.py) as
+    """A binary batch frame (`format=binary`; layout in clients/wire.py) as
     BatchStates."""
     hlen = int.from_bytes(data[4:8], "little")
     header = orjson.loads(data[8 : 8 + hlen])

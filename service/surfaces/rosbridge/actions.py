@@ -9,7 +9,7 @@ result frame carries the result message in `values`, the final GoalStatus in `st
 command) gets `result: false` with the reason in `values` and status UNKNOWN, which roslibpy
 hands to its errback and roslib.js to its failed callback; nothing moves.
 
-The goals run in service/surfaces/ros/goals.py; its callbacks come from
+The goals run in service/surfaces/rosbridge/goals.py; its callbacks come from
 other threads, so frames are queued onto the socket's event loop.
 """
 
@@ -18,11 +18,12 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
+from clients import ros_rules
+from clients.ros_rules import GoalRejected, Status
 from service.core.errors import ArmfleetError
-from service.surfaces.ros.goal_msgs import GoalRejected, Status, action_names
-from service.surfaces.ros.goals import Goal, runner_of
-from service.surfaces.ros.rosbridge_base import ROSBRIDGE, ProtocolError, topic_name
-from service.surfaces.ros.topics import stamp
+from service.surfaces.rosbridge.base import ROSBRIDGE, ProtocolError, topic_name
+from service.surfaces.rosbridge.goal_msgs import action_names
+from service.surfaces.rosbridge.goals import Goal, runner_of
 
 
 def _type_matches(given: Any, kind: str) -> bool:
@@ -132,7 +133,7 @@ def cancel_all(session: Any, action: str) -> dict[str, Any]:
     infos = []
     for goal in canceling:
         key = goal.key if isinstance(goal.key, bytes) else bytes(16)
-        sec, nanosec = stamp(goal.accepted_at)
+        sec, nanosec = ros_rules.stamp(goal.accepted_at)
         infos.append({"goal_id": {"uuid": list(key)}, "stamp": {"sec": sec, "nanosec": nanosec}})
     return {"return_code": 0 if infos else 1, "goals_canceling": infos}
 

@@ -1,14 +1,14 @@
-"""The UR driver's actions as messages: names, types, goal checks, feedback and result shapes.
-
-Everything here works on the ROS messages in their JSON shape (what rosbridge carries).
+"""The UR driver's actions as rosbridge carries them: goals, feedback and results in their JSON
+shape. The names, types, constants and goal rules are the ROS rulebook's (clients/ros_rules.py),
+which the ROS node applies to the same goals as rclpy messages.
 """
 
 from __future__ import annotations
 
-import enum
-import math
 from typing import Any
 
+from clients import ros_rules
+from clients.ros_rules import ACTIONS, BadMessage, GoalRejected
 from service.core.commands.trajectory import (
     JointTolerance,
     JointTrajectorySpec,
@@ -16,42 +16,6 @@ from service.core.commands.trajectory import (
     TrajectoryStatus,
 )
 from service.core.errors import ArmfleetError
-from service.surfaces.ros import topics
-
-FJT_TYPE = "control_msgs/action/FollowJointTrajectory"
-GRIPPER_TYPE = "control_msgs/action/GripperCommand"
-ACTIONS = {
-    "scaled_joint_trajectory_controller/follow_joint_trajectory": FJT_TYPE,
-    "joint_trajectory_controller/follow_joint_trajectory": FJT_TYPE,
-    "robotiq_gripper_controller/gripper_cmd": GRIPPER_TYPE,
-}
-FEEDBACK_HZ = 20.0  # joint_trajectory_controller's default action_monitor_rate
-GOAL_TOLERANCE = 0.01  # rad: GripperActionController's default goal_tolerance
-STALL_VELOCITY = 0.01  # rad/s: below this the finger counts as not moving
-STALL_TIMEOUT_S = 0.2  # simulated seconds without movement short of the goal: stalled
-# control_msgs FollowJointTrajectory result codes
-SUCCESSFUL, INVALID_GOAL, INVALID_JOINTS = 0, -1, -2
-PATH_TOLERANCE_VIOLATED, GOAL_TOLERANCE_VIOLATED = -4, -5
-
-
-class Status(enum.IntEnum):
-    """action_msgs/GoalStatus values."""
-
-    UNKNOWN = 0
-    ACCEPTED = 1
-    EXECUTING = 2
-    CANCELING = 3
-    SUCCEEDED = 4
-    CANCELED = 5
-    ABORTED = 6
-
-    @property
-    def terminal(self) -> bool:
-        return self >= Status.SUCCEEDED
-
-
-class GoalRejected(ValueError):
-    """The goal is invalid; nothing moved. The text says which field and why."""
 
 
 def action_names(namespaces: dict[str, int]) -> dict[str, tuple[int, str]]:
@@ -73,7 +37,7 @@ def seconds(value: Any, where: str) -> float:
 
 
 def _duration(t: float) -> dict[str, int]:
-    sec, nanosec = topics.stamp(t)
+    sec, nanosec = ros_rules.stamp(t)
     return {"sec": sec, "nanosec": nanosec}
 
 
@@ -84,12 +48,10 @@ def trajectory_spec(robot: Any, arm: list[str], goal: dict[str, Any]) -> JointTr
     if multi.get("points") or multi.get("joint_names"):
         raise GoalRejected("multi_dof_trajectory: the UR controllers have no multi-DOF joints")
     names = list(traj.get("joint_names") or [])
-    others = [n for n in names if n not in arm]
-    if others:
-        raise GoalRejected(
-            f"trajectory.joint_names: {others[0]!r} is not a joint of this controller "
-            f"(joints: {', '.join(arm)}); the gripper has robotiq_gripper_controller/gripper_cmd"
-        )
+    try:
+        ros_rules.check_arm_joints(names, arm)
+    except BadMessage as exc:
+        raise GoalRejected(exc.detail) from None
     points = []
     for i, p in enumerate(traj.get("points") or []):
         if not isinstance(p, dict):
@@ -147,7 +109,7 @@ def trajectory_feedback(s: TrajectoryStatus, tick_dt: float) -> dict[str, Any]:
             "time_from_start": elapsed,
         }
 
-    sec, nanosec = topics.stamp(stamp)
+    sec, nanosec = ros_rules.stamp(stamp)
     return {
         "header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": ""},
         "joint_names": s.joint_names,
@@ -158,16 +120,8 @@ def trajectory_feedback(s: TrajectoryStatus, tick_dt: float) -> dict[str, Any]:
 
 
 def gripper_position(goal: dict[str, Any]) -> float:
-    """A GripperCommand goal's finger position [rad], or GoalRejected."""
+    """A GripperCommand goal's finger position [rad], or GoalRejected (the rulebook's checks)."""
     command = goal.get("command")
     if not isinstance(command, dict):
         raise GoalRejected("command: a control_msgs/GripperCommand is required")
-    position, effort = command.get("position", 0.0), command.get("max_effort", 0.0)
-    for value, what in ((position, "position"), (effort, "max_effort")):
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise GoalRejected(f"command.{what} must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise GoalRejected(f"command.{what} must be finite, got {value}")
-    if effort < 0:
-        raise GoalRejected(f"command.max_effort must be >= 0, got {effort}")
-    return float(position)
+    return ros_rules.gripper_goal(command.get("position", 0.0), command.get("max_effort", 0.0))

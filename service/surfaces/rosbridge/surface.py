@@ -3,7 +3,7 @@
 and what the node reads from armfleet (`/v1/ros/robot_description`, `/v1/ros/frames`) or
 reports to it (`PUT /v1/ros/node`).
 
-The protocol itself (one client's ops, services and outbox) is rosbridge.py; this module owns
+The protocol itself (one client's ops, services and outbox) is protocol.py; this module owns
 what one service shares: the topic map from the settings, the counters, and the read loop that
 feeds a session until its client goes.
 """
@@ -23,9 +23,9 @@ from service.core.commands.fields import example_config, json_int
 from service.core.sim.worlds import world_list
 from service.core.surface import ServiceFacts, SurfaceContext
 from service.surfaces.ros import description
-from service.surfaces.ros.rosbridge import RosbridgeServer, Session
 from service.surfaces.ros.settings import Ros2Settings
-from service.surfaces.ros.topics import TopicMap
+from service.surfaces.rosbridge.protocol import RosbridgeServer, Session
+from service.surfaces.rosbridge.topics import TopicMap
 
 if TYPE_CHECKING:
     from service.core.surface import Surface

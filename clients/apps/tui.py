@@ -18,7 +18,7 @@ from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.widgets import Footer, Static
 
-from clients.controller import STEP, TITLE, ControllerBackend, ControllerModel, Event
+from clients.apps.controller import STEP, TITLE, ControllerBackend, ControllerModel, Event
 
 HELP = (
     "up/down j/k: joint   +/- right/left: ±0.1   o/c: open/close gripper   "

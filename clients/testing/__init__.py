@@ -9,8 +9,13 @@
 The server is `python -m service.cli serve` run by this same interpreter, so it is the armfleet
 this Python imports (an installed wheel, or a source checkout), on a free 127.0.0.1 port. It is
 a separate process with its own simulation loop, exactly as users run it: tests through it
-talk over real sockets. With pytest, the `armfleet_server` fixture (clients/pytest_plugin.py)
-wraps it.
+talk over real sockets. With pytest, the `armfleet_server` fixture
+(clients/testing/pytest_plugin.py) wraps it. `headless` launches the Chromium that the page's
+tests and the bench drive.
+
+A sub-package, not part of the client-only distribution: it starts the service, so it needs the
+whole `armfleet`. May import: the client library's public modules (the service only as a child
+process, never as an import).
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ from clients.models import Lease
 
 READY_TIMEOUT = 300.0  # [s] a cold kernel cache compiles for minutes on a small CPU
 STOP_TIMEOUT = 15.0  # [s] after SIGINT, before the process is killed
-_PACKAGE_ROOT = Path(__file__).resolve().parents[1]  # holds clients/ and service/
+_PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # holds clients/ and service/
 
 
 class ServerFailed(RuntimeError):
