@@ -11,7 +11,8 @@ import asyncio
 import contextlib
 import time
 from collections.abc import Callable
-from typing import Annotated, Literal, TypeVar
+from dataclasses import dataclass
+from typing import Annotated, Literal
 
 import numpy as np
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
@@ -29,7 +30,6 @@ from service.core.streams.formats import FrameFormat
 from service.core.streams.hub import StreamHub, Subscription
 
 router = APIRouter(prefix="/v1")
-T = TypeVar("T")
 
 MAX_RATE = 1000.0
 _MAX_QUEUED_ACKS = 256  # a client that never reads its acks stops being read (backpressure)
@@ -66,20 +66,17 @@ async def world_socket(
 ) -> None:
     """One world's state frames (`{"op": "state", ...}`); commands need no `world` field."""
 
-    def read(loop: SimLoop, control: Control) -> tuple[int, bool]:
-        return control.world(world), flag(entities, "query.entities")
+    def stream(loop: SimLoop, control: Control) -> Stream:
+        shown, with_entities = control.world(world), flag(entities, "query.entities")
+        names, brief = loop.spec.names, control.trajectories.brief
 
-    opened = await _open(ws, read)
-    if opened is None:
-        return
-    loop, control, hub, (world, with_entities) = opened
-    names = loop.spec.names
+        def render(s: Snapshot) -> bytes:
+            return wire.single_frame(s, shown, names, brief(shown), with_entities)
 
-    def render(s: Snapshot) -> bytes:
-        return wire.single_frame(s, world, names, control.trajectories.brief(world), with_entities)
+        fmt = FrameFormat.single(with_entities)
+        return Stream(np.array([shown]), rate, fmt, render, default_world=shown)
 
-    fmt = FrameFormat.single(with_entities)
-    await _serve(ws, loop, control, hub, (np.array([world]), rate, fmt, render), world)
+    await _serve(ws, stream)
 
 
 @router.websocket("/ws")
@@ -95,32 +92,26 @@ async def batch_socket(
 ) -> None:
     """Many worlds per frame (`{"op": "states", ...}`, column-wise); commands name `world`."""
 
-    def read(loop: SimLoop, control: Control) -> tuple[np.ndarray, bool]:
-        n = loop.batch.nworld
+    def stream(loop: SimLoop, control: Control) -> Stream:
+        n, names = loop.batch.nworld, loop.spec.names
         ids = np.arange(n) if worlds is None else parse_worlds(worlds, n)
-        return ids, flag(entities, "query.entities")
+        with_entities = flag(entities, "query.entities")
+        # Packed: the sim thread gathers these worlds' rows and a thread of the hub serialises
+        # them (service.core.streams.frames); `render` makes the first frame, from a snapshot.
+        if format == "binary":
 
-    opened = await _open(ws, read)
-    if opened is None:
-        return
-    loop, control, hub, (ids, with_entities) = opened
-    names = loop.spec.names
-    # Packed: the sim thread gathers these worlds' rows and a thread of the hub serialises them
-    # (service.core.streams.frames); `render` makes the first frame, from the latest snapshot.
-    if format == "binary":
-        fmt = FrameFormat.batch_binary(tuple(names), with_entities)
+            def render(s: Snapshot) -> bytes:
+                return wire.batch_frame_binary(s, ids, names, with_entities)
 
-        def render(s: Snapshot) -> bytes:
-            return wire.batch_frame_binary(s, ids, names, with_entities)
-
-    else:
-        fmt = FrameFormat.batch(tuple(names), with_entities)
+            return Stream(ids, rate, FrameFormat.batch_binary(tuple(names), with_entities), render)
         briefs = control.trajectories.briefs
 
-        def render(s: Snapshot) -> bytes:
+        def render_json(s: Snapshot) -> bytes:
             return wire.batch_frame(s, ids, names, briefs(ids), with_entities)
 
-    await _serve(ws, loop, control, hub, (ids, rate, fmt, render), None)
+        return Stream(ids, rate, FrameFormat.batch(tuple(names), with_entities), render_json)
+
+    await _serve(ws, stream)
 
 
 class StillFilter:
@@ -175,7 +166,7 @@ async def view_socket(
     control layer's with source `browser`.
     """
 
-    def read(loop: SimLoop, control: Control) -> tuple[int | None, np.ndarray]:
+    def stream(loop: SimLoop, control: Control) -> Stream:
         shown = None if focus is None else control.world(focus)
         if worlds is not None:
             ids = parse_worlds(worlds, loop.batch.nworld)
@@ -185,44 +176,38 @@ async def view_socket(
             raise BadCommand("query.worlds", "give `worlds`, `focus` or both")
         if len(ids) > MAX_VIEW_WORLDS:
             raise BadCommand("query.worlds", f"{len(ids)} asked, at most {MAX_VIEW_WORLDS}")
-        return shown, ids
+        names = loop.spec.names
 
-    opened = await _open(ws, read)
-    if opened is None:
-        return
-    loop, control, hub, (focus, ids) = opened
-    names = loop.spec.names
+        def render(snap: Snapshot) -> bytes:
+            st = loop.stats
+            stats = {
+                "mode": st.mode.value,
+                "ticks_per_s": st.ticks_per_s,
+                "realtime_factor": st.realtime_factor,
+                "trajectory": None if shown is None else control.trajectories.brief(shown),
+            }
+            return wire.pose_frame(snap, ids, names, shown, stats)
 
-    def render(snap: Snapshot) -> bytes:
-        st = loop.stats
-        stats = {
-            "mode": st.mode.value,
-            "ticks_per_s": st.ticks_per_s,
-            "realtime_factor": st.realtime_factor,
-            "trajectory": None if focus is None else control.trajectories.brief(focus),
-        }
-        return wire.pose_frame(snap, ids, names, focus, stats)
+        fmt = FrameFormat.view(shown)
+        return Stream(ids, rate, fmt, render, skip=StillFilter(ids), source=BROWSER)
 
-    stream = (ids, rate, FrameFormat.view(focus), render)
-    await _serve(ws, loop, control, hub, stream, None, BROWSER, StillFilter(ids))
+    await _serve(ws, stream)
 
 
-async def _open(
-    ws: WebSocket, read: Callable[[SimLoop, Control], T]
-) -> tuple[SimLoop, Control, StreamHub, T] | None:
-    """The running service's loop, control and hub, with `read`'s reading of the socket's
-    query; None once the socket has been refused (starting: 1013; a bad query: 1008 naming
-    the field)."""
-    runtime = ws.app.state.runtime
-    if runtime.loop is None or runtime.control is None or runtime.hub is None:
-        await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
-        return None
-    try:
-        got = read(runtime.loop, runtime.control)
-    except ArmfleetError as exc:
-        await _refuse(ws, _CLOSE_POLICY, str(exc))
-        return None
-    return runtime.loop, runtime.control, runtime.hub, got
+@dataclass(frozen=True)
+class Stream:
+    """What one socket streams, read from its query: the worlds, the rate, the frame format
+    and the renderer of a frame from a snapshot; `skip` drops frames (the page's: nothing
+    moved), `default_world` is the world commands without `world` go to, `source` the
+    commands' source."""
+
+    worlds: np.ndarray
+    rate: float | None
+    format: FrameFormat
+    render: Callable[[Snapshot], bytes]
+    skip: Callable[[Snapshot], bool] | None = None
+    default_world: int | None = None
+    source: str = WS
 
 
 async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
@@ -235,19 +220,19 @@ def _grant(ws: WebSocket) -> access.Grant:
     return access.check_websocket(runtime.settings.access, ws, runtime.leases)
 
 
-async def _serve(
-    ws: WebSocket,
-    loop: SimLoop,
-    control: Control,
-    hub: StreamHub,
-    stream: tuple[np.ndarray, float | None, FrameFormat, Callable[[Snapshot], bytes]],
-    default_world: int | None,
-    source: str = WS,
-    skip: Callable[[Snapshot], bool] | None = None,
-) -> None:
-    """Serve one socket: its Subscription to `stream` (worlds, rate, frame format, renderer),
-    built whole here with the socket's closer, and its commands."""
+async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> None:
+    """Serve one socket: `read` reads its query into a `Stream` (an ArmfleetError closes the
+    socket with 1008 naming the field; 1013 while the service starts), then its Subscription,
+    built whole here with the socket's closer, streams, and its commands are run."""
     runtime = ws.app.state.runtime
+    loop, control, hub = runtime.loop, runtime.control, runtime.hub
+    if loop is None or control is None or hub is None:
+        return await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
+    try:
+        stream = read(loop, control)
+    except ArmfleetError as exc:
+        return await _refuse(ws, _CLOSE_POLICY, str(exc))
+    default_world, source = stream.default_world, stream.source
     grant = _grant(ws)
     limiter = access.RateLimiter(
         runtime.settings.access.command_rate, runtime.settings.access.command_burst
@@ -259,8 +244,9 @@ async def _serve(
     async def close(code: int, reason: str) -> None:
         await ws.close(code=code, reason=reason[:120])
 
-    worlds, rate, fmt, render = stream
-    sub = Subscription(worlds, rate, fmt, render, skip=skip, close=close)
+    sub = Subscription(
+        stream.worlds, stream.rate, stream.format, stream.render, skip=stream.skip, close=close
+    )
     first = loop.latest
     if sub.entities and first.entities is None:  # nobody asked before: read them at a boundary
         first = await asyncio.wrap_future(loop.call(entity_frames.snapshot_with_entities))

@@ -48,6 +48,20 @@ def _fill_point(point: Any, values: Any, elapsed: float) -> None:
     point.time_from_start.sec, point.time_from_start.nanosec = sec, nanosec
 
 
+def _server(part: Any, kind: Any, name: str, handler: Any) -> ActionServer:
+    """An action server of the node's part (its node and callback group) for `handler`'s
+    goals: every goal may be cancelled (the handler stops the world where it is)."""
+    return ActionServer(
+        part.servers,
+        kind,
+        name,
+        execute_callback=handler._execute,
+        goal_callback=handler._goal,
+        cancel_callback=lambda _h: CancelResponse.ACCEPT,
+        callback_group=part.group,
+    )
+
+
 class TrajectoryActions:
     """FollowJointTrajectory servers of one world (both controller names)."""
 
@@ -56,15 +70,7 @@ class TrajectoryActions:
         self._started: dict[int, int] = {}  # id(goal message) → trajectory id
         self._lock = threading.Lock()
         self.servers = [
-            ActionServer(
-                part.servers,
-                FollowJointTrajectory,
-                f"{ns}/{name}/follow_joint_trajectory",
-                execute_callback=self._execute,
-                goal_callback=self._goal,
-                cancel_callback=lambda _h: CancelResponse.ACCEPT,
-                callback_group=part.group,
-            )
+            _server(part, FollowJointTrajectory, f"{ns}/{name}/follow_joint_trajectory", self)
             for name in FJT_CONTROLLERS
         ]
 
@@ -139,15 +145,7 @@ class GripperAction:
     def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
         self.owner, self.world = owner, world
         self.finger = owner.joints.index(FINGER)
-        self.server = ActionServer(
-            part.servers,
-            GripperCommand,
-            f"{ns}/{GRIPPER_ACTION}",
-            execute_callback=self._execute,
-            goal_callback=self._goal,
-            cancel_callback=lambda _h: CancelResponse.ACCEPT,
-            callback_group=part.group,
-        )
+        self.server = _server(part, GripperCommand, f"{ns}/{GRIPPER_ACTION}", self)
 
     def _goal(self, goal: Any) -> GoalResponse:
         try:

@@ -16,15 +16,13 @@ from typing import Any, ClassVar
 
 from pydantic import Field
 
-from service.core.commands.base import Door, world_ack
+from service.core.commands.base import Door
 from service.core.commands.fields import FiniteFloat, Strict, example_config
 from service.core.commands.params import (
     PAYLOAD_MASS,
     PAYLOAD_REACH,
-    ParamsResult,
     SetParams,
 )
-from service.core.commands.writes import ManyWrites
 from service.core.errors import BadCommand
 
 __all__ = ["PayloadValues", "SetPayload"]
@@ -54,8 +52,9 @@ def _number(value: Any, field: str, low: float, high: float, unit: str) -> float
 
 
 @dataclass(frozen=True)
-class SetPayload(ManyWrites[ParamsResult]):
-    """Payloads of any worlds, written together at one tick boundary (as `set_params`)."""
+class SetPayload(SetParams):
+    """Payloads of any worlds, written together at one tick boundary: `set_params` of the
+    `payload` parameter, given and recorded as mass and centre (its stage and ack are theirs)."""
 
     kind: ClassVar[str] = "set_payload"
     op: ClassVar[str | None] = "set_payload"
@@ -78,9 +77,3 @@ class SetPayload(ManyWrites[ParamsResult]):
             kept.append({"world": item.get("world"), "mass": mass, "cog": xyz})
         asked = [{"world": k["world"], "params": {"payload": [k["mass"], *k["cog"]]}} for k in kept]
         return cls(SetParams.create(door, asked).writes, tuple(kept))
-
-    def stage(self, door: Door, source: str) -> ParamsResult:
-        return ParamsResult(*self.staged(door))
-
-    def ack(self, door: Door, msg_id: Any, world: int, result: ParamsResult) -> dict[str, Any]:
-        return world_ack(msg_id, world, tick=result.tick)

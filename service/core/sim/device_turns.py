@@ -41,10 +41,7 @@ class DeviceTurns:
         if self._holder == me:
             yield
             return
-        with self._cond:
-            while self._busy or self._renders_waiting:
-                self._cond.wait()
-            self._busy, self._holder = True, me
+        self._acquire(me, render=False)
         try:
             yield
         finally:
@@ -54,18 +51,25 @@ class DeviceTurns:
     def render_turn(self) -> Iterator[None]:
         """The renderer's turn, for one picture's launches: it waits for the turn held now,
         and goes before the loop's next one."""
-        with self._cond:
-            self._renders_waiting += 1
-            try:
-                while self._busy:
-                    self._cond.wait()
-            finally:
-                self._renders_waiting -= 1
-            self._busy, self._holder = True, threading.get_ident()
+        self._acquire(threading.get_ident(), render=True)
         try:
             yield
         finally:
             self._release()
+
+    def _acquire(self, me: int, render: bool) -> None:
+        """Wait for the device to be free, then hold it. The loop also waits while a renderer
+        waits (renderers go first); a waiting renderer is counted so that the loop sees it."""
+        with self._cond:
+            if render:
+                self._renders_waiting += 1
+            try:
+                while self._busy or (not render and self._renders_waiting):
+                    self._cond.wait()
+            finally:
+                if render:
+                    self._renders_waiting -= 1
+            self._busy, self._holder = True, me
 
     @contextlib.contextmanager
     def lent(self) -> Iterator[None]:
