@@ -129,6 +129,9 @@ class Recorder(SnapshotSink):
             self._give_up()
             raise error from None
         self._start_tick = state.tick
+        # The starting state is that tick's, in the file already: a later snapshot of the same
+        # tick (a paused loop publishes writes it applied at once, SimLoop._settle) is not.
+        self._last_tick = state.tick
         self._thread = threading.Thread(
             target=self._run, args=(out,), name="armfleet-recorder", daemon=True
         )
