@@ -54,8 +54,9 @@ _STOP = object()
 
 
 def every_ticks(rate: float, control_hz: float) -> int:
-    """A state every this many ticks for `rate` states per simulated second (at least 1)."""
-    return max(1, round(control_hz / rate))
+    """A state every this many ticks for `rate` states per simulated second (at least 1; at
+    most one per 2**31 ticks, so that a tiny rate is a long period, never an overflow)."""
+    return max(1, min(2**31, round(min(control_hz / rate, 2.0**31))))
 
 
 class Recorder(SnapshotSink):
