@@ -126,7 +126,8 @@ class WorldState:
     flange_position: np.ndarray  # (3,) x y z [m], world frame
     flange_quaternion: np.ndarray  # (4,) w x y z
     faults: int  # times this world was reset for NaN or capacity overflow
-    # Only while the service is paused: targets as of every accepted command (the next step's).
+    # Only while the service is paused: targets as of every accepted command (a paused service
+    # applies them at once, so they equal `target` once applied).
     pending_target: np.ndarray | None = None
     entities: EntityStates | None = None  # only when asked for (entities=True)
 

@@ -194,6 +194,10 @@ class Runtime:
             return
         reclaim_stop_signals()  # building may have loaded a library that took them (Ray)
         self.header = provenance.batch_header(batch)
+        own = batch.robot.own  # a user's cell: say what of its step options armfleet replaced
+        line = own.told(batch.control_hz, s.sim.physics_dt) if own is not None else None
+        if s.sim.scene is not None and line:
+            log.warning("%s", line)
         restore = s.persistence.restore
         if restore and not await asyncio.to_thread(self._restore_at_start, batch, restore):
             batch.close()

@@ -55,7 +55,8 @@ def test_while_paused_the_state_carries_the_pending_target(http):
         r = http.post("/v1/worlds/1/increments", json={"joint": "elbow_joint", "delta": 0.2})
         s = http.get("/v1/worlds/1/state").json()  # answers at once: time stands still
         assert s["tick"] == before["tick"]
-        assert s["target"] == pytest.approx(HOME)  # what the last tick used
+        assert r.json()["tick"] == before["tick"] + 1  # the first tick stepped with it
+        assert s["target"] == pytest.approx(r.json()["target"])  # applied at once, paused
         assert s["pending_target"] == pytest.approx(r.json()["target"])
         http.post("/v1/sim/step", json={"ticks": 1}).raise_for_status()
         s = http.get("/v1/worlds/1/state").json()

@@ -329,8 +329,9 @@ def test_simulation_interfaces(ros: tuple[Server, httpx.Client]) -> None:
 
 
 def test_set_entity_state_places_the_cube(ros: tuple[Server, httpx.Client]) -> None:
-    """SetEntityState in world 1 (paused), read back over ROS and HTTP at one tick; refused
-    sets (unknown entity, NaN, out of bounds) change nothing, not even after a step."""
+    """SetEntityState in world 1 (paused) is instant: a GetEntityState right after, with no
+    step, returns it; then read back over ROS and HTTP at one tick; refused sets (unknown
+    entity, NaN, out of bounds) change nothing, not even after a step."""
     http, url = ros[1], "/v1/worlds/1/entities/cube"
     try:
         seen = judge("entity", "/world_1", timeout=120)
@@ -341,6 +342,10 @@ def test_set_entity_state_places_the_cube(ros: tuple[Server, httpx.Client]) -> N
     dt, got = 1 / http.get("/v1/info").json()["control_hz"], seen["got"]
     assert seen["set"] == seen["step"] == 1 and seen["pause"] in (1, 101) and seen["after"] == got
     assert got["stamp"] == pytest.approx(cube["tick"] * dt, abs=1e-6)
+    h, now = 0.5**0.5, seen["instant"]  # as set, before any step: the same tick as the set's
+    np.testing.assert_allclose(now["pose"], [0.3, -0.5, 1.2, h, h, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(now["angular"], [0, 0, 1], atol=1e-9)
+    assert now["stamp"] == pytest.approx(got["stamp"] - dt, abs=1e-6)
     np.testing.assert_allclose(got["pose"], cube["position"] + cube["orientation"], atol=1e-6)
     c, s = np.cos(dt / 2) / 2**0.5, np.sin(dt / 2) / 2**0.5  # as set, one tick's spin about z
     np.testing.assert_allclose(got["pose"][:2] + got["pose"][3:], [0.3, -0.5, c, c, s, s], 1e-6)
@@ -349,7 +354,7 @@ def test_set_entity_state_places_the_cube(ros: tuple[Server, httpx.Client]) -> N
     assert later["position"][:2] == pytest.approx([0.3, -0.5], abs=1e-6)
     assert later["tick"] == cube["tick"] + 1 and later["position"][2] < cube["position"][2]
     assert [seen[k][0] for k in ("missing", "nan", "high")] == [2, 4, 4]  # NOT_FOUND, FAILED
-    assert "unknown entity 'sphere'" in seen["missing"][1] and "z is nan" in seen["nan"][1]
+    assert "no entity 'sphere'" in seen["missing"][1] and "z is nan" in seen["nan"][1]
     assert "outside the scene's bounds at z" in seen["high"][1]
 
 

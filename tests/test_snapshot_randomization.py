@@ -2,8 +2,9 @@
 
 Real servers over real sockets, paused on native MuJoCo (float64: the JSON of a state is its
 bits): worlds 0-3 are randomised with a seed, a snapshot names that seed and spec for exactly
-those worlds (in the listing, the route's reply and the file's own header; a randomisation
-accepted but not yet applied is not in the state, so not in the header either), and a fresh
+those worlds (in the listing, the route's reply and the file's own header; a paused server
+applies a randomisation at once, so one accepted after the last step is in the state and in the
+header, with the tick it will be stepped from), and a fresh
 server restored from the file holds the same state bit for bit, steps on identically, and still
 names the seed and spec, in the snapshots it takes and per world. A file of the previous format
 (/1, no randomisation in its header) still loads, its worlds with none.
@@ -56,9 +57,12 @@ def test_a_snapshot_names_the_seed_and_spec_and_a_restore_keeps_them(tmp_path):
         ack = http.post("/v1/randomize", json={"seed": SEED, "spec": SPEC, "worlds": [0, 1, 2, 3]})
         ack = ack.json()
         http.post("/v1/sim/step", json={"ticks": 10}).raise_for_status()
-        # accepted, not applied: world 4's reset waits for the next step
-        http.post("/v1/randomize", json={"seed": 99, "spec": SPEC, "worlds": [4]})
-        expected = [{"worlds": [0, 1, 2, 3], "tick": ack["tick"], "seed": SEED, "spec": SPEC}]
+        # paused: world 4's randomisation is applied at once, before its tick is stepped
+        four = http.post("/v1/randomize", json={"seed": 99, "spec": SPEC, "worlds": [4]}).json()
+        expected = [
+            {"worlds": [0, 1, 2, 3], "tick": ack["tick"], "seed": SEED, "spec": SPEC},
+            {"worlds": [4], "tick": four["tick"], "seed": 99, "spec": SPEC},
+        ]
 
         info = http.post("/v1/snapshots", json={"name": "drawn"}).json()
         assert info["format"] == "armfleet-snapshot/2"
@@ -66,9 +70,9 @@ def test_a_snapshot_names_the_seed_and_spec_and_a_restore_keeps_them(tmp_path):
         assert http.get("/v1/snapshots").json()[0]["randomization"] == expected
         path = a_dir / "data" / "snapshots" / "drawn.npz"
         assert _header(path)["randomization"] == expected
-        # the snapshot holds the state of its tick: world 4 is not yet randomised in it
+        # the snapshot holds the state of its tick, world 4's draw in it already
         state_before = _everything(http)
-        assert state_before["states"]["tick"] == info["tick"]
+        assert state_before["states"]["tick"] == info["tick"] == four["tick"] - 1
         one = http.get("/v1/worlds/2/randomization").json()
         assert (one["seed"], one["spec"], one["randomized_at"]) == (SEED, SPEC, ack["tick"])
         http.post("/v1/sim/step", json={"ticks": 20}).raise_for_status()
@@ -86,12 +90,12 @@ def test_a_snapshot_names_the_seed_and_spec_and_a_restore_keeps_them(tmp_path):
         assert _everything(http) == state_before  # bit for bit (float64 JSON round-trips)
         for w in range(NWORLD):
             got = http.get(f"/v1/worlds/{w}/randomization").json()
-            assert (got["seed"], got["spec"]) == ((SEED, SPEC) if w < 4 else (None, None))
+            want = {4: (99, SPEC), 5: (None, None)}.get(w, (SEED, SPEC))
+            assert (got["seed"], got["spec"]) == want
         # a snapshot of the restored worlds still names the seed and spec
         again = http.post("/v1/snapshots", json={"name": "again"}).json()
         assert again["randomization"] == expected
-        # and they step on identically, but for world 4's randomisation: A had it, B not
-        http.post("/v1/randomize", json={"seed": 99, "spec": SPEC, "worlds": [4]})
+        # and they step on identically, world 4's draw included
         http.post("/v1/sim/step", json={"ticks": 20}).raise_for_status()
         assert _everything(http) == after_a
 

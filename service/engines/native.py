@@ -118,7 +118,9 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         self.nworld = nworld
         self.control_hz = float(control_hz)
         self.tick_dt = 1.0 / self.control_hz
-        self.substeps, self.physics_dt = tick_timing(self.control_hz, physics_dt)
+        own = self.robot.own  # a cell that keeps its own timestep is stepped at it
+        step = physics_dt if own is None else own.step(physics_dt)
+        self.substeps, self.physics_dt = tick_timing(self.control_hz, step)
         self.nthread = max(1, min(nthread or auto_threads(nworld), nworld))
         self.device_name = f"cpu (native MuJoCo, {self.nthread} thread{'s' * (self.nthread > 1)})"
 

@@ -85,7 +85,9 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         self.shards = 1
         self.control_hz = float(control_hz)
         self.tick_dt = 1.0 / self.control_hz
-        self.substeps, self.physics_dt = tick_timing(self.control_hz, physics_dt)
+        own = self.robot.own  # a cell that keeps its own timestep is stepped at it
+        step = physics_dt if own is None else own.step(physics_dt)
+        self.substeps, self.physics_dt = tick_timing(self.control_hz, step)
         self.device = wp.get_device(device)
         self.device_name = str(self.device)
         self.device_turns = engine_streams(self.device)  # ticks go first (cuda_streams.py)

@@ -54,8 +54,9 @@ _STOP = object()
 
 
 def every_ticks(rate: float, control_hz: float) -> int:
-    """A state every this many ticks for `rate` states per simulated second (at least 1)."""
-    return max(1, round(control_hz / rate))
+    """A state every this many ticks for `rate` states per simulated second (at least 1; at
+    most one per 2**31 ticks, so that a tiny rate is a long period, never an overflow)."""
+    return max(1, min(2**31, round(min(control_hz / rate, 2.0**31))))
 
 
 class Recorder(SnapshotSink):
@@ -129,6 +130,9 @@ class Recorder(SnapshotSink):
             self._give_up()
             raise error from None
         self._start_tick = state.tick
+        # The starting state is that tick's, in the file already: a later snapshot of the same
+        # tick (a paused loop publishes writes it applied at once, SimLoop._settle) is not.
+        self._last_tick = state.tick
         self._thread = threading.Thread(
             target=self._run, args=(out,), name="armfleet-recorder", daemon=True
         )

@@ -112,7 +112,8 @@ def sim(ns: str, reset_ns: str) -> None:
 
 def entity(ns: str) -> None:
     """SetEntityState as a ROS user places a body: paused, the cube set in `ns` (pose and a
-    world-frame spin), one step, read back; then a set of an unknown entity, read again."""
+    world-frame spin), read back at once (the standard's "instant change"), one step, read
+    back; then a set of an unknown entity, read again."""
     from simulation_interfaces import srv
     from simulation_interfaces.msg import EntityState, SimulationState
 
@@ -142,6 +143,7 @@ def entity(ns: str) -> None:
     st.twist.angular.z = 1.0
     done = call(srv.SetEntityState, f"{ns}/set_entity_state", entity="cube", state=st)
     r["set"] = done.result.result
+    r["instant"] = get()  # no step between: the set is in effect already
     r["step"] = call(srv.StepSimulation, "/step_simulation", steps=1).result.result
     r["got"] = get()
     missing = call(srv.SetEntityState, f"{ns}/set_entity_state", entity="sphere", state=st)

@@ -60,8 +60,8 @@ class WorldState(BaseModel):
     faults: int = Field(description="times this world was reset for NaN or capacity overflow")
     pending_target: list[float] | None = Field(
         None,
-        description="only while paused: the targets as of every accepted command, which the "
-        "next step puts in effect (`target` is what the last step used) [rad]",
+        description="only while paused: the targets as of every accepted command (a paused "
+        "service applies them at once, so they equal `target` once applied) [rad]",
     )
     entities: list[EntityState] | None = Field(None, description="only with ?entities=true")
 

@@ -81,7 +81,9 @@ class RecordingRequest(Strict):
     worlds: str | None = Field(
         default=None, description="worlds whose states are recorded, e.g. '0-7,12'; default first 8"
     )
-    rate: float = Field(default=30.0, gt=0, le=1000, description="states per simulated second")
+    # At least one state per 1000 simulated seconds: a rate of 5e-324 made `every_ticks`
+    # infinite and the start a 500 (found by schemathesis, issue 38).
+    rate: float = Field(default=30.0, ge=0.001, le=1000, description="states per simulated second")
 
     model_config = ConfigDict(
         extra="forbid",

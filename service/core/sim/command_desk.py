@@ -4,7 +4,8 @@ Why apart from the loop: commands arrive from any thread and only fold into the 
 (`CommandTable`), stop a trajectory they override, and note a randomisation; the loop thread
 takes what is pending at each tick boundary. The desk owns that folding and nothing of time:
 the tick a command takes effect at comes from the loop (`accept_tick`, read with the lock
-held), so the rule "a command applies from the tick after the one in progress" is the loop's.
+held), so the rule "a command applies from the tick after the one in progress" is the loop's,
+and so is when a paused loop applies a write at once (`staged`, told after every write).
 """
 
 from __future__ import annotations
@@ -33,12 +34,15 @@ class CommandDesk:
         nworld: int,
         accept_tick: Callable[[], int],
         tick: Callable[[], int],
+        staged: Callable[[], None] = lambda: None,
     ) -> None:
         self._lock = lock  # the loop's: the loop thread takes what is pending under it
         self.table = table
         self._nworld = nworld
         self._accept_tick = accept_tick  # the tick a command accepted now applies from
         self._tick = tick  # the last tick completed
+        # Told (lock held) after every write staged: while paused the loop applies it at once.
+        self._staged = staged
         self.traj: TrajectoryHook | None = None
         # Per world, the last randomisation (seed, spec) and its tick: snapshots name it.
         self.randomizations = RandomizationBook()
@@ -57,6 +61,7 @@ class CommandDesk:
             out = self.table.stage_rows(worlds, update, self._accept_tick())
             if self.traj is not None and out:
                 self.traj.overridden(np.asarray(worlds), Override.MANUAL, named)
+            self._staged()
             return out
 
     def reset(
@@ -81,6 +86,7 @@ class CommandDesk:
                 self.randomizations.record(idx.tolist(), entry, self._tick())
             if self.traj is not None:
                 self.traj.overridden(idx, Override.RESET)
+            self._staged()
             return tick
 
     def stage_state(self, writes: Sequence[StateWrite | ModelWrite]) -> int:
@@ -89,6 +95,7 @@ class CommandDesk:
         with self._lock:
             tick = self._accept_tick()
             self.table.stage_state(writes, tick)
+            self._staged()
             return tick
 
     def attach_trajectories(self, hook: TrajectoryHook) -> None:

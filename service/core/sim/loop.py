@@ -6,12 +6,15 @@ boundary the loop thread moves what is pending into the engine in one write, ste
 the lock released (the graph replay releases the GIL too), then publishes a snapshot if a sink or
 reader wants one. A command takes effect at a tick known when it is accepted: the `tick` in every
 reply; the first snapshot whose `tick` is >= it carries the new target.
+
+While paused at rest a write does not wait for a tick that may never come: the loop applies
+it at once, between two ticks, and publishes the state it makes (loop_state.py says why that
+keeps every reply's tick and every recording as they were).
 """
 
 from __future__ import annotations
 
 import concurrent.futures
-import dataclasses
 import logging
 import threading
 import time
@@ -25,6 +28,7 @@ from service.core.sim.batch import Batch, TickWrites
 from service.core.sim.command_desk import CommandDesk
 from service.core.sim.device_turns import DeviceTurns
 from service.core.sim.listeners import Listeners
+from service.core.sim.loop_state import StateDoor
 from service.core.sim.loop_types import (
     LoopStats,
     SnapshotSink,
@@ -33,7 +37,7 @@ from service.core.sim.loop_types import (
 )
 from service.core.sim.pace import Cadence, FailureLog, RateWindow
 from service.core.sim.staging import CommandTable, Staging, TrajectoryHook
-from service.core.sim.types import BatchState, Mode, Snapshot
+from service.core.sim.types import Mode, Snapshot
 from service.core.sim.waiters import Waiters
 
 log = logging.getLogger("armfleet.loop")
@@ -44,7 +48,7 @@ T = TypeVar("T")
 _IDLE_SNAPSHOT_PERIOD = 0.1
 
 
-class SimLoop:
+class SimLoop(StateDoor):
     """Advance a Batch in realtime, fast or paused mode and serialise commands into it."""
 
     def __init__(
@@ -65,11 +69,19 @@ class SimLoop:
         self._table = CommandTable(batch.targets, batch.home_target)  # what commands staged
         # Commands (any thread) fold into the table through the desk; see command_desk.py.
         self.commands = CommandDesk(
-            self._lock, self._table, batch.nworld, self._accept_tick, lambda: self._tick
+            self._lock,
+            self._table,
+            batch.nworld,
+            self._accept_tick,
+            lambda: self._tick,
+            self._settle_soon,
         )
         self._stepping = False
         self._tick = batch.tick
         self._step_goal = self._tick  # paused mode: run until the tick counter reaches this
+        # Paused writes applied at once (`_settle`): one queued; readers must wait for it.
+        self._settle_queued = False
+        self._unsettled = False
         # Work between ticks, `step` futures, readers waiting for a tick (read-your-writes).
         self._waiters = Waiters()
         self._failures = FailureLog()
@@ -118,6 +130,7 @@ class SimLoop:
         with self._wake:
             self._mode = Mode(mode)
             self._rate.restart(self._tick)
+            self._settle_soon()  # paused: writes accepted before it are applied now
             self._wake.notify_all()
             waiters = self._stranded_waiters()
         for fut in waiters:  # paused: the ticks they waited for will not come
@@ -173,48 +186,6 @@ class SimLoop:
             run_request(fn, fut, self.batch)
         return fut
 
-    def request_state(self) -> concurrent.futures.Future[BatchState]:
-        """Every world's full state at the next tick boundary (`state_of`)."""
-        return self.call(self.state_of)
-
-    def state_of(self, batch: Batch) -> BatchState:
-        """`batch.get_state()` with the randomisations it holds (sim thread, or a stopped
-        loop): a snapshot's header names them."""
-        return dataclasses.replace(batch.get_state(), randomized=self.randomizations.at(batch.tick))
-
-    def restore(self, state: BatchState, name: str = "") -> concurrent.futures.Future[int]:
-        """Continue from `state` at the next tick boundary; the future gets the restored tick.
-
-        Commands accepted but not yet applied are dropped (they belonged to the replaced state);
-        step requests waiting in paused mode complete at the restored tick. A state that does not
-        fit fails the future with ValueError, and nothing changes.
-        """
-        return self.call(lambda batch: self._restore(batch, state, name))
-
-    def _restore(self, batch: Batch, state: BatchState, name: str) -> int:
-        tick_before = batch.tick
-        batch.set_state(state)  # checks everything before changing anything
-        with self._lock:
-            self._tick = batch.tick
-            self._step_goal = self._tick
-            self._table.restored(batch.targets, self._tick)
-            self.randomizations.replace(state.randomized)
-            if self._traj is not None:
-                self._traj.restored()
-            self._rate.restart(self._tick)
-            waiting = self._waiters.steps.take()
-        self.listeners.restored(tick_before, state, name)
-        if self._traj is not None:  # the trajectories the restore stopped, told now
-            self._traj.dispatch()
-        self._publish(time.monotonic())
-        with self._lock:  # readers waiting for a tick of the old timeline get the restored state
-            readers = self._waiters.readers.take()
-        for reader in readers:
-            resolve(reader, self._latest)
-        for fut in waiting:
-            fut.set_result(self._tick)
-        return self._tick
-
     def _serve_requests(self) -> None:
         with self._lock:
             requests = self._waiters.take_requests()
@@ -254,13 +225,15 @@ class SimLoop:
 
     def _will_not_advance(self) -> bool:
         """Paused with no step requested, no tick in progress, and `latest` showing the last
-        tick (lock held). Realtime does not snapshot every tick, so a pause can find `latest`
-        behind: the sim thread then publishes once more, and readers wait for that."""
+        tick (lock held), with no paused write still to apply (`_settle`). Realtime does not
+        snapshot every tick, so a pause can find `latest` behind: the sim thread then publishes
+        once more, and readers wait for that."""
         return (
             self._mode is Mode.PAUSED
             and self._tick >= self._step_goal
             and not self._stepping
             and self._latest.tick >= self._tick
+            and not self._unsettled
         )
 
     def _stranded_waiters(self) -> list[concurrent.futures.Future[Snapshot]]:
@@ -360,6 +333,7 @@ class SimLoop:
             self._stepping = False
             if faulted.size:
                 self._table.faulted(faulted)
+            self._settle_soon()  # a write accepted during the last tick of a burst: now
             traj = self._traj is not None and self._traj.after_step(
                 self._tick, faulted, self._staged()
             )
@@ -371,13 +345,16 @@ class SimLoop:
                 or self.listeners.wants_snapshot(now)
             )
 
-    def _publish(self, now: float) -> None:
-        """Take a snapshot, wake the readers waiting for one, hand it to every sink."""
+    def _publish(self, now: float, settled: bool = False) -> None:
+        """Take a snapshot, wake the readers waiting for one, hand it to every sink.
+        `settled`: it shows paused writes just applied (readers waited for those)."""
         snap = self.batch.snapshot()
         snap = self.listeners.extend(snap, self.batch)
         with self._lock:
             self._latest = snap
             self._last_snapshot_wall = now
+            if settled and not self._settle_queued:
+                self._unsettled = False
             if self._traj is not None:
                 self._traj.observe(snap, self._staged())
             ready = self._waiters.readers.reached(snap.tick) + self._stranded_waiters()

@@ -7,6 +7,8 @@ that. Nothing here imports warp: the native engine and the tests use it without 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import mujoco
 import numpy as np
 
@@ -18,6 +20,63 @@ import numpy as np
 # 2.083 ms steps the joints differ by at most 2.2 mrad over 2 s of presses (0.75 mrad at
 # 4.17 ms). Four times fewer steps per tick: see bench/ for the gain in worlds held real time.
 DEFAULT_PHYSICS_DT = 1.0 / 120.0
+
+# A cell that sets this custom numeric to 1 is stepped with its own <option> timestep and solver
+# (issue 38: a tuned cell must not get other physics without a word): `own_physics`.
+KEEP_OWN = "armfleet_own_physics"
+
+
+@dataclass(frozen=True)
+class CellPhysics:
+    """A cell's own step options, as written in its MJCF (read before `configure` replaces
+    them): timestep [s], solver and integrator names as MJCF spells them, and whether the
+    cell asks to keep them (the custom numeric `armfleet_own_physics` = 1)."""
+
+    timestep: float
+    solver: str
+    integrator: str
+    keep: bool
+
+    @classmethod
+    def of(cls, mjm: mujoco.MjModel) -> CellPhysics:
+        keep = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_NUMERIC, KEEP_OWN)
+        return cls(
+            float(mjm.opt.timestep),
+            mujoco.mjtSolver(int(mjm.opt.solver)).name.removeprefix("mjSOL_").lower(),
+            mujoco.mjtIntegrator(int(mjm.opt.integrator)).name.removeprefix("mjINT_").lower(),
+            keep >= 0 and bool(mjm.numeric_data[mjm.numeric_adr[keep]]),
+        )
+
+    def step(self, physics_dt: float) -> float:
+        """The approximate physics step to use: the cell's own when it keeps it."""
+        return self.timestep if self.keep else physics_dt
+
+    def told(self, control_hz: float, physics_dt: float) -> str | None:
+        """The one line `serve` logs at start about the cell's step options (None: nothing was
+        replaced and the step is the cell's): what was replaced and how to keep the cell's own,
+        or, when kept, that a timestep not dividing the control tick was rounded."""
+        substeps, exact = tick_timing(control_hz, self.step(physics_dt))
+        how = f"{substeps} substeps of {exact * 1e3:.4g} ms per 1/{control_hz:g} s tick"
+        if self.keep:
+            if abs(exact - self.timestep) <= 1e-12 * max(1.0, self.timestep):
+                return None
+            return (
+                f"physics: the cell's timestep {self.timestep * 1e3:.4g} ms does not divide the "
+                f"1/{control_hz:g} s control tick: stepping {how} (its {self.solver} solver and "
+                f"{self.integrator} integrator kept)"
+            )
+        replaced = []
+        if abs(exact - self.timestep) > 1e-12:
+            replaced.append(f"timestep {self.timestep * 1e3:.4g} ms")
+        if self.solver != "cg":
+            replaced.append(f"{self.solver} solver")
+        if not replaced:
+            return None
+        return (
+            f"physics: the cell's {' and '.join(replaced)} replaced by armfleet's: {how}, CG "
+            f"solver (its {self.integrator} integrator kept); to keep the cell's own, add "
+            f'<custom><numeric name="{KEEP_OWN}" data="1"/></custom> to it'
+        )
 
 
 def tick_timing(control_hz: float, physics_dt: float) -> tuple[int, float]:
@@ -31,15 +90,19 @@ def configure(mjm: mujoco.MjModel, physics_dt: float) -> None:
     """Set the step and solver options on a model, in place, as every engine runs it.
 
     Conjugate gradient instead of Newton: ~15-20% less work per step on this model (measured in
-    bench/), and every fidelity test (hold, step response, grasp, warp-vs-native) passes.
+    bench/), and every fidelity test (hold, step response, grasp, warp-vs-native) passes. A cell
+    that keeps its own physics (`CellPhysics.keep`) keeps its solver; the step is the exact one
+    the engine derived from its timestep (`tick_timing`).
 
     Sleeping is cleared: a model with it needs a persistent native batch (its bookkeeping is not
     in the state rows) and the Newton solver on MuJoCo Warp. A scene that asks for it
     (`LoadedRobot.sleep`) sleeps in the native engine only, on the batch's own copy
     (service.engines.native); warp, the camera renderer and the kinematics step every body.
     """
+    keep = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_NUMERIC, KEEP_OWN)
     mjm.opt.timestep = physics_dt
-    mjm.opt.solver = mujoco.mjtSolver.mjSOL_CG
+    if keep < 0 or not mjm.numeric_data[mjm.numeric_adr[keep]]:
+        mjm.opt.solver = mujoco.mjtSolver.mjSOL_CG
     mjm.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
 
 

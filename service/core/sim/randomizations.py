@@ -4,9 +4,11 @@ A snapshot names, per world, the last randomisation its state holds, or none: th
 this book answers (`at(tick)`), on the sim thread where the state is taken. A randomisation is
 recorded under the loop's command lock with the tick its reset is staged for (SimLoop.reset),
 so a state of tick T names exactly the randomisations with tick <= T: one accepted but not yet
-applied is not in that state and not in its header. A restore replaces the book with what the
-snapshot names; a later plain reset or entity write does not clear a world's entry (its worlds
-started from that draw; what came after is in the state, and in a recording).
+applied is not in that state and not in its header. A paused loop applies writes at once,
+before their tick (SimLoop._settle): the entries it applied so are `held`, named at any tick
+since. A restore replaces the book with what the snapshot names; a later plain reset or
+entity write does not clear a world's entry (its worlds started from that draw; what came
+after is in the state, and in a recording).
 
 The wire form (snapshot headers, GET routes) groups worlds that share one randomisation:
 [{"worlds": [0, 1, 2, 3], "tick": 12, "seed": 7, "spec": {...}}, ...].
@@ -17,7 +19,7 @@ from __future__ import annotations
 import json
 import threading
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 
@@ -28,6 +30,11 @@ class Randomized:
     tick: int
     seed: int
     spec: Mapping[str, Any]
+    held: bool = field(default=False, compare=False)  # in the state before its tick (paused)
+
+    def in_effect(self, tick: int) -> bool:
+        """Does a state of `tick` hold it?"""
+        return self.held or self.tick <= tick
 
 
 class RandomizationBook:
@@ -43,7 +50,7 @@ class RandomizationBook:
         with self._lock:
             for w in worlds:
                 kept = [*self._worlds.get(int(w), ()), entry]
-                live = [i for i, e in enumerate(kept) if e.tick <= done_tick]
+                live = [i for i, e in enumerate(kept) if e.in_effect(done_tick)]
                 self._worlds[int(w)] = kept[live[-1] :] if live else kept
 
     def at(self, tick: int) -> dict[int, Randomized]:
@@ -51,15 +58,23 @@ class RandomizationBook:
         with self._lock:
             out = {}
             for w, entries in self._worlds.items():
-                done = [e for e in entries if e.tick <= tick]
+                done = [e for e in entries if e.in_effect(tick)]
                 if done:
                     out[w] = done[-1]
             return out
 
-    def replace(self, worlds: Mapping[int, Randomized]) -> None:
-        """Forget everything; hold `worlds` (a restored state's)."""
+    def hold(self) -> None:
+        """Every entry recorded so far is in the state now, whatever its tick (a paused loop
+        applied the writes at once); older ones are forgotten as `record` does."""
         with self._lock:
-            self._worlds = {int(w): [e] for w, e in worlds.items()}
+            self._worlds = {
+                w: [replace(entries[-1], held=True)] for w, entries in self._worlds.items()
+            }
+
+    def replace(self, worlds: Mapping[int, Randomized]) -> None:
+        """Forget everything; hold `worlds` (a restored state's: in it, whatever their tick)."""
+        with self._lock:
+            self._worlds = {int(w): [replace(e, held=True)] for w, e in worlds.items()}
 
 
 def groups(worlds: Mapping[int, Randomized]) -> list[dict[str, Any]]:

@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 
 from mjcf import ROBOT_XML, SCENE_XML
+from service.core.sim.physics import CellPhysics
 from service.core.sim.types import NJOINT, JointSpec, RobotSpec
 
 ROBOT_NAME = "UR10e + Robotiq 2F-140"
@@ -35,6 +36,9 @@ class LoadedRobot:
     # The scene asks MuJoCo to let bodies at rest sleep (<flag sleep="enable"/>): the native
     # engine honours it; `configure` clears the flag on `mjm`, which everything else shares.
     sleep: bool = False
+    # The cell's own step options as written (before `configure`): its timestep when it keeps
+    # them, and the line `serve` logs about them (physics.CellPhysics).
+    own: CellPhysics | None = None
 
 
 def compile_scene(path: Path | str) -> mujoco.MjModel:
@@ -94,6 +98,7 @@ def load_robot(path: Path | str = SCENE_XML) -> LoadedRobot:
         flange_site=flange,
         home_key=home_key,
         sleep=bool(mjm.opt.enableflags & mujoco.mjtEnableBit.mjENBL_SLEEP),
+        own=CellPhysics.of(mjm),
     )
 
 

@@ -127,6 +127,10 @@ class CommandTable:
         for w in writes:
             self.effective[w.world] = tick
 
+    def has_writes(self) -> bool:
+        """Is anything staged for the engine?"""
+        return bool(self.state) or bool(self.dirty.any()) or bool(self.reset.any())
+
     def take(self) -> TickWrites:
         """Everything staged, as the engine's `TickWrites`; the table starts empty again."""
         dirty = np.flatnonzero(self.dirty)
