@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
 from pydantic import Field
 
@@ -32,7 +32,7 @@ class PayloadValues(Strict):
     """One world's payload: `mass` [kg] at `cog` [m] in the flange frame."""
 
     mass: FiniteFloat = Field(ge=0, le=PAYLOAD_MASS, description="kg; 0 takes the payload off")
-    cog: list[FiniteFloat] = Field(
+    cog: list[Annotated[FiniteFloat, Field(ge=-PAYLOAD_REACH, le=PAYLOAD_REACH)]] = Field(
         default_factory=lambda: [0.0, 0.0, 0.0],
         min_length=3,
         max_length=3,

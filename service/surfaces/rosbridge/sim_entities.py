@@ -66,7 +66,8 @@ def _result(code: int, message: str = "") -> dict[str, Any]:
 
 
 def set_state(session: Any, world: int, args: Any) -> dict[str, Any]:
-    """SetEntityState: the entity's pose and/or twist, from the next tick boundary."""
+    """SetEntityState: the entity's pose and/or twist, from the next tick boundary (while
+    paused: at once, as the loop applies every write made while time stands still)."""
     try:
         if not session.grant.command:
             raise BadCommand("grant", session.grant.reason)
