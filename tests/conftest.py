@@ -56,6 +56,33 @@ def pytest_configure(config: pytest.Config) -> None:
         config.pluginmanager.register(armfleet_plugin, "armfleet")
 
 
+# The test files that take longest, longest first: they run before the others, so that with
+# pytest-xdist (`scripts/dev.py test`: -n <cores> --dist loadfile, files handed out in
+# collection order) no long file starts last and keeps one worker busy while the rest idle.
+LONGEST_FIRST = (
+    "test_stopping.py",
+    "test_leases.py",
+    "test_ros_node.py",
+    "test_params.py",
+    "test_randomize.py",
+    "test_your_cell.py",
+    "test_client.py",
+    "test_docs.py",
+    "test_batch_contract.py",
+    "test_engine_worker.py",
+    "test_contract.py",
+    "test_soak.py",
+    "test_ray_shards.py",
+    "test_faults.py",
+    "test_engine.py",
+)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: files stay whole
+
+
 def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
     """Poll `pred` until it returns something truthy; fail naming `what` after `timeout` s."""
     deadline = time.monotonic() + timeout
