@@ -157,12 +157,13 @@ def main(argv: list[str]) -> int:
 
 def parallel(rest: list[str]) -> list[str]:
     """pytest-xdist options: one worker a core, each test file on one worker (a module's
-    servers start once), unless the options given choose (-n, --dist, -p no:xdist)."""
+    servers start once) and handed out in collection order (tests/conftest.py puts the longest
+    first), unless the options given choose (-n, --dist, -p no:xdist)."""
     chosen = any(a.startswith(("-n", "--numprocesses", "--dist")) or "no:xdist" in a for a in rest)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     if chosen or (cores or 1) < 2:
         return []
-    return ["-n", str(cores), "--dist", "loadfile"]
+    return ["-n", str(cores), "--dist", "loadfile", "--no-loadscope-reorder"]
 
 
 if __name__ == "__main__":

@@ -57,24 +57,25 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 # The test files that take longest, longest first: they run before the others, so that with
-# pytest-xdist (`scripts/dev.py test`: -n <cores> --dist loadfile, files handed out in
-# collection order) no long file starts last and keeps one worker busy while the rest idle.
+# pytest-xdist (`scripts/dev.py test`: --dist loadfile --no-loadscope-reorder hands out files
+# in collection order) no long file starts last and keeps one worker busy while others idle.
 LONGEST_FIRST = (
     "test_stopping.py",
-    "test_leases.py",
     "test_ros_node.py",
-    "test_params.py",
-    "test_randomize.py",
-    "test_your_cell.py",
-    "test_client.py",
     "test_docs.py",
+    "test_cameras.py",
     "test_batch_contract.py",
-    "test_engine_worker.py",
+    "test_leases.py",
+    "test_page.py",
+    "test_params.py",
+    "test_ws_bulk.py",
+    "test_ray_hosts.py",
+    "test_your_cell.py",
     "test_contract.py",
-    "test_soak.py",
-    "test_ray_shards.py",
-    "test_faults.py",
+    "test_access.py",
+    "test_client_dist.py",
     "test_engine.py",
+    "test_snapshots.py",
 )
 
 

@@ -23,9 +23,8 @@ def paused(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
         yield s
 
 
-def newest_tick(ws: ClientConnection, wait_for: int, within: float = 30.0) -> int:
-    """Read frames until one of tick `wait_for` (or `within` seconds pass): the last tick read.
-    (It returns as soon as that frame comes; the long bound is for a box under load.)"""
+def newest_tick(ws: ClientConnection, wait_for: int, within: float = 5.0) -> int:
+    """Read frames until one of tick `wait_for` (or `within` seconds pass): the last tick read."""
     tick, end = -1, time.monotonic() + within
     while tick != wait_for and time.monotonic() < end:
         try:
