@@ -3,6 +3,7 @@
 
     python3 scripts/dev.py serve [armfleet serve options]   set up, warm the kernel cache, serve
     python3 scripts/dev.py test  [pytest options]           set up, warm the cache, lint + tests
+                                                            (one pytest worker a core)
 
 Set-up is idempotent and quick when nothing changed: a virtualenv in .venv, the project
 installed editable with its pinned dependencies (re-installed only when pyproject.toml
@@ -150,7 +151,19 @@ def main(argv: list[str]) -> int:
     run(BIN / "ruff", "check", ".")
     run(BIN / "ruff", "format", "--check", ".")
     say("pytest")
-    return subprocess.run([BIN / "python", "-m", "pytest", *rest], cwd=ROOT).returncode
+    pytest = [BIN / "python", "-m", "pytest", *parallel(rest), *rest]
+    return subprocess.run(pytest, cwd=ROOT).returncode
+
+
+def parallel(rest: list[str]) -> list[str]:
+    """pytest-xdist options: one worker a core, each test file on one worker (a module's
+    servers start once) and handed out in collection order (tests/conftest.py puts the longest
+    first), unless the options given choose (-n, --dist, -p no:xdist)."""
+    chosen = any(a.startswith(("-n", "--numprocesses", "--dist")) or "no:xdist" in a for a in rest)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if chosen or (cores or 1) < 2:
+        return []
+    return ["-n", str(cores), "--dist", "loadfile", "--no-loadscope-reorder"]
 
 
 if __name__ == "__main__":

@@ -56,6 +56,34 @@ def pytest_configure(config: pytest.Config) -> None:
         config.pluginmanager.register(armfleet_plugin, "armfleet")
 
 
+# The test files that take longest, longest first: they run before the others, so that with
+# pytest-xdist (`scripts/dev.py test`: --dist loadfile --no-loadscope-reorder hands out files
+# in collection order) no long file starts last and keeps one worker busy while others idle.
+LONGEST_FIRST = (
+    "test_stopping.py",
+    "test_ros_node.py",
+    "test_docs.py",
+    "test_cameras.py",
+    "test_batch_contract.py",
+    "test_leases.py",
+    "test_page.py",
+    "test_params.py",
+    "test_ws_bulk.py",
+    "test_ray_hosts.py",
+    "test_your_cell.py",
+    "test_contract.py",
+    "test_access.py",
+    "test_client_dist.py",
+    "test_engine.py",
+    "test_snapshots.py",
+)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: files stay whole
+
+
 def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
     """Poll `pred` until it returns something truthy; fail naming `what` after `timeout` s."""
     deadline = time.monotonic() + timeout

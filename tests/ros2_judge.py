@@ -4,17 +4,22 @@
     python -m tests.ros2_judge          # build it if missing (about 3-4 min), print its folder
 
 Found at: $ARMFLEET_ROS2_JUDGE, else ~/.cache/armfleet/ros2-judge-<hash of the sources>, else
-the setup script's own default (/tmp/ros2-judge). Each test process gets a ROS_DOMAIN_ID of its
-own (from its pid, below 230: Fast DDS refuses higher) and LOCALHOST discovery, so runs side by
-side never see each other and nothing leaves the machine.
+the setup script's own default (/tmp/ros2-judge). Each test process gets ROS_DOMAIN_IDs of its
+own (claimed with a lock file, below 230: Fast DDS refuses higher) and LOCALHOST discovery, so
+pytest-xdist workers and runs side by side never see each other and nothing leaves the machine.
+The build takes a lock too: two processes that find it missing build it once.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import os
 import subprocess
 import sys
+import tempfile
+from collections.abc import Iterator
 from functools import cache
 from pathlib import Path
 
@@ -63,10 +68,36 @@ def skip_reason() -> str | None:
     return "the ROS 2 judge is not built: run `python -m tests.ros2_judge` (or scripts/dev.py test)"
 
 
+DOMAINS = range(20, 220)
+_claimed: dict[int, int] = {}  # offset -> the domain this process holds for it
+_held: list[object] = []  # the claims' open lock files, released when the process ends
+
+
 def domain_id(offset: int = 0) -> int:
-    """This test process's ROS_DOMAIN_ID: 20..219, from the pid (`offset`: another graph of
-    the same process, for a test that must not see the module's node)."""
-    return 20 + (os.getpid() + offset) % 200
+    """This test process's ROS_DOMAIN_ID: 20..219 (`offset`: another graph of the same process,
+    for a test that must not see the module's node). Each is claimed once, starting from the
+    pid, by locking a file of that number: a domain another live process holds (an xdist
+    worker, a run beside this one) is passed over, so no two graphs meet."""
+    if offset not in _claimed:
+        folder = Path(tempfile.gettempdir()) / "armfleet-ros-domains"
+        folder.mkdir(exist_ok=True)
+        start = (os.getpid() + offset) % len(DOMAINS)
+        for i in range(len(DOMAINS)):
+            domain = DOMAINS[(start + i) % len(DOMAINS)]
+            if domain in _claimed.values():
+                continue
+            lock = open(folder / f"{domain}.lock", "w")  # noqa: SIM115 (held until exit)
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                lock.close()
+                continue
+            _held.append(lock)
+            _claimed[offset] = domain
+            break
+        else:
+            raise RuntimeError(f"every ROS domain of {DOMAINS} is held by another process")
+    return _claimed[offset]
 
 
 @cache
@@ -113,12 +144,23 @@ def build() -> Path:
     if src is None:
         raise SystemExit("../shared/ros2_judge not found")
     target = cached_root(src)
-    if not (target / "env.sh").is_file():
-        print(f"building the ROS 2 judge into {target} (about 3-4 min, once)", flush=True)
-        subprocess.run(
-            ["bash", str(src / "setup.sh")], env={**os.environ, "RJ_ROOT": str(target)}, check=True
-        )
+    if (target / "env.sh").is_file():
+        return target
+    with _locked(target.with_name(target.name + ".lock")):  # one build, whoever else asks
+        if not (target / "env.sh").is_file():
+            print(f"building the ROS 2 judge into {target} (about 3-4 min, once)", flush=True)
+            env = {**os.environ, "RJ_ROOT": str(target)}
+            subprocess.run(["bash", str(src / "setup.sh")], env=env, check=True)
     return target
+
+
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on `path` (waiting for another holder) for the block."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
 
 
 if __name__ == "__main__":

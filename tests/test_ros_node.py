@@ -39,7 +39,7 @@ WORLDS = "0-3"
 OWN_GRAPH = 100  # domain offset of tests that start their own armfleet beside the module's
 
 
-def judge(*args: str, timeout: float = 90, domain: int = 0) -> dict[str, Any]:
+def judge(*args: str, timeout: float = 180, domain: int = 0) -> dict[str, Any]:
     """Run one judge node (on this process's domain + `domain`); its JSON line."""
     done = subprocess.run(
         [ros2_judge.python(), str(ros2_judge.JUDGE_SCRIPT), *args],
@@ -70,7 +70,7 @@ def ros_server(port: int | None = None, log_dir: Any = None, domain: int = 0) ->
         yield srv
 
 
-def node_report(http: httpx.Client, timeout: float = 30) -> dict[str, Any]:
+def node_report(http: httpx.Client, timeout: float = 60) -> dict[str, Any]:
     def connected() -> dict[str, Any] | None:
         node = http.get("/v1/ros").json()["node"]
         report = node.get("report") or {}
@@ -96,7 +96,7 @@ def rejected_count(http: httpx.Client, kind: str, at_least: int = 1) -> int:
         n = http.get("/v1/ros").json()["node"]["report"]["rejected"].get(kind, 0)
         return n if n >= at_least else None
 
-    return wait_for(count, f"{at_least} {kind} counted", 10)
+    return wait_for(count, f"{at_least} {kind} counted", 30)
 
 
 def targets(http: httpx.Client, world: int) -> list[float]:
@@ -125,15 +125,14 @@ def test_bad_messages_are_counted_and_change_nothing(ros: tuple[Server, httpx.Cl
     before = targets(http, 1)
     seen = judge("bad", "/world_1")
     assert seen["sent"] == 4
-    time.sleep(0.5)
-    assert targets(http, 1) == before
 
     def counted() -> dict[str, int] | None:
         r = http.get("/v1/ros").json()["node"]["report"]["rejected"]
         kinds = ("not_finite", "length_mismatch", "duplicate_joint")
         return r if all(r.get(k, 0) >= 1 for k in kinds) else None
 
-    wait_for(counted, "the bad messages counted", 15)
+    wait_for(counted, "the bad messages counted", 30)
+    assert targets(http, 1) == before  # once the node has handled all of them
 
 
 def test_both_ros_faces_refuse_a_bad_message_in_the_same_words(
@@ -188,7 +187,7 @@ def test_ur_command_topics_move_the_arm(ros: tuple[Server, httpx.Client]) -> Non
     joint_trajectory_controller/joint_trajectory runs on the trajectory core."""
     _, http = ros
     forward = judge("topics", "/world_2", "forward")["forward"]
-    wait_for(lambda: targets(http, 2)[:6] == forward, "the forward command's targets", 10)
+    wait_for(lambda: targets(http, 2)[:6] == forward, "the forward command's targets", 30)
     seen = judge("topics", "/world_2", "trajectory")
     traj = http.get("/v1/worlds/2/trajectory").json()
     assert traj["joint_names"] == JOINTS[:6] and traj["desired"] is not None
@@ -275,7 +274,17 @@ def test_robot_description_for_a_late_joiner(ros: tuple[Server, httpx.Client]) -
 
 
 def test_graph_lists_the_node_topics_and_actions(ros: tuple[Server, httpx.Client]) -> None:
-    seen = judge("graph")
+    topic_names = ["joint_commands", "joint_states", "tf", "tf_static", "robot_description"]
+    topic_names += ["forward_position_controller/commands"]
+    topic_names += ["scaled_joint_trajectory_controller/joint_trajectory"]
+    action_names = [
+        f"{c}/follow_joint_trajectory"
+        for c in ("scaled_joint_trajectory_controller", "joint_trajectory_controller")
+    ]
+    action_names += ["robotiq_gripper_controller/gripper_cmd"]
+    expect = [f"{ns}/{t}" for ns in ("", "/world_1") for t in topic_names]
+    expect += ["/clock", *(f"{ns}/{a}" for ns in ("", "/world_3") for a in action_names)]
+    seen = judge("graph", *expect)  # once all of these are discovered (a busy box is slow)
     assert ["armfleet", "/"] in seen["nodes"]
     topics = dict((name, types) for name, types in seen["topics"])
     for ns in ("", "/world_1"):
@@ -373,7 +382,7 @@ def test_node_restarts_when_it_dies_and_readyz_says_so(tmp_path: Any) -> None:
             r = http.get("/readyz")
             return r.json() if r.status_code == 503 else None
 
-        ready = wait_for(degraded, "/readyz naming the dead node", 5)
+        ready = wait_for(degraded, "/readyz naming the dead node", 30)
         assert "ROS 2 node exited" in ready["detail"]
         node = wait_for(
             lambda: (n := node_report(http)) and n["pid"] != pid and n, "a new node", 30
@@ -436,7 +445,14 @@ def test_isaac_contract_by_remapping(tmp_path: Any) -> None:
         try:
             node_report(http)
             seen = judge("isaac", "500", "3", domain=OWN_GRAPH)
-            time.sleep(1.0)
+
+            def handled() -> dict[str, Any] | None:  # the node's report comes every so often
+                report = node_report(http)["report"]
+                done = report["accepted"] + sum(report["rejected"].values())
+                return report if done >= seen["sent"] else None
+
+            with contextlib.suppress(AssertionError):  # else the assertion names what is not
+                wait_for(handled, "the node to report every message handled", 30)
             report = node_report(http)["report"]
             assert report["accepted"] == seen["sent"] == 1500 and not report["rejected"], report
             assert targets(http, 0)[6] == pytest.approx(seen["last"], abs=1e-12)

@@ -39,6 +39,7 @@ from clients.models import Lease
 
 READY_TIMEOUT = 300.0  # [s] a cold kernel cache compiles for minutes on a small CPU
 STOP_TIMEOUT = 15.0  # [s] after SIGINT, before the process is killed
+PORT_ATTEMPTS = 3  # free ports tried when the one picked was taken before the server bound it
 _PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # holds clients/ and service/
 
 
@@ -134,6 +135,8 @@ def serve(
 
     worlds, mode: as `armfleet serve --worlds --mode`
     port: a fixed port (to restart a server where clients expect it); None picks a free one
+        (another, up to PORT_ATTEMPTS times, when something else took it before the server
+        could bind it: tests in parallel processes each pick ports)
     extra_args: more `armfleet serve` options, e.g. ("--control-hz", "120")
     env: variables added to this process's environment for the server (ARMFLEET_* settings)
     log_dir: where `server-PORT.log` goes (appended to), and `data-PORT/` (the server's
@@ -149,24 +152,36 @@ def serve(
     with contextlib.ExitStack() as stack:
         if log_dir is None:
             log_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="armfleet-"))
-        port = port or free_port()
-        log_path = Path(log_dir) / f"server-{port}.log"
-        data_dir = Path(log_dir) / f"data-{port}"
-        cmd = [sys.executable, "-m", "service.cli", "serve", "--worlds", str(worlds)]
-        cmd += ["--host", "127.0.0.1", "--port", str(port), "--mode", str(mode), *extra_args]
-        with open(log_path, "ab") as log:
-            process = subprocess.Popen(
-                cmd,
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                env=_child_env(env, data_dir),
-                start_new_session=own_group,
-                cwd=cwd,
-            )
-        stack.callback(stop, process, stop_timeout)
-        url = f"http://127.0.0.1:{port}"
-        server = Server(url, f"ws://127.0.0.1:{port}", process, log_path)
-        _wait_ready(server, ready_timeout)
+        for attempt in range(1, PORT_ATTEMPTS + 1):
+            chosen = port or free_port()
+            log_path = Path(log_dir) / f"server-{chosen}.log"
+            data_dir = Path(log_dir) / f"data-{chosen}"
+            cmd = [sys.executable, "-m", "service.cli", "serve", "--worlds", str(worlds)]
+            cmd += ["--host", "127.0.0.1", "--port", str(chosen), "--mode", str(mode)]
+            with open(log_path, "ab") as log:
+                process = subprocess.Popen(
+                    [*cmd, *extra_args],
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    env=_child_env(env, data_dir),
+                    start_new_session=own_group,
+                    cwd=cwd,
+                )
+            stack.callback(stop, process, stop_timeout)
+            url = f"http://127.0.0.1:{chosen}"
+            server = Server(url, f"ws://127.0.0.1:{chosen}", process, log_path)
+            try:
+                _wait_ready(server, ready_timeout)
+                break
+            except ServerFailed:
+                taken = "address already in use" in server.log().lower()
+                if (
+                    port is not None
+                    or attempt == PORT_ATTEMPTS
+                    or process.poll() is None
+                    or not taken
+                ):
+                    raise
         yield server
 
 

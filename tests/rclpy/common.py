@@ -25,3 +25,12 @@ def spin_until(node: Node, pred, timeout: float) -> bool:
         if pred():
             return True
     return False
+
+
+def acked(*pubs, timeout: float = 60.0) -> None:
+    """Stay until every subscriber acknowledged what `pubs` sent (a judge that exits sooner
+    can take unsent messages with it on a busy box)."""
+    from rclpy.duration import Duration
+
+    for pub in pubs:
+        pub.wait_for_all_acked(Duration(seconds=timeout))

@@ -14,7 +14,7 @@ import threading
 import time
 
 import rclpy
-from common import ARM, JOINTS, out, spin_until
+from common import ARM, JOINTS, acked, out, spin_until
 from rclpy.node import Node
 
 
@@ -26,7 +26,7 @@ def seed(ns: str, value: float) -> None:
     pub = node.create_publisher(JointState, f"{ns}/joint_commands", 10)
     seen: list = []
     node.create_subscription(JointState, f"{ns}/joint_states", seen.append, 10)
-    spin_until(node, lambda: pub.get_subscription_count() > 0 and seen, 20)
+    spin_until(node, lambda: pub.get_subscription_count() > 0 and seen, 60)
     targets = [0.0, -1.2, 1.5, -1.57, -1.57, 0.0, value]
     msg = JointState()
     msg.name, msg.position = list(JOINTS), targets
@@ -56,7 +56,7 @@ def bad(ns: str) -> None:
     node = Node("judge_bad")
     pub = node.create_publisher(JointState, f"{ns}/joint_commands", 10)
     fwd = node.create_publisher(Float64MultiArray, f"{ns}/forward_position_controller/commands", 10)
-    spin_until(node, lambda: pub.get_subscription_count() and fwd.get_subscription_count(), 20)
+    spin_until(node, lambda: pub.get_subscription_count() and fwd.get_subscription_count(), 60)
     sent = 0
     for names, values in (
         (["elbow_joint"], [float("nan")]),
@@ -71,7 +71,7 @@ def bad(ns: str) -> None:
     short.data = [0.1, 0.2]
     fwd.publish(short)
     sent += 1
-    spin_until(node, lambda: False, 1.0)
+    acked(pub, fwd)
     out(sent=sent)
 
 
@@ -100,12 +100,12 @@ def topics(ns: str, which: str) -> None:
     jt = node.create_publisher(
         JointTrajectory, f"{ns}/joint_trajectory_controller/joint_trajectory", 10
     )
-    spin_until(node, lambda: fwd.get_subscription_count() and jt.get_subscription_count(), 20)
+    spin_until(node, lambda: fwd.get_subscription_count() and jt.get_subscription_count(), 60)
     msg = Float64MultiArray()
     msg.data = [0.2, -1.4, 1.4, -1.6, -1.5, 0.1]
     if which == "forward":
         fwd.publish(msg)
-        spin_until(node, lambda: False, 0.5)
+        acked(fwd)
         out(forward=list(msg.data))
         return
     traj = JointTrajectory()
@@ -115,7 +115,7 @@ def topics(ns: str, which: str) -> None:
     point.time_from_start.sec = 1
     traj.points = [point]
     jt.publish(traj)
-    spin_until(node, lambda: False, 0.5)
+    acked(jt)
     out(trajectory=list(point.positions))
 
 
@@ -138,7 +138,7 @@ def actions(ns: str) -> None:
     states: list = []
     node.create_subscription(JointState, f"{ns}/joint_states", states.append, 10)
     for c in [*fjt.values(), grip]:
-        assert c.wait_for_server(timeout_sec=20), "no action server"
+        assert c.wait_for_server(timeout_sec=60), "no action server"
 
     def run(client, goal, cancel_after=None):
         feedback: list = []
@@ -174,7 +174,8 @@ def actions(ns: str) -> None:
 
     target = [0.3, -1.3, 1.6, -1.8, -1.4, 0.4]
     r = run(fjt[names[0]], traj(target, 1.0))
-    spin_until(node, lambda: False, 0.1)
+    after = len(states)
+    spin_until(node, lambda: len(states) >= after + 2, 10)  # states sent after the result
     report["scaled"] = {
         "position": list(states[-1].position) if states else None,
         "status": r["status"],
@@ -228,7 +229,7 @@ def tf(ns: str) -> None:
 
     node.create_subscription(TFMessage, f"{ns}/tf", take, 100)
     node.create_subscription(TFMessage, f"{ns}/tf_static", take, static_qos)
-    spin_until(node, lambda: {"tool0", "wrist_3_link", "left_inner_finger"} <= set(edges), 20)
+    spin_until(node, lambda: {"tool0", "wrist_3_link", "left_inner_finger"} <= set(edges), 60)
     spin_until(node, lambda: False, 0.5)
     out(edges=edges)
 
@@ -242,12 +243,13 @@ def description(ns: str) -> None:
     got: list = []
     qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     node.create_subscription(String, f"{ns}/robot_description", lambda m: got.append(m.data), qos)
-    spin_until(node, lambda: got, 20)
+    spin_until(node, lambda: got, 60)
     out(urdf=got[0] if got else None)
 
 
-def graph(counts: bool = False) -> None:
-    """What `ros2 node list`, `ros2 topic list -t` and `ros2 action list -t` see."""
+def graph(counts: bool = False, expect: tuple[str, ...] = ()) -> None:
+    """What `ros2 node list`, `ros2 topic list -t` and `ros2 action list -t` see, once the
+    topics and actions named in `expect` are discovered (at most 60 s: a box under load)."""
     from rclpy.action import get_action_names_and_types
 
     node = Node("judge_graph")
@@ -270,7 +272,13 @@ def graph(counts: bool = False) -> None:
             ),
         )
         return
-    spin_until(node, lambda: ("armfleet", "/") in node.get_node_names_and_namespaces(), 20)
+    spin_until(node, lambda: ("armfleet", "/") in node.get_node_names_and_namespaces(), 60)
+
+    def seen() -> set:
+        found = {n for n, _ in node.get_topic_names_and_types()}
+        return found | {n for n, _ in get_action_names_and_types(node)}
+
+    spin_until(node, lambda: set(expect) <= seen(), 60)
     spin_until(node, lambda: False, 1.0)
     out(
         nodes=node.get_node_names_and_namespaces(),
@@ -318,7 +326,7 @@ def main() -> None:
 
             isaac(float(args[0]), float(args[1]))
         elif cmd == "graph":
-            graph(bool(args and args[0] == "counts"))
+            graph(bool(args and args[0] == "counts"), tuple(a for a in args if a != "counts"))
         else:
             raise SystemExit(f"unknown judge {cmd!r}")
     finally:

@@ -10,6 +10,7 @@ installation; the Python's own numpy stays the one rclpy uses.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import logging
 import os
@@ -113,6 +114,16 @@ def prepare(python: str, version: tuple[int, int], env: dict[str, str]) -> Path:
     target = cache_root() / f"ros-node-py{version[0]}.{version[1]}-{sources_hash()}"
     if (target / ".complete").exists():
         return target
+    # Servers (or test processes) started together install once: the others wait for it here.
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with open(target.parent / f"ros-node-py{version[0]}.{version[1]}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (target / ".complete").exists():
+            _install(python, version, env, target)
+    return target
+
+
+def _install(python: str, version: tuple[int, int], env: dict[str, str], target: Path) -> None:
     log.info("ROS 2 node: installing armfleet's client for %s into %s (once)", python, target)
     for old in target.parent.glob(f"ros-node-py{version[0]}.{version[1]}-*"):
         shutil.rmtree(old, ignore_errors=True)  # earlier sources' folders (this one's too)
@@ -133,7 +144,6 @@ def prepare(python: str, version: tuple[int, int], env: dict[str, str]) -> Path:
             raise ValueError(f"--ros2: installing armfleet's client for {python} failed:\n{tail}")
     (target / ".complete").write_text(python + "\n")
     log.info("ROS 2 node: ready in %s", target)
-    return target
 
 
 def _pip_env() -> dict[str, str]:
