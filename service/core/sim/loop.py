@@ -90,6 +90,7 @@ class SimLoop(StateDoor):
         self._last_snapshot_wall = 0.0
         self._rate = RateWindow(self._tick, self._mode, batch.tick_dt)
         self._cadence = Cadence(batch.tick_dt)
+        self._rested_at = -1  # the tick the sinks were last told time stopped at (`_at_rest`)
         # launches on a device shared with the camera renderer go in turns (device_turns.py)
         self._turns: DeviceTurns = getattr(batch, "device_turns", None) or DeviceTurns()
         self.randomizations = self.commands.randomizations
@@ -258,7 +259,7 @@ class SimLoop(StateDoor):
                     continue
                 mode = self._mode
                 idle = mode is Mode.PAUSED and self._tick >= self._step_goal
-                if idle and self._latest.tick >= self._tick:
+                if idle and self._latest.tick >= self._tick and self._rested_at == self._tick:
                     self._wake.wait()
                     cadence.restart()
                     continue
@@ -267,10 +268,12 @@ class SimLoop(StateDoor):
                     if delay > 0:
                         self._wake.wait(delay)
                         continue
-            if idle:  # paused after a tick that took no snapshot: show where time stopped
+            if idle:  # paused: show where time stopped, once (a snapshot first if it took none)
                 with turns.loop_turn():
-                    self._publish(time.monotonic())
-                    self._at_rest(time.monotonic())
+                    now = time.monotonic()
+                    if self._latest.tick < self._tick:
+                        self._publish(now)
+                    self._at_rest(now)
                 continue
             try:
                 with turns.loop_turn():
@@ -365,4 +368,5 @@ class SimLoop(StateDoor):
     def _at_rest(self, now: float) -> None:
         """Tell the sinks that time stopped here (they may stream at a cadence of their own,
         which a burst of steps ends between)."""
+        self._rested_at = self.batch.tick
         self.listeners.at_rest(self.batch, now)
