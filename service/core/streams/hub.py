@@ -74,7 +74,9 @@ class Subscription:
         self.key = (fmt.key, worlds.tobytes())
         self.period = 1.0 / rate if rate else 0.0  # 0: every tick
         self.render = render
-        self.skip = skip if skip is not None or not fmt.entities else _without_entities
+        if skip is None and fmt.entities:
+            skip = _without_entities
+        self.skip = skip
         self.close = close
         self.ready = ready if ready is not None else asyncio.Event()
         self.frame: bytes | None = None  # the newest packed frame not yet sent
