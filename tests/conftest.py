@@ -96,6 +96,17 @@ def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
         time.sleep(0.05)
 
 
+def replies_of(ws: Any, n: int, ops: tuple[str, ...] = ("ack", "error")) -> list[dict[str, Any]]:
+    """The next `n` messages of a command socket (websockets' sync client) whose op is in
+    `ops`, in order; state frames and other ops in between are passed over."""
+    replies: list[dict[str, Any]] = []
+    while len(replies) < n:
+        msg = json.loads(ws.recv(timeout=5))
+        if msg["op"] in ops:
+            replies.append(msg)
+    return replies
+
+
 def node_armfleet(seen: dict[str, Any], owned: dict[str, str]) -> dict[str, Any]:
     """Node /armfleet from a peer's `ros_discovery_info` view (`seen`: 'nodes', and the GUIDs
     DDS discovery reported as 'writers'/'readers' by topic), checked to own exactly one
