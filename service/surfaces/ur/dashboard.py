@@ -22,7 +22,7 @@ from service.surfaces.ur import rtde_wire
 from service.surfaces.ur.controller import Controller, ProgramState, SafetyMode
 
 if TYPE_CHECKING:
-    from service.surfaces.ur.endpoints import WorldRobot
+    from service.surfaces.ur.world_robot import WorldRobot
 
 log = logging.getLogger("armfleet.ur")
 GREETING = "Connected: Universal Robots Dashboard Server"

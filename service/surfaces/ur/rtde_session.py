@@ -27,7 +27,7 @@ from service.surfaces.ur import rtde_wire as wire
 from service.surfaces.ur.rtde_outputs import OutputRecipe, apply_inputs
 
 if TYPE_CHECKING:
-    from service.surfaces.ur.endpoints import WorldRobot
+    from service.surfaces.ur.world_robot import WorldRobot
 
 log = logging.getLogger("armfleet.ur")
 _MAX_BUFFERED = 4 * wire.MAX_PACKAGE  # unread input bytes before the connection is closed

@@ -13,7 +13,7 @@ import logging
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from service.surfaces.ur.endpoints import WorldRobot
+    from service.surfaces.ur.world_robot import WorldRobot
 
 log = logging.getLogger("armfleet.ur")
 
