@@ -5,10 +5,10 @@ the simulation (core/sim/settings.py), the engine (engines/settings.py), the HTT
 (`ServerSettings`, here: app.py and serving.py read it), access and leases
 (core/access/settings.py), persistence (persistence/settings.py), the cameras
 (core/cameras/settings.py), Foxglove and the camera recording (surfaces/foxglove/settings.py),
-ROS 2 (surfaces/ros/settings.py). Code reads `settings.foxglove.port`; what needs two sections
-(a world list against the number of worlds, the render batch's pixel limit, camera names
-against the scene, whether the engine steps apart from the cameras) is checked here, on the
-model that holds both.
+ROS 2 (surfaces/ros/settings.py), the UR controllers' ports (surfaces/ur/settings.py).
+Code reads `settings.foxglove.port`; what needs two sections (a world list against the
+number of worlds, the render batch's pixel limit, camera names against the scene, whether the
+engine steps apart from the cameras) is checked here, on the model that holds both.
 
 Why here, at the top: the composite names every section, and persistence and surfaces rank
 above the core, so no lower room may import it; a surface is built from its own section and
@@ -45,6 +45,7 @@ from service.engines.settings import EngineSettings
 from service.persistence.settings import PersistenceSettings
 from service.surfaces.foxglove.settings import CameraRecordSettings, FoxgloveSettings
 from service.surfaces.ros.settings import Ros2Settings
+from service.surfaces.ur.settings import UrSettings
 
 ENV_PREFIX = "ARMFLEET_"
 MAX_RENDER_PIXELS = 1 << 26  # one camera's render batch: colour, depth, rays, ~12 bytes a pixel
@@ -84,6 +85,7 @@ class Settings(BaseSettings):
     foxglove: FoxgloveSettings = Field(default_factory=FoxgloveSettings)
     ros2: Ros2Settings = Field(default_factory=Ros2Settings)
     camera_record: CameraRecordSettings = Field(default_factory=CameraRecordSettings)
+    ur: UrSettings = Field(default_factory=UrSettings)
 
     @classmethod
     def settings_customise_sources(
@@ -107,6 +109,8 @@ class Settings(BaseSettings):
     @model_validator(mode="after")
     def _world_lists_exist(self) -> Settings:
         world_list(self.ros2.worlds, self.sim.worlds, "ros2_worlds")  # names the bad part
+        if self.ur.worlds:
+            world_list(self.ur.worlds, self.sim.worlds, "ur_worlds")
         if self.camera_record.path:
             world_list(self.camera_record.worlds, self.sim.worlds, "camera_record_worlds")
         return self

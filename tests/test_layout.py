@@ -103,15 +103,23 @@ def test_the_registry_builds_what_the_settings_ask_for(monkeypatch: pytest.Monke
         for key, value in ros2_judge.env().items():
             monkeypatch.setenv(key, value)
     full = build_surfaces(
-        Settings(worlds=4, foxglove=True, ros2_worlds="0-1", camera_record=Path("c.mcap"), **ros)
+        Settings(
+            worlds=4,
+            foxglove=True,
+            ros2_worlds="0-1",
+            camera_record=Path("c.mcap"),
+            ur=True,  # built, not bound: its ports open when the surface starts
+            **ros,
+        )
     )
     wanted = [e.name for e in REGISTRY if judge or e.name != "ros2"]
     assert [s.name for s in full] == wanted
     for surface in full:
         assert isinstance(surface, Surface)
-    # Routes come from the surfaces that have them: rosbridge's socket and GET /v1/ros.
-    assert [s.name for s in full if isinstance(s, Routed)] == ["rosbridge"]
-    assert len(full.routers()) == 1
+    # Routes come from the surfaces that have them: rosbridge's socket and GET /v1/ros, and
+    # the UR surface's GET /v1/ur.
+    assert [s.name for s in full if isinstance(s, Routed)] == ["rosbridge", "ur"]
+    assert len(full.routers()) == 2
 
 
 def test_a_bad_world_list_is_refused_before_anything_is_built() -> None:

@@ -24,6 +24,7 @@ from pydantic import BaseModel
 from service.core.surface import Routed, ServiceFacts, Surface, SurfaceContext
 from service.surfaces.foxglove.settings import CameraRecordSettings, FoxgloveSettings
 from service.surfaces.ros.settings import Ros2Settings
+from service.surfaces.ur.settings import UrSettings
 
 log = logging.getLogger("armfleet")
 M = TypeVar("M", bound=BaseModel)
@@ -97,6 +98,14 @@ def _rosbridge(own: Ros2Settings, facts: ServiceFacts, built: Mapping[str, Surfa
     return RosbridgeSurface(own, facts, built.get("ros2"))  # always on; reports the ROS 2 node
 
 
+def _ur(own: UrSettings, facts: ServiceFacts, built: Mapping[str, Surface]) -> Surface | None:
+    if not own.enabled:
+        return None
+    from service.surfaces.ur.surface import UrSurface
+
+    return UrSurface(own, facts)  # ValueError naming ur_worlds / ur_addresses
+
+
 # In start order. The names are the surfaces' `name`s.
 REGISTRY: tuple[Entry, ...] = (
     Entry("foxglove", "service.surfaces.foxglove.live", FoxgloveSettings, _foxglove),
@@ -108,6 +117,7 @@ REGISTRY: tuple[Entry, ...] = (
     ),
     Entry("ros2", "service.surfaces.ros.node_process", Ros2Settings, _ros2),
     Entry("rosbridge", "service.surfaces.rosbridge.surface", Ros2Settings, _rosbridge),
+    Entry("ur", "service.surfaces.ur.surface", UrSettings, _ur),
 )
 
 

@@ -1,0 +1,196 @@
+"""Every world's UR ports, served by one event loop on a thread of its own.
+
+Why one thread and asyncio: 32 worlds × 5 ports are 160 listening sockets and a few hundred
+connections, mostly idle, and RTDE's 500 Hz sends are timers; one selector serves them all
+for the cost of their descriptors (addresses.py). Why not the service's own event loop: RTDE
+at 500 Hz to many clients is thousands of small writes a second, which the HTTP and WebSocket
+surfaces should not queue behind. The sim thread only hands over the latest frame (surface.py).
+
+With leases on, a world's ports accept a connection only while the world is lent: a
+connection to a world that is not lent is closed at once, and when a lease ends (or the
+world passes to another lease) every connection of that world is closed and its controller
+state reset, checked every `_LEASE_POLL_S`. RTDE and the Dashboard carry no credentials:
+anyone who can reach the address while it is lent drives that world (the guide says so).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import logging
+import resource
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from service.surfaces.ur import addresses
+from service.surfaces.ur.dashboard import DashboardSession
+from service.surfaces.ur.rtde_outputs import Frame
+from service.surfaces.ur.rtde_session import RtdeSession
+from service.surfaces.ur.script_ports import ScriptSession
+from service.surfaces.ur.tcp_pose import ToolKinematics
+from service.surfaces.ur.world_robot import WorldRobot
+
+log = logging.getLogger("armfleet.ur")
+_LEASE_POLL_S = 0.2
+_PAYLOAD_POLL_S = 0.5
+_SPARE_DESCRIPTORS = 512  # beside the listeners: connections, the service's own files
+
+
+def _raise_descriptor_limit(needed: int) -> None:
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    want = needed + _SPARE_DESCRIPTORS
+    if soft >= want:
+        return
+    if hard != resource.RLIM_INFINITY and hard < want:
+        raise ValueError(
+            f"ur_worlds: the listeners need {needed} file descriptors and the hard limit is "
+            f"{hard} (ulimit -Hn): give fewer --ur-worlds or raise the limit"
+        )
+    resource.setrlimit(resource.RLIMIT_NOFILE, (want, hard))
+    log.info("UR ports: open-file limit raised from %d to %d", soft, want)
+
+
+class Endpoints:
+    """The listeners of every UR world (see the module docstring)."""
+
+    def __init__(
+        self,
+        worlds: dict[int, str],
+        kin: ToolKinematics,
+        owner_of: Callable[[int], str | None] | None,
+        read_payloads: Callable[[list[int]], concurrent.futures.Future[Any]] | None = None,
+    ) -> None:
+        self.robots = {w: WorldRobot(w, a, self) for w, a in worlds.items()}
+        self.kin = kin
+        self._owner_of = owner_of  # None: leases off, every world always open
+        self._read_payloads = read_payloads
+        self.frame: Frame | None = None  # set by the sink (sim thread), read here
+        self.payloads: dict[int, tuple[float, ...]] = {}
+        self.streaming = 0  # started RTDE sessions (the sink asks for a snapshot per tick)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._servers: list[asyncio.AbstractServer] = []
+        self._tasks: list[asyncio.Task[None]] = []
+
+    def start(self) -> None:
+        """Bind every port of every world (ValueError, nothing left bound, when one fails)."""
+        _raise_descriptor_limit(addresses.descriptors(len(self.robots)))
+        ready: concurrent.futures.Future[None] = concurrent.futures.Future()
+        self._thread = threading.Thread(
+            target=self._run, args=(ready,), name="armfleet-ur", daemon=True
+        )
+        self._thread.start()
+        try:
+            ready.result(timeout=60)
+        except Exception:
+            self.stop()
+            raise
+
+    def _run(self, ready: concurrent.futures.Future[None]) -> None:
+        loop = self._loop = asyncio.new_event_loop()
+        asyncio.set_event_loop(loop)
+        try:
+            loop.run_until_complete(self._bind())
+        except Exception as exc:
+            ready.set_exception(exc)
+            loop.run_until_complete(self._close())
+            loop.close()
+            return
+        ready.set_result(None)
+        loop.run_forever()
+        loop.run_until_complete(self._close())
+        loop.close()
+
+    async def _bind(self) -> None:
+        loop = asyncio.get_running_loop()
+        for robot in self.robots.values():
+            factories: dict[int, Callable[[], asyncio.Protocol]] = {
+                addresses.RTDE_PORT: lambda r=robot: RtdeSession(r),
+                addresses.PORTS["dashboard"]: lambda r=robot: DashboardSession(r),
+            }
+            for name, port in addresses.PORTS.items():
+                if name != "dashboard":
+                    factories[port] = lambda r=robot, p=port: ScriptSession(r, p)
+            for port, factory in factories.items():
+                try:
+                    server = await loop.create_server(factory, robot.address, port)
+                except OSError as exc:
+                    raise ValueError(
+                        f"ur_addresses: world {robot.world} cannot listen on "
+                        f"{robot.address}:{port}: {exc.strerror or exc} (is the address on an "
+                        "interface, and the port free?)"
+                    ) from None
+                self._servers.append(server)
+        self._tasks.append(asyncio.create_task(self._watch()))
+
+    async def _watch(self) -> None:
+        """Leases (open/close worlds) and payloads (while RTDE streams), polled."""
+        waited = 0.0
+        while True:
+            try:
+                self._check_leases()
+                if waited >= _PAYLOAD_POLL_S and self.streaming and self._read_payloads:
+                    waited = 0.0
+                    await self._refresh_payloads()
+            except Exception:
+                log.exception("UR watch failed")
+            await asyncio.sleep(_LEASE_POLL_S)
+            waited += _LEASE_POLL_S
+
+    def _check_leases(self) -> None:
+        if self._owner_of is None:
+            return
+        for robot in self.robots.values():
+            owner = self._owner_of(robot.world) or None  # "" (being reset) counts as not lent
+            if owner == robot.owner:
+                continue
+            if robot.owner is not None:
+                robot.close_all(f"the lease of world {robot.world} ended")
+            robot.owner, robot.open = owner, owner is not None
+            robot.controller.reset()
+
+    async def _refresh_payloads(self) -> None:
+        assert self._read_payloads is not None
+        worlds = list(self.robots)
+        read = await asyncio.wrap_future(self._read_payloads(worlds))
+        self.payloads = {row["world"]: tuple(row["params"]["payload"]) for row in read["worlds"]}
+
+    def begin_leases(self) -> None:
+        """Leases on: every world starts closed until the first poll finds its lease."""
+        for robot in self.robots.values():
+            robot.open = False
+
+    async def _close(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        for server in self._servers:
+            server.close()
+        for robot in self.robots.values():
+            robot.close_all("the service is stopping")
+        for server in self._servers:
+            with contextlib.suppress(Exception):
+                await server.wait_closed()
+
+    def stop(self) -> None:
+        loop = self._loop
+        if loop is not None and loop.is_running():
+            loop.call_soon_threadsafe(loop.stop)
+        if self._thread is not None:
+            self._thread.join(timeout=10)
+
+    def status(self) -> list[dict[str, Any]]:
+        """Each world's address, whether it accepts connections, its controller's modes."""
+        return [
+            {
+                "world": r.world,
+                "address": r.address,
+                "open": r.open,
+                "clients": len(r.sessions),
+                "robot_mode": r.controller.robot_mode.name,
+                "safety_mode": r.controller.safety_mode.name,
+                "program_state": r.controller.program.name,
+            }
+            for r in self.robots.values()
+        ]

@@ -1,0 +1,232 @@
+"""One RTDE connection: the handshake, recipes, start/pause, and the data packages.
+
+Protocol version 2 only (ur_rtde and UR's own client ask for it; version 1 is answered "not
+accepted"). An output recipe with a `NOT_FOUND` variable, or an input recipe with a
+`NOT_FOUND` or `IN_USE` one (an input another connection to the same world already writes),
+is answered with recipe id 0 and its type list, as the robot fails a setup, and is not kept.
+Started output recipes are sent at their frequency (1..500 Hz), each package from the world's
+state at the latest tick (the same bytes again while neither the tick nor the controller
+moved); a client too slow to read has packages skipped, never queued without bound.
+
+Malformed input never ends the service or reaches another world: a package too short for its
+fields or naming an unknown recipe gets a text message (level ERROR) and a log line; a header
+that cannot be framed closes this connection with a log line.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import socket
+import struct
+from typing import TYPE_CHECKING
+
+from service.surfaces.ur import rtde_variables as rv
+from service.surfaces.ur import rtde_wire as wire
+from service.surfaces.ur.rtde_outputs import OutputRecipe, apply_inputs
+
+if TYPE_CHECKING:
+    from service.surfaces.ur.world_robot import WorldRobot
+
+log = logging.getLogger("armfleet.ur")
+_MAX_BUFFERED = 4 * wire.MAX_PACKAGE  # unread input bytes before the connection is closed
+_MAX_UNSENT = 256 * 1024  # bytes waiting in the socket before packages are skipped
+_MAX_RECIPES = 255
+
+
+class RtdeSession(asyncio.Protocol):
+    """One client of one world's RTDE port (runs on the UR event loop)."""
+
+    def __init__(self, robot: WorldRobot) -> None:
+        self.robot = robot
+        self.transport: asyncio.Transport | None = None
+        self._buffer = bytearray()
+        self._outputs: dict[int, OutputRecipe] = {}
+        self._inputs: dict[int, tuple[tuple[str, ...], struct.Struct]] = {}
+        self._next_id = 1
+        self._timers: dict[int, asyncio.TimerHandle] = {}  # recipe id → its next send
+        self.started = False
+        self.sent = 0  # data packages sent
+        self.skipped = 0  # data packages skipped for a slow reader
+
+    # -- asyncio.Protocol -------------------------------------------------------------------
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.robot.opened(self)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._stop_streaming()
+        self.robot.closed(self)
+
+    def data_received(self, data: bytes) -> None:
+        self._buffer += data
+        try:
+            packages = wire.split(self._buffer)
+        except wire.Malformed as exc:
+            return self.refuse_connection(str(exc))
+        if len(self._buffer) > _MAX_BUFFERED:
+            return self.refuse_connection("a package larger than the buffer")
+        for package in packages:
+            if self.transport is None or self.transport.is_closing():
+                return
+            try:
+                self._handle(package)
+            except wire.Malformed as exc:
+                self._error(f"package {package.name!r}: {exc}")
+
+    # -- packages ---------------------------------------------------------------------------
+
+    def _handle(self, p: wire.Package) -> None:
+        kind, body = p.kind, p.payload
+        if kind == wire.REQUEST_PROTOCOL_VERSION:
+            if len(body) != 2:
+                raise wire.Malformed(f"a protocol version is 2 bytes, got {len(body)}")
+            version = struct.unpack(">H", body)[0]
+            self._send(wire.accepted(kind, version == wire.PROTOCOL_VERSION))
+        elif kind == wire.GET_URCONTROL_VERSION:
+            self._send(wire.control_version())
+        elif kind == wire.TEXT_MESSAGE:
+            message, source, level = wire.read_text(body)
+            log.info(
+                "world %d RTDE client says (%s, level %d): %s",
+                self.robot.world,
+                source,
+                level,
+                message[:200],
+            )
+        elif kind == wire.SETUP_OUTPUTS:
+            self._setup_outputs(body)
+        elif kind == wire.SETUP_INPUTS:
+            self._setup_inputs(body)
+        elif kind == wire.START:
+            self._start()
+            self._send(wire.accepted(kind, True))
+        elif kind == wire.PAUSE:
+            self._stop_streaming()
+            self._send(wire.accepted(kind, True))
+        elif kind == wire.DATA_PACKAGE:
+            self._inputs_package(body)
+        else:
+            self._error(f"unknown package type {p.name!r} ({kind})")
+
+    def _new_id(self) -> int:
+        if self._next_id > _MAX_RECIPES:
+            raise wire.Malformed(f"more than {_MAX_RECIPES} recipes on one connection")
+        self._next_id += 1
+        return self._next_id - 1
+
+    def _setup_outputs(self, body: bytes) -> None:
+        if len(body) < 8:
+            raise wire.Malformed("an output setup starts with its frequency (8 bytes)")
+        frequency = struct.unpack(">d", body[:8])[0]
+        names = wire.names_of(body[8:])
+        types = [rv.output_type(n) for n in names]
+        problem = None
+        if not (math.isfinite(frequency) and 0 < frequency <= wire.MAX_FREQUENCY):
+            problem = f"frequency {frequency} Hz is outside (0, {wire.MAX_FREQUENCY:g}]"
+        elif self.started:
+            problem = "outputs cannot be set up while synchronising (pause first)"
+        elif rv.NOT_FOUND in types:
+            problem = f"unknown output variable {names[types.index(rv.NOT_FOUND)]!r}"
+        if problem is not None:
+            log.info("world %d RTDE output setup refused: %s", self.robot.world, problem)
+            self._send(wire.text(problem, level=wire.ERROR))
+            self._send(wire.recipe_answer(wire.SETUP_OUTPUTS, 0, types))
+            return
+        recipe = OutputRecipe.build(self._new_id(), names, frequency)
+        self._outputs[recipe.id] = recipe
+        self._send(wire.recipe_answer(wire.SETUP_OUTPUTS, recipe.id, types))
+
+    def _setup_inputs(self, body: bytes) -> None:
+        names = wire.names_of(body)
+        types = [rv.input_type(n) for n in names]
+        for i, name in enumerate(names):
+            if types[i] != rv.NOT_FOUND and not self.robot.may_write(name, self):
+                types[i] = rv.IN_USE
+        bad = [n for n, t in zip(names, types, strict=True) if t in (rv.NOT_FOUND, rv.IN_USE)]
+        if bad or len(set(names)) != len(names):
+            log.info("world %d RTDE input setup refused: %s", self.robot.world, ", ".join(bad[:4]))
+            self._send(wire.recipe_answer(wire.SETUP_INPUTS, 0, types))
+            return
+        recipe_id = self._new_id()
+        self._inputs[recipe_id] = (tuple(names), rv.struct_of(types))
+        self.robot.hold_inputs(names, self)
+        self._send(wire.recipe_answer(wire.SETUP_INPUTS, recipe_id, types))
+
+    def _inputs_package(self, body: bytes) -> None:
+        if not body:
+            raise wire.Malformed("a data package without its recipe id")
+        recipe = self._inputs.get(body[0])
+        if recipe is None:
+            raise wire.Malformed(f"no input recipe {body[0]} on this connection")
+        names, layout = recipe
+        if len(body) - 1 != layout.size:
+            raise wire.Malformed(
+                f"recipe {body[0]} takes {layout.size} bytes of values, got {len(body) - 1}"
+            )
+        values = layout.unpack(body[1:])
+        grouped, i = [], 0
+        for name in names:
+            n = rv.COUNTS[rv.input_type(name)]
+            grouped.append(values[i] if n == 1 else list(values[i : i + n]))
+            i += n
+        apply_inputs(self.robot.controller, names, grouped)
+
+    # -- streaming --------------------------------------------------------------------------
+
+    def _start(self) -> None:
+        if self.started:
+            return
+        self.started = True
+        self.robot.streaming(+1)
+        loop = asyncio.get_running_loop()
+        for recipe in self._outputs.values():
+            self._timers[recipe.id] = loop.call_soon(self._tick, recipe, loop.time(), None)
+
+    def _stop_streaming(self) -> None:
+        for timer in self._timers.values():
+            timer.cancel()
+        self._timers.clear()
+        if self.started:
+            self.started = False
+            self.robot.streaming(-1)
+
+    def _tick(self, recipe: OutputRecipe, due: float, last: tuple[object, bytes] | None) -> None:
+        transport = self.transport
+        if transport is None or transport.is_closing() or not self.started:
+            return
+        view = self.robot.view()
+        if view is not None:
+            key = (view.frame, view.ctl.version)
+            if last is None or last[0] != key:
+                last = (key, recipe.pack(view))
+            if transport.get_write_buffer_size() > _MAX_UNSENT:
+                self.skipped += 1
+            else:
+                transport.write(wire.frame(wire.DATA_PACKAGE, last[1]))
+                self.sent += 1
+        loop = asyncio.get_running_loop()
+        due = max(due + 1.0 / recipe.frequency, loop.time())
+        self._timers[recipe.id] = loop.call_at(due, self._tick, recipe, due, last)
+
+    # -- replies ----------------------------------------------------------------------------
+
+    def _send(self, data: bytes) -> None:
+        if self.transport is not None and not self.transport.is_closing():
+            self.transport.write(data)
+
+    def _error(self, why: str) -> None:
+        log.warning("world %d RTDE: %s", self.robot.world, why)
+        self._send(wire.text(why, level=wire.ERROR))
+
+    def refuse_connection(self, why: str) -> None:
+        """Close this connection (a package that cannot be framed, or the world not lent)."""
+        log.warning("world %d RTDE connection closed: %s", self.robot.world, why)
+        if self.transport is not None:
+            self.transport.abort()
