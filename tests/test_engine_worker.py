@@ -90,6 +90,7 @@ def test_cameras_on_the_engines_own_device_keep_the_engine_in_the_server():
     assert Settings(engine_worker=True).engine_apart()
     with pytest.raises(ValueError, match="engine_worker: a worker process holds the warp"):
         Settings(engine="mujoco", engine_worker=True)
-    with serve(worlds=1, extra_args=("--engine", "warp", "--camera-device", "cpu", *CAMERAS)) as srv:
+    args = ("--engine", "warp", "--camera-device", "cpu", *CAMERAS)
+    with serve(worlds=1, extra_args=args) as srv:
         assert _workers(srv.process.pid) == []
         assert httpx.get(f"{srv.url}/v1/info").json()["shards"] == 1

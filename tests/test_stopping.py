@@ -29,7 +29,8 @@ from service.persistence.snapshots import decode_state
 TARGET = 0.5  # elbow target [rad] commanded before the signal (within the joint's range)
 CONFIGS = {
     "warp": ("--engine", "warp", "--worlds", "4"),
-    "shards": ("--engine", "warp", "--worlds", "64", "--shards", "2"),  # worlds 32..63 on a worker process
+    # worlds 32..63 on a worker process
+    "shards": ("--engine", "warp", "--worlds", "64", "--shards", "2"),
     "native": ("--engine", "mujoco", "--worlds", "4"),
     "ray": ("--engine", "warp", "--worlds", "8", "--ray", "local", "--shards", "2"),
 }
