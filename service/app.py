@@ -17,8 +17,8 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service.api import (
     camera_ws,
-    cartesian,
     cameras,
+    cartesian,
     health,
     info,
     leases,

@@ -219,4 +219,3 @@ def _bounded(value: Any, field: str, bounds: tuple[float, float], unit: str) -> 
     if not number or not math.isfinite(value) or not bounds[0] <= value <= bounds[1]:
         raise BadCommand(field, f"must be a number in {bounds[0]:g}..{bounds[1]:g} {unit}")
     return float(value)
-

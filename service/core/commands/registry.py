@@ -14,8 +14,8 @@ from service.core.commands.entities import SetEntities
 from service.core.commands.params import SetParams
 from service.core.commands.payload import SetPayload
 from service.core.commands.randomize import Randomize
-from service.core.commands.tcp import SetTcp
 from service.core.commands.targets import Increment, SetMany, SetTargets
+from service.core.commands.tcp import SetTcp
 from service.core.commands.trajectory.commands import (
     CancelTrajectory,
     ResumeTrajectory,

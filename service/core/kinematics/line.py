@@ -162,12 +162,16 @@ def _follow(
     return out
 
 
-def _joint_speeds(kin: URKinematics, q: np.ndarray, tcp: np.ndarray, twist: np.ndarray) -> np.ndarray:
+def _joint_speeds(
+    kin: URKinematics, q: np.ndarray, tcp: np.ndarray, twist: np.ndarray
+) -> np.ndarray:
     jac = kin.jacobian(q, np.broadcast_to(tcp, (len(q), 6)))
     try:
         return np.linalg.solve(jac, twist[..., None])[..., 0]
     except np.linalg.LinAlgError:
-        return np.stack([np.linalg.lstsq(j, t, rcond=None)[0] for j, t in zip(jac, twist, strict=True)])
+        return np.stack(
+            [np.linalg.lstsq(j, t, rcond=None)[0] for j, t in zip(jac, twist, strict=True)]
+        )
 
 
 def _check_speeds(

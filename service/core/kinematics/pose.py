@@ -18,11 +18,11 @@ __all__ = [
     "invert",
     "matrix_to_pose",
     "matrix_to_quat",
+    "matrix_to_rotvec",
     "pose_to_matrix",
     "quat_to_matrix",
     "rotvec_to_matrix",
     "rotvec_to_quat",
-    "matrix_to_rotvec",
 ]
 
 _SMALL = 1e-8  # rad: below it, the series of sin(θ)/θ and (1 - cos θ)/θ² are used
@@ -50,8 +50,10 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     cands = np.stack([1 + tr, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22], -1)
     pick = np.argmax(cands, axis=-1)
     s = 2.0 * np.sqrt(np.maximum(np.take_along_axis(cands, pick[..., None], -1)[..., 0], 1e-300))
-    d21, d02, d10 = m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]
-    s21, s02, s10 = m[..., 2, 1] + m[..., 1, 2], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 0] + m[..., 0, 1]
+    m21, m12, m02 = m[..., 2, 1], m[..., 1, 2], m[..., 0, 2]
+    m20, m10, m01 = m[..., 2, 0], m[..., 1, 0], m[..., 0, 1]
+    d21, d02, d10 = m21 - m12, m02 - m20, m10 - m01
+    s21, s02, s10 = m21 + m12, m02 + m20, m10 + m01
     q = np.stack(
         [
             np.select([pick == 0, pick == 1, pick == 2], [s / 4, d21 / s, d02 / s], d10 / s),
@@ -136,4 +138,6 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _skew(r: np.ndarray) -> np.ndarray:
     x, y, z = r[..., 0], r[..., 1], r[..., 2]
     o = np.zeros_like(x)
-    return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2)
+    return np.stack(
+        [np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2
+    )

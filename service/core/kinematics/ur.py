@@ -38,7 +38,7 @@ import numpy as np
 
 from service.core.kinematics.pose import invert, matrix_to_pose, pose_to_matrix
 
-__all__ = ["IKResult", "NotDH", "URKinematics", "Singularity", "Unsolved"]
+__all__ = ["IKResult", "NotDH", "Singularity", "URKinematics", "Unsolved"]
 
 TWO_PI = 2.0 * np.pi
 _ALPHA = np.array([np.pi / 2, 0.0, 0.0, np.pi / 2, -np.pi / 2, 0.0])
@@ -214,9 +214,7 @@ class URKinematics:
             t = t @ invert(pose_to_matrix(tcp))
         return self._solve(t @ invert(self.flange_in_dh6), q6)
 
-    def ik(
-        self, pose: np.ndarray, q_near: np.ndarray, tcp: np.ndarray | None = None
-    ) -> IKResult:
+    def ik(self, pose: np.ndarray, q_near: np.ndarray, tcp: np.ndarray | None = None) -> IKResult:
         """The solution nearest q_near (n, 6) for TCP poses (n, 6), each joint taken to the
         turn (θ + 2πk) nearest q_near inside its range; see `IKResult`."""
         pose = np.asarray(pose, dtype=np.float64)
@@ -259,10 +257,11 @@ class URKinematics:
         free = np.zeros(n) if q6 is None else np.asarray(q6, dtype=np.float64)
         wrist = np.abs(s5) < _SINGULAR
         safe = np.where(wrist, 1.0, s5)
-        th6 = np.where(wrist, free[:, None, None], np.arctan2(-uy[..., None] / safe, ux[..., None] / safe))
+        th6 = np.where(
+            wrist, free[:, None, None], np.arctan2(-uy[..., None] / safe, ux[..., None] / safe)
+        )
         # θ2, θ3, θ4 in the arm's plane: T14 = A1⁻¹ T06 (A5 A6)⁻¹
         th1b = np.broadcast_to(th1[:, :, None], th5.shape)
-        z = np.zeros_like(th5)
         a1 = _dh(th1b, d1, 0.0, _ALPHA[0])
         a56 = _dh(th5, d5, 0.0, _ALPHA[4]) @ _dh(th6, d6, 0.0, _ALPHA[5])
         t14 = invert(a1) @ t06[:, None, None] @ invert(a56)
@@ -334,7 +333,9 @@ def _wrap(q: np.ndarray) -> np.ndarray:
     return np.pi - np.mod(np.pi - q, TWO_PI)
 
 
-def _nearest_turn(q: np.ndarray, near: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+def _nearest_turn(
+    q: np.ndarray, near: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> np.ndarray:
     """Each angle's turn θ + 2πk nearest `near`, moved a turn back inside [lower, upper] if
     that one is outside and the next is not."""
     out = q + TWO_PI * np.round((near - q) / TWO_PI)
