@@ -271,7 +271,7 @@ async def _open(url: str, timeout: float, token: str | None = None) -> ClientCon
         raise ArmfleetError(None, str(exc)) from exc
 
 
-class AsyncWorldSession(_Closes, cartesian.AsyncSessionOps):
+class AsyncWorldSession(_Closes, cartesian.AsyncWorldOps):
     """One world over one WebSocket. A reader task routes acks to their commands (by id), so
     several tasks may send commands at once; state frames queue up for iteration (the oldest
     are dropped past 256)."""

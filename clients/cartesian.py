@@ -3,7 +3,7 @@
 Poses are UR's p[x, y, z, rx, ry, rz] (position [m], rotation vector [rad]) in the robot's
 base frame; the TCP is the flange plus the world's offset (`set_tcp`, flange frame). The calls
 are built here once (`*_call`) and run by the mixins the clients inherit: `Calls` (REST, in
-`ArmfleetClient`), `AsyncCalls` (`AsyncArmfleetClient`), and `SessionOps` / `AsyncSessionOps`
+`ArmfleetClient`), `AsyncCalls` (`AsyncArmfleetClient`), and `WorldOps` / `AsyncWorldOps`
 (the WebSocket ops `jog` and `tcp_target` of `WorldSession` / `AsyncWorldSession`).
 
     arm.set_tcp(0, [0, 0, 0.2, 0, 0, 0])
@@ -164,7 +164,7 @@ class AsyncCalls:
         return await self.call(ik_call(world, pose, q_near))
 
 
-class SessionOps:
+class WorldOps:
     """`jog` and `tcp_target` over a world's WebSocket (`WorldSession`): acked like Up/Down."""
 
     def _op(self, op: str, body: dict[str, Any]) -> models.CommandAck:
@@ -177,7 +177,7 @@ class SessionOps:
         return self._op("tcp_target", {"pose": _six(pose, "a pose")})
 
 
-class AsyncSessionOps:
+class AsyncWorldOps:
     """`jog` and `tcp_target` over a world's WebSocket (`AsyncWorldSession`)."""
 
     async def _op(self, op: str, body: dict[str, Any]) -> models.CommandAck:

@@ -314,7 +314,7 @@ def _open(url: str, timeout: float, token: str | None = None) -> ClientConnectio
         raise ArmfleetError(None, str(exc)) from exc
 
 
-class WorldSession(_Closes, cartesian.SessionOps):
+class WorldSession(_Closes, cartesian.WorldOps):
     """One world over one WebSocket: commands get their acks back (matched by id) and state
     frames that arrive meanwhile are kept for iteration. Does not reconnect: a command on a
     dropped socket raises Unreachable. Use from one thread at a time (a lock enforces it).

@@ -108,7 +108,11 @@ def test_the_jacobian_is_the_derivative_of_the_tcp_pose() -> None:
         dq[j] = eps
         hi, lo = KIN.tcp(q + dq, tcp), KIN.tcp(q - dq, tcp)
         v = (hi[:, :3, 3] - lo[:, :3, 3]) / (2 * eps)
-        w = (hi[:, :3, :3] - lo[:, :3, :3]) / (2 * eps) @ KIN.tcp(q, tcp)[:, :3, :3].transpose(0, 2, 1)
+        w = (
+            (hi[:, :3, :3] - lo[:, :3, :3])
+            / (2 * eps)
+            @ KIN.tcp(q, tcp)[:, :3, :3].transpose(0, 2, 1)
+        )
         assert np.abs(jac[:, :3, j] - v).max() < 1e-7
         assert np.abs(jac[:, 3:, j] - w[:, [2, 0, 1], [1, 2, 0]]).max() < 1e-7
 
