@@ -73,6 +73,30 @@ def test_state_has_joint_state_fields_and_flange_pose(http):
     assert [w["world"] for w in several["worlds"]] == [0, 2, 3]
 
 
+def test_info_and_state_carry_mode_tick_sim_time_and_faults(http):
+    # the REST guide's table: info's mode and tick; a state's sim_time and faults
+    info = http.get("/v1/info").json()
+    assert info["robot"] and info["mode"] == "realtime" and info["tick"] > 0
+    assert info["sim_time"] == pytest.approx(info["tick"] / info["control_hz"])
+    s = http.get("/v1/worlds/0/state").json()
+    assert s["tick"] >= info["tick"] and s["faults"] == 0 and s["sim_time"] >= 0
+    assert s.get("pending_target") is None  # only while paused
+
+
+def test_a_world_range_may_be_written_either_way_round(http):
+    for worlds in ("1-3", "3-1"):
+        body = http.get("/v1/worlds/state", params={"worlds": worlds}).json()
+        assert [w["world"] for w in body["worlds"]] == [1, 2, 3], worlds
+
+
+def test_the_openapi_page_is_served_at_docs(http):
+    # README and Getting started: "OpenAPI page at /docs"
+    page = http.get("/docs")
+    assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+    assert "/openapi.json" in page.text  # the page reads the schema this server serves
+    assert "/v1/worlds/{world}/increments" in http.get("/openapi.json").json()["paths"]
+
+
 # --------------------------------------------------------------------------- commands
 
 
@@ -137,6 +161,17 @@ def test_reset_one_world_restores_home_and_leaves_the_others(http):
     assert t[3][2] == pytest.approx(1.37)
     # Increments after a reset build on home, not on the old target.
     assert press(http, 2, "elbow_joint", 0.1)["target"][2] == pytest.approx(1.67)
+
+
+def test_reset_of_every_world_sends_targets_home(http):
+    press(http, 0, "elbow_joint", 0.2)
+    press(http, 3, "finger_joint", 0.5)
+    wait_ticks(http, 2)
+    assert targets(http)[3][6] == pytest.approx(0.5)
+    r = http.post("/v1/reset").json()
+    assert r["worlds"] == [0, 1, 2, 3]
+    wait_ticks(http, 2)
+    np.testing.assert_allclose(targets(http), [HOME] * 4)
 
 
 def test_reply_tick_is_the_first_tick_whose_state_carries_the_target(server, http):

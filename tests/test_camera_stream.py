@@ -49,6 +49,22 @@ def test_stream_sends_the_asked_worlds_at_the_asked_rate(server: Server) -> None
     assert 0.6 < took < 2.0  # five messages at 5 a second (1 s), give or take a loaded box
 
 
+def test_a_stream_asked_for_a_camera_alone_gets_the_documented_defaults(server: Server) -> None:
+    # the guide's query table: worlds 0, rate 10, image rgb, format png
+    with connect(f"{server.ws_url}/v1/ws/cameras?camera=wrist") as ws:
+        for _ in range(2):
+            header, images = unpack(ws.recv(timeout=30))
+        t0 = time.monotonic()
+        for _ in range(10):
+            ws.recv(timeout=30)
+        took = time.monotonic() - t0
+    assert header["worlds"] == [0] and header["image"] == "rgb" and header["format"] == "png"
+    assert header["content_type"] == "image/png" and len(images) == 1
+    assert Image.open(io.BytesIO(images[0])).mode == "RGB"
+    # ten messages at 10 a second: about 1 s, never much faster (up to three drawn ahead)
+    assert took > 0.65, took
+
+
 def test_a_slow_reader_holds_drawing_back(server: Server) -> None:
     # Big messages (raw float32 depth, 4 worlds) and a client that queues one message: while it
     # does not read, the socket's buffers fill and no further picture is drawn.

@@ -197,6 +197,21 @@ def test_formats_decode_in_pillow(http: httpx.Client) -> None:
     assert MJM.geom(int(ids[round(v), round(u)])).name == "cube_geom"
 
 
+def test_jpeg_quality_defaults_to_90_and_replies_say_their_tick_and_size(
+    http: httpx.Client,
+) -> None:
+    url = "/v1/worlds/0/cameras/overview"  # not in --cameras: the default size, 128x96
+    plain = http.get(url, params={"format": "jpeg"})
+    ninety = http.get(url, params={"format": "jpeg", "quality": 90})
+    low = http.get(url, params={"format": "jpeg", "quality": 10})
+    assert plain.headers["x-armfleet-tick"] == ninety.headers["x-armfleet-tick"]  # paused
+    assert plain.content == ninety.content and len(low.content) < len(plain.content)
+    assert plain.headers["x-armfleet-size"] == "128x96"
+    wrist = http.get("/v1/worlds/0/cameras/wrist", params={"image": "depth", "format": "raw"})
+    assert wrist.headers["x-armfleet-size"] == "160x120"
+    assert len(wrist.content) == 160 * 120 * 4  # float32 metres
+
+
 def test_many_worlds_in_one_binary_reply(http: httpx.Client) -> None:
     r = http.get("/v1/cameras/wrist/images", params={"worlds": "0-3", "format": "png"})
     assert r.status_code == 200 and r.headers["content-type"] == "application/x-armfleet-images"
@@ -248,6 +263,7 @@ def test_rows_of_a_request_among_the_drawn_worlds() -> None:
         ("/v1/worlds/0/cameras/wrist", {"image": "heat"}, 422, "image"),
         ("/v1/worlds/0/cameras/overview", {"image": "seg"}, 409, "seg"),
         ("/v1/worlds/0/cameras/wrist", {"quality": "0"}, 422, "quality"),
+        ("/v1/worlds/0/cameras/wrist", {"quality": "101"}, 422, "quality"),
         ("/v1/cameras/wrist/images", {"worlds": "0-9"}, 404, "0-9"),
         ("/v1/cameras/wrist/images", {"worlds": "a"}, 422, "worlds"),
     ],

@@ -81,6 +81,7 @@ def test_a_pose_set_at_tick_t_is_read_at_t_in_that_world_only(paused):
         ({"position": [0.6, 0.1, 9.0]}, "position", "outside the scene's bounds at z"),
         ({"orientation": [2, 0, 0, 0]}, "orientation", "norm 2 is too far from 1"),
         ({"linear": [100, 0, 0]}, "linear", "exceeds 50 m/s"),
+        ({"angular": [0, 300, 450]}, "angular", "exceeds 500 rad/s"),
         ({}, "position", "nothing to write"),
     ],
 )

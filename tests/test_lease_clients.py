@@ -8,6 +8,7 @@ import asyncio
 import os
 from collections.abc import Iterator
 
+import httpx
 import numpy as np
 import pytest
 
@@ -70,6 +71,34 @@ def test_the_controller_takes_a_world_for_its_session_and_gives_it_back(lending:
                 assert (same, again) == (world, token)  # a handed-out lease: its world
             assert len(anyone.leases()) == 1  # not given back by the one it was handed to
         assert anyone.leases() == []
+
+
+def test_lending_refusals_say_why_over_rest(lending: Server) -> None:
+    """The leases guide's answers: a time to live over `--lease-max-ttl-s` (default 86400),
+    every world lent (503 with when the next lease ends), and a token this server never
+    issued, as every token from before a restart is (401 saying the service restarted)."""
+    with httpx.Client(base_url=lending.url, timeout=30) as http:
+        r = http.post("/v1/leases", json={"count": 1, "ttl_s": 86401})
+        assert r.status_code == 422 and "ttl_s" in r.text and "86400" in r.text, r.text
+        r = http.post("/v1/leases", json={"count": 4, "ttl_s": 30, "label": "all"})
+        assert r.status_code == 201, r.text
+        every = r.json()
+        mine = {"Authorization": f"Bearer {every['token']}"}
+        try:
+            r = http.post("/v1/leases", json={"count": 1, "ttl_s": 30})
+            assert r.status_code == 503, r.text
+            assert "no free world" in r.text and "0 of 4 free" in r.text
+            assert "the next lease ends in" in r.text
+            r = http.post(f"/v1/leases/{every['id']}/renew", json={"ttl_s": 90000}, headers=mine)
+            assert r.status_code == 422 and "86400" in r.text, r.text
+            r = http.post(f"/v1/leases/{every['id']}/renew", json={"ttl_s": 60}, headers=mine)
+            assert r.status_code == 200 and r.json()["ttl_s"] == 60  # the holder renews
+        finally:
+            given_back = http.delete(f"/v1/leases/{every['id']}", headers=mine)
+            assert given_back.status_code == 200, given_back.text
+        stale = {"Authorization": "Bearer lease_0123abcd_" + "x" * 32}
+        r = http.post("/v1/worlds/0/increments", json={"joint": 0, "delta": 0.1}, headers=stale)
+        assert r.status_code == 401 and "service restarted" in r.json()["detail"], r.text
 
 
 @pytest.mark.skipif("ARMFLEET_URL" in os.environ, reason="uses the shared server instead")

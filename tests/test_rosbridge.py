@@ -105,6 +105,33 @@ def test_roslibpy_rosapi_services(ros: roslibpy.Ros) -> None:
         missing.call(roslibpy.ServiceRequest({}), timeout=10)
 
 
+def test_roslibpy_rosapi_time_and_version(server: Server, ros: roslibpy.Ros) -> None:
+    # the rosbridge guide's rosapi services beyond the topic listings
+    get_time = roslibpy.Service(ros, "/rosapi/get_time", "rosapi/GetTime")
+    before = httpx.get(f"{server.url}/v1/info").json()["sim_time"]
+    now = get_time.call(roslibpy.ServiceRequest({}), timeout=10)["time"]
+    after = httpx.get(f"{server.url}/v1/info").json()["sim_time"]
+    seconds = now["sec"] + now["nanosec"] * 1e-9
+    # simulated time (of the newest state, taken at least every 0.1 s), as /clock carries it
+    assert before - 0.25 <= seconds <= after + 1e-6, (before, seconds, after)
+    version = roslibpy.Service(ros, "/rosapi/get_ros_version", "rosapi/GetROSVersion")
+    assert version.call(roslibpy.ServiceRequest({}), timeout=10)["version"] == 2
+
+
+def test_only_uncompressed_json_is_spoken(server: Server) -> None:
+    # "JSON text frames only (no CBOR, PNG or fragments)": asked for another, a status says so
+    with connect(server.ws_url + "/rosbridge") as ws:
+        for compression in ("cbor", "png"):
+            ask = {"op": "subscribe", "id": compression, "topic": "/joint_states"}
+            ws.send(json.dumps({**ask, "compression": compression}))
+            (reply,) = _frames(ws, 1)
+            assert reply["op"] == "status" and reply["level"] == "error", reply
+            assert "compression" in reply["msg"] and reply["id"] == compression
+        ws.send(json.dumps({"op": "call_service", "id": "ok", "service": "/rosapi/topics"}))
+        (reply,) = _frames(ws, 1)
+        assert reply["result"] is True  # the connection stays open
+
+
 def test_roslibpy_clock(ros: roslibpy.Ros) -> None:
     seen: list[dict[str, Any]] = []
     clock = roslibpy.Topic(ros, "/clock", "rosgraph_msgs/msg/Clock")

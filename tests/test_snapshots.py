@@ -79,6 +79,23 @@ def test_restore_then_the_same_commands_give_bit_identical_states(http):
     assert "exact" in names
 
 
+def test_the_listing_names_size_tick_world_count_and_model_hash(paused, http):
+    # the snapshots guide: `GET /v1/snapshots` gives name, size, tick, nworld, model hash
+    _, data = paused
+    http.post("/v1/sim/step", json={"ticks": 3}).raise_for_status()
+    saved = http.post("/v1/snapshots", json={"name": "listed"})
+    assert saved.status_code == 201, saved.text
+    (entry,) = [s for s in http.get("/v1/snapshots").json() if s["name"] == "listed"]
+    path = data / "snapshots" / "listed.npz"
+    assert entry["size_bytes"] == path.stat().st_size
+    assert entry["tick"] == saved.json()["tick"] == everything(http)["tick"]
+    assert entry["nworld"] == NWORLD
+    header = read_header(path.read_bytes())
+    assert entry["model_hash"] == header["model_hash"] and len(entry["model_hash"]) == 64
+    int(entry["model_hash"], 16)  # hex
+    assert entry["format"] == "armfleet-snapshot/2"
+
+
 @pytest.mark.parametrize("name", ["", "a/b", "../up", ".hidden", "-dash", "x" * 65, "sp ace"])
 def test_bad_names_are_refused_with_422(http, name):
     r = http.post("/v1/snapshots", json={"name": name})

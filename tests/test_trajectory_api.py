@@ -72,6 +72,21 @@ def test_post_get_delete_and_the_outcome(arm):
         arm.trajectory(3)
 
 
+def test_a_trajectory_is_read_by_id_after_a_newer_one_replaced_it(arm, paused):
+    srv, _ = paused
+    first = arm.start_trajectory(2, ARM, POINTS)
+    arm.step(10)
+    second = arm.start_trajectory(2, ARM, [point(MID, 0.5)])
+    arm.step(1)
+    assert arm.trajectory(2).id == second.id  # the world's own route shows the newer one
+    old = httpx.get(f"{srv.url}/v1/trajectories/{first.id}", timeout=10)
+    assert old.status_code == 200, old.text
+    assert old.json()["id"] == first.id and old.json()["state"] == "aborted"
+    assert old.json()["reason"] == "preempted"
+    missing = httpx.get(f"{srv.url}/v1/trajectories/999999", timeout=10)
+    assert missing.status_code == 404 and "999999" in missing.json()["detail"]
+
+
 def test_cancel_holds_and_a_button_press_takes_over(arm):
     arm.start_trajectory(0, ARM, POINTS)
     arm.start_trajectory(2, ARM, POINTS)
