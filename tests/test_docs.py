@@ -109,6 +109,22 @@ def test_the_cli_and_settings_references_hold_every_command_and_variable(site: P
         assert f"ARMFLEET_{name.upper()}" in settings
 
 
+def test_armfleet_help_lists_every_command() -> None:
+    """Getting started: "`.venv/bin/armfleet --help` lists every command"."""
+    import typer
+
+    from service.cli import app
+
+    names = list(typer.main.get_command(app).commands)  # type: ignore[attr-defined]
+    assert {"serve", "controller", "watch", "replay", "setup", "bench", "docs"} <= set(names)
+    env = {**os.environ, "COLUMNS": "200"}
+    cmd = [sys.executable, "-m", "service.cli", "--help"]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stderr
+    listed = set(re.findall(r"^\W*([a-z]+)\s{2,}\S", out.stdout, re.M))
+    assert set(names) <= listed, out.stdout
+
+
 def test_the_client_reference_is_generated_from_the_docstrings(site: Path) -> None:
     from clients import ArmfleetClient
 

@@ -110,3 +110,4 @@ def test_armfleet_world_without_a_shared_server_leases_from_its_own(
     assert arm.increment(w, "elbow_joint", 0.1).world == w
     (held,) = arm.leases()
     assert "test_armfleet_world_without_a_shared_server" in held.label
+    assert held.ttl_s == 900  # the leases guide: a dead test's lease expires by itself (15 min)

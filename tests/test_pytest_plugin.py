@@ -10,6 +10,7 @@ import signal
 import tomllib
 from pathlib import Path
 
+import httpx
 import pytest
 from conftest import ROOT
 
@@ -35,11 +36,22 @@ def test_elbow_settles_on_an_incremented_target(armfleet_server):
 # -- end of the example ------------------------------------------------------------------------
 
 
+def test_the_module_server_is_four_realtime_worlds_on_loopback(armfleet_server):
+    # the testing guide: "a real 4-world server on a free 127.0.0.1 port", ready when given
+    assert armfleet_server.url.startswith("http://127.0.0.1:")
+    with armfleet_server.client() as arm:
+        info = arm.info()
+        assert (info.nworld, info.mode) == (4, "realtime")
+    assert httpx.get(f"{armfleet_server.url}/readyz").status_code == 200
+
+
 def test_factory_serves_a_paused_batch_that_steps_exactly(armfleet_server_factory, tmp_path):
-    server = armfleet_server_factory(worlds=2, mode="paused", log_dir=tmp_path)
+    # the testing guide: `env={"ARMFLEET_...": ...}` sets the server's settings
+    env = {"ARMFLEET_CONTROL_HZ": "30"}
+    server = armfleet_server_factory(worlds=2, mode="paused", log_dir=tmp_path, env=env)
     with server.client() as arm:
         info = arm.info()
-        assert (info.nworld, info.mode) == (2, "paused")
+        assert (info.nworld, info.mode, info.control_hz) == (2, "paused", 30)
         ack = arm.increment(0, "finger_joint", 0.5)
         stepped = arm.step(30)
         assert stepped.tick == ack.tick + 29  # the command's tick is the first of the 30
