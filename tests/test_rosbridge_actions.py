@@ -99,6 +99,32 @@ def test_roslibpy_cancel(server: Server, ros: roslibpy.Ros) -> None:
     assert 0 < held[0] < 1.0
 
 
+def test_roslibpy_a_broken_tolerance_or_a_newer_goal_aborts_with_its_code(
+    server: Server, ros: roslibpy.Ros
+) -> None:
+    """The ROS 2 guide's results, which rosbridge shares: ABORTED with -4 when a path
+    tolerance broke, ABORTED with -1 and the reason when a newer goal preempted the goal."""
+    name = "/world_1/scaled_joint_trajectory_controller/follow_joint_trajectory"
+    client = roslibpy.ActionClient(ros, name, FJT)
+    far = [0.8, -1.0, 1.0, -1.0, -1.0, 0.8]
+    point = {"positions": far, "time_from_start": {"sec": 1, "nanosec": 0}}
+    tight = {"name": "elbow_joint", "position": 1e-4, "velocity": 0.0, "acceleration": 0.0}
+    goal = {"trajectory": {"joint_names": ARM, "points": [point]}, "path_tolerance": [tight]}
+    _, out = _send(client, roslibpy.Goal(goal))
+    assert out.done.wait(30), "no action_result"
+    assert out.result["status"] == roslibpy.GoalStatus.ABORTED, out.result
+    assert out.result["values"]["error_code"] == -4
+    assert out.result["values"]["error_string"].startswith("path_tolerance")
+    _, first = _send(client, _goal(far, 20.0))
+    wait_for(lambda: first.feedback, "feedback of the long goal")
+    _, second = _send(client, _goal([0.2, -1.5, 1.5, -1.5, -1.5, 0.2], 0.5))
+    assert first.done.wait(30) and second.done.wait(30), "no action_result"
+    assert first.result["status"] == roslibpy.GoalStatus.ABORTED, first.result
+    assert first.result["values"]["error_code"] == -1
+    assert first.result["values"]["error_string"].startswith("preempted")
+    assert second.result["status"] == roslibpy.GoalStatus.SUCCEEDED, second.result
+
+
 @pytest.mark.parametrize(
     ("name", "kind", "goal", "why"),
     [
