@@ -77,7 +77,15 @@ def test_lending_refusals_say_why_over_rest(lending: Server) -> None:
     """The leases guide's answers: a time to live over `--lease-max-ttl-s` (default 86400),
     every world lent (503 with when the next lease ends), and a token this server never
     issued, as every token from before a restart is (401 saying the service restarted)."""
+
+    def counted(http: httpx.Client, name: str) -> float:
+        lines = http.get("/metrics").text.splitlines()
+        return float(next(x for x in lines if x.startswith(f"{name} ")).split()[1])
+
     with httpx.Client(base_url=lending.url, timeout=30) as http:
+        granted, released = (
+            counted(http, f"armfleet_leases_{x}_total") for x in ("granted", "released")
+        )
         r = http.post("/v1/leases", json={"count": 1, "ttl_s": 86401})
         assert r.status_code == 422 and "ttl_s" in r.text and "86400" in r.text, r.text
         r = http.post("/v1/leases", json={"count": 4, "ttl_s": 30, "label": "all"})
@@ -96,6 +104,8 @@ def test_lending_refusals_say_why_over_rest(lending: Server) -> None:
         finally:
             given_back = http.delete(f"/v1/leases/{every['id']}", headers=mine)
             assert given_back.status_code == 200, given_back.text
+        assert counted(http, "armfleet_leases_granted_total") == granted + 1
+        assert counted(http, "armfleet_leases_released_total") == released + 1
         stale = {"Authorization": "Bearer lease_0123abcd_" + "x" * 32}
         r = http.post("/v1/worlds/0/increments", json={"joint": 0, "delta": 0.1}, headers=stale)
         assert r.status_code == 401 and "service restarted" in r.json()["detail"], r.text

@@ -151,6 +151,8 @@ def test_metrics_parse_and_count_ticks_commands_and_latency(server, http):
         "armfleet_world_faults",
         "armfleet_shard_restarts",
         "armfleet_ready",
+        "armfleet_clients",
+        "armfleet_engine_faults",
     ):
         assert name in after, name
 
