@@ -233,7 +233,7 @@ def test_the_table_passes_through_every_point_with_its_velocity(kind):
 # -- tracking on both engines -----------------------------------------------------------------
 
 
-def test_a_2s_three_point_trajectory_tracks_within_0_05_rad_and_settles(sim):
+def test_a_2s_three_point_trajectory_tracks_within_0_03_rad_and_settles(sim):
     loop, control = sim
     hz = loop.batch.control_hz
     started = control.start_trajectory([1], three_points(), "http")[0]
@@ -249,9 +249,11 @@ def test_a_2s_three_point_trajectory_tracks_within_0_05_rad_and_settles(sim):
     assert final.progress == 1.0
     stepped(round(0.5 * hz), loop)
     snap = loop.latest
-    np.testing.assert_allclose(snap.position[1, :6], WAYPOINTS[-1][1], atol=0.005)
+    # the trajectories guide: "tracks within 0.03 rad and ends within 0.0002 rad of its last
+    # point 0.5 s after its end, on both engines"
+    np.testing.assert_allclose(snap.position[1, :6], WAYPOINTS[-1][1], atol=2e-4)
     np.testing.assert_array_equal(snap.target[1, :6], WAYPOINTS[-1][1])  # held exactly
-    assert 0 < worst <= 0.05, f"largest path error {worst:.4f} rad"
+    assert 0 < worst <= 0.03, f"largest path error {worst:.4f} rad"
     # The other worlds never moved their targets.
     np.testing.assert_array_equal(snap.target[[0, 2, 3]], np.tile(HOME, (3, 1)))
 
