@@ -149,8 +149,13 @@ def test_native_engine_draws_the_same_pixels_for_the_same_state(
     with serve(
         worlds=2, mode="paused", extra_args=extra, log_dir=tmp_path_factory.mktemp("n")
     ) as s:
-        _cameras_ready(s.url)
-        native = httpx.get(f"{s.url}/v1/worlds/0/cameras/wrist", params={"format": "raw"}).content
+        # The cameras guide: on the CPU the renderer is built at the first ask, and a picture
+        # asked before it is ready waits for the build, drawn from the tick it asked for.
+        url = f"{s.url}/v1/worlds/0/cameras/wrist"
+        first = httpx.get(url, params={"format": "raw"}, timeout=300)
+        assert first.status_code == 200 and first.headers["x-armfleet-tick"] == "0", first.text
+        assert httpx.get(f"{s.url}/v1/cameras").json()["ready"] is True
+        native = first.content
         overview = httpx.get(f"{s.url}/v1/worlds/1/cameras/overview", params={"format": "raw"})
     warp_reply = http.get("/v1/worlds/0/cameras/wrist", params={"format": "raw"})
     assert warp_reply.headers["x-armfleet-tick"] == "0"  # runs before the arm-moving test
