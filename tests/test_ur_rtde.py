@@ -173,3 +173,39 @@ def test_malformed_packages_get_an_answer_or_a_closed_connection(ur) -> None:
     finally:
         raw.close()
         watcher.disconnect()
+
+
+def test_payload_is_the_worlds_parameter_and_what_has_no_source_is_zero(ur) -> None:
+    # the UR programs guide: `payload`, `payload_cog` are the world's payload parameter
+    # (set_payload); the TCP force, temperatures and digital inputs have no source: 0
+    server, addrs = ur
+    body = {"mass": 1.5, "cog": [0.0, 0.01, 0.08]}
+    r = httpx.put(f"{server.url}/v1/worlds/1/payload", json=body, timeout=10)
+    assert r.status_code == 200, r.text
+    _step(server, 1)
+    raw = RawRtde(addrs[1])
+    try:
+        raw.handshake()
+        rid = raw.ask(_outputs("payload,payload_cog"), "O")[0]
+        assert rid >= 1
+        assert raw.ask(package("S"), "S") == b"\x01"
+
+        def payload() -> tuple[float, ...] | None:
+            kind, data = raw.read()
+            while kind != "U":
+                kind, data = raw.read()
+            values = struct.unpack(">dddd", data[1:])
+            return values if values[0] == pytest.approx(1.5) else None
+
+        # the payload parameter is polled every 0.5 s while RTDE streams: it shows soon
+        got = wait_for(payload, "the world's payload over RTDE")
+        assert got[1:] == pytest.approx((0.0, 0.01, 0.08))
+    finally:
+        raw.close()
+    rx = rtde_receive.RTDEReceiveInterface(addrs[1])
+    try:
+        assert rx.getActualTCPForce() == [0.0] * 6
+        assert rx.getJointTemperatures() == [0.0] * 6
+        assert rx.getActualDigitalInputBits() == 0
+    finally:
+        rx.disconnect()

@@ -203,9 +203,9 @@ class RtdeSession(asyncio.Protocol):
             return
         view = self.robot.view()
         if view is not None:
-            key = (view.frame, view.ctl.version)
-            if last is None or last[0] != key:
-                last = (key, recipe.pack(view))
+            # a view is renewed when its frame, controller or payload changes (world_robot.py)
+            if last is None or last[0] is not view:
+                last = (view, recipe.pack(view))
             if transport.get_write_buffer_size() > _MAX_UNSENT:
                 self.skipped += 1
             else:

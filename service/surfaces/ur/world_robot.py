@@ -70,8 +70,15 @@ class WorldRobot:
         if frame is None:
             return None
         v = self._view
-        if v is None or v.frame is not frame or self._view_version != self.controller.version:
-            payload = self.fleet.payloads.get(self.world, NO_PAYLOAD)
+        payload = self.fleet.payloads.get(self.world, NO_PAYLOAD)
+        # the payload is polled apart from the frames: a paused world gets no new frame, so a
+        # changed payload must renew the view by itself
+        if (
+            v is None
+            or v.frame is not frame
+            or v.payload != payload
+            or self._view_version != self.controller.version
+        ):
             v = self._view = WorldTick(frame, self.world, self.fleet.kin, self.controller, payload)
             self._view_version = self.controller.version
         return v
