@@ -44,8 +44,8 @@ class ControllerApp(App[None]):
     BINDINGS: ClassVar[list[Binding]] = [
         Binding("up,k", "select(-1)", "row up", show=False),
         Binding("down,j", "select(1)", "row down", show=False),
-        Binding("plus,equals_sign,right,l", "step(1)", "+"),
-        Binding("minus,underscore,left,h", "step(-1)", "-"),
+        Binding("plus,equals_sign,right,l", "step(1)", "+0.1 / jog +"),
+        Binding("minus,underscore,left,h", "step(-1)", "-0.1 / jog -"),
         Binding("t", "frame", "base/tool"),
         Binding("s", "jog_step(1)", "jog step"),
         Binding("S", "jog_step(-1)", "jog step", show=False),
@@ -95,7 +95,8 @@ class ControllerApp(App[None]):
         table.add_section()
         for k, axis in enumerate(AXES):
             on = m.selected == len(m.names) + k
-            label, step = m.jog.row_label(axis), m.jog.row_step_text(axis)
+            label = Text(m.jog.row_label(axis))  # Text: "[m]" is no markup
+            step = m.jog.row_step_text(axis)
             table.add_row(">" if on else " ", label, step, "", style="reverse" if on else "")
         self.query_one("#rows", Static).update(table)
         self.query_one("#jog", Static).update(m.jog.summary())
