@@ -33,6 +33,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from clients import ArmfleetClient
+from clients.apps.jog import step_texts
 
 try:
     from playwright.sync_api import expect
@@ -355,6 +356,7 @@ def test_jog_buttons_move_the_tcp_by_the_step_in_the_base_then_the_tool_frame(sr
     expect(jog.get_by_role("button")).to_have_text(
         ["-X", "+X", "-Y", "+Y", "-Z", "+Z", "-Rx", "+Rx", "-Ry", "+Ry", "-Rz", "+Rz"]
     )
+    expect(page.locator("#jogStep option")).to_have_text(step_texts())  # the controllers' presets
     expect(page.locator("#jogStep option:checked")).to_have_text("10 mm / 0.05 rad")
     expect(jog.get_by_label("base")).to_be_checked()
     before = settled_tcp(arm, 1)
