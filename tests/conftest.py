@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 import roslibpy
 
@@ -139,6 +140,44 @@ def target_after(client: ArmfleetClient, world: int, pred: Callable[[WorldState]
         return state if pred(state) else None
 
     return wait_for(check, f"world {world}'s target to change").target
+
+
+def rotvec_matrix(r: Any) -> np.ndarray:
+    """The rotation of a UR rotation vector (Rodrigues; the tests' own, not the service's)."""
+    r = np.asarray(r, dtype=float)
+    t = np.linalg.norm(r)
+    if t < 1e-12:
+        return np.eye(3)
+    k = r / t
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(t) * kx + (1 - np.cos(t)) * kx @ kx
+
+
+def settled_tcp(client: ArmfleetClient, world: int, timeout: float = 20) -> dict[str, Any]:
+    """`GET /v1/worlds/{w}/tcp` once the world's arm stands at its targets (every arm joint
+    within 1 mrad of its target and slower than 0.01 rad/s), so that a difference between two
+    readings is what the servos made of the commands in between."""
+
+    def check() -> dict[str, Any] | None:
+        s = client.state(world)
+        at = np.abs(s.position[:6] - s.target[:6]).max() < 1e-3
+        return client.tcp(world) if at and np.abs(s.velocity[:6]).max() < 1e-2 else None
+
+    return wait_for(check, f"world {world}'s arm to settle at its targets", timeout)
+
+
+def jogged_tcp(client: ArmfleetClient, world: int, before: dict[str, Any]) -> dict[str, Any]:
+    """The TCP after a jog press: once the targets' TCP left `before`'s and the arm settled."""
+    wait_for(
+        lambda: client.tcp(world)["target_tcp"] != before["target_tcp"],
+        f"a jog to change world {world}'s targets",
+    )
+    return settled_tcp(client, world)
+
+
+def tcp_moved(before: dict[str, Any], after: dict[str, Any], key: str = "tcp") -> np.ndarray:
+    """How far the TCP went between two readings, in the base frame [m]."""
+    return np.subtract(after[key][:3], before[key][:3])
 
 
 @pytest.fixture(scope="module")

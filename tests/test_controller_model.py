@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from conftest import HOME, JOINTS
 
 from clients import CommandAck, ConnectionStatus, Info, JointInfo, ResetResult, WorldState
 from clients.apps.controller import ControllerModel, Notice
+from clients.apps.jog import STEPS, JogPad, button_text, step_texts
+from clients.cartesian import AXES
+from service.core.commands.cartesian import JOG_STEP
 
 URL = "http://127.0.0.1:8000"
 
@@ -60,7 +64,43 @@ def test_rows_come_from_the_served_model_and_start_without_values() -> None:
     m.apply(info())
     assert [m.joint_label(i) for i in range(7)][2] == "[2] elbow_joint"
     assert m.target_text(0) == "--" and m.measured_text(0) == "--"
-    assert m.move_selection(-1) == 6 and m.selected_joint() == JOINTS[6]
+    # the cursor runs over the seven joint rows, then the six jog rows, and wraps around
+    assert m.move_selection(-1) == 12 and m.selected_joint() is None
+    assert m.selected_axis() == "rz"
+    assert m.move_selection(-6) == 6 and m.selected_joint() == JOINTS[6]
+    assert m.selected_axis() is None
+    assert m.move_selection(1) == 7 and m.selected_axis() == "x"
+    assert m.move_selection(6) == 0 and m.selected_joint() == JOINTS[0]
+
+
+def test_jog_pad_starts_at_a_centimetre_in_the_base_frame() -> None:
+    pad = ControllerModel(URL, 0).jog
+    assert pad.frame == "base"
+    assert [pad.step(a, 1) for a in AXES] == [0.01, 0.01, 0.01, 0.05, 0.05, 0.05]
+    assert pad.step("z", -1) == -0.01 and pad.step("rx", -1) == -0.05
+    assert [button_text(a, s) for a in ("y", "ry") for s in (-1, 1)] == ["-Y", "+Y", "-Ry", "+Ry"]
+    assert pad.summary() == "Jog: base frame, step 10 mm / 0.05 rad"
+    assert pad.row_label("z") == "jog Z [m]" and pad.row_label("rx") == "jog Rx [rad]"
+    assert pad.row_step_text("x") == "±0.01" and pad.row_step_text("rz") == "±0.05"
+
+
+def test_jog_pad_frame_switch_and_step_presets() -> None:
+    pad = JogPad()
+    assert pad.toggle_frame() == "tool" and pad.toggle_frame() == "base"
+    pad.set_frame("tool")
+    assert pad.frame == "tool"
+    with pytest.raises(ValueError, match="frame"):
+        pad.set_frame("world")
+    with pytest.raises(ValueError, match="axis"):
+        pad.step("w", 1)
+    assert step_texts() == ["1 mm / 0.01 rad", "10 mm / 0.05 rad", "50 mm / 0.1 rad"]
+    assert pad.cycle_step() == 2 and pad.step("x", 1) == 0.05 and pad.step("rz", 1) == 0.1
+    assert pad.cycle_step() == 0 and pad.step("y", -1) == -0.001
+    assert pad.cycle_step(-1) == 2
+    pad.set_step_text("1 mm / 0.01 rad")
+    assert pad.step("ry", 1) == 0.01
+    # every preset is a step the server takes (it refuses more than JOG_STEP per press)
+    assert all(0 < size <= JOG_STEP for preset in STEPS for size in preset)
 
 
 def test_target_shows_the_replied_value_and_older_frames_do_not_undo_it() -> None:

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from conftest import (
     ELBOW,
@@ -29,8 +30,12 @@ from conftest import (
     ROOT,
     Server,
     free_port,
+    jogged_tcp,
+    rotvec_matrix,
     serve,
+    settled_tcp,
     target_after,
+    tcp_moved,
     wait_for,
 )
 
@@ -263,6 +268,78 @@ def test_world_selector_switches_the_controlled_world(app: TkApp, client: Armfle
         app.click("world", fx=0.93, fy=0.75)  # the down arrow: back to world 1
         wait_for(lambda: app.probe()["world"] == WORLD, "world 1 to be selected again")
         client.reset([1, 2])
+
+
+def test_window_has_the_jog_block_under_the_joint_rows(app: TkApp) -> None:
+    probe = app.probe()
+    assert probe["jog"] == {"frame": "base", "step": "10 mm / 0.05 rad"}
+    names = ("X", "Y", "Z", "Rx", "Ry", "Rz")
+    for axis, name in zip(("x", "y", "z", "rx", "ry", "rz"), names, strict=True):
+        assert app.text(f"jog:-{axis}") == f"-{name}" and app.text(f"jog:+{axis}") == f"+{name}"
+    assert {app.text("frame:base"), app.text("frame:tool")} == {"base", "tool"}
+    lowest_row = probe["widgets"]["up:finger_joint"]["y"]
+    assert min(probe["widgets"][f"jog:{s}{a}"]["y"] for s in "+-" for a in "xyz") > lowest_row
+
+
+def test_plus_z_click_raises_the_tcp_by_the_step(app: TkApp, client: ArmfleetClient) -> None:
+    client.reset(WORLD)
+    before = settled_tcp(client, WORLD)
+    app.click("jog:+z")
+    after = jogged_tcp(client, WORLD, before)
+    assert tcp_moved(before, after, "target_tcp") == pytest.approx([0, 0, 0.01], abs=1e-6)
+    assert tcp_moved(before, after) == pytest.approx([0, 0, 0.01], abs=5e-4)
+    turned = rotvec_matrix(after["tcp"][3:]).T @ rotvec_matrix(before["tcp"][3:])
+    assert turned == pytest.approx(np.eye(3), abs=1e-3)  # a translation: the tool kept its turn
+    label_shows(app, "target:elbow_joint", f"{client.state(WORLD).target[ELBOW]:.2f}")
+    client.reset(WORLD)
+
+
+def test_tool_frame_and_a_finer_step_move_along_the_tools_z(
+    app: TkApp, client: ArmfleetClient
+) -> None:
+    client.reset(WORLD)
+    before = settled_tcp(client, WORLD)
+    app.click("frame:tool")
+    app.click("step", fx=0.95, fy=0.75)  # the spinbox's down arrow: the finer preset
+    try:
+        wait_for(
+            lambda: app.probe()["jog"] == {"frame": "tool", "step": "1 mm / 0.01 rad"},
+            "the tool frame and the 1 mm step in the window",
+        )
+        app.click("jog:+z")
+        after = jogged_tcp(client, WORLD, before)
+        # along the tool's z axis (the third column of its rotation), which at home points
+        # down: the same button in the base frame went up
+        tool_z = rotvec_matrix(before["target_tcp"][3:])[:, 2]
+        assert tool_z[2] < -0.9
+        moved = tcp_moved(before, after, "target_tcp")
+        assert moved == pytest.approx(0.001 * tool_z, abs=1e-6)
+        assert tcp_moved(before, after) == pytest.approx(0.001 * tool_z, abs=5e-4)
+    finally:
+        app.click("frame:base")
+        app.click("step", fx=0.95, fy=0.25)  # the up arrow: back to 10 mm / 0.05 rad
+        wait_for(
+            lambda: app.probe()["jog"] == {"frame": "base", "step": "10 mm / 0.05 rad"},
+            "the window back on base frame and 10 mm",
+        )
+        client.reset(WORLD)
+
+
+def test_a_jog_out_of_reach_shows_the_servers_reason(app: TkApp, client: ArmfleetClient) -> None:
+    # The arm stretched out flat (shoulder lift and elbow at 0): one more step outwards is
+    # beyond its reach. Jogs start from the targets, so the arm need not get there first.
+    client.set_targets(WORLD, {"shoulder_lift_joint": 0.0, "elbow_joint": 0.0})
+    try:
+        stretched = client.state(WORLD).target
+        outward = "-x" if client.tcp(WORLD)["target_tcp"][0] < 0 else "+x"
+        app.click(f"jog:{outward}")
+        wait_for(lambda: "leaves the arm's reach" in app.probe()["status"], "the refusal")
+        status = app.probe()["status"]
+        assert f"Jog {outward.upper()} (base) failed: HTTP 422: body.step:" in status
+        assert list(client.state(WORLD).target) == list(stretched)  # nothing moved
+        assert app.process.poll() is None
+    finally:
+        client.reset(WORLD)
 
 
 def test_screenshot_of_the_window(app: TkApp, tmp_path: Path) -> None:

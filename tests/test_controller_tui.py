@@ -17,8 +17,22 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import pytest
-from conftest import ELBOW, FINGER, HOME, JOINTS, ROOT, Server, target_after, wait_for
+from conftest import (
+    ELBOW,
+    FINGER,
+    HOME,
+    JOINTS,
+    ROOT,
+    Server,
+    jogged_tcp,
+    rotvec_matrix,
+    settled_tcp,
+    target_after,
+    tcp_moved,
+    wait_for,
+)
 
 from clients import ArmfleetClient
 
@@ -27,6 +41,8 @@ if shutil.which("tmux") is None:
 
 WORLD = 2
 ROW = re.compile(r"^\s*(>?)\s*\[(\d)\] (\w+)\s+(-?\d+\.\d\d|--)\s+(-?\d+\.\d\d|--)\s*$")
+JOG_ROW = re.compile(r"^\s*(>?)\s*jog (\w+) \[(m|rad)\]\s+±(\S+)\s*$")
+AXES = ["X", "Y", "Z", "Rx", "Ry", "Rz"]
 
 
 @dataclass
@@ -62,17 +78,33 @@ class Terminal:
                 }
         return out
 
+    def jog_rows(self) -> dict[str, dict[str, Any]]:
+        """The jog rows on screen: axis (X .. Rz) → {selected, unit, step}."""
+        out = {}
+        for line in self.screen().splitlines():
+            m = JOG_ROW.match(line)
+            if m:
+                out[m[2]] = {"selected": m[1] == ">", "unit": m[3], "step": m[4]}
+        return out
+
+    def said(self, text: str) -> bool:
+        """Whether the screen shows `text`, however the status line wrapped it."""
+        return " ".join(text.split()) in " ".join(self.screen().split())
+
     def status(self) -> str:
         return next((ln for ln in self.screen().splitlines() if "http://" in ln), "")
 
     def selected(self) -> int:
-        return next(r["index"] for r in self.rows().values() if r["selected"])
+        """The cursor's row: a joint's index, or 7 + the jog axis's for a jog row."""
+        joints = [r["index"] for r in self.rows().values() if r["selected"]]
+        jogs = [len(JOINTS) + AXES.index(a) for a, r in self.jog_rows().items() if r["selected"]]
+        return (joints + jogs)[0]
 
-    def select(self, joint: int) -> None:
-        """Move the row cursor to `joint` with j/k, as a user would."""
-        step = joint - self.selected()
+    def select(self, row: int) -> None:
+        """Move the row cursor to `row` (a joint, or 7 + a jog axis) with j/k, as a user would."""
+        step = row - self.selected()
         self.keys(*(["j"] * step if step > 0 else ["k"] * -step))
-        wait_for(lambda: self.selected() == joint, f"row {joint} to be selected")
+        wait_for(lambda: self.selected() == row, f"row {row} to be selected")
 
     def shows(self, joint: str, target: str) -> None:
         wait_for(
@@ -190,6 +222,69 @@ def test_w_key_switches_world_and_keys_drive_the_new_one(
         term.keys("W")
         wait_for(lambda: "world 2 (0..3), tick" in term.status(), "back on world 2")
         client.reset(3)
+
+
+def test_screen_shows_the_jog_rows_and_s_changes_their_step(term: Terminal) -> None:
+    rows = term.jog_rows()
+    assert list(rows) == AXES, term.screen()
+    assert [(r["unit"], r["step"]) for r in rows.values()] == [("m", "0.01")] * 3 + [
+        ("rad", "0.05")
+    ] * 3
+    assert term.said("Jog: base frame, step 10 mm / 0.05 rad")
+    term.keys("s")
+    wait_for(lambda: term.said("step 50 mm / 0.1 rad"), "the coarser step on screen")
+    assert term.jog_rows()["Z"]["step"] == "0.05" and term.jog_rows()["Rz"]["step"] == "0.1"
+    term.keys("S")
+    wait_for(lambda: term.jog_rows()["Z"]["step"] == "0.01", "the default step again")
+
+
+def test_plus_on_the_jog_z_row_raises_the_tcp_by_the_step(
+    term: Terminal, client: ArmfleetClient
+) -> None:
+    before = settled_tcp(client, WORLD)
+    term.select(len(JOINTS) + AXES.index("Z"))
+    term.keys("+")
+    after = jogged_tcp(client, WORLD, before)
+    assert tcp_moved(before, after, "target_tcp") == pytest.approx([0, 0, 0.01], abs=1e-6)
+    assert tcp_moved(before, after) == pytest.approx([0, 0, 0.01], abs=5e-4)
+    term.shows("elbow_joint", f"{client.state(WORLD).target[ELBOW]:.2f}")  # the ack's targets
+
+
+def test_t_key_turns_jogs_into_the_tool_frame(term: Terminal, client: ArmfleetClient) -> None:
+    """+Rz in the tool frame turns the tool about its own z axis, in place."""
+    before = settled_tcp(client, WORLD)
+    term.keys("t")
+    try:
+        wait_for(lambda: term.said("Jog: tool frame"), "the tool frame on screen")
+        term.select(len(JOINTS) + AXES.index("Rz"))
+        term.keys("+")
+        after = jogged_tcp(client, WORLD, before)
+        c, s = np.cos(0.05), np.sin(0.05)
+        about_z = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        want = rotvec_matrix(before["target_tcp"][3:]) @ about_z  # R · Rz: the tool's own z
+        assert rotvec_matrix(after["target_tcp"][3:]) == pytest.approx(want, abs=1e-6)
+        assert rotvec_matrix(after["tcp"][3:]) == pytest.approx(want, abs=1e-3)
+        assert tcp_moved(before, after) == pytest.approx([0, 0, 0], abs=5e-4)
+        # the same key in the base frame turns about the base's z: another rotation
+        base_turn = about_z @ rotvec_matrix(before["target_tcp"][3:])
+        assert np.abs(base_turn - want).max() > 0.01
+    finally:
+        term.keys("t")
+        wait_for(lambda: term.said("Jog: base frame"), "the base frame again")
+
+
+def test_a_jog_out_of_reach_shows_the_servers_reason_on_the_status_line(
+    term: Terminal, client: ArmfleetClient
+) -> None:
+    client.set_targets(WORLD, {"shoulder_lift_joint": 0.0, "elbow_joint": 0.0})  # stretched
+    stretched = client.state(WORLD).target
+    outward = "-" if client.tcp(WORLD)["target_tcp"][0] < 0 else "+"
+    term.select(len(JOINTS) + AXES.index("X"))
+    term.keys(outward)
+    wait_for(lambda: term.said("the arm's reach"), f"the refusal on screen:\n{term.screen()}")
+    assert term.said(f"Jog {outward}X (base) failed: HTTP 422: body.step:")
+    assert list(client.state(WORLD).target) == list(stretched)  # nothing moved
+    assert "Connected to" in term.status()  # still running, still streaming
 
 
 def test_q_key_quits(server: Server) -> None:

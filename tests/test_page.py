@@ -16,10 +16,24 @@ import time
 import httpx
 import numpy as np
 import pytest
-from conftest import HOME, JOINTS, free_port, page_of, serve, wait_for
+from conftest import (
+    HOME,
+    JOINTS,
+    free_port,
+    jogged_tcp,
+    page_of,
+    rotvec_matrix,
+    serve,
+    settled_tcp,
+    tcp_moved,
+    wait_for,
+)
 from PIL import Image
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
+
+from clients import ArmfleetClient
+from clients.apps.jog import step_texts
 
 try:
     from playwright.sync_api import expect
@@ -347,6 +361,59 @@ def test_a_hidden_tab_stops_its_stream_and_resumes_when_shown(srv, page):
     expect(page.locator("#status")).to_contain_text("tab hidden")
     set_visibility("visible")
     page.wait_for_function(f"window.armfleet.connected && window.armfleet.frames > {frames}")
+
+
+@pytest.fixture
+def arm(srv, http):
+    with ArmfleetClient(srv.url) as client:
+        yield client
+
+
+def test_jog_buttons_move_the_tcp_by_the_step_in_the_base_then_the_tool_frame(srv, arm, page):
+    open_page(page, srv, "?world=1")
+    jog = page.locator("#jog")
+    expect(jog.get_by_role("button")).to_have_text(
+        ["-X", "+X", "-Y", "+Y", "-Z", "+Z", "-Rx", "+Rx", "-Ry", "+Ry", "-Rz", "+Rz"]
+    )
+    expect(page.locator("#jogStep option")).to_have_text(step_texts())  # the controllers' presets
+    expect(page.locator("#jogStep option:checked")).to_have_text("10 mm / 0.05 rad")
+    expect(jog.get_by_label("base")).to_be_checked()
+    before = settled_tcp(arm, 1)
+    jog.get_by_role("button", name="+Z", exact=True).click()
+    after = jogged_tcp(arm, 1, before)
+    assert tcp_moved(before, after, "target_tcp") == pytest.approx([0, 0, 0.01], abs=1e-6)
+    assert tcp_moved(before, after) == pytest.approx([0, 0, 0.01], abs=5e-4)
+    shown = page.locator('tr[data-joint="elbow_joint"] .target')
+    expect(shown).to_have_text(f"{arm.state(1).target[2]:.2f}")  # the ack's targets
+
+    # The tool frame and the finest step: +Z goes along the tool's own z (down, at home).
+    jog.get_by_label("tool").check()
+    page.locator("#jogStep").select_option(label="1 mm / 0.01 rad")
+    tool_z = rotvec_matrix(after["target_tcp"][3:])[:, 2]
+    assert tool_z[2] < -0.9
+    jog.get_by_role("button", name="+Z", exact=True).click()
+    tooled = jogged_tcp(arm, 1, after)
+    assert tcp_moved(after, tooled, "target_tcp") == pytest.approx(0.001 * tool_z, abs=1e-6)
+    assert tcp_moved(after, tooled) == pytest.approx(0.001 * tool_z, abs=5e-4)
+    assert arm.state(0).target == pytest.approx(HOME)  # the other worlds saw nothing
+
+
+def test_a_jog_out_of_reach_shows_the_servers_reason(srv, arm, page):
+    open_page(page, srv, "?world=3")
+    arm.set_targets(3, {"shoulder_lift_joint": 0.0, "elbow_joint": 0.0})  # stretched out flat
+    stretched = arm.state(3).target
+    outward, inward = ("-X", "+X") if arm.tcp(3)["target_tcp"][0] < 0 else ("+X", "-X")
+    page.locator("#jog").get_by_role("button", name=outward, exact=True).click()
+    message = page.locator("#message")
+    expect(message).to_contain_text(
+        f"jog x {outward[0]}0.01 (base) refused: step: the step leaves the arm's reach"
+    )
+    assert list(arm.state(3).target) == list(stretched)  # nothing moved
+    # a step back in is taken, and its ack clears the message
+    page.locator("#jog").get_by_role("button", name=inward, exact=True).click()
+    expect(message).to_have_text("")
+    assert list(arm.state(3).target) != list(stretched)
+    assert page.evaluate("window.armfleet.connected")
 
 
 def test_a_killed_server_shows_disconnected_and_the_page_recovers_when_it_is_back(srv, page):

@@ -1,13 +1,15 @@
 """What the Tk and terminal controllers share: a view model and an asyncio backend.
 
 `ControllerModel` is plain Python (no widgets, no I/O): it takes events (Info, WorldState,
-CommandAck, ConnectionStatus, Notice) and says what the rows and the status line show. The
-UIs only copy its texts into widgets, so the view logic is tested without a display.
+CommandAck, ConnectionStatus, Notice) and says what the rows, the jog block (`JogPad`,
+clients/apps/jog.py) and the status line show. The UIs only copy its texts into widgets, so
+the view logic is tested without a display.
 
 `ControllerBackend` does all network work on an asyncio loop: it streams the chosen world over
 the WebSocket (reconnecting when the server goes away) and sends the button presses as HTTP
-commands. It reports everything through one `emit(event)` callback; the Tk app runs it on a
-background thread and passes events through a queue, the textual app runs it on its own loop.
+commands (Up/Down, jog steps, gripper, reset). It reports everything through one `emit(event)`
+callback; the Tk app runs it on a background thread and passes events through a queue, the
+textual app runs it on its own loop.
 """
 
 from __future__ import annotations
@@ -18,7 +20,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from clients.apps.jog import JogPad, button_text
 from clients.async_client import AsyncArmfleetClient
+from clients.cartesian import AXES
 from clients.errors import ArmfleetError, NotFound, Unreachable
 from clients.models import CommandAck, ConnectionStatus, Info, ResetResult, WorldState
 
@@ -69,7 +73,8 @@ class ControllerModel:
         self.home: list[float] | None = None
         self.targets: list[float | None] = [None] * len(self.names)
         self.positions: list[float | None] = [None] * len(self.names)
-        self.selected = 0
+        self.selected = 0  # a row of the keyboard's cursor: the joints', then the jog axes'
+        self.jog = JogPad()
         self.tick: int | None = None
         self.connected = False
         self.link = f"connecting to {url}..."
@@ -100,7 +105,7 @@ class ControllerModel:
             self.names = info.names
             self.targets = [None] * len(self.names)
             self.positions = [None] * len(self.names)
-            self.selected = min(self.selected, max(0, len(self.names) - 1))
+            self.selected = 0  # the rows moved: back to the first
         self.home = [j.home for j in info.joints]
 
     def apply_state(self, state: WorldState) -> None:
@@ -157,13 +162,19 @@ class ControllerModel:
     # -- user input --------------------------------------------------------------------------
 
     def move_selection(self, step: int) -> int:
+        """Move the cursor over the joint rows and then the jog rows, wrapping around."""
         if self.names:
-            self.selected = (self.selected + step) % len(self.names)
+            self.selected = (self.selected + step) % (len(self.names) + len(AXES))
         return self.selected
 
     def selected_joint(self) -> str | None:
-        """The joint the keyboard acts on (None until the joints are known)."""
-        return self.names[self.selected] if self.names else None
+        """The joint the keyboard acts on (None until the joints are known, or on a jog row)."""
+        return self.names[self.selected] if self.selected < len(self.names) else None
+
+    def selected_axis(self) -> str | None:
+        """The jog axis the keyboard acts on (None on a joint row or before the joints)."""
+        k = self.selected - len(self.names)
+        return AXES[k] if self.names and 0 <= k < len(AXES) else None
 
     def clamp_world(self, world: int) -> int:
         """A world id the server has (wraps around when nworld is known)."""
@@ -273,6 +284,12 @@ class ControllerBackend:
     async def increment(self, joint: int | str, delta: float) -> None:
         sign = "Up" if delta > 0 else "Down"
         await self._command(sign, self.client.increment(self.world, joint, delta))
+
+    async def jog(self, axis: str, step: float, frame: str) -> None:
+        """One pendant step; a step out of reach comes back as a Notice with the server's
+        reason (`Jog +Z (base) failed: HTTP 422: body.step: the step leaves the arm's reach`)."""
+        what = f"Jog {button_text(axis, 1 if step > 0 else -1)} ({frame})"
+        await self._command(what, self.client.jog(self.world, axis, step, frame))
 
     async def gripper(self, closed: bool) -> None:
         """Close: the gripper joint to its upper limit; Open: to its lower (as the served

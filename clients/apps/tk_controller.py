@@ -2,7 +2,9 @@
 
 One row per joint: `[i] name`, the target (2 decimals, as the server replied: clamped as the
 server clamps), the measured position (live from the WebSocket), "Up (+0.1)" and "Down (-0.1)".
-Above: a world selector and Reset; below: gripper Open / Close and a status line.
+Above: a world selector and Reset; below: the pendant's jog block (a base/tool frame switch, a
+step size, -/+ for X Y Z and Rx Ry Rz: `JogPad`), gripper Open / Close and a status line, where
+a refused command (a jog out of reach) says the server's reason.
 
 The network never runs on the Tk thread: a background thread runs an asyncio loop with a
 `ControllerBackend`; button handlers schedule coroutines on it and its events come back through
@@ -35,9 +37,12 @@ from clients.apps.controller import (
     ControllerModel,
     Event,
 )
+from clients.apps.jog import FRAMES, button_text, step_text, step_texts
+from clients.cartesian import AXES
 
 POLL_MS = 30  # how often the Tk thread drains backend events
 GEOMETRY_ENV = "ARMFLEET_TK_GEOMETRY_FILE"
+_TEXTED = (tk.Label, tk.Button, tk.Radiobutton)  # widgets whose text the probe reports
 
 
 class _BackendThread:
@@ -111,8 +116,12 @@ class TkController:
         self.table.grid(row=1, column=0, sticky="nsew", padx=6)
         self._build_rows()
 
+        self.jog_box = tk.Frame(root)
+        self.jog_box.grid(row=2, column=0, sticky="w", padx=6, pady=(6, 0))
+        self._build_jog()
+
         grip = tk.Frame(root)
-        grip.grid(row=2, column=0, sticky="w", padx=6, pady=4)
+        grip.grid(row=3, column=0, sticky="w", padx=6, pady=4)
         tk.Label(grip, text="Gripper:", width=25, anchor="w").pack(side="left")
         self.open_button = tk.Button(grip, text="Open", command=lambda: self._on_gripper(False))
         self.open_button.pack(side="left")
@@ -120,7 +129,7 @@ class TkController:
         self.close_button.pack(side="left", padx=4)
 
         self.status = tk.Label(root, text="", anchor="w", justify="left", wraplength=560)
-        self.status.grid(row=3, column=0, sticky="ew", padx=6, pady=(2, 6))
+        self.status.grid(row=4, column=0, sticky="ew", padx=6, pady=(2, 6))
         root.columnconfigure(0, weight=1)
         self.refresh()
 
@@ -151,6 +160,46 @@ class TkController:
         self._shown.clear()
         self._probe_dirty = True
 
+    def _build_jog(self) -> None:
+        """The pendant's jog: the frame switch and step size, then -/+ per axis, three a line."""
+        head = tk.Frame(self.jog_box)
+        head.grid(row=0, column=0, columnspan=8, sticky="w")
+        tk.Label(head, text="Jog TCP, frame:").pack(side="left")
+        self.frame_var = tk.StringVar(value=self.model.jog.frame)
+        self.frame_buttons: dict[str, tk.Radiobutton] = {}
+        for frame in FRAMES:
+            button = tk.Radiobutton(
+                head, text=frame, value=frame, variable=self.frame_var, command=self._on_frame
+            )
+            button.pack(side="left")
+            self.frame_buttons[frame] = button
+        tk.Label(head, text="  step:").pack(side="left")
+        self.step_var = tk.StringVar()
+        self.step_box = tk.Spinbox(
+            head,
+            values=step_texts(),
+            textvariable=self.step_var,
+            state="readonly",
+            width=16,
+            wrap=False,
+            command=self._on_step_size,
+        )
+        self.step_var.set(step_text(self.model.jog.step_index))  # after `values` set the first
+        self.step_box.pack(side="left", padx=4)
+        self.jog_buttons: dict[str, tk.Button] = {}
+        for k, axis in enumerate(AXES):
+            row, col = 1 + k // 3, (k % 3) * 3
+            for sign, c in ((-1, col), (1, col + 1)):
+                button = tk.Button(
+                    self.jog_box,
+                    text=button_text(axis, sign),
+                    width=4,
+                    command=lambda a=axis, s=sign: self._on_jog(a, s),
+                )
+                button.grid(row=row, column=c, padx=1, pady=1)
+                self.jog_buttons[f"jog:{'+' if sign > 0 else '-'}{axis}"] = button
+            self.jog_box.columnconfigure(col + 2, minsize=14)  # a gap between the axes
+
     # -- user input (Tk thread): schedule on the network thread, never wait --------------------
 
     def _submit(self, coro: Coroutine[Any, Any, None]) -> None:
@@ -165,6 +214,21 @@ class TkController:
     def _on_step(self, joint: str, delta: float) -> None:
         if backend := self._backend():
             self._submit(backend.increment(joint, delta))
+
+    def _on_jog(self, axis: str, sign: int) -> None:
+        jog = self.model.jog
+        if backend := self._backend():
+            self._submit(backend.jog(axis, jog.step(axis, sign), jog.frame))
+
+    def _on_frame(self) -> None:
+        self.model.jog.set_frame(self.frame_var.get())
+        self._probe_dirty = True
+        self._write_probe()
+
+    def _on_step_size(self) -> None:
+        self.model.jog.set_step_text(self.step_var.get())
+        self._probe_dirty = True
+        self._write_probe()
 
     def _on_gripper(self, closed: bool) -> None:
         if backend := self._backend():
@@ -235,6 +299,9 @@ class TkController:
             "open": self.open_button,
             "close": self.close_button,
             "status": self.status,
+            "step": self.step_box,
+            **{f"frame:{f}": b for f, b in self.frame_buttons.items()},
+            **self.jog_buttons,
         }
         for name, row in zip(self._row_names, self._rows, strict=True):
             for key in ("label", "up", "down", "target", "measured"):
@@ -258,7 +325,7 @@ class TkController:
                 "y": w.winfo_rooty() - y0,
                 "width": w.winfo_width(),
                 "height": w.winfo_height(),
-                **({"text": w.cget("text")} if isinstance(w, tk.Label | tk.Button) else {}),
+                **({"text": w.cget("text")} if isinstance(w, _TEXTED) else {}),
             }
             for key, w in self.widgets().items()
         }
@@ -269,6 +336,7 @@ class TkController:
             "nworld": self.model.nworld,
             "connected": self.model.connected,
             "status": self.model.status_text(),
+            "jog": {"frame": self.model.jog.frame, "step": step_text(self.model.jog.step_index)},
             "widgets": geometry,
         }
         path = Path(self._probe)

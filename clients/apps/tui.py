@@ -1,8 +1,13 @@
-"""Terminal twin of the Tk controller (textual): the same seven rows, driven by keys.
+"""Terminal twin of the Tk controller (textual): the same seven rows and jog block, by keys.
 
-    up/down or k/j   pick a joint          +/- or right/left   target ±0.1
+    up/down or k/j   pick a row            +/- or right/left   target ±0.1, or jog ±step
+    t                base / tool frame     s / S               jog step size: next / previous
     o / c            open / close gripper  r                   reset the world
     w / W or ] / [   next / previous world q                   quit
+
+Below the joint rows, six jog rows (X Y Z [m], Rx Ry Rz [rad]): on one of them +/- sends a
+pendant jog step in the frame and of the size the jog line shows (`JogPad`); a refused step
+(out of reach) shows the server's reason on the status line.
 
 Network work runs on textual's asyncio loop in workers (`ControllerBackend`), never blocking
 the screen; rows and status line show what `ControllerModel` says.
@@ -19,10 +24,11 @@ from textual.binding import Binding
 from textual.widgets import Footer, Static
 
 from clients.apps.controller import STEP, TITLE, ControllerBackend, ControllerModel, Event
+from clients.cartesian import AXES
 
 HELP = (
-    "up/down j/k: joint   +/- right/left: ±0.1   o/c: open/close gripper   "
-    "r: reset   w/W ]/[: world   q: quit"
+    "up/down j/k: row   +/- right/left: ±0.1 or jog   t: base/tool   s/S: jog step\n"
+    "o/c: open/close gripper   r: reset   w/W ]/[: world   q: quit"
 )
 
 
@@ -31,14 +37,18 @@ class ControllerApp(App[None]):
     CSS = """
     #title { padding: 0 1; text-style: bold; }
     #rows { padding: 0 1; height: auto; }
+    #jog { padding: 0 1; }
     #help { padding: 0 1; color: $text-muted; }
     #status { padding: 0 1; dock: bottom; height: auto; max-height: 3; margin-bottom: 1; }
     """
     BINDINGS: ClassVar[list[Binding]] = [
-        Binding("up,k", "select(-1)", "joint up", show=False),
-        Binding("down,j", "select(1)", "joint down", show=False),
-        Binding("plus,equals_sign,right,l", "step(1)", "+0.1"),
-        Binding("minus,underscore,left,h", "step(-1)", "-0.1"),
+        Binding("up,k", "select(-1)", "row up", show=False),
+        Binding("down,j", "select(1)", "row down", show=False),
+        Binding("plus,equals_sign,right,l", "step(1)", "+0.1 / jog +"),
+        Binding("minus,underscore,left,h", "step(-1)", "-0.1 / jog -"),
+        Binding("t", "frame", "base/tool"),
+        Binding("s", "jog_step(1)", "jog step"),
+        Binding("S", "jog_step(-1)", "jog step", show=False),
         Binding("o", "gripper(False)", "open"),
         Binding("c", "gripper(True)", "close"),
         Binding("r", "reset", "reset"),
@@ -55,6 +65,7 @@ class ControllerApp(App[None]):
     def compose(self) -> ComposeResult:
         yield Static(id="title")
         yield Static(id="rows")
+        yield Static(id="jog")
         yield Static(HELP, id="help")
         yield Static(id="status")
         yield Footer()
@@ -81,7 +92,14 @@ class ControllerApp(App[None]):
             mark = ">" if i == m.selected else " "
             style = "reverse" if i == m.selected else ""
             table.add_row(mark, m.joint_label(i), m.target_text(i), m.measured_text(i), style=style)
+        table.add_section()
+        for k, axis in enumerate(AXES):
+            on = m.selected == len(m.names) + k
+            label = Text(m.jog.row_label(axis))  # Text: "[m]" is no markup
+            step = m.jog.row_step_text(axis)
+            table.add_row(">" if on else " ", label, step, "", style="reverse" if on else "")
         self.query_one("#rows", Static).update(table)
+        self.query_one("#jog", Static).update(m.jog.summary())
         color = "green" if m.connected else "red"
         self.query_one("#status", Static).update(Text(m.status_text(), style=color))
 
@@ -95,9 +113,19 @@ class ControllerApp(App[None]):
         self.refresh_view()
 
     def action_step(self, sign: int) -> None:
-        joint = self.model.selected_joint()
+        joint, axis, jog = self.model.selected_joint(), self.model.selected_axis(), self.model.jog
         if joint is not None:
             self._spawn(self.backend.increment(joint, sign * STEP))
+        elif axis is not None:
+            self._spawn(self.backend.jog(axis, jog.step(axis, sign), jog.frame))
+
+    def action_frame(self) -> None:
+        self.model.jog.toggle_frame()
+        self.refresh_view()
+
+    def action_jog_step(self, by: int) -> None:
+        self.model.jog.cycle_step(by)
+        self.refresh_view()
 
     def action_gripper(self, closed: bool) -> None:
         self._spawn(self.backend.gripper(closed))

@@ -48,6 +48,7 @@ window.armfleetCamera = cameraPane.stats;
 const track = new PoseTrack(page.rate);
 const panel = new Panel({
   step: (joint, delta) => command({ op: 'increment', joint, delta }),
+  jog: (axis, step, frame) => command({ op: 'jog', axis, step, frame }),
   reset: () => command({ op: 'reset' }),
   gripper: (closed) => {
     const g = page.info.joints.find((j) => j.name === 'finger_joint') ?? page.info.joints.at(-1);
@@ -87,7 +88,11 @@ const conn = new Connection({
     }
     panel.message(msg.clamped.length ? `at the limit: ${msg.clamped.join(', ')}` : '', true);
   },
-  error: (msg) => panel.message(msg.detail),
+  // A refused command (a jog out of reach, a bad value) says the server's reason.
+  error: (msg, sent) => {
+    const jog = sent?.op === 'jog' ? `jog ${sent.axis} ${sent.step > 0 ? '+' : ''}${sent.step} (${sent.frame}) refused: ` : '';
+    panel.message(jog + msg.detail);
+  },
 });
 
 function command(msg) {

@@ -1,8 +1,15 @@
 // The seed's button panel: seven rows "[i] joint_name", target, measured, Up (+0.1), Down (-0.1),
-// plus world selector, Reset, gripper Open/Close, a message line and a status line.
+// plus world selector, Reset, the pendant's jog block (-/+ X Y Z Rx Ry Rz, base/tool frame, a
+// step size), gripper Open/Close, a message line and a status line.
 // It only shows what it is told and reports what the user asked for (`actions`).
 
 export const STEP = 0.1; // rad per press, as in the seed
+// The jog block's presets, as the Tk and terminal controllers' (clients/apps/jog.py): metres
+// for X Y Z and radians for Rx Ry Rz per press, each within the server's ±0.1.
+export const JOG_AXES = ['x', 'y', 'z', 'rx', 'ry', 'rz'];
+export const JOG_STEPS = [[0.001, 0.01], [0.01, 0.05], [0.05, 0.1]];
+const JOG_DEFAULT = 1; // 10 mm / 0.05 rad
+const axisName = (a) => (a.length === 1 ? a.toUpperCase() : 'R' + a[1]);
 
 const $ = (id) => document.getElementById(id);
 // Writing the same text again still costs a layout and a paint: write only changes.
@@ -12,8 +19,8 @@ const setText = (el, text) => {
 const fmt = (v) => (Math.abs(v) < 0.005 ? 0 : v).toFixed(2); // no "-0.00"
 
 export class Panel {
-  /** actions: step(joint, delta), reset(), gripper(closed), world(id), toggleView(),
-   * cancelTrajectory() */
+  /** actions: step(joint, delta), jog(axis, step, frame), reset(), gripper(closed), world(id),
+   * toggleView(), cancelTrajectory() */
   constructor(actions) {
     this.actions = actions;
     this.rows = new Map();
@@ -29,6 +36,39 @@ export class Panel {
       if (Number.isInteger(w)) actions.world(w);
     });
     document.addEventListener('keydown', (e) => this._key(e));
+    this._buildJog();
+  }
+
+  /** The jog block: a step select and, per axis, "-X" and "+X" buttons sending one step of the
+   * chosen size in the frame the radio buttons say. */
+  _buildJog() {
+    const select = $('jogStep');
+    JOG_STEPS.forEach(([m, rad], i) => {
+      const option = new Option(`${Math.round(m * 1000)} mm / ${rad} rad`, String(i), false, i === JOG_DEFAULT);
+      select.append(option);
+    });
+    const grid = $('jogAxes');
+    for (const axis of JOG_AXES) {
+      const cell = document.createElement('span');
+      for (const sign of [-1, 1]) {
+        const b = document.createElement('button');
+        b.textContent = `${sign > 0 ? '+' : '-'}${axisName(axis)}`;
+        b.dataset.axis = axis;
+        b.addEventListener('click', () => this.actions.jog(axis, sign * this.jogStep(axis), this.jogFrame()));
+        cell.append(b, ' ');
+      }
+      grid.append(cell);
+    }
+  }
+
+  /** The size of one jog press on `axis` (m or rad), from the step select. */
+  jogStep(axis) {
+    const [m, rad] = JOG_STEPS[Number($('jogStep').value)];
+    return axis.length === 1 ? m : rad;
+  }
+
+  jogFrame() {
+    return document.querySelector('input[name="jogFrame"]:checked').value;
   }
 
   /** One row per joint, in command order. */
@@ -110,7 +150,8 @@ export class Panel {
   }
 
   _key(e) {
-    if (e.target instanceof HTMLInputElement || e.ctrlKey || e.metaKey || e.altKey) return;
+    const field = e.target instanceof HTMLInputElement || e.target instanceof HTMLSelectElement;
+    if (field || e.ctrlKey || e.metaKey || e.altKey) return;
     const k = e.key;
     if (k >= '1' && k <= String(this.names.length)) this._select(Number(k) - 1);
     else if (k === 'ArrowUp' || k === 'ArrowDown') {
