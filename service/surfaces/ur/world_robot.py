@@ -1,8 +1,8 @@
-"""One world's controller as its connections see it: address, state, sessions, input owners.
+"""One world's controller as its connections see it: address, state, connections, input owners.
 
-Why a module of its own: the sessions (RTDE, Dashboard, script ports) and the listeners
+Why a module of its own: the connections (RTDE, Dashboard, script ports) and the listeners
 (endpoints.py) both hold it; it knows the listeners only as a `Fleet` (the latest frame, the
-kinematics, the payloads, the count of streaming sessions), so no import runs in a circle.
+kinematics, the payloads, the count of streaming connections), so no import runs in a circle.
 """
 
 from __future__ import annotations
