@@ -355,12 +355,23 @@ class BatchRenderer:
         return depth, seg
 
 
+def warm_renderer(mjm: mujoco.MjModel, device: str) -> tuple[int, float]:
+    """Compile (or load from the kernel cache) every kernel the cameras draw with on `device`:
+    every camera of the scene, every output, one world. `armfleet setup` runs this beside the
+    engine's tick, so that a service's first start compiles nothing. The kernels do not depend
+    on the image size, the outputs or the number of worlds (mujoco_warp specialises its render
+    kernel on the scene's geom types and the context's lighting options, which the service
+    never changes). Returns (cameras drawn, seconds)."""
+    specs = camera_specs(mjm, CameraSettings().size, "rgb,depth,seg")
+    return len(specs), BatchRenderer(mjm, specs, 1, device).warm()
+
+
 def camera_feed(loop: SimLoop, settings: CameraSettings) -> CameraFeed:
     """The service's cameras: the scene's cameras at the sizes and outputs of the settings,
     drawn by a BatchRenderer on --camera-device, else on the engine's device (CPU engines:
-    warp's CPU device), built and warmed on the feed's own thread. On a device of its own the
-    renderer takes no turns with the engine (service/core/sim/device_turns.py): nothing else
-    launches there."""
+    warp's CPU device), built and warmed on the feed's own thread (on a GPU the runtime waits
+    for that before the first tick). On a device of its own the renderer takes no turns with
+    the engine (service/core/sim/device_turns.py): nothing else launches there."""
     batch = loop.batch
     mjm = batch.robot.mjm
     specs = camera_specs(mjm, settings.size, settings.outputs, settings.per_camera)
@@ -369,4 +380,5 @@ def camera_feed(loop: SimLoop, settings: CameraSettings) -> CameraFeed:
     slots = min(settings.batch, batch.nworld)
     shared = str(wp.get_device(device)) == str(wp.get_device(engine))
     turns = getattr(batch, "device_turns", None) if shared else None
-    return CameraFeed(loop, specs, lambda: BatchRenderer(mjm, specs, slots, device, turns))
+    build = lambda: BatchRenderer(mjm, specs, slots, device, turns)  # noqa: E731
+    return CameraFeed(loop, specs, build, on_gpu=wp.get_device(device).is_cuda)

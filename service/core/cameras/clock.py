@@ -6,6 +6,9 @@ render at one tick. Each reader then gets its own worlds of it. Readers that are
 (their last picture is being drawn or waits behind the one being sent) skip that instant, so a
 slow reader never makes the others wait and nothing piles up for it: newest only.
 
+While the loop runs late in realtime (`SimLoop.late`), the clock asks for nothing (the instant
+is skipped and counted as given way): pictures wait for the ticks, never the other way round.
+
 Why one clock and not each socket asking at the grid's instants: sockets that each ask "now"
 drift apart as soon as one picture comes late (eight readers ended up on two or three phases
 of the grid and cost two or three renders a picture); a shared clock cannot split.
@@ -118,6 +121,9 @@ class CameraClock:
                 now = time.monotonic()
                 ready = [r for r in self.readers if r.ready(now, self.period)]
                 if not ready:
+                    continue
+                if self.feed.ticks_late():  # ticks first: this instant's picture gives way
+                    self.feed.gave_way += 1
                     continue
                 for r in ready:
                     r._drawing += 1
