@@ -220,8 +220,9 @@ class Runtime:
         self.cameras = camera_feed(loop, s.cameras)
         if self.cameras.on_gpu:
             # Built and warmed before the first tick: its kernels compiled or loaded, its render
-            # contexts made. Beside the ticks, a cold compile held the interpreter for minutes
-            # and the first service run after `armfleet setup` streamed at 0.44x of the engine.
+            # contexts made. Built beside the ticks, its compile (mujoco_warp's render and BVH
+            # modules, which `setup` did not compile before) slowed the first service run after
+            # `armfleet setup` to 0.08x of the next (16,384 worlds, two H200s, issue 39).
             await self.cameras.warmed()
         loop.start()
         self.loop = loop
