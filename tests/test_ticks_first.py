@@ -2,7 +2,7 @@
 
 The loop says how far its realtime schedule is behind (`SimLoop.lag`), on a real engine held
 up by work on its own thread; a camera clock asks for no picture while the ticks are more than
-`pace.LATE_S` late, and counts the instants it gave way."""
+`pace.LATE_S` late (but one every `GIVE_WAY_S`), and counts the instants it gave way."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from service.core.cameras.clock import CameraClock, Reader
+from service.core.cameras.clock import GIVE_WAY_S, CameraClock, Reader
 from service.core.sim.loop import SimLoop
 from service.core.sim.pace import LATE_S
 from service.core.sim.settings import SimSettings
@@ -60,19 +60,22 @@ class _Feed:
         await asyncio.sleep(3600)  # never drawn: the test looks at what was asked
 
 
-def test_a_clock_asks_no_picture_while_the_ticks_are_late() -> None:
-    async def run() -> tuple[int, int, int]:
+def test_a_clock_asks_no_picture_while_the_ticks_are_late_but_one_a_second() -> None:
+    async def run() -> tuple[int, int, int, int]:
         feed = _Feed()
         clock = CameraClock(feed, "wrist", 100.0)  # type: ignore[arg-type]
         clock.join(Reader(np.arange(4), pull=False))
-        await asyncio.sleep(0.2)  # ~20 instants, all while the ticks are late
+        await asyncio.sleep(0.2)  # ~20 instants, all while the ticks are late (< GIVE_WAY_S)
         asked_late, gave_way = len(feed.asked), feed.gave_way
+        await asyncio.sleep(GIVE_WAY_S)  # still late: one picture when a second has passed
+        asked_floor = len(feed.asked)
         feed.late = False
         await asyncio.sleep(0.1)
         clock.readers.clear()
         await asyncio.sleep(0.05)
-        return asked_late, gave_way, len(feed.asked)
+        return asked_late, gave_way, asked_floor, len(feed.asked)
 
-    asked_late, gave_way, asked = asyncio.run(run())
+    asked_late, gave_way, asked_floor, asked = asyncio.run(run())
     assert asked_late == 0 and gave_way >= 5, (asked_late, gave_way)
-    assert asked >= 1  # on time again: pictures are asked (up to AHEAD in flight)
+    assert asked_floor == 1, asked_floor
+    assert asked > asked_floor  # on time again: pictures are asked (up to AHEAD in flight)
