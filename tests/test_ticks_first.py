@@ -25,7 +25,9 @@ def test_lag_says_how_far_realtime_is_behind_and_comes_back_to_zero() -> None:
     loop = SimLoop(batch, Mode.REALTIME)
     loop.start()
     try:
-        time.sleep(0.3)
+        deadline = time.monotonic() + 5
+        while loop.late() and time.monotonic() < deadline:  # a loaded box may hold it up
+            time.sleep(0.01)
         assert not loop.late()  # on time: behind by at most the tick in progress
         held = loop.call(lambda _batch: time.sleep(0.15))  # the sim thread held up 9 ticks
         time.sleep(0.1)
