@@ -148,7 +148,9 @@ def section(
     """Register `fn` as section `number`, written to bench/results/`name`[_cuda].json."""
 
     def register(fn: SectionFn) -> SectionFn:
-        if fn.__module__ == "__main__":  # `python -m bench.x`: the runner imports it as bench.x
+        # `python -m bench.x`: the runner imports it as bench.x; a process it spawns imports the
+        # main module again as __mp_main__ (section 30's clients failed on a second section 30)
+        if fn.__module__ in ("__main__", "__mp_main__"):
             return fn
         taken = SECTIONS.get(number)
         if taken is not None and (taken.module, taken.fn.__name__) != (fn.__module__, fn.__name__):

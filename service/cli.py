@@ -199,7 +199,9 @@ def replay(
 def setup(
     device: Annotated[str, typer.Option(help="device to compile for: cpu, cuda")] = "cpu",
 ) -> None:
-    """Compile (or load from ~/.cache/warp) every kernel the service uses, showing progress."""
+    """Compile (or load from ~/.cache/warp) every kernel the service uses, showing progress:
+    the engine's tick and the cameras' renderer (which a first start would otherwise compile
+    beside its first ticks)."""
     os.environ["ARMFLEET_WARP_LOG"] = "info"
     typer.echo(
         f"armfleet setup: compiling MuJoCo Warp kernels for {device} "
@@ -210,10 +212,13 @@ def setup(
 
     batch = WorldBatch(1, device=device)
     batch.step(2)
+    from service.engines.camera_render import warm_renderer
+
+    cameras, _ = warm_renderer(batch.robot.mjm, device)
     typer.echo(
         f"armfleet setup: ready in {time.perf_counter() - t0:.1f} s "
         f"(tick captured: {batch.captured}; {batch.substeps} substeps of "
-        f"{batch.physics_dt * 1e3:.3f} ms per tick)"
+        f"{batch.physics_dt * 1e3:.3f} ms per tick; {cameras} cameras drawn)"
     )
 
 

@@ -156,6 +156,11 @@ class Runtime:
                 "state_seconds",
                 "wall time the sim thread spent handing world states to the cameras",
             ),
+            (
+                "armfleet_camera_gave_way",
+                "gave_way",
+                "stream pictures not drawn because the ticks ran late (ticks first)",
+            ),
         ):
             self.metrics.counter_level(
                 name,
@@ -212,8 +217,14 @@ class Runtime:
         self.control.add_listener(self._count_accepted)
         self._lend(batch.nworld)
         loop.listeners.add_tick_listener(self.metrics.on_tick)
-        loop.start()
         self.cameras = camera_feed(loop, s.cameras)
+        if self.cameras.at_start:  # on a GPU (service/engines/cameras.py)
+            # Built and warmed before the first tick: its kernels compiled or loaded, its render
+            # contexts made. Built beside the ticks, its compile (mujoco_warp's render and BVH
+            # modules, which `setup` did not compile before) slowed the first service run after
+            # `armfleet setup` to 0.08x of the next (16,384 worlds, two H200s, issue 39).
+            await self.cameras.warmed()
+        loop.start()
         self.loop = loop
         self._watchdog = asyncio.create_task(self._watch())
         ctx = SurfaceContext(

@@ -29,7 +29,8 @@ import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
-from service.core.cameras.catalog import CameraSpec
+from service.core.cameras.catalog import CameraSpec, camera_specs
+from service.core.cameras.settings import CameraSettings
 from service.core.sim.device_turns import DeviceTurns
 from service.engines.cuda_streams import render_stream
 
@@ -350,3 +351,14 @@ class BatchRenderer:
             seg = _host(rc.seg_data, k, self._pools)[:, : h * w, 0]
             seg = seg.reshape(k, h, w).astype(np.int32)
         return depth, seg
+
+
+def warm_renderer(mjm: mujoco.MjModel, device: str) -> tuple[int, float]:
+    """Compile (or load from the kernel cache) every kernel the cameras draw with on `device`:
+    every camera of the scene, every output, one world. `armfleet setup` runs this beside the
+    engine's tick, so that a service's first start compiles nothing. The kernels do not depend
+    on the image size, the outputs or the number of worlds (mujoco_warp specialises its render
+    kernel on the scene's geom types and the context's lighting options, which the service
+    never changes). Returns (cameras drawn, seconds)."""
+    specs = camera_specs(mjm, CameraSettings().size, "rgb,depth,seg")
+    return len(specs), BatchRenderer(mjm, specs, 1, device).warm()

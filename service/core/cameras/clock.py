@@ -6,6 +6,10 @@ render at one tick. Each reader then gets its own worlds of it. Readers that are
 (their last picture is being drawn or waits behind the one being sent) skip that instant, so a
 slow reader never makes the others wait and nothing piles up for it: newest only.
 
+While the loop runs late in realtime (`SimLoop.late`), the clock skips its instants (counted as
+given way), asking for at most one picture every GIVE_WAY_S: pictures wait for the ticks, never
+the other way round.
+
 Why one clock and not each socket asking at the grid's instants: sockets that each ask "now"
 drift apart as soon as one picture comes late (eight readers ended up on two or three phases
 of the grid and cost two or three renders a picture); a shared clock cannot split.
@@ -25,6 +29,10 @@ from service.core.cameras.feed import CameraFeed, Shot
 from service.core.errors import ArmfleetError, Unavailable
 
 AHEAD = 3  # pictures a push reader may have drawing or waiting beyond the one it sends
+# While the ticks run late, a clock still asks for one picture this often: one hand-over a
+# second costs the loop next to nothing, and a stream on a machine that cannot keep real time
+# for long (a loaded CPU) slows down instead of stopping.
+GIVE_WAY_S = 1.0
 
 
 class Reader:
@@ -92,6 +100,7 @@ class CameraClock:
         self.readers: set[Reader] = set()
         self._task: asyncio.Task[None] | None = None
         self._wake = asyncio.Event()  # a pull reader asked: no need to wait for the next instant
+        self._asked_at = time.monotonic()  # when this clock last asked for a picture
 
     def join(self, reader: Reader) -> None:
         self.readers.add(reader)
@@ -119,6 +128,10 @@ class CameraClock:
                 ready = [r for r in self.readers if r.ready(now, self.period)]
                 if not ready:
                     continue
+                if self.feed.ticks_late() and now - self._asked_at < GIVE_WAY_S:
+                    self.feed.gave_way += 1  # ticks first: this instant's picture gives way
+                    continue
+                self._asked_at = now
                 for r in ready:
                     r._drawing += 1
                     r.asked = max(0, r.asked - 1)

@@ -96,6 +96,7 @@ class CameraFeed:
         self.state_seconds = 0.0  # wall time the loop's thread spent handing over states
         self.warm_s: float | None = None  # seconds the first draw of every camera took
         self.streams_direct = 0  # streams whose socket was taken over (service/api/ws_bulk.py)
+        self.gave_way = 0  # stream pictures not asked because the ticks were late (clock.py)
         self.streams: set[Any] = set()  # open streams (`async close(code, reason)`): going away
         self.error: str | None = None
         self._lock = threading.Lock()
@@ -126,6 +127,20 @@ class CameraFeed:
         except Exception as exc:
             self.error = f"{type(exc).__name__}: {exc}"
             raise
+
+    async def warmed(self) -> None:
+        """Until the renderer is built and has drawn every camera once (or failed to: `error`
+        says why). The runtime waits for this before it says ready when the cameras draw on a
+        GPU, so that no kernel is compiled or loaded beside the first ticks served."""
+        with contextlib.suppress(Exception):
+            await asyncio.wrap_future(self.open())
+
+    def ticks_late(self) -> bool:
+        """True while the loop runs late in realtime (`SimLoop.late`). Stream pictures then
+        wait (the clock skips its instant): handing a picture its state costs the loop's thread
+        time, and drawing it costs the device (or the interpreter) time the ticks need, so when
+        both cannot be had, the pictures give way, never the ticks."""
+        return self.loop.late()
 
     @property
     def available(self) -> bool:

@@ -35,7 +35,7 @@ from service.core.sim.loop_types import (
     resolve,
     run_request,
 )
-from service.core.sim.pace import Cadence, FailureLog, RateWindow
+from service.core.sim.pace import LATE_S, Cadence, FailureLog, RateWindow
 from service.core.sim.staging import CommandTable, Staging, TrajectoryHook
 from service.core.sim.types import Mode, Snapshot
 from service.core.sim.waiters import Waiters
@@ -162,6 +162,19 @@ class SimLoop(StateDoor):
     def failure(self) -> str | None:
         """Why the last tick failed; None while ticks succeed."""
         return self._failures.why
+
+    def lag(self) -> float:
+        """Seconds the realtime schedule is behind the wall clock now (0 in fast and paused
+        mode, and while on time). Within a tick it grows to that tick's duration; behind by
+        more, the loop is making up ticks, and past `pace.MAX_LAG_S` it gives time up."""
+        if self._mode is not Mode.REALTIME or not self._running:
+            return 0.0
+        return max(0.0, -self._cadence.delay())
+
+    def late(self) -> bool:
+        """Behind real time by more than `pace.LATE_S`: work that can wait (the cameras' stream
+        pictures, core/cameras/clock.py) waits, so that the ticks catch up before time is lost."""
+        return self.lag() > LATE_S
 
     @property
     def stats(self) -> LoopStats:

@@ -16,6 +16,10 @@ from service.core.sim.types import Mode
 log = logging.getLogger("armfleet.loop")
 
 MAX_LAG_S = 0.1  # real time catches up after hiccups (a shared core paused) up to this far
+# Further behind than this, the loop is on its way to giving time up: work that can wait (the
+# cameras' stream pictures) waits until it has caught up. Half the catch-up reach: a loop that
+# only jitters by a tick or two is not held to be late.
+LATE_S = MAX_LAG_S / 2
 STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
 
 
