@@ -129,6 +129,22 @@ class Runtime:
             lambda: None if self.hub is None else self.hub.subscribers,
         )
         m.level("armfleet_clients", "clients being served now", lambda: self.slots.active)
+        share = lambda attr: None if self.loop is None else getattr(self.loop.share, attr)  # noqa: E731
+        m.level(
+            "armfleet_command_budget_seconds",
+            "ticks first: event-loop seconds commands may take per real-time tick now",
+            lambda: share("budget_s"),
+        )
+        m.counter_level(
+            "armfleet_command_waits",
+            "ticks first: commands that waited for a later tick's budget",
+            lambda: share("waits"),
+        )
+        m.counter_level(
+            "armfleet_late_ticks",
+            "real-time ticks that started over half a tick late",
+            lambda: share("late_ticks"),
+        )
         m.counter_level(
             "armfleet_frames_skipped",
             "state frames replaced by a newer one before a slow reader took them",
@@ -203,6 +219,7 @@ class Runtime:
             batch.close()
             return
         loop = SimLoop(batch, s.sim.mode)
+        loop.share.enabled = s.sim.ticks_first
         loop.randomizations.replace(self._restored_randomized)
         self.control = Control(loop)
         # Packed JSON frames say where each world's trajectory is: the manager's briefs.

@@ -22,6 +22,7 @@ from service.core.access import policy as access
 from service.core.commands.base import BROWSER, WS
 from service.core.commands.control import Control
 from service.core.errors import ArmfleetError, BadCommand
+from service.core.sim.command_share import turn
 from service.core.sim.loop import SimLoop
 from service.core.sim.types import Snapshot
 from service.core.sim.worlds import parse_worlds
@@ -237,7 +238,7 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
     limiter = access.RateLimiter(
         runtime.settings.access.command_rate, runtime.settings.access.command_burst
     )
-    metrics = runtime.metrics
+    metrics, share = runtime.metrics, loop.share
     control = control.acting_for(grant.caller)  # each command checked for its worlds
     await ws.accept(subprotocol=grant.subprotocol)
 
@@ -270,7 +271,10 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
             else:
                 verdict = limiter.take()
                 if verdict == "ok":
+                    await turn(share)  # ticks first: this tick's command budget, else wait
+                    t0 = time.perf_counter()
                     reply, kind = ws_ops.handle_text(control, text, default_world, source)
+                    share.spent(time.perf_counter() - t0)
                     if reply.get("op") == "error":
                         metrics.command_rejected(source, kind)
                     elif reply.get("op") == "ack" and isinstance(reply.get("tick"), int):

@@ -15,7 +15,8 @@ from service.core.sim.types import Mode
 
 
 class SimSettings(BaseModel):
-    """The simulation (`--worlds`, `--scene`, `--mode`, `--control-hz`, `--physics-dt`)."""
+    """The simulation (`--worlds`, `--scene`, `--mode`, `--control-hz`, `--physics-dt`,
+    `--ticks-first`)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -29,6 +30,11 @@ class SimSettings(BaseModel):
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
     physics_dt: float = Field(
         DEFAULT_PHYSICS_DT, gt=0, le=0.01, description="approximate physics step [s]"
+    )
+    ticks_first: bool = Field(
+        True,
+        description="in real time, commands take only the time the ticks leave: when the "
+        "ticks run late, commands wait for a later tick (in order) rather than slow the worlds",
     )
 
     @model_validator(mode="after")
