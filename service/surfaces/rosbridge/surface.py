@@ -20,6 +20,7 @@ from pydantic import BaseModel, Field, StrictBool
 
 from service.core.access import policy as access
 from service.core.commands.fields import example_config, json_int
+from service.core.sim.command_share import turn
 from service.core.sim.worlds import world_list
 from service.core.surface import ServiceFacts, SurfaceContext
 from service.surfaces.ros import description
@@ -151,7 +152,10 @@ class RosbridgeSurface:
                     server.bad.report("binary_frame", "(socket)", "a binary frame was sent")
                     session.status("error", "send JSON as text frames (binary frames are not read)")
                 else:
+                    await turn(ctx.loop.share)  # ticks first: this tick's command budget
+                    t0 = time.perf_counter()
                     session.handle_text(text)
+                    ctx.loop.share.spent(time.perf_counter() - t0)
                     if session.over_rate:
                         await asyncio.sleep(0.2)  # let the writer send the refusal first
                         await ws.close(code=access.CLOSE_POLICY, reason="over the command rate")

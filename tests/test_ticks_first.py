@@ -1,0 +1,138 @@
+"""Ticks first under load: the command budget beside real-time ticks, and the refusal path.
+
+The budget's rule alone (service/core/sim/command_share.py), then a real server over real
+sockets: a client over its command rate gets error replies naming the limit, counted in
+/metrics, while another client's commands are acked in order, its final target the sum of
+what was acked. Speed itself is measured in `armfleet bench --section 31`, not here.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+
+import httpx
+import pytest
+from conftest import running_server
+from websockets.sync.client import connect
+
+from service.core.sim import command_share
+from service.core.sim.command_share import FLOOR_SHARE, CommandShare, turn
+
+DT = 1 / 60
+
+
+def test_late_ticks_shrink_the_budget_to_the_floor_and_on_time_ticks_grow_it_back():
+    share = CommandShare(DT)
+    assert share.budget_s == pytest.approx(DT)
+    for _ in range(40):
+        share.ticked(late_s=DT)  # a whole tick late
+    assert share.budget_s == pytest.approx(FLOOR_SHARE * DT)
+    assert share.late_ticks == 40
+    share.ticked(late_s=0.1 * DT)  # on time (jitter under half a tick)
+    assert share.budget_s > FLOOR_SHARE * DT and share.late_ticks == 40
+    for _ in range(100):
+        share.ticked(late_s=0.0)
+    assert share.budget_s == pytest.approx(DT)
+
+
+def test_a_spent_budget_waits_for_the_next_tick_only_in_real_time():
+    share = CommandShare(DT)
+    assert share.wait_s() == 0  # not real time yet: nothing waits
+    share.set_active(True)
+    share.ticked(late_s=DT)  # budget halved, a new tick
+    assert share.wait_s() == 0
+    share.spent(share.budget_s)
+    wait = share.wait_s()
+    assert 0 < wait <= DT
+    share.ticked(late_s=0.0)  # the next tick: a fresh budget
+    assert share.wait_s() == 0
+    share.spent(10 * DT)
+    assert share.wait_s() > 0
+    share.set_active(False)  # paused or fast: commands never wait for ticks
+    assert share.wait_s() == 0
+    share.set_active(True)
+    share.enabled = False  # --no-ticks-first
+    assert share.wait_s() == 0
+
+
+def test_a_command_never_waits_forever_when_ticks_stop(monkeypatch):
+    monkeypatch.setattr(command_share, "MAX_WAIT_S", 0.05)
+    share = CommandShare(DT)
+    share.set_active(True)
+    share.ticked(0.0)
+    share.wait_s()
+    share.spent(DT)  # budget used, and no tick will come
+    asyncio.run(turn(share))
+    assert share.waits == 1 and share.waited_s >= 0.05
+
+
+# --------------------------------------------------------------------------- a real server
+
+RATE, BURST = 10, 4
+
+
+@pytest.fixture(scope="module")
+def limited(tmp_path_factory):
+    extra = ("--engine", "mujoco", "--command-rate", str(RATE), "--command-burst", str(BURST))
+    with running_server(tmp_path_factory.mktemp("ticks_first"), worlds=2, extra=extra) as srv:
+        yield srv
+
+
+def _press(ws, msg_id, delta=0.01) -> None:
+    ws.send(json.dumps({"op": "increment", "joint": "elbow_joint", "delta": delta, "id": msg_id}))
+
+
+def _replies(ws, n: int) -> list[dict]:
+    out: list[dict] = []
+    while len(out) < n:
+        msg = json.loads(ws.recv(timeout=10))
+        if msg["op"] in ("ack", "error"):
+            out.append(msg)
+    return out
+
+
+def _refused(url: str) -> float:
+    text = httpx.get(f"{url}/metrics").text
+    total = 0.0
+    for line in text.splitlines():
+        series = line.startswith("armfleet_commands_total{") and 'source="ws"' in line
+        if series and 'result="refused"' in line:
+            total += float(line.rpartition(" ")[2])
+    return total
+
+
+def test_a_client_over_its_rate_is_refused_by_name_counted_and_alone(limited):
+    before = _refused(limited.url)
+    elbow = [j["name"] for j in httpx.get(f"{limited.url}/v1/info").json()["joints"]].index(
+        "elbow_joint"
+    )
+    start = httpx.get(f"{limited.url}/v1/worlds/1/state").json()["target"][elbow]
+    with (
+        connect(f"{limited.ws_url}/v1/ws/worlds/0?rate=1") as greedy,
+        connect(f"{limited.ws_url}/v1/ws/worlds/1?rate=1") as calm,
+    ):
+        for i in range(2 * BURST):  # at once: the burst, then over the rate
+            _press(greedy, f"g{i}")
+        greedy_replies = _replies(greedy, 2 * BURST)
+        calm_replies = []
+        for i in range(BURST):  # within its own rate: never refused for the other's sake
+            _press(calm, f"c{i}")
+            calm_replies += _replies(calm, 1)
+            time.sleep(1.5 / RATE)
+    ids = [r["id"] for r in greedy_replies]
+    assert ids == [f"g{i}" for i in range(2 * BURST)]  # one reply each, in the order sent
+    acked = [r for r in greedy_replies if r["op"] == "ack"]
+    errors = [r for r in greedy_replies if r["op"] == "error"]
+    assert [r["id"] for r in acked] == [f"g{i}" for i in range(len(acked))]  # a prefix
+    assert len(acked) >= BURST and errors
+    for r in errors:
+        assert r["detail"] == f"rate: over {RATE:g} commands/s (bursts of {BURST}); slow down"
+    assert _refused(limited.url) - before == len(errors)
+    assert [r["op"] for r in calm_replies] == ["ack"] * BURST
+    assert [r["id"] for r in calm_replies] == [f"c{i}" for i in range(BURST)]
+    ticks = [r["tick"] for r in calm_replies]
+    assert ticks == sorted(ticks)
+    end = httpx.get(f"{limited.url}/v1/worlds/1/state").json()["target"][elbow]
+    assert end == pytest.approx(start + 0.01 * BURST, abs=1e-9)
