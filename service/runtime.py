@@ -18,7 +18,8 @@ import orjson
 from service.core.access.callers import Gate
 from service.core.access.lease_metrics import LeaseCollector
 from service.core.access.leases import LeaseBook
-from service.core.access.policy import ClientSlots, RateLimiter
+from service.core.access.policy import ClientSlots
+from service.core.access.rates import RateLimiter
 from service.core.cameras.feed import CameraFeed
 from service.core.commands.control import Accepted, Control
 from service.core.errors import ArmfleetError, Conflict, NotFound

@@ -147,7 +147,7 @@ class _Always:
 
 def test_a_lease_has_one_rate_limit_over_all_its_connections() -> None:
     from service.core.access.callers import OverRate
-    from service.core.access.policy import RateLimiter
+    from service.core.access.rates import RateLimiter
 
     b, _ = book(2)
     lease, _ = b.grant(count=1, ttl_s=60)

@@ -71,6 +71,7 @@ def test_a_command_never_waits_forever_when_ticks_stop(monkeypatch):
 # --------------------------------------------------------------------------- a real server
 
 RATE, BURST = 10, 4
+LIMIT = f"rate: over {RATE:g} commands/s (bursts of {BURST}); slow down"  # what a refusal says
 
 
 @pytest.fixture(scope="module")
@@ -93,11 +94,11 @@ def _replies(ws, n: int) -> list[dict]:
     return out
 
 
-def _refused(url: str) -> float:
+def _refused(url: str, source: str = "ws") -> float:
     text = httpx.get(f"{url}/metrics").text
     total = 0.0
     for line in text.splitlines():
-        series = line.startswith("armfleet_commands_total{") and 'source="ws"' in line
+        series = line.startswith("armfleet_commands_total{") and f'source="{source}"' in line
         if series and 'result="refused"' in line:
             total += float(line.rpartition(" ")[2])
     return total
@@ -128,7 +129,7 @@ def test_a_client_over_its_rate_is_refused_by_name_counted_and_alone(limited):
     assert [r["id"] for r in acked] == [f"g{i}" for i in range(len(acked))]  # a prefix
     assert len(acked) >= BURST and errors
     for r in errors:
-        assert r["detail"] == f"rate: over {RATE:g} commands/s (bursts of {BURST}); slow down"
+        assert r["detail"] == LIMIT
     assert _refused(limited.url) - before == len(errors)
     assert [r["op"] for r in calm_replies] == ["ack"] * BURST
     assert [r["id"] for r in calm_replies] == [f"c{i}" for i in range(BURST)]
@@ -136,3 +137,22 @@ def test_a_client_over_its_rate_is_refused_by_name_counted_and_alone(limited):
     assert ticks == sorted(ticks)
     end = httpx.get(f"{limited.url}/v1/worlds/1/state").json()["target"][elbow]
     assert end == pytest.approx(start + 0.01 * BURST, abs=1e-9)
+
+
+def test_an_http_connection_over_its_rate_gets_429_naming_the_limit(limited):
+    before = _refused(limited.url, "http")
+    press = {"joint": "elbow_joint", "delta": 0.01}
+    with httpx.Client(base_url=limited.url, timeout=10) as greedy:  # one keep-alive connection
+        answers = [greedy.post("/v1/worlds/0/increments", json=press) for _ in range(2 * BURST)]
+        with httpx.Client(base_url=limited.url, timeout=10) as calm:  # another connection
+            assert calm.post("/v1/worlds/1/increments", json=press).status_code == 200
+    codes = [r.status_code for r in answers]
+    first = codes.index(429)
+    assert first >= BURST and set(codes[:first]) == {200}  # its burst, then refused
+    ticks = [r.json()["tick"] for r in answers[:first]]
+    assert ticks == sorted(ticks)
+    refused = [r for r in answers if r.status_code == 429]
+    for r in refused:
+        assert r.json()["detail"] == LIMIT
+        assert r.headers["retry-after"] == "1"
+    assert _refused(limited.url, "http") - before == len(refused)

@@ -19,6 +19,7 @@ from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
 from service.api import ws_ops
 from service.core.access import policy as access
+from service.core.access import rates
 from service.core.commands.base import BROWSER, WS
 from service.core.commands.control import Control
 from service.core.errors import ArmfleetError, BadCommand
@@ -235,7 +236,7 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
         return await _refuse(ws, _CLOSE_POLICY, str(exc))
     default_world, source = stream.default_world, stream.source
     grant = _grant(ws)
-    limiter = access.RateLimiter(
+    limiter = rates.RateLimiter(
         runtime.settings.access.command_rate, runtime.settings.access.command_burst
     )
     metrics, share = runtime.metrics, loop.share
