@@ -5,11 +5,12 @@ Why both in one section: the box is shared and its load moves; the two runs foll
 and report their load beside their figures, so the ratio says what ticks-first changes. The
 clients run in this process, the service in its own (`common.served`), on the same machine.
 
-Per run: the ticks' real-time factor over the whole load window (ticks stepped / wall time, and
-the lowest 1 s sample), commands sent and acked, replies lost, duplicated or out of order (the
-soak's checks, final targets included), refusals (client side, and `/metrics`'
-`armfleet_commands_total{result="refused"}`), commands that waited for a later tick
-(`armfleet_command_waits`), ack latency. ARMFLEET_TICKS_FIRST_DURATION sets the seconds of
+Per run: the ticks' real-time factor with no commands first (`IDLE_S`: what the box gives the
+ticks then), then over the whole load window (ticks stepped / wall time) and its lowest 1 s
+sample; commands sent and acked; replies lost, duplicated or out of order (the soak's checks,
+final targets included); refusals (client side, and `/metrics`'
+`armfleet_commands_total{result="refused"}`); commands that waited for a later tick
+(`armfleet_command_waits`); ack latency. ARMFLEET_TICKS_FIRST_DURATION sets the seconds of
 load per run (default 30; 20 with --quick).
 """
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import time
 from typing import Any
 
 import httpx
@@ -26,6 +28,7 @@ from bench.registry import Context, Result, section
 
 DURATION_ENV = "ARMFLEET_TICKS_FIRST_DURATION"
 CLIENTS, WORLDS, RATE = 200, 64, 5.0  # 1,000 commands/s in all
+IDLE_S = 8.0  # the ticks' pace with no commands, measured first on the same service
 
 
 def metric(text: str, name: str, **labels: str) -> float:
@@ -50,6 +53,10 @@ def one_run(ticks_first: bool, duration: float, device: str, say: Any) -> dict[s
     with common.served(WORLDS, "realtime", device, env=env) as srv:
         load = os.getloadavg()[0]
         say(f"  ticks-first {'on' if ticks_first else 'off'}: load {load:.2f}, {duration:g} s")
+        # The same service with no commands first: what the box gives the ticks right now.
+        before = srv.get_info()
+        time.sleep(IDLE_S)
+        idle = common.rtf_between(before, srv.get_info())
         result = asyncio.run(
             soak(srv.url, CLIENTS, WORLDS, RATE, duration, srv.server.process.pid, warmup=3.0)
         )
@@ -58,7 +65,9 @@ def one_run(ticks_first: bool, duration: float, device: str, say: Any) -> dict[s
         "ticks_first": ticks_first,
         "load_1m_at_start": round(load, 2),
         "load_1m_at_end": round(os.getloadavg()[0], 2),
+        "rtf_idle": round(idle, 3),
         "rtf": result.rtf_window,
+        "rtf_of_idle": None if not result.rtf_window else round(result.rtf_window / idle, 3),
         "rtf_min": result.rtf_min,
         "sent": result.commands_sent,
         "acks": result.acks,
@@ -80,7 +89,9 @@ def _row(name: str, r: dict[str, Any]) -> dict[str, Any]:
     return {
         "run": name,
         "load 1m": f"{r['load_1m_at_start']:.1f}→{r['load_1m_at_end']:.1f}",
+        "RTF idle": r["rtf_idle"],
         "RTF": r["rtf"],
+        "RTF/idle": r["rtf_of_idle"],
         "RTF min 1 s": r["rtf_min"],
         "sent": r["sent"],
         "acked": r["acks"],
@@ -122,6 +133,7 @@ def ticks_first_section(ctx: Context) -> Result:
             {
                 "run": "on / off",
                 "RTF": _ratio(on["rtf"], off["rtf"]),
+                "RTF/idle": _ratio(on["rtf_of_idle"], off["rtf_of_idle"]),
                 "RTF min 1 s": _ratio(on["rtf_min"], off["rtf_min"]),
                 "acked/s": _ratio(on["accepted_per_s"], off["accepted_per_s"]),
             }
@@ -131,7 +143,9 @@ def ticks_first_section(ctx: Context) -> Result:
         f"{ctx.device} default; load 1m is the box's load average at the run's start→end "
         "(a shared box: read each RTF beside it)",
         "RTF: ticks stepped over the load window / its wall time; the target is ≥ 0.95 with "
-        "every accepted command acked in order (lost/dup/reordered 0/0/0)",
+        "every accepted command acked in order (lost/dup/reordered 0/0/0). RTF idle: the same "
+        f"service's first {IDLE_S:g} s with no commands; RTF/idle: what the commands cost the "
+        "ticks, apart from what the box's other load costs them",
     ]
     return Result(rows, data={"runs": runs, "errors": errors}, notes=notes)
 
