@@ -11,22 +11,27 @@ sample; commands sent and acked; replies lost, duplicated or out of order (the s
 final targets included); refusals (client side, and `/metrics`'
 `armfleet_commands_total{result="refused"}`); commands that waited for a later tick
 (`armfleet_command_waits`); ack latency. ARMFLEET_TICKS_FIRST_DURATION sets the seconds of
-load per run (default 30; 20 with --quick).
+load per run (default 30; 20 with --quick). ARMFLEET_BENCH_AGAINST=<revision> adds a first run
+of that revision's tree (checked out in a temporary worktree), e.g. the tree before ticks-first.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import time
+from pathlib import Path
 from typing import Any
 
 import httpx
 
 from bench import common
+from bench.code_vs import checkout
 from bench.registry import Context, Result, section
 
 DURATION_ENV = "ARMFLEET_TICKS_FIRST_DURATION"
+AGAINST_ENV = "ARMFLEET_BENCH_AGAINST"  # a revision before ticks-first, served as a third run
 CLIENTS, WORLDS, RATE = 200, 64, 5.0  # 1,000 commands/s in all
 IDLE_S = 8.0  # the ticks' pace with no commands, measured first on the same service
 
@@ -45,14 +50,17 @@ def metric(text: str, name: str, **labels: str) -> float:
     return total
 
 
-def one_run(ticks_first: bool, duration: float, device: str, say: Any) -> dict[str, Any]:
-    """The load against a fresh service with ticks-first on or off."""
+def one_run(
+    ticks_first: bool | None, duration: float, device: str, say: Any, cwd: Path | None = None
+) -> dict[str, Any]:
+    """The load against a fresh service with ticks-first on or off (None: a tree without it,
+    served from `cwd`)."""
     from bench.soak import soak
 
-    env = {"ARMFLEET_TICKS_FIRST": "true" if ticks_first else "false"}
-    with common.served(WORLDS, "realtime", device, env=env) as srv:
+    env = {} if ticks_first is None else {"ARMFLEET_TICKS_FIRST": str(ticks_first).lower()}
+    with common.served(WORLDS, "realtime", device, env=env, cwd=cwd) as srv:
         load = os.getloadavg()[0]
-        say(f"  ticks-first {'on' if ticks_first else 'off'}: load {load:.2f}, {duration:g} s")
+        say(f"  ticks-first {ticks_first}: load {load:.2f}, {duration:g} s")
         # The same service with no commands first: what the box gives the ticks right now.
         before = srv.get_info()
         time.sleep(IDLE_S)
@@ -118,10 +126,14 @@ def ticks_first_section(ctx: Context) -> Result:
     duration = float(os.environ.get(DURATION_ENV) or ctx.pick(30.0, 20.0))
     runs: dict[str, dict[str, Any]] = {}
     errors: dict[str, str] = {}
-    for name, on in (("off", False), ("on", True)):
+    against = os.environ.get(AGAINST_ENV)
+    plan: list[tuple[str, bool | None]] = [("off", False), ("on", True)]
+    for name, on in [(f"at {against}", None)] * bool(against) + plan:
         try:
-            runs[name] = one_run(on, duration, ctx.device, ctx.say)
-        except Exception as exc:  # one failed run still reports the other
+            with contextlib.ExitStack() as stack:
+                cwd = stack.enter_context(checkout(against)) if on is None and against else None
+                runs[name] = one_run(on, duration, ctx.device, ctx.say, cwd)
+        except Exception as exc:  # one failed run still reports the others
             errors[name] = f"{type(exc).__name__}: {exc}"
             continue
         if runs[name]["problems"]:
