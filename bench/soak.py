@@ -62,7 +62,7 @@ class SoakResult:
     commands_sent: int
     acks: int
     errors: int
-    refused: int  # of the errors: refusals over the command rate ("rate: ..."), not lost
+    refused: int  # of the errors: refusals naming a limit ("rate: ...", "busy: ..."), not lost
     missing: int
     duplicates: int
     out_of_order: int
@@ -236,7 +236,7 @@ def _judge(
             seen.add(rid)
             if r.get("op") == "error":
                 errors += 1
-                refused += str(r.get("detail", "")).startswith("rate:")
+                refused += str(r.get("detail", "")).startswith(("rate:", "busy:"))
                 continue
             acks += 1
             if r.get("clamped"):
@@ -260,7 +260,7 @@ def _judge(
     growth = None if rss_before is None or rss_after is None else rss_after - rss_before
     sent = sum(len(g.sent) for g in logs)
     for what, n in (
-        ("errors (other than refusals over the command rate)", errors - refused),
+        ("errors (other than refusals naming a limit)", errors - refused),
         ("commands without a reply", missing),
         ("duplicate replies", duplicates),
         ("clients with replies out of order", out_of_order),

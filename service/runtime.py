@@ -142,6 +142,11 @@ class Runtime:
             lambda: share("waits"),
         )
         m.counter_level(
+            "armfleet_commands_busy",
+            "ticks first: commands refused for finding no turn within --command-wait-s",
+            lambda: share("busy"),
+        )
+        m.counter_level(
             "armfleet_late_ticks",
             "real-time ticks that started over half a tick late",
             lambda: share("late_ticks"),
@@ -220,7 +225,7 @@ class Runtime:
             batch.close()
             return
         loop = SimLoop(batch, s.sim.mode)
-        loop.share.enabled = s.sim.ticks_first
+        loop.share.enabled, loop.share.max_wait_s = s.sim.ticks_first, s.sim.command_wait_s
         loop.randomizations.replace(self._restored_randomized)
         self.control = Control(loop)
         # Packed JSON frames say where each world's trajectory is: the manager's briefs.

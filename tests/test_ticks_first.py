@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import threading
 import time
 
 import httpx
@@ -23,49 +24,98 @@ from service.core.sim.command_share import FLOOR_SHARE, CommandShare, turn
 DT = 1 / 60
 
 
-def test_late_ticks_shrink_the_budget_to_the_floor_and_on_time_ticks_grow_it_back():
+class Clock:
+    """The share's clock, moved by hand: the budget's rule without the box's timing."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+
+@pytest.fixture
+def clock(monkeypatch) -> Clock:
+    fake = Clock()
+    monkeypatch.setattr(command_share, "time", fake)
+    return fake
+
+
+def test_late_ticks_shrink_the_budget_to_the_floor_and_on_time_ticks_grow_it_back(clock):
     share = CommandShare(DT)
     assert share.budget_s == pytest.approx(DT)
     for _ in range(40):
+        clock.now += DT
         share.ticked(late_s=DT)  # a whole tick late
     assert share.budget_s == pytest.approx(FLOOR_SHARE * DT)
     assert share.late_ticks == 40
+    clock.now += DT
     share.ticked(late_s=0.1 * DT)  # on time (jitter under half a tick)
     assert share.budget_s > FLOOR_SHARE * DT and share.late_ticks == 40
     for _ in range(100):
+        clock.now += DT
         share.ticked(late_s=0.0)
     assert share.budget_s == pytest.approx(DT)
 
 
-def test_a_spent_budget_waits_for_the_next_tick_only_in_real_time():
+def test_slow_ticks_leave_commands_a_share_of_the_wall_time(clock):
+    """Ticks late for reasons of their own (a box shared with others): commands still move."""
     share = CommandShare(DT)
-    assert share.wait_s() == 0  # not real time yet: nothing waits
+    for _ in range(40):
+        clock.now += 0.2  # a tick every 0.2 s instead of every 1/60 s
+        share.ticked(late_s=0.1)
+    assert share.budget_s == pytest.approx(FLOOR_SHARE * 0.2)
+
+
+def test_a_spent_budget_waits_for_the_next_tick_only_in_real_time(clock):
+    share = CommandShare(DT)
+    assert share.may_run()  # not real time yet: nothing waits
     share.set_active(True)
+    clock.now += DT
     share.ticked(late_s=DT)  # budget halved, a new tick
-    assert share.wait_s() == 0
+    assert share.may_run()
     share.spent(share.budget_s)
-    wait = share.wait_s()
-    assert 0 < wait <= DT
+    assert not share.may_run()
+    clock.now += DT
     share.ticked(late_s=0.0)  # the next tick: a fresh budget
-    assert share.wait_s() == 0
+    assert share.may_run()
     share.spent(10 * DT)
-    assert share.wait_s() > 0
+    assert not share.may_run()
     share.set_active(False)  # paused or fast: commands never wait for ticks
-    assert share.wait_s() == 0
+    assert share.may_run()
     share.set_active(True)
     share.enabled = False  # --no-ticks-first
-    assert share.wait_s() == 0
+    assert share.may_run()
 
 
-def test_a_command_never_waits_forever_when_ticks_stop(monkeypatch):
-    monkeypatch.setattr(command_share, "MAX_WAIT_S", 0.05)
-    share = CommandShare(DT)
+def _spent_share(max_wait_s: float) -> CommandShare:
+    share = CommandShare(DT, max_wait_s=max_wait_s)
     share.set_active(True)
     share.ticked(0.0)
-    share.wait_s()
-    share.spent(DT)  # budget used, and no tick will come
-    asyncio.run(turn(share))
-    assert share.waits == 1 and share.waited_s >= 0.05
+    share.may_run()
+    share.spent(DT)  # this tick's budget used
+    return share
+
+
+def test_a_waiting_command_runs_at_the_next_tick():
+    share = _spent_share(max_wait_s=30.0)
+
+    async def main() -> bool:
+        waiting = asyncio.ensure_future(turn(share))
+        await asyncio.sleep(0)  # it waits on the tick's future
+        assert not waiting.done()
+        threading.Thread(target=share.ticked, args=(0.0,)).start()  # the sim thread's tick
+        return await waiting
+
+    assert asyncio.run(main()) is True
+    assert share.waits == 1 and share.busy == 0
+
+
+def test_a_command_with_no_turn_within_the_longest_wait_is_refused_as_busy():
+    share = _spent_share(max_wait_s=0.05)  # and no tick comes
+    assert asyncio.run(turn(share)) is False
+    assert share.busy == 1
+    assert "busy: no turn within 0.05 s beside the ticks (--command-wait-s)" in share.busy_detail
 
 
 # --------------------------------------------------------------------------- a real server

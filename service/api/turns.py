@@ -4,12 +4,15 @@ Why a middleware: every command route runs on the event loop like a socket's com
 it takes the same turns (service/core/sim/command_share.py) before it runs, and is charged its
 time on the event loop after. One place covers the routes added later, as the access check does.
 Reads never wait: they take no tick's budget (a read that waits for a tick waits for it anyway).
+A command that finds no turn within the longest wait is answered 503 naming that limit, with
+`Retry-After` (counted as refused in /metrics).
 """
 
 from __future__ import annotations
 
 import time
 
+from starlette.responses import JSONResponse
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.core.access.policy import is_command
@@ -29,7 +32,11 @@ class TakeTurns:
         if loop is None:
             return await self.app(scope, receive, send)
         share = loop.share
-        await turn(share)
+        if not await turn(share):  # no turn within the longest wait: busy, try later
+            busy = JSONResponse(
+                {"detail": share.busy_detail}, status_code=503, headers={"Retry-After": "1"}
+            )
+            return await busy(scope, receive, send)
         t0 = time.perf_counter()
         try:
             await self.app(scope, receive, send)

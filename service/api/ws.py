@@ -271,8 +271,10 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
                 metrics.command_rejected(source, "unknown", "refused")
             else:
                 verdict = limiter.take()
-                if verdict == "ok":
-                    await turn(share)  # ticks first: this tick's command budget, else wait
+                if verdict == "ok" and not await turn(share):  # ticks first: wait, or busy
+                    reply = wire.error_frame(wire.read_id(text), share.busy_detail)
+                    metrics.command_rejected(source, ws_ops.kind_of(text), "refused")
+                elif verdict == "ok":
                     t0 = time.perf_counter()
                     reply, kind = ws_ops.handle_text(control, text, default_world, source)
                     share.spent(time.perf_counter() - t0)

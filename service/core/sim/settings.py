@@ -16,7 +16,7 @@ from service.core.sim.types import Mode
 
 class SimSettings(BaseModel):
     """The simulation (`--worlds`, `--scene`, `--mode`, `--control-hz`, `--physics-dt`,
-    `--ticks-first`)."""
+    `--ticks-first`, `--command-wait-s`)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -35,6 +35,13 @@ class SimSettings(BaseModel):
         True,
         description="in real time, commands take only the time the ticks leave: when the "
         "ticks run late, commands wait for a later tick (in order) rather than slow the worlds",
+    )
+    command_wait_s: float = Field(
+        1.0,
+        gt=0,
+        le=60,
+        description="ticks first: a command that finds no turn beside the ticks within this "
+        "many seconds is refused as busy (WebSocket error, HTTP 503), not run over their time",
     )
 
     @model_validator(mode="after")

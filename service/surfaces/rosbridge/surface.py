@@ -152,7 +152,11 @@ class RosbridgeSurface:
                     server.bad.report("binary_frame", "(socket)", "a binary frame was sent")
                     session.status("error", "send JSON as text frames (binary frames are not read)")
                 else:
-                    await turn(ctx.loop.share)  # ticks first: this tick's command budget
+                    if not await turn(ctx.loop.share):  # ticks first: wait, or busy
+                        busy = ctx.loop.share.busy_detail
+                        server.bad.report("refused", "(socket)", busy)
+                        session.status("error", busy)
+                        continue
                     t0 = time.perf_counter()
                     session.handle_text(text)
                     ctx.loop.share.spent(time.perf_counter() - t0)
