@@ -255,6 +255,7 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
     hub.add(sub)
     sub.offer(first, time.monotonic())  # the current state at once, then the stream
     writer = asyncio.create_task(_write(ws, hub, sub))
+    busy_until = 0.0  # refused as busy: until then, what cannot run at once is refused at once
     try:
         while True:
             message = await ws.receive()
@@ -271,7 +272,8 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
                 metrics.command_rejected(source, "unknown", "refused")
             else:
                 verdict = limiter.take()
-                if verdict == "ok" and not await turn(share):  # ticks first: wait, or busy
+                if verdict == "ok" and not await turn(share, time.monotonic() > busy_until):
+                    busy_until = time.monotonic() + share.max_wait_s  # ticks first: busy
                     reply = wire.error_frame(wire.read_id(text), share.busy_detail)
                     metrics.command_rejected(source, ws_ops.kind_of(text), "refused")
                 elif verdict == "ok":

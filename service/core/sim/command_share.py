@@ -125,11 +125,17 @@ def _resolve(fut: asyncio.Future[None]) -> None:
         fut.set_result(None)
 
 
-async def turn(share: CommandShare) -> bool:
+async def turn(share: CommandShare, wait: bool = True) -> bool:
     """Wait (on the event loop) until `share` lets a command run: True; False when no turn came
-    within `share.max_wait_s` (refuse the command with `share.busy_detail`)."""
+    within `share.max_wait_s` (refuse the command with `share.busy_detail`). `wait` False: no
+    waiting, False at once unless the command may run now (a connection just refused as busy
+    has its queued commands refused at once, so that its backlog, and the pings queued behind
+    it, are not held `max_wait_s` each)."""
     if share.may_run():
         return True
+    if not wait:
+        share.busy += 1
+        return False
     share.waits += 1
     deadline = time.monotonic() + share.max_wait_s
     while time.monotonic() < deadline:

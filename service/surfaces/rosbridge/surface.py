@@ -140,6 +140,7 @@ class RosbridgeSurface:
         session = Session(ws, server, ctx)
         server.clients += 1
         writer = asyncio.create_task(session.write())
+        busy_until = 0.0  # refused as busy: until then, what cannot run at once is refused
         try:
             while True:
                 message = await ws.receive()
@@ -152,8 +153,9 @@ class RosbridgeSurface:
                     server.bad.report("binary_frame", "(socket)", "a binary frame was sent")
                     session.status("error", "send JSON as text frames (binary frames are not read)")
                 else:
-                    if not await turn(ctx.loop.share):  # ticks first: wait, or busy
-                        busy = ctx.loop.share.busy_detail
+                    if not await turn(ctx.loop.share, time.monotonic() > busy_until):
+                        busy_until = time.monotonic() + ctx.loop.share.max_wait_s
+                        busy = ctx.loop.share.busy_detail  # ticks first: refused as busy
                         server.bad.report("refused", "(socket)", busy)
                         session.status("error", busy)
                         continue
