@@ -32,7 +32,7 @@ ENGINES = ("mujoco", "warp")
 
 
 @contextlib.contextmanager
-def _checkout(rev: str) -> Iterator[Path]:
+def checkout(rev: str) -> Iterator[Path]:
     """A detached worktree of `rev`, removed afterwards."""
     folder = Path(tempfile.mkdtemp(prefix="armfleet-against-"))
     subprocess.run(
@@ -103,7 +103,7 @@ def code_vs(ctx: Context) -> Result:
     ).stdout.strip()
     results: dict[str, Any] = {}
     errors: dict[str, str] = {}
-    with _checkout(rev) as other:
+    with checkout(rev) as other:
         for n in sizes:
             for engine in ENGINES:
                 key = f"{n}/{engine}"

@@ -62,6 +62,7 @@ class SoakResult:
     commands_sent: int
     acks: int
     errors: int
+    refused: int  # of the errors: refusals naming a limit ("rate: ...", "busy: ..."), not lost
     missing: int
     duplicates: int
     out_of_order: int
@@ -76,6 +77,7 @@ class SoakResult:
     rtf_min: float | None
     commands_per_s: float
     problems: list[str]
+    rtf_window: float | None = None  # ticks over the whole load window / its wall time
 
     @property
     def ok(self) -> bool:
@@ -169,12 +171,15 @@ async def soak(
         rtfs: list[float] = []
         t0 = time.monotonic()
         stop_at = t0 + duration
+        # (time, /v1/info) when the clients start and at the last sample: the window's RTF
+        window = [(t0, (await http.get("/v1/info")).json())]
 
         async def sample_rtf() -> None:
             while time.monotonic() < stop_at:
                 await asyncio.sleep(2.0)
                 with_info = (await http.get("/v1/info")).json()
                 rtfs.append(float(with_info["realtime_factor"]))
+                window[1:] = [(time.monotonic(), with_info)]
                 done = time.monotonic() - t0
                 if int(done) % 60 < 2:
                     sent = sum(len(g.sent) for g in logs)
@@ -190,10 +195,13 @@ async def soak(
         elapsed = time.monotonic() - t0
         states = (await http.get("/v1/worlds/state", params={"worlds": f"0-{worlds - 1}"})).json()
         rss_after = rss_mb(server_pid)
-    return _judge(
+    result = _judge(
         logs, outcomes, states, home, clients, worlds, rate, elapsed, rss_before, rss_after, rtfs,
         max_rss_growth_mb,
     )  # fmt: skip
+    if len(window) == 2:
+        result.rtf_window = round(common.rtf_between(window[0], window[1]), 3)
+    return result
 
 
 def _judge(
@@ -215,7 +223,7 @@ def _judge(
         if isinstance(out, BaseException):
             problems.append(f"client {i}: {type(out).__name__}: {out}")
     acked = [[0] * ARM_JOINTS for _ in range(worlds)]
-    acks = errors = missing = duplicates = out_of_order = clamped = 0
+    acks = errors = refused = missing = duplicates = out_of_order = clamped = 0
     for i, log in enumerate(logs):
         if log.closed:
             problems.append(f"client {i}: {log.closed}")
@@ -228,6 +236,7 @@ def _judge(
             seen.add(rid)
             if r.get("op") == "error":
                 errors += 1
+                refused += str(r.get("detail", "")).startswith(("rate:", "busy:"))
                 continue
             acks += 1
             if r.get("clamped"):
@@ -251,7 +260,7 @@ def _judge(
     growth = None if rss_before is None or rss_after is None else rss_after - rss_before
     sent = sum(len(g.sent) for g in logs)
     for what, n in (
-        ("errors", errors),
+        ("errors (other than refusals naming a limit)", errors - refused),
         ("commands without a reply", missing),
         ("duplicate replies", duplicates),
         ("clients with replies out of order", out_of_order),
@@ -270,6 +279,7 @@ def _judge(
         commands_sent=sent,
         acks=acks,
         errors=errors,
+        refused=refused,
         missing=missing,
         duplicates=duplicates,
         out_of_order=out_of_order,

@@ -33,6 +33,7 @@ from service.api import (
     ws,
     ws_bulk,
 )
+from service.api.turns import TakeTurns
 from service.core.access import policy as access
 from service.core.contract.replies import ANY, errors, fit_openapi
 from service.core.errors import ArmfleetError, BadCommand
@@ -171,6 +172,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.runtime = runtime
     app.add_middleware(BodySizeLimit, max_bytes=settings.server.max_body_bytes)
+    app.add_middleware(TakeTurns)  # ticks first: commands wait for the tick's budget
     # Added last = runs first: count refused commands, then check token, origin and slots.
     app.add_middleware(
         access.AccessMiddleware,

@@ -18,7 +18,8 @@ import orjson
 from service.core.access.callers import Gate
 from service.core.access.lease_metrics import LeaseCollector
 from service.core.access.leases import LeaseBook
-from service.core.access.policy import ClientSlots, RateLimiter
+from service.core.access.policy import ClientSlots
+from service.core.access.rates import RateLimiter
 from service.core.cameras.feed import CameraFeed
 from service.core.commands.control import Accepted, Control
 from service.core.errors import ArmfleetError, Conflict, NotFound
@@ -129,6 +130,27 @@ class Runtime:
             lambda: None if self.hub is None else self.hub.subscribers,
         )
         m.level("armfleet_clients", "clients being served now", lambda: self.slots.active)
+        share = lambda attr: None if self.loop is None else getattr(self.loop.share, attr)  # noqa: E731
+        m.level(
+            "armfleet_command_budget_seconds",
+            "ticks first: event-loop seconds commands may take per real-time tick now",
+            lambda: share("budget_s"),
+        )
+        m.counter_level(
+            "armfleet_command_waits",
+            "ticks first: commands that waited for a later tick's budget",
+            lambda: share("waits"),
+        )
+        m.counter_level(
+            "armfleet_commands_busy",
+            "ticks first: commands refused for finding no turn within --command-wait-s",
+            lambda: share("busy"),
+        )
+        m.counter_level(
+            "armfleet_late_ticks",
+            "real-time ticks that started over half a tick late",
+            lambda: share("late_ticks"),
+        )
         m.counter_level(
             "armfleet_frames_skipped",
             "state frames replaced by a newer one before a slow reader took them",
@@ -208,6 +230,7 @@ class Runtime:
             batch.close()
             return
         loop = SimLoop(batch, s.sim.mode)
+        loop.share.enabled, loop.share.max_wait_s = s.sim.ticks_first, s.sim.command_wait_s
         loop.randomizations.replace(self._restored_randomized)
         self.control = Control(loop)
         # Packed JSON frames say where each world's trajectory is: the manager's briefs.

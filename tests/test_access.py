@@ -14,6 +14,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from service.core.access import policy as access
+from service.core.access import rates
 from service.core.access.settings import AccessSettings
 
 TOKEN = "s3cret-token"
@@ -91,7 +92,7 @@ def test_websocket_from_a_foreign_origin_may_watch_but_not_command():
 
 
 def test_rate_limiter_refuses_over_the_rate_then_says_close():
-    lim = access.RateLimiter(rate=10, burst=3)
+    lim = rates.RateLimiter(rate=10, burst=3)
     t = 100.0
     assert [lim.take(t) for _ in range(3)] == ["ok"] * 3
     assert [lim.take(t) for _ in range(3)] == ["refuse"] * 3

@@ -146,7 +146,7 @@ class _Always:
 
 
 def test_a_lease_has_one_rate_limit_over_all_its_connections() -> None:
-    from service.core.access.policy import RateLimiter
+    from service.core.access.rates import RateLimiter
     from service.core.errors import OverRate
 
     b, _ = book(2)

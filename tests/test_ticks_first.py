@@ -1,83 +1,208 @@
-"""Ticks first: while the loop runs late in realtime, the camera streams' pictures give way.
+"""Ticks first under load: the command budget beside real-time ticks, and the refusal path.
 
-The loop says how far its realtime schedule is behind (`SimLoop.lag`), on a real engine held
-up by work on its own thread; a camera clock asks for no picture while the ticks are more than
-`pace.LATE_S` late (but one every `GIVE_WAY_S`), and counts the instants it gave way."""
+The budget's rule alone (service/core/sim/command_share.py), then a real server over real
+sockets: a client over its command rate gets error replies naming the limit, counted in
+/metrics, while another client's commands are acked in order, its final target the sum of
+what was acked. Speed itself is measured in `armfleet bench --section 31`, not here.
+"""
 
 from __future__ import annotations
 
 import asyncio
-import time
+import json
+import threading
 
-import numpy as np
+import httpx
+import pytest
+from conftest import running_server
+from websockets.sync.client import connect
 
-from service.core.cameras.clock import GIVE_WAY_S, CameraClock, Reader
-from service.core.sim.loop import SimLoop
-from service.core.sim.pace import LATE_S
-from service.core.sim.settings import SimSettings
-from service.core.sim.types import Mode
-from service.engines.choice import build_batch
-from service.engines.settings import EngineSettings
+from service.core.sim import command_share
+from service.core.sim.command_share import FLOOR_SHARE, CommandShare, turn
 
-
-def test_lag_says_how_far_realtime_is_behind_and_comes_back_to_zero() -> None:
-    batch = build_batch(EngineSettings(kind="mujoco", shards=1), SimSettings(worlds=2))
-    loop = SimLoop(batch, Mode.REALTIME)
-    loop.start()
-    try:
-        deadline = time.monotonic() + 5
-        while loop.late() and time.monotonic() < deadline:  # a loaded box may hold it up
-            time.sleep(0.01)
-        assert not loop.late()  # on time: behind by at most the tick in progress
-        held = loop.call(lambda _batch: time.sleep(0.15))  # the sim thread held up 9 ticks
-        time.sleep(0.1)
-        lag, late = loop.lag(), loop.late()  # read while it is held
-        held.result(timeout=10)
-        assert lag > LATE_S and late, lag  # behind by the ticks it could not step
-        deadline = time.monotonic() + 5
-        while loop.late() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert loop.lag() < LATE_S  # caught up: the missed ticks were made up
-        loop.set_mode(Mode.FAST)
-        assert loop.lag() == 0.0  # no schedule to be behind of
-    finally:
-        loop.stop()
-        batch.close()
+DT = 1 / 60
 
 
-class _Feed:
-    """What a clock reads of its camera feed: the ticks' lateness, and pictures on request
-    (the clock's own logic under test; the real feed is exercised by test_camera_stream)."""
+class Clock:
+    """The share's clock, moved by hand: the budget's rule without the box's timing."""
 
     def __init__(self) -> None:
-        self.late = True
-        self.asked: list[np.ndarray] = []
-        self.gave_way = 0
+        self.now = 100.0
 
-    def ticks_late(self) -> bool:
-        return self.late
-
-    async def shoot_async(self, worlds: np.ndarray, camera: str) -> object:
-        self.asked.append(worlds)
-        await asyncio.sleep(3600)  # never drawn: the test looks at what was asked
+    def monotonic(self) -> float:
+        return self.now
 
 
-def test_a_clock_asks_no_picture_while_the_ticks_are_late_but_one_a_second() -> None:
-    async def run() -> tuple[int, int, int, int]:
-        feed = _Feed()
-        clock = CameraClock(feed, "wrist", 100.0)  # type: ignore[arg-type]
-        clock.join(Reader(np.arange(4), pull=False))
-        await asyncio.sleep(0.2)  # ~20 instants, all while the ticks are late (< GIVE_WAY_S)
-        asked_late, gave_way = len(feed.asked), feed.gave_way
-        await asyncio.sleep(GIVE_WAY_S)  # still late: one picture when a second has passed
-        asked_floor = len(feed.asked)
-        feed.late = False
-        await asyncio.sleep(0.1)
-        clock.readers.clear()
-        await asyncio.sleep(0.05)
-        return asked_late, gave_way, asked_floor, len(feed.asked)
+@pytest.fixture
+def clock(monkeypatch) -> Clock:
+    fake = Clock()
+    monkeypatch.setattr(command_share, "time", fake)
+    return fake
 
-    asked_late, gave_way, asked_floor, asked = asyncio.run(run())
-    assert asked_late == 0 and gave_way >= 5, (asked_late, gave_way)
-    assert asked_floor == 1, asked_floor
-    assert asked > asked_floor  # on time again: pictures are asked (up to AHEAD in flight)
+
+def test_late_ticks_shrink_the_budget_to_the_floor_and_on_time_ticks_grow_it_back(clock):
+    share = CommandShare(DT)
+    assert share.budget_s == pytest.approx(DT)
+    for _ in range(40):
+        clock.now += DT
+        share.ticked(late_s=DT)  # a whole tick late
+    assert share.budget_s == pytest.approx(FLOOR_SHARE * DT)
+    assert share.late_ticks == 40
+    clock.now += DT
+    share.ticked(late_s=0.1 * DT)  # on time (jitter under half a tick)
+    assert share.budget_s > FLOOR_SHARE * DT and share.late_ticks == 40
+    for _ in range(100):
+        clock.now += DT
+        share.ticked(late_s=0.0)
+    assert share.budget_s == pytest.approx(DT)
+
+
+def test_slow_ticks_leave_commands_a_share_of_the_wall_time(clock):
+    """Ticks late for reasons of their own (a box shared with others): commands still move."""
+    share = CommandShare(DT)
+    for _ in range(40):
+        clock.now += 0.2  # a tick every 0.2 s instead of every 1/60 s
+        share.ticked(late_s=0.1)
+    assert share.budget_s == pytest.approx(FLOOR_SHARE * 0.2)
+
+
+def test_a_spent_budget_waits_for_the_next_tick_only_in_real_time(clock):
+    share = CommandShare(DT)
+    assert share.may_run()  # not real time yet: nothing waits
+    share.set_active(True)
+    clock.now += DT
+    share.ticked(late_s=DT)  # budget halved, a new tick
+    assert share.may_run()
+    share.spent(share.budget_s)
+    assert not share.may_run()
+    clock.now += DT
+    share.ticked(late_s=0.0)  # the next tick: a fresh budget
+    assert share.may_run()
+    share.spent(10 * DT)
+    assert not share.may_run()
+    share.set_active(False)  # paused or fast: commands never wait for ticks
+    assert share.may_run()
+    share.set_active(True)
+    share.enabled = False  # --no-ticks-first
+    assert share.may_run()
+
+
+def _spent_share(max_wait_s: float) -> CommandShare:
+    share = CommandShare(DT, max_wait_s=max_wait_s)
+    share.set_active(True)
+    share.ticked(0.0)
+    share.may_run()
+    share.spent(DT)  # this tick's budget used
+    return share
+
+
+def test_a_waiting_command_runs_at_the_next_tick():
+    share = _spent_share(max_wait_s=30.0)
+
+    async def main() -> bool:
+        waiting = asyncio.ensure_future(turn(share))
+        await asyncio.sleep(0)  # it waits on the tick's future
+        assert not waiting.done()
+        threading.Thread(target=share.ticked, args=(0.0,)).start()  # the sim thread's tick
+        return await waiting
+
+    assert asyncio.run(main()) is True
+    assert share.waits == 1 and share.busy == 0
+
+
+def test_a_command_with_no_turn_within_the_longest_wait_is_refused_as_busy():
+    share = _spent_share(max_wait_s=0.05)  # and no tick comes
+    assert asyncio.run(turn(share)) is False
+    assert share.busy == 1
+    assert "busy: no turn within 0.05 s beside the ticks (--command-wait-s)" in share.busy_detail
+    assert asyncio.run(turn(share, wait=False)) is False  # right after: refused at once
+    assert share.busy == 2 and share.waits == 1
+
+
+# --------------------------------------------------------------------------- a real server
+
+RATE, BURST = 0.1, 4  # a token every 10 s: what is sent at once beyond the burst is refused
+LIMIT = f"rate: over {RATE:g} commands/s (bursts of {BURST}); slow down"  # what a refusal says
+
+
+@pytest.fixture(scope="module")
+def limited(tmp_path_factory):
+    extra = ("--engine", "mujoco", "--command-rate", str(RATE), "--command-burst", str(BURST))
+    with running_server(tmp_path_factory.mktemp("ticks_first"), worlds=2, extra=extra) as srv:
+        yield srv
+
+
+def _press(ws, msg_id, delta=0.01) -> None:
+    ws.send(json.dumps({"op": "increment", "joint": "elbow_joint", "delta": delta, "id": msg_id}))
+
+
+def _replies(ws, n: int) -> list[dict]:
+    out: list[dict] = []
+    while len(out) < n:
+        msg = json.loads(ws.recv(timeout=10))
+        if msg["op"] in ("ack", "error"):
+            out.append(msg)
+    return out
+
+
+def _refused(url: str, source: str = "ws") -> float:
+    text = httpx.get(f"{url}/metrics").text
+    total = 0.0
+    for line in text.splitlines():
+        series = line.startswith("armfleet_commands_total{") and f'source="{source}"' in line
+        if series and 'result="refused"' in line:
+            total += float(line.rpartition(" ")[2])
+    return total
+
+
+def test_a_client_over_its_rate_is_refused_by_name_counted_and_alone(limited):
+    before = _refused(limited.url)
+    elbow = [j["name"] for j in httpx.get(f"{limited.url}/v1/info").json()["joints"]].index(
+        "elbow_joint"
+    )
+    start = httpx.get(f"{limited.url}/v1/worlds/1/state").json()["target"][elbow]
+    with (
+        connect(f"{limited.ws_url}/v1/ws/worlds/0?rate=1") as greedy,
+        connect(f"{limited.ws_url}/v1/ws/worlds/1?rate=1") as calm,
+    ):
+        for i in range(2 * BURST):  # at once: the burst, then over the rate
+            _press(greedy, f"g{i}")
+        greedy_replies = _replies(greedy, 2 * BURST)
+        calm_replies = []
+        for i in range(BURST):  # within its own limit: never refused for the other's sake
+            _press(calm, f"c{i}")
+            calm_replies += _replies(calm, 1)
+    ids = [r["id"] for r in greedy_replies]
+    assert ids == [f"g{i}" for i in range(2 * BURST)]  # one reply each, in the order sent
+    acked = [r for r in greedy_replies if r["op"] == "ack"]
+    errors = [r for r in greedy_replies if r["op"] == "error"]
+    assert [r["id"] for r in acked] == [f"g{i}" for i in range(len(acked))]  # a prefix
+    assert len(acked) >= BURST and errors
+    for r in errors:
+        assert r["detail"] == LIMIT
+    assert _refused(limited.url) - before == len(errors)
+    assert [r["op"] for r in calm_replies] == ["ack"] * BURST
+    assert [r["id"] for r in calm_replies] == [f"c{i}" for i in range(BURST)]
+    ticks = [r["tick"] for r in calm_replies]
+    assert ticks == sorted(ticks)
+    end = httpx.get(f"{limited.url}/v1/worlds/1/state").json()["target"][elbow]
+    assert end == pytest.approx(start + 0.01 * BURST, abs=1e-9)
+
+
+def test_an_http_connection_over_its_rate_gets_429_naming_the_limit(limited):
+    before = _refused(limited.url, "http")
+    press = {"joint": "elbow_joint", "delta": 0.01}
+    with httpx.Client(base_url=limited.url, timeout=10) as greedy:  # one keep-alive connection
+        answers = [greedy.post("/v1/worlds/0/increments", json=press) for _ in range(2 * BURST)]
+        with httpx.Client(base_url=limited.url, timeout=10) as calm:  # another connection
+            assert calm.post("/v1/worlds/1/increments", json=press).status_code == 200
+    codes = [r.status_code for r in answers]
+    first = codes.index(429)
+    assert first >= BURST and set(codes[:first]) == {200}  # its burst, then refused
+    ticks = [r.json()["tick"] for r in answers[:first]]
+    assert ticks == sorted(ticks)
+    refused = [r for r in answers if r.status_code == 429]
+    for r in refused:
+        assert r.json()["detail"] == LIMIT
+        assert r.headers["retry-after"] == "1"
+    assert _refused(limited.url, "http") - before == len(refused)

@@ -19,9 +19,11 @@ from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
 from service.api import ws_ops
 from service.core.access import policy as access
+from service.core.access import rates
 from service.core.commands.base import BROWSER, WS
 from service.core.commands.control import Control
 from service.core.errors import ArmfleetError, BadCommand
+from service.core.sim.command_share import turn
 from service.core.sim.loop import SimLoop
 from service.core.sim.types import Snapshot
 from service.core.sim.worlds import parse_worlds
@@ -234,10 +236,10 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
         return await _refuse(ws, _CLOSE_POLICY, str(exc))
     default_world, source = stream.default_world, stream.source
     grant = _grant(ws)
-    limiter = access.RateLimiter(
+    limiter = rates.RateLimiter(
         runtime.settings.access.command_rate, runtime.settings.access.command_burst
     )
-    metrics = runtime.metrics
+    metrics, share = runtime.metrics, loop.share
     control = control.acting_for(grant.caller)  # each command checked for its worlds
     await ws.accept(subprotocol=grant.subprotocol)
 
@@ -253,6 +255,7 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
     hub.add(sub)
     sub.offer(first, time.monotonic())  # the current state at once, then the stream
     writer = asyncio.create_task(_write(ws, hub, sub))
+    busy_until = 0.0  # refused as busy: until then, what cannot run at once is refused at once
     try:
         while True:
             message = await ws.receive()
@@ -269,8 +272,14 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
                 metrics.command_rejected(source, "unknown", "refused")
             else:
                 verdict = limiter.take()
-                if verdict == "ok":
+                if verdict == "ok" and not await turn(share, time.monotonic() > busy_until):
+                    busy_until = time.monotonic() + share.max_wait_s  # ticks first: busy
+                    reply = wire.error_frame(wire.read_id(text), share.busy_detail)
+                    metrics.command_rejected(source, ws_ops.kind_of(text), "refused")
+                elif verdict == "ok":
+                    t0 = time.perf_counter()
                     reply, kind = ws_ops.handle_text(control, text, default_world, source)
+                    share.spent(time.perf_counter() - t0)
                     if reply.get("op") == "error":
                         metrics.command_rejected(source, kind)
                     elif reply.get("op") == "ack" and isinstance(reply.get("tick"), int):

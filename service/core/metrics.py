@@ -75,19 +75,29 @@ class Metrics:
         # drained on the sim thread. deque appends and pops are atomic.
         self._waiting: collections.deque[tuple[int, float]] = collections.deque(maxlen=_MAX_WAITING)
         self._lock = threading.Lock()
+        self._command_series: dict[tuple[str, str, str], Any] = {}
 
     # -- fed by the service -----------------------------------------------------------------
 
     def command_accepted(self, source: str, kind: str, tick: int, worlds: int = 1) -> None:
         """A control listener calls this for each accepted command (`worlds` it changed: one
         that changes none, a mode switch, has no effect latency)."""
-        self.commands.labels(str(source), kind, "accepted").inc()
+        self._series(str(source), kind, "accepted").inc()
         if worlds:
             self._waiting.append((tick, time.monotonic()))
 
     def command_rejected(self, source: str, kind: str, result: str = "rejected") -> None:
         """A surface calls this for a command it refused (result: rejected or refused)."""
-        self.commands.labels(str(source), kind or "unknown", result).inc()
+        self._series(str(source), kind or "unknown", result).inc()
+
+    def _series(self, source: str, kind: str, result: str) -> Any:
+        """The commands counter's series of these labels, kept: `labels()` costs a lock and a
+        lookup on every command, and commands come by the thousand a second."""
+        key = (source, kind, result)
+        series = self._command_series.get(key)
+        if series is None:
+            series = self._command_series[key] = self.commands.labels(source, kind, result)
+        return series
 
     def on_tick(self, tick: int, seconds: float, faulted: int) -> None:
         """The loop calls this on the sim thread after each tick (faulted -1: the tick failed)."""

@@ -79,7 +79,7 @@ def book_of(control: object) -> LeaseBook | None:
 
 
 class Bucket(Protocol):
-    """A token bucket (access.RateLimiter): take() says "ok" or not."""
+    """A token bucket (access.rates.RateLimiter): take() says "ok" or not."""
 
     detail: str
 

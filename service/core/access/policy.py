@@ -7,8 +7,9 @@ WebSocket commands, rosbridge/Foxglove publishes) must present it; reads stay op
 `?token=` query or as a subprotocol `armfleet.token.<TOKEN>`. A browser socket from a foreign
 Origin may watch but never command (a page on another site must not drive the arms of a
 colleague who happens to have the service open). Each connection's commands go through a token
-bucket (`RateLimiter`), and `ClientSlots` caps how many clients are served at once, so that one
-client cannot starve the loop or the others.
+bucket (`rates.RateLimiter`; over HTTP one per keep-alive connection, 429 beyond it), and
+`ClientSlots` caps how many clients are served at once, so that one client cannot starve the
+loop or the others.
 
 Leases (service.core.access.leases) add tokens of their own: a lease token may command its lease's
 worlds on every surface (the check per world is `callers.Gate`, run by Control); over HTTP it
@@ -17,14 +18,13 @@ The resolved `callers.Caller` of a request is kept in its scope's state (`caller
 
 HTTP is checked by `AccessMiddleware` (so routes added later are covered without opting in);
 WebSocket surfaces call `check_ws(...)` for a `Grant`, hold a `ClientSlots` slot while connected,
-and feed each command to their own `RateLimiter`.
+and feed each command to their own `rates.RateLimiter`.
 """
 
 from __future__ import annotations
 
 import hmac
 import ipaddress
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -36,6 +36,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.core.access.callers import OPEN, Caller, identify
 from service.core.access.leases import LeaseBook
+from service.core.access.rates import ConnectionRates
 from service.core.access.settings import AccessSettings
 from service.core.errors import BadToken
 
@@ -153,6 +154,11 @@ def check_http(
     return caller
 
 
+def is_command(method: str, path: str) -> bool:
+    """An HTTP write to a command route (what a lease may write: `LEASE_WRITES`)."""
+    return method.upper() in _API_WRITES and path.startswith(LEASE_WRITES)
+
+
 def _lease_writes(caller: Caller, path: str) -> bool:
     if path.startswith(LEASE_WRITES):
         return True
@@ -222,38 +228,6 @@ def check_websocket(settings: AccessSettings, ws: Any, book: LeaseBook | None = 
 # -- rates and slots --------------------------------------------------------------------------
 
 
-class RateLimiter:
-    """A token bucket for one connection's commands: `rate` per second, bursts of `burst`.
-
-    `take()` answers "ok", "refuse" (send an error frame, keep the socket) or "close" (the client
-    went on sending at least `burst` more commands while refused: close with 1008).
-    """
-
-    def __init__(self, rate: float, burst: int | None = None) -> None:
-        self.rate = float(rate)
-        self.burst = int(burst if burst is not None else max(1, round(rate)))
-        self._tokens = float(self.burst)
-        self._last: float | None = None
-        self._refused_in_a_row = 0
-
-    def take(self, now: float | None = None) -> str:
-        now = time.monotonic() if now is None else now
-        if self._last is not None:
-            gained = max(0.0, now - self._last) * self.rate
-            self._tokens = min(float(self.burst), self._tokens + gained)
-        self._last = now
-        if self._tokens >= 1.0:
-            self._tokens -= 1.0
-            self._refused_in_a_row = 0
-            return "ok"
-        self._refused_in_a_row += 1
-        return "close" if self._refused_in_a_row > self.burst else "refuse"
-
-    @property
-    def detail(self) -> str:
-        return f"rate: over {self.rate:g} commands/s (bursts of {self.burst}); slow down"
-
-
 class ClientSlots:
     """At most `limit` clients at once (0: no limit), shared by every surface of one service."""
 
@@ -276,7 +250,8 @@ class ClientSlots:
 
 
 class AccessMiddleware:
-    """Token and origin checks for every HTTP route; client slots for HTTP and WebSockets.
+    """Token and origin checks for every HTTP route; client slots for HTTP and WebSockets;
+    the command rate of each HTTP connection (429 naming it beyond).
 
     WebSocket handshakes only take a slot here (refused with close 1013 when full, or 1008
     when reads need a token the client lacks); what a socket may command is the surface's call
@@ -294,6 +269,7 @@ class AccessMiddleware:
         self.settings = settings
         self.slots = slots
         self.leases = leases  # the service's LeaseBook once it runs
+        self.rates = ConnectionRates(settings.command_rate, settings.command_burst)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] == "http":
@@ -317,6 +293,13 @@ class AccessMiddleware:
             return await reply(scope, receive, send)
         if is_open(scope["path"]):  # probes and page files: cheap, never refused for load
             return await self.app(scope, receive, send)
+        if is_command(scope["method"], scope["path"]):
+            bucket = self.rates.of(scope.get("client"))
+            if bucket.take() != "ok":
+                reply = JSONResponse(
+                    {"detail": bucket.detail}, status_code=429, headers={"Retry-After": "1"}
+                )
+                return await reply(scope, receive, send)
         if not self.slots.acquire():
             reply = JSONResponse(
                 {"detail": f"over the limit of {self.slots.limit} clients at once; retry"},

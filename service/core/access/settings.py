@@ -27,7 +27,12 @@ class AccessSettings(BaseModel):
     max_clients: int = Field(
         256, ge=0, description="clients served at once (HTTP requests + sockets); 0 = no limit"
     )
-    command_rate: float = Field(200.0, gt=0, description="commands per second per connection")
+    command_rate: float = Field(
+        200.0,
+        gt=0,
+        description="commands per second per connection (a socket, or an HTTP keep-alive "
+        "connection: 429 beyond it)",
+    )
     command_burst: int | None = Field(
         None, ge=1, description="commands a connection may send at once (default: one second's)"
     )

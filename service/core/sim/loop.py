@@ -26,6 +26,7 @@ import numpy as np
 from service.core.errors import NotPaused
 from service.core.sim.batch import Batch, TickWrites
 from service.core.sim.command_desk import CommandDesk
+from service.core.sim.command_share import CommandShare
 from service.core.sim.device_turns import DeviceTurns
 from service.core.sim.listeners import Listeners
 from service.core.sim.loop_state import StateDoor
@@ -94,6 +95,8 @@ class SimLoop(StateDoor):
         # launches on a device shared with the camera renderer go in turns (device_turns.py)
         self._turns: DeviceTurns = getattr(batch, "device_turns", None) or DeviceTurns()
         self.randomizations = self.commands.randomizations
+        # Ticks first: the commands' budget beside real-time ticks (command_share.py).
+        self.share = CommandShare(batch.tick_dt)
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -105,6 +108,7 @@ class SimLoop(StateDoor):
     def stop(self) -> None:
         with self._wake:
             self._running = False
+            self.share.set_active(False)
             self._wake.notify_all()
         if self._thread is not None:
             self._thread.join(timeout=10)
@@ -130,6 +134,7 @@ class SimLoop(StateDoor):
     def set_mode(self, mode: Mode) -> None:
         with self._wake:
             self._mode = Mode(mode)
+            self.share.set_active(self._running and self._mode is Mode.REALTIME)
             self._rate.restart(self._tick)
             self._settle_soon()  # paused: writes accepted before it are applied now
             self._wake.notify_all()
@@ -271,16 +276,19 @@ class SimLoop(StateDoor):
                 if self._waiters.requests_waiting:  # arrived while serving: serve them first
                     continue
                 mode = self._mode
+                self.share.set_active(mode is Mode.REALTIME)
                 idle = mode is Mode.PAUSED and self._tick >= self._step_goal
                 if idle and self._latest.tick >= self._tick and self._rested_at == self._tick:
                     self._wake.wait()
                     cadence.restart()
                     continue
+                late = 0.0
                 if mode is Mode.REALTIME:
                     delay = cadence.delay()
                     if delay > 0:
                         self._wake.wait(delay)
                         continue
+                    late = -delay
             if idle:  # paused: show where time stopped, once (a snapshot first if it took none)
                 with turns.loop_turn():
                     now = time.monotonic()
@@ -298,6 +306,7 @@ class SimLoop(StateDoor):
                 self._failures.succeeded()
             if mode is Mode.REALTIME:
                 cadence.ticked()
+                self.share.ticked(late)
 
     def _tick_failed(self, exc: Exception) -> None:
         """Report the failure (pace.FailureLog) and tell the tick listeners."""

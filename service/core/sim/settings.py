@@ -15,7 +15,8 @@ from service.core.sim.types import Mode
 
 
 class SimSettings(BaseModel):
-    """The simulation (`--worlds`, `--scene`, `--mode`, `--control-hz`, `--physics-dt`)."""
+    """The simulation (`--worlds`, `--scene`, `--mode`, `--control-hz`, `--physics-dt`,
+    `--ticks-first`, `--command-wait-s`)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -29,6 +30,18 @@ class SimSettings(BaseModel):
     control_hz: float = Field(60.0, gt=0, le=1000, description="control ticks per second")
     physics_dt: float = Field(
         DEFAULT_PHYSICS_DT, gt=0, le=0.01, description="approximate physics step [s]"
+    )
+    ticks_first: bool = Field(
+        True,
+        description="in real time, commands take only the time the ticks leave: when the "
+        "ticks run late, commands wait for a later tick (in order) rather than slow the worlds",
+    )
+    command_wait_s: float = Field(
+        1.0,
+        gt=0,
+        le=60,
+        description="ticks first: a command that finds no turn beside the ticks within this "
+        "many seconds is refused as busy (WebSocket error, HTTP 503), not run over their time",
     )
 
     @model_validator(mode="after")

@@ -13,7 +13,7 @@ from collections import OrderedDict
 
 from service.core.access.callers import Caller, identify
 from service.core.access.leases import LeaseBook
-from service.core.access.policy import RateLimiter
+from service.core.access.rates import RateLimiter
 from service.core.access.settings import AccessSettings
 from service.core.errors import BadToken
 

@@ -28,6 +28,7 @@ from fastapi import WebSocket
 
 from clients.ros_rules import BadMessage, RefusalCounter
 from service.core.access import policy as access
+from service.core.access import rates
 from service.core.access.callers import book_of
 from service.core.errors import ArmfleetError, Forbidden
 from service.core.sim.rules import BadJointState
@@ -101,7 +102,7 @@ class Session:
         self.subs: dict[str, _TopicSub] = {}
         self.advertised: dict[str, str] = {}
         self.ready = asyncio.Event()
-        self.limiter = access.RateLimiter(settings.command_rate, settings.command_burst)
+        self.limiter = rates.RateLimiter(settings.command_rate, settings.command_burst)
         self.over_rate = False  # set when the client kept publishing over its rate: close 1008
 
     # -- inbound ----------------------------------------------------------------------------

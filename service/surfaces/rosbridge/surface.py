@@ -20,6 +20,7 @@ from pydantic import BaseModel, Field, StrictBool
 
 from service.core.access import policy as access
 from service.core.commands.fields import example_config, json_int
+from service.core.sim.command_share import turn
 from service.core.sim.worlds import world_list
 from service.core.surface import ServiceFacts, SurfaceContext
 from service.surfaces.ros import description
@@ -139,6 +140,7 @@ class RosbridgeSurface:
         session = Session(ws, server, ctx)
         server.clients += 1
         writer = asyncio.create_task(session.write())
+        busy_until = 0.0  # refused as busy: until then, what cannot run at once is refused
         try:
             while True:
                 message = await ws.receive()
@@ -151,7 +153,15 @@ class RosbridgeSurface:
                     server.bad.report("binary_frame", "(socket)", "a binary frame was sent")
                     session.status("error", "send JSON as text frames (binary frames are not read)")
                 else:
+                    if not await turn(ctx.loop.share, time.monotonic() > busy_until):
+                        busy_until = time.monotonic() + ctx.loop.share.max_wait_s
+                        busy = ctx.loop.share.busy_detail  # ticks first: refused as busy
+                        server.bad.report("refused", "(socket)", busy)
+                        session.status("error", busy)
+                        continue
+                    t0 = time.perf_counter()
                     session.handle_text(text)
+                    ctx.loop.share.spent(time.perf_counter() - t0)
                     if session.over_rate:
                         await asyncio.sleep(0.2)  # let the writer send the refusal first
                         await ws.close(code=access.CLOSE_POLICY, reason="over the command rate")

@@ -81,12 +81,7 @@ class TrajectoryManager:
         self._last_vel = np.zeros((0, 7))
         self._last_tick = -1
         # The last observed tick: (tick, trajectory id per slot, desired, actual) (S, 7).
-        self._feedback: tuple[int, np.ndarray, np.ndarray, np.ndarray] = (
-            -1,
-            np.zeros(0, dtype=np.int64),
-            np.zeros((0, 7)),
-            np.zeros((0, 7)),
-        )
+        self._feedback = (-1, np.zeros(0, dtype=np.int64), np.zeros((0, 7)), np.zeros((0, 7)))
         self._dispatching = threading.Lock()
         loop.commands.attach_trajectories(self)
 
@@ -304,6 +299,8 @@ class TrajectoryManager:
 
     def dispatch(self) -> None:
         """Hand finished trajectories to waiters and listeners (no lock held)."""
+        if not self._done:  # every command calls this; most find none and take no lock (a run
+            return  # finishing meanwhile is handed at the loop's next dispatch, every tick)
         with self._dispatching:
             with self.loop.commands.staging() as _:
                 done, self._done = self._done, []
