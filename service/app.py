@@ -15,6 +15,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from mjcf import SCENE_XML
 from service.api import (
     camera_ws,
     cameras,
@@ -33,9 +34,11 @@ from service.api import (
     ws_bulk,
 )
 from service.core.access import policy as access
+from service.core.contract.cell import fit_cell
 from service.core.contract.replies import ANY, errors, fit_openapi
 from service.core.errors import ArmfleetError, BadCommand
 from service.core.metrics import CommandCounter
+from service.core.sim.robot import LoadedRobot, load_robot
 from service.runtime import Runtime
 from service.settings import Settings
 
@@ -201,9 +204,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     web.mount_static(app)
     generate = app.openapi
 
+    def served() -> LoadedRobot:
+        """The served cell: the running engine's, or (before it runs) the scene compiled."""
+        loop = runtime.loop
+        return loop.batch.robot if loop is not None else load_robot(settings.sim.scene or SCENE_XML)
+
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
-            app.openapi_schema = fit_openapi(generate(), settings.sim.worlds)
+            robot = served()
+            spec = fit_openapi(generate(), settings.sim.worlds)
+            app.openapi_schema = fit_cell(spec, robot.mjm, robot.spec.names)
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
