@@ -123,6 +123,8 @@ def test_the_schema_names_the_served_cells_entities_and_parameters(server):
         assert set(draw["properties"]["params"]["properties"]) == set(table)
         assert "lo <= hi" in draw["description"]
         assert schemas["RandomizeRequest"]["properties"]["seed"]["maximum"] == 2**63 - 1
+        tolerance = schemas["JointToleranceBody"]["properties"]["name"]
+        assert "joint_names" in tolerance["description"] and "finger_joint" in tolerance["enum"]
         path = spec["paths"]["/v1/worlds/{world}/entities/{name}"]
         for op in path.values():
             (name,) = [p for p in op["parameters"] if p["name"] == "name"]
