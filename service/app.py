@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import threading
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -155,7 +156,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         starting = asyncio.create_task(runtime.start())
+        # The OpenAPI document takes seconds to build on a busy CPU, and built by the first
+        # GET /openapi.json it held the event loop (every request) that long: built here, on a
+        # thread, while the engine compiles.
+        documenting = asyncio.create_task(asyncio.to_thread(app.openapi))
         yield
+        with contextlib.suppress(BaseException):
+            await documenting
         with contextlib.suppress(BaseException):
             await asyncio.wait_for(starting, timeout=120)
         runtime.stop()
@@ -209,11 +216,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         loop = runtime.loop
         return loop.batch.robot if loop is not None else load_robot(settings.sim.scene or SCENE_XML)
 
+    building = threading.Lock()  # the lifespan's thread builds it; a request waits for that
+
     def openapi() -> dict[str, Any]:
-        if app.openapi_schema is None:
-            robot = served()
-            spec = fit_openapi(generate(), settings.sim.worlds)
-            app.openapi_schema = fit_cell(spec, robot.mjm, robot.spec.names)
+        with building:
+            if app.openapi_schema is None:
+                robot = served()
+                spec = fit_openapi(generate(), settings.sim.worlds)
+                app.openapi_schema = fit_cell(spec, robot.mjm, robot.spec.names)
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]

@@ -6,7 +6,7 @@ that made a Model field per world captured the tick's graph again, on the sim th
 field: seconds each, so a fuzz run's first payload or mass writes held every snapshot and
 recording start behind them for over 10 s. Every field a parameter may write is now per world
 from the build, and no write captures again; the server's own counter of capture time,
-`armfleet_engine_capture_seconds`, shows that no request waited behind one. Timing is not
+`armfleet_engine_capture_seconds_total`, shows that no request waited behind one. Timing is not
 asserted (bench measures speed): every request answers, and the counter does not move.
 """
 
@@ -50,7 +50,7 @@ def test_snapshots_and_a_recording_start_answer_while_every_parameter_is_written
     with httpx.Client(base_url=fleet.url, timeout=120) as http:
         assert http.get("/v1/info").json()["captured"]  # the default engine captures its tick
         table = http.get("/v1/params").json()["params"]
-        before = metric(http, "armfleet_engine_capture_seconds")
+        before = metric(http, "armfleet_engine_capture_seconds_total")
         assert before > 0  # the build's capture is counted
 
         # Every parameter of every world, one request per parameter (each one a fresh field),
@@ -86,7 +86,7 @@ def test_snapshots_and_a_recording_start_answer_while_every_parameter_is_written
         recording = http.get("/v1/recordings/current").json()
         assert recording["active"] and recording["worlds"] == list(range(NWORLD))
         # no write captured the tick again: nothing waited behind a capture
-        assert metric(http, "armfleet_engine_capture_seconds") == before
+        assert metric(http, "armfleet_engine_capture_seconds_total") == before
         # the values are in effect (the writes were not dropped to get there)
         got = http.get("/v1/worlds/7/params").json()["params"]
         for p in table:
