@@ -29,7 +29,11 @@ def _status(recorder: Recorder) -> RecordingStatus:
     response_model=RecordingStatus,
     status_code=201,
     summary="Start recording to <data-dir>/recordings/<name>.mcap",
-    responses={**CANNOT_WRITE, 409: {"description": "a recording is already running"}},
+    responses={
+        **CANNOT_WRITE,
+        **errors(404),  # a world that `worlds` names does not exist
+        409: {"description": "a recording is already running"},
+    },
 )
 async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
     check_state_support(loop.batch)  # a recording starts from the full state
