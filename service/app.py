@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import threading
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -15,6 +16,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import compile_path
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from mjcf import SCENE_XML
 from service.api import (
     camera_ws,
     cameras,
@@ -35,9 +37,11 @@ from service.api import (
 )
 from service.api.turns import TakeTurns
 from service.core.access import policy as access
+from service.core.contract.cell import fit_cell
 from service.core.contract.replies import ANY, errors, fit_openapi
 from service.core.errors import ArmfleetError, BadCommand
 from service.core.metrics import CommandCounter
+from service.core.sim.robot import LoadedRobot, load_robot
 from service.runtime import Runtime
 from service.settings import Settings
 
@@ -154,7 +158,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         starting = asyncio.create_task(runtime.start())
+        # The OpenAPI document takes seconds to build on a busy CPU, and built by the first
+        # GET /openapi.json it held the event loop (every request) that long: built here, on a
+        # thread, while the engine compiles.
+        documenting = asyncio.create_task(asyncio.to_thread(app.openapi))
         yield
+        with contextlib.suppress(BaseException):
+            await documenting
         with contextlib.suppress(BaseException):
             await asyncio.wait_for(starting, timeout=120)
         runtime.stop()
@@ -205,9 +215,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     web.mount_static(app)
     generate = app.openapi
 
+    def served() -> LoadedRobot:
+        """The served cell: the running engine's, or (before it runs) the scene compiled."""
+        loop = runtime.loop
+        return loop.batch.robot if loop is not None else load_robot(settings.sim.scene or SCENE_XML)
+
+    building = threading.Lock()  # the lifespan's thread builds it; a request waits for that
+
     def openapi() -> dict[str, Any]:
-        if app.openapi_schema is None:
-            app.openapi_schema = fit_openapi(generate(), settings.sim.worlds)
+        with building:
+            if app.openapi_schema is None:
+                robot = served()
+                spec = fit_openapi(generate(), settings.sim.worlds)
+                app.openapi_schema = fit_cell(spec, robot.mjm, robot.spec.names)
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]

@@ -124,6 +124,12 @@ class Runtime:
             "is the loop's own work: commands, snapshots, frames)",
             lambda: self._loop_attr("engine_seconds"),
         )
+        m.counter_level(
+            "armfleet_engine_capture_seconds",
+            "wall time spent capturing the tick's graph, at build and since (a capture holds "
+            "the tick boundary that snapshots, recordings and reads wait for)",
+            lambda: None if self.loop is None else self.loop.batch.capture_s,
+        )
         m.level(
             "armfleet_subscribers",
             "WebSocket stream subscribers",

@@ -22,6 +22,7 @@ import httpx
 import numpy as np
 import pytest
 import roslibpy
+import server_logs
 
 from clients import ArmfleetClient, WorldState
 from clients.testing import Server, free_port, headless, serve
@@ -66,6 +67,64 @@ def pytest_configure(config: pytest.Config) -> None:
     clash with the entry point: pytest refuses a module registered under two names.)"""
     if not config.pluginmanager.is_registered(armfleet_plugin):
         config.pluginmanager.register(armfleet_plugin, "armfleet")
+    config.addinivalue_line(
+        "markers",
+        f"{server_logs.MARKER}(reason): this test makes a server of its own (logging under its "
+        "tmp_path) print a traceback on purpose; the end-of-run log check skips those logs",
+    )
+
+
+# -- the servers' logs: no traceback, no logging error (tests/server_logs.py) ------------------
+
+_LOG_PROBLEMS = "armfleet_server_log_problems"  # a worker's findings, for the controller
+_FOUND = pytest.StashKey[list[str]]()  # this process's findings (a controller: its workers')
+
+
+@pytest.fixture(autouse=True)
+def _server_traceback_expected(request: pytest.FixtureRequest) -> None:
+    """A test marked `server_traceback(reason)`: the logs under its tmp_path are excused."""
+    mark = request.node.get_closest_marker(server_logs.MARKER)
+    if mark is not None:
+        assert mark.args and mark.args[0], f"@pytest.mark.{server_logs.MARKER} needs a reason"
+        tmp = request.getfixturevalue("tmp_path")
+        server_logs.excused(request.config)[tmp] = str(mark.args[0])
+
+
+def _is_xdist_controller(config: pytest.Config) -> bool:
+    return not hasattr(config, "workerinput") and bool(getattr(config.option, "numprocesses", 0))
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """Read every server log this process's tests left (a worker: its own) and fail the run
+    when one has a traceback or a logging error; a worker hands its findings to the
+    controller (pytest_testnodedown), which fails the run and prints them."""
+    config = session.config
+    found = config.stash.setdefault(_FOUND, [])
+    if not _is_xdist_controller(config):
+        root = config._tmp_path_factory.getbasetemp()  # type: ignore[attr-defined]
+        found += server_logs.problems(root, server_logs.excused(config))
+        if hasattr(config, "workeroutput"):
+            config.workeroutput[_LOG_PROBLEMS] = found  # type: ignore[attr-defined]
+            return
+    if found and session.exitstatus == pytest.ExitCode.OK:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+@pytest.hookimpl(optionalhook=True)  # a pytest-xdist hook: unknown where xdist is not loaded
+def pytest_testnodedown(node: Any, error: object) -> None:
+    """pytest-xdist's controller: a worker's findings (see pytest_sessionfinish)."""
+    output = getattr(node, "workeroutput", {})
+    node.config.stash.setdefault(_FOUND, []).extend(output.get(_LOG_PROBLEMS, []))
+
+
+def pytest_terminal_summary(terminalreporter: Any, config: pytest.Config) -> None:
+    found = config.stash.get(_FOUND, [])
+    if found:
+        terminalreporter.section("tracebacks in the servers' logs", red=True, bold=True)
+        for finding in found:
+            terminalreporter.write_line(finding)
+            terminalreporter.write_line("")
 
 
 # The test files that take longest, longest first: they run before the others, so that with

@@ -10,16 +10,31 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import httpx
 import pytest
 
-# Bounded so that the run stays well under a minute on the 2-core CI machine.
+from clients.testing import Server, serve
+
+# Bounded so that the run stays within minutes on the 2-core CI machine (the coverage phase
+# alone sends a few thousand requests: every parameter and entity of the cell is in the schema).
 MAX_EXAMPLES = 20
 SEED = 20261122
 
 
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """A 16-world server, as the issue's fuzz run had; native MuJoCo, whose parameter writes
+    cost microseconds (the contract is the same on every engine, and the fuzzing writes
+    thousands of them)."""
+    log = tmp_path_factory.mktemp("contract")
+    with serve(worlds=16, extra_args=("--engine", "mujoco"), log_dir=log) as srv:
+        yield srv
+
+
+@pytest.mark.timeout(900)  # every phase, default and extra checks, on a busy 2-core box
 def test_schemathesis_finds_nothing(server, tmp_path):
     cmd = [
         sys.executable,
@@ -45,7 +60,7 @@ def test_schemathesis_finds_nothing(server, tmp_path):
         "--report-dir",
         str(tmp_path),
     ]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=840, cwd=tmp_path)
     summary = [line for line in proc.stdout.splitlines() if "generated" in line]
     assert proc.returncode == 0, proc.stdout[-6000:] + proc.stderr[-2000:]
     assert summary and "passed" in summary[-1], proc.stdout[-2000:]
@@ -82,3 +97,43 @@ def test_the_schema_states_the_cross_field_rules(server):
     assert state["parameters"][0]["schema"]["anyOf"][0]["pattern"].startswith("^[0-9]+")
     increment = spec["paths"]["/v1/worlds/{world}/increments"]["post"]["responses"]
     assert {"400", "404", "413", "422", "503"} <= set(increment)
+
+
+def test_the_schema_names_the_served_cells_entities_and_parameters(server):
+    """Issue 38 item 6: what JSON Schema can say about the cell is in the document (names as
+    enums, closed objects, bounds); an unknown name in a path is a 404."""
+    with httpx.Client(base_url=server.url, timeout=10) as http:
+        spec = http.get("/openapi.json").json()
+        table = {p["name"]: p for p in http.get("/v1/params").json()["params"]}
+        entities = [e["name"] for e in http.get("/v1/worlds/0/entities").json()["entities"]]
+        schemas = spec["components"]["schemas"]
+        for model in ("ParamValues", "ParamWrite"):
+            params = schemas[model]["properties"]["params"]
+            assert params["additionalProperties"] is False and params["minProperties"] == 1
+            assert set(params["properties"]) == set(table)
+        mass = schemas["ParamValues"]["properties"]["params"]["properties"]["cube.mass"]
+        assert mass["anyOf"][0] == {"type": "number", "minimum": 0.001, "maximum": 100.0}
+        assert schemas["EntityWrite"]["properties"]["name"]["enum"] == entities
+        position = schemas["EntityValues"]["properties"]["position"]["anyOf"][0]["prefixItems"]
+        assert all(p["minimum"] < p["maximum"] for p in position)
+        assert "norm" in schemas["EntityValues"]["properties"]["orientation"]["description"]
+        draw = schemas["RandomizeRequest"]["properties"]["spec"]
+        assert draw["additionalProperties"] is False
+        assert set(draw["properties"]["entities"]["properties"]) == set(entities)
+        assert set(draw["properties"]["params"]["properties"]) == set(table)
+        assert "lo <= hi" in draw["description"]
+        assert schemas["RandomizeRequest"]["properties"]["seed"]["maximum"] == 2**63 - 1
+        tolerance = schemas["JointToleranceBody"]["properties"]["name"]
+        assert "joint_names" in tolerance["description"] and "finger_joint" in tolerance["enum"]
+        path = spec["paths"]["/v1/worlds/{world}/entities/{name}"]
+        for op in path.values():
+            (name,) = [p for p in op["parameters"] if p["name"] == "name"]
+            assert name["schema"]["enum"] == entities
+        # what the enum leaves out is not there: 404 naming the entities there are
+        for method in ("GET", "PUT"):
+            body = {"position": [0.7, 0.1, 0.9]} if method == "PUT" else None
+            reply = http.request(method, "/v1/worlds/0/entities/no_such_part", json=body)
+            assert reply.status_code == 404 and entities[0] in reply.json()["detail"]
+        # a key the closed object leaves out is refused, naming it
+        reply = http.put("/v1/worlds/0/params", json={"params": {"cube.volume": 1}})
+        assert reply.status_code == 422 and "cube.volume" in reply.text

@@ -73,6 +73,11 @@ def test_http_and_websocket_randomize_with_the_seed_and_spec_in_the_ack(paused):
         bad = {"seed": 3, "spec": {"entities": {"cube": {"position": [[0, 1], [0, 1], [0, 9]]}}}}
         reply = http.post("/v1/randomize", json=bad)
         assert reply.status_code == 422 and "outside the scene's bounds" in reply.text
+        # a yaw range too wide to draw from (its width overflowed to inf: was a 500)
+        bad = {"seed": 3, "spec": {"entities": {"cube": {"yaw": [-1e308, 1e308]}}}}
+        reply = http.post("/v1/randomize", json=bad)
+        assert reply.status_code == 422, reply.text
+        assert reply.json()["detail"][0]["loc"] == ["body", "spec", "entities", "cube", "yaw"]
         again = http.post("/v1/randomize", json={"seed": 3, "spec": SPEC, "worlds": [1]}).json()
         http.post("/v1/sim/step", json={"ticks": 1})
         assert http.get("/v1/worlds/1/params").json()["params"]["cube.mass"] == masses[1]

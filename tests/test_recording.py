@@ -173,11 +173,19 @@ def test_a_changed_command_is_named_at_the_first_tick_world_and_joint_it_changes
 
 
 def test_bad_recording_requests(paused):
-    srv, _ = paused
+    srv, data = paused
     http = httpx.Client(base_url=srv.url, timeout=30)
     assert http.post("/v1/recordings", json={"name": "a/b"}).status_code == 422
     assert http.post("/v1/recordings", json={"name": "x", "rate": 0}).status_code == 422
-    assert http.post("/v1/recordings", json={"name": "x", "worlds": "0-99"}).status_code == 404
+    # bad or unknown worlds are refused before the file is opened: one of that name is kept
+    kept = data / "recordings" / "x.mcap"
+    kept.parent.mkdir(parents=True, exist_ok=True)
+    kept.write_bytes(b"an earlier recording")
+    reply = http.post("/v1/recordings", json={"name": "x", "worlds": "0-99"})
+    assert reply.status_code == 404
+    reply = http.post("/v1/recordings", json={"name": "x", "worlds": "seven"})
+    assert reply.status_code == 422 and reply.json()["detail"][0]["loc"] == ["body", "worlds"]
+    assert kept.read_bytes() == b"an earlier recording"
     assert http.delete("/v1/recordings/current").status_code == 404  # none running
 
 

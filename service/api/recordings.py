@@ -11,6 +11,7 @@ from service.api.deps import CANNOT_WRITE, Loop, get_runtime
 from service.core.contract.replies import errors
 from service.core.contract.snapshots import RecordingRequest, RecordingStatus
 from service.core.errors import NotFound
+from service.core.sim.worlds import pick_worlds
 from service.persistence.recorder import Recorder
 from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
@@ -28,15 +29,21 @@ def _status(recorder: Recorder) -> RecordingStatus:
     response_model=RecordingStatus,
     status_code=201,
     summary="Start recording to <data-dir>/recordings/<name>.mcap",
-    responses={**CANNOT_WRITE, 409: {"description": "a recording is already running"}},
+    responses={
+        **CANNOT_WRITE,
+        **errors(404),  # a world that `worlds` names does not exist
+        409: {"description": "a recording is already running"},
+    },
 )
 async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
     check_state_support(loop.batch)  # a recording starts from the full state
+    # Unknown worlds are a 404 before the file is opened (opening truncates one of that name).
+    worlds = pick_worlds(body.worlds, loop.batch.nworld)
     path = runtime.persistence.recordings_dir / f"{body.name}.mcap"
     # Opening and starting write the file's beginning before answering: a file that cannot be
     # written is a 507 naming the cause, never an "active" recording that is not.
     queue_items = runtime.settings.persistence.record_queue
-    recorder = await asyncio.to_thread(Recorder, path, body.worlds, body.rate, queue_items)
+    recorder = await asyncio.to_thread(Recorder, path, worlds, body.rate, queue_items)
     # Conflict while one runs; waits for a tick boundary (off the event loop).
     await asyncio.to_thread(runtime.persistence.begin, recorder)
     return _status(recorder)

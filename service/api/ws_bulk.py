@@ -202,6 +202,11 @@ class BulkSocket:
         broken: OSError | None = None
         while (item := self._out.get()) is not None:
             parts, done = item
+            # A send whose awaiting task was cancelled (the socket's task ended) cancelled its
+            # future: its buffers are the caller's again, so the message is not written, and
+            # setting a result on it would raise InvalidStateError and end this thread.
+            if not done.set_running_or_notify_cancel():
+                continue
             if broken is None:
                 try:
                     self._send_parts(parts)

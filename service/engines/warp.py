@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import mujoco
@@ -20,16 +21,22 @@ import numpy as np
 import warp as wp
 
 from mjcf import SCENE_XML
-from service.core.sim.batch import Batch, Renderable, Restorable, StateWrite
+from service.core.sim.batch import Batch, ModelWrite, Renderable, Restorable, StateWrite
 from service.core.sim.packed_rows import PackedRows
 from service.core.sim.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.sim.robot import LoadedRobot, load_robot
 from service.core.sim.types import PHYSICS_FIELDS, BatchState, Snapshot
 from service.engines import warp_frames as frames
 from service.engines.cuda_streams import engine_streams
-from service.engines.mirror import HostMirror
+from service.engines.mirror import SETCONST_INPUTS, HostMirror
 from service.engines.warp_kernels import gather_bodies, gather_state
-from service.engines.warp_model import DERIVED, batched, host_layout, write_rows
+from service.engines.warp_model import (
+    DERIVED,
+    batched,
+    host_layout,
+    writable_fields,
+    write_rows,
+)
 from service.engines.warp_snapshot import NCOL, SnapshotArrays, snapshot_from
 
 log = logging.getLogger("armfleet.engine")
@@ -107,6 +114,13 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         t0 = time.perf_counter()
         with wp.ScopedDevice(self.device):
             self._m = mjw.put_model(mjm)
+            if self.device.is_cpu:
+                # A capture costs seconds on a CPU, on the sim thread, and every request that
+                # needs a tick boundary (a snapshot, a recording's start, a read) waits behind
+                # it: so every field a parameter may write is per world from the start, and no
+                # write captures again (its cost in ticks: bench section `cells`, ~1%).
+                for field in writable_fields(mjm, self.robot.spec.names):
+                    batched(self._m, field, nworld, self.device)
             self._d = mjw.put_data(mjm, home, nworld=nworld, nconmax=nconmax, njmax=njmax)
             self._qpos_adr = wp.array(self.robot.qpos_adr, dtype=int)
             self._dof_adr = wp.array(self.robot.dof_adr, dtype=int)
@@ -127,10 +141,9 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
             self.reset(np.arange(nworld))
             self._gather()  # tick 0's snapshot is exactly home
             self.compile_s = time.perf_counter() - t0
-            t1 = time.perf_counter()
+            self.capture_s = 0.0  # build's capture, and every one since (`_capture`)
             if capture:
                 self._capture()
-            self.capture_s = time.perf_counter() - t1
 
     # -- stepping ---------------------------------------------------------------------------
 
@@ -173,6 +186,7 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         )
 
     def _capture(self) -> None:
+        t0 = time.perf_counter()
         try:
             with wp.ScopedCapture(device=self.device) as cap:
                 self._run_tick_ops()
@@ -185,6 +199,8 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
                 self.device_name,
                 self.capture_error,
             )
+        finally:
+            self.capture_s += time.perf_counter() - t0
 
     @property
     def captured(self) -> bool:
@@ -336,6 +352,19 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
         row = array.numpy()[write.world : write.world + 1].copy()
         row[0, write.index] = write.values
         write_rows(array, np.array([write.world]), row, self.device.is_cpu)
+
+    def write_models(self, writes: Sequence[ModelWrite]) -> None:
+        """As HostMirror's, but the fields it makes per world (and what set_const derives from
+        them) are made so first, and the tick captured again once for all of them, not once
+        per field (a payload writes four)."""
+        fields = {w.field for w in writes}
+        if SETCONST_INPUTS.intersection(fields):
+            fields.update(DERIVED)
+        with wp.ScopedDevice(self.device):
+            fresh = [batched(self._m, f, self.nworld, self.device) for f in sorted(fields)]
+            if any(fresh) and self._graph is not None:
+                self._capture()
+        super().write_models(writes)
 
     def push_model(self, field: str, worlds: np.ndarray) -> None:
         """Per-world values of a Model field for `worlds` (see warp_model); the first write to

@@ -3,18 +3,32 @@
 mujoco_warp's kernels read a Model field of leading size 1 as shared by every world and one of
 leading size nworld per world (`field[worldid % field.shape[0]]`), as `put_model(mjm,
 batch_sizes={field: nworld})` builds it: so only the fields some world changed pay for a row
-per world, in memory and in reads.
+per world, in memory and in reads. Except on a CPU, where the fields a parameter may write
+(`writable_fields`) are per world from the build: making one so later captures the tick again,
+which takes seconds there, on the sim thread (WorldBatch's constructor says why that matters).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+import mujoco
 import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
+from service.core.commands.params import param_table
+
 # What mjw.set_const writes per world that depends on the fields a command may write (masses,
 # inertia, armature): made batched before it runs.
 DERIVED = ("body_subtreemass", "body_invweight0", "dof_invweight0", "actuator_acc0")
+
+
+def writable_fields(mjm: mujoco.MjModel, commanded: Sequence[str]) -> tuple[str, ...]:
+    """Every Model field a parameter write may change (service/core/commands/params.py's
+    table of this model), and what mjw.set_const derives from them."""
+    fields = {f for p in param_table(mjm, commanded).values() for f in p.fields}
+    return (*sorted(fields), *DERIVED)
 
 
 def host_layout(arr: wp.array) -> tuple[tuple[int, ...], type]:

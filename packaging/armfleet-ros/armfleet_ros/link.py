@@ -101,6 +101,19 @@ class FleetLink:
             pass
         except Exception:
             log.exception("armfleet link stopped")
+        finally:
+            self._drain()
+
+    def _drain(self) -> None:
+        """Let every task left (a lane still unwinding, its flusher) finish being cancelled
+        while the loop can still run it: one dropped pending would run its `finally` when it
+        is collected, on a closed loop ("Event loop is closed" in the log at every stop)."""
+        left = asyncio.all_tasks(self._loop)
+        for task in left:
+            task.cancel()
+        if left:
+            gathered = asyncio.gather(*left, return_exceptions=True)
+            self._loop.run_until_complete(gathered)
 
     # -- commands (any thread) -------------------------------------------------------------
 

@@ -12,7 +12,8 @@ spec = {
   "entities": {name: {"position": [[x0, x1], [y0, y1], [z0, z1]], "yaw": [a0, a1]}},
   "params": {name: [lo, hi]  (or one [lo, hi] per number: payload)},
 }
-Each entry is optional; "yaw" [rad] turns the entity about the world's z axis (upright).
+Each entry is optional; "yaw" [rad] turns the entity about the world's z axis (upright), its
+bounds within ±4π (two turns either way: any angle, and never a range too wide to draw from).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from service.core.sim.entities import entity_table
 __all__ = ["Randomize", "RandomizeAck", "RandomizeRequest"]
 
 MAX_SEED = 2**63 - 1
+MAX_YAW = 4 * math.pi  # [rad] |lo|, |hi| of a yaw range
 
 
 class RandomizeRequest(Strict):
@@ -131,6 +133,10 @@ def plan(door: Door, spec: Any) -> Plan:
                     f"reaches outside the scene's bounds ({table.bounds_text()})",
                 )
         yaw = None if e.get("yaw") is None else _range(e["yaw"], f"{where}.yaw")
+        if yaw is not None and max(abs(yaw[0]), abs(yaw[1])) > MAX_YAW:
+            raise BadCommand(
+                f"{where}.yaw", f"{list(yaw)} reaches outside ±4π rad (±{MAX_YAW:.6g})"
+            )
         ents.append((name, pos, yaw))
     pars = []
     for name, value in dict(spec.get("params") or {}).items():

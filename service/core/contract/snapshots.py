@@ -8,6 +8,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from service.core.commands.fields import Strict
+from service.core.sim.worlds import WORLDS_PATTERN
 
 
 class RandomizationGroup(BaseModel):
@@ -79,7 +80,9 @@ class SnapshotRequest(Strict):
 class RecordingRequest(Strict):
     name: SnapshotName = Field(description="file <data-dir>/recordings/<name>.mcap")
     worlds: str | None = Field(
-        default=None, description="worlds whose states are recorded, e.g. '0-7,12'; default first 8"
+        default=None,
+        pattern=WORLDS_PATTERN,
+        description="worlds whose states are recorded, e.g. '0-7,12'; default first 8",
     )
     # At least one state per 1000 simulated seconds: a rate of 5e-324 made `every_ticks`
     # infinite and the start a 500 (found by schemathesis, issue 38).

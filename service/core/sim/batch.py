@@ -111,7 +111,7 @@ class Batch(Protocol):
     captured: bool  # the tick replays a captured graph
     capture_error: str | None  # why capture failed, when it did
     compile_s: float  # seconds spent compiling/loading kernels at build
-    capture_s: float  # seconds spent capturing the tick at build
+    capture_s: float  # seconds spent capturing the tick, at build and since
 
     @property
     def tick(self) -> int:

@@ -60,7 +60,10 @@ class TrajectoryPointBody(_Strict):
 class JointToleranceBody(_Strict):
     """control_msgs/JointTolerance: > 0 checks the bound; 0 or -1 does not."""
 
-    name: JointName
+    name: JointName = Field(
+        description="a joint that `joint_names` lists (one field against another, which JSON "
+        "Schema cannot state: any other joint is refused with 422)"
+    )
     position: Number = Field(default=0.0, description="rad")
     velocity: Number = Field(default=0.0, description="rad/s")
     acceleration: Number = Field(default=0.0, description="accepted, not checked")
