@@ -161,11 +161,14 @@ def ros(ctx: Context) -> Result:
         node = _node(http)
         data["node_start_s"] = time.perf_counter() - t0
         data["namespaces"] = node["report"]["worlds"]
+        data["open_at_start"] = node["report"].get("open", data["namespaces"])
         data["graph"] = _judge("graph", "counts")
         data["idle"] = _usage(node["pid"], ctx.pick(5.0, 3.0))
         ctx.say(f"  node up in {data['node_start_s']:.1f} s; graph {data['graph']}")
         n_lat = min(LATENCY_WORLDS, worlds)
-        data["node_latency"] = _stats(_judge("latency", str(n_lat), str(rounds), str(GAP_S))["ms"])
+        seen = _judge("latency", str(n_lat), str(rounds), str(GAP_S))
+        data["node_latency"] = _stats(seen["ms"])
+        data["first_use_s"] = seen.get("ready_s")
         data["direct_latency"] = _stats(direct_round_trips(server.url, n_lat, rounds))
         before = _node(http)["report"]
         flood = _judge("flood", str(FLOOD_WORLDS), str(FLOOD_RATE), str(flood_s))
@@ -180,6 +183,7 @@ def ros(ctx: Context) -> Result:
             "last_is_target": all(abs(targets[w] - v) < 1e-9 for w, v in flood["last"].items()),
         }
         data["busy"] = _usage(node["pid"], 0.5)
+        data["open_at_end"] = after.get("open", data["namespaces"])
     lat_n, lat_d = data["node_latency"], data["direct_latency"]
     rows = [
         {
@@ -187,7 +191,15 @@ def ros(ctx: Context) -> Result:
             "value": f"{data['node_start_s']:.1f} s",
         },
         {
-            "measure": "topics / services / actions",
+            "measure": "namespaces served / open at start / open at the end",
+            "value": "{namespaces} / {open_at_start} / {open_at_end}".format(**data),
+        },
+        {
+            "measure": f"first use of {n_lat} worlds' topics: made → matched, states flowing",
+            "value": f"{data['first_use_s']:.2f} s",
+        },
+        {
+            "measure": "topics / services / actions (at start)",
             "value": "{topics} / {services} / {actions}".format(**data["graph"]),
         },
         {
