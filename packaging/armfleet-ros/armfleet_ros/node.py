@@ -20,6 +20,7 @@ import logging
 import sys
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import rclpy
@@ -43,6 +44,10 @@ NODE_NAME = "armfleet"
 SIM = "simulation_interfaces"  # the group of a world's simulation_interfaces services
 
 
+def _urdf(body: dict) -> str:
+    return body["urdf"]
+
+
 def parse_worlds(spec: str, nworld: int) -> list[int]:
     """'0-7,9' → [0, ..., 7, 9] (each < nworld); '' → []."""
     out: list[int] = []
@@ -60,7 +65,9 @@ class ArmfleetNode:
 
     def __init__(self, node: Node) -> None:
         self.node = node  # parameters, /clock and the first slice's topics (parts.py)
-        log = node.get_logger()
+        # Start's lines go to Python's logging, as the link's do: rclpy's logger reads the
+        # caller's source on its first call (inspect: about a second on a busy 2-core box)
+        log = logging.getLogger("armfleet_ros")
         self.url = str(param(node, "url", "http://127.0.0.1:8000"))
         spec = str(param(node, "worlds", ""))  # `worlds:=3` arrives as an integer
         self.rate = float(param(node, "rate", 60.0))  # `rate:=100` too
@@ -70,10 +77,17 @@ class ArmfleetNode:
         self.joints = info.names
         self.tick_dt = 1.0 / info.control_hz
         self.worlds = parse_worlds(spec, info.nworld)
-        self.urdf = self.http.call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
-        self.frames = self.http.call(Call("GET", "/v1/ros/frames", lambda d: d))
+        with ThreadPoolExecutor(3, thread_name_prefix="armfleet-start") as pool:
+            # the reads the root namespace needs, in flight together and beside the import
+            urdf = pool.submit(self.http.call, Call("GET", "/v1/ros/robot_description", _urdf))
+            frames = pool.submit(self.http.call, Call("GET", "/v1/ros/frames", lambda d: d))
+            free = pool.submit(self.http.entities, 0)  # every world has the same scene
+            self._sim = self._simulation_interfaces(log)
+            self.urdf, self.frames = urdf.result(), frames.result()
+            self.free_bodies = [e["name"] for e in free.result()["entities"]]
         self.tree = TfTree(self.frames)
-        self.bad = ros_rules.RefusalCounter("armfleet_ros", log.warning)
+        # refusals are warnings of the ROS node (on /rosout too)
+        self.bad = ros_rules.RefusalCounter("armfleet_ros", node.get_logger().warning)
         self.accepted = 0
         self._publish_lock = threading.Lock()
         self._clock_tick = -1
@@ -89,7 +103,6 @@ class ArmfleetNode:
         self._part_of: dict[str, Any] = {}  # a namespace's groups share its slice
         names = [c.strip() for c in str(param(node, "cameras", "")).split(",") if c.strip()]
         self.cameras = camera_topics(self, names, float(param(node, "camera_rate", 10.0)))
-        self._sim = self._simulation_interfaces(log)
         served = {"": 0} | {f"/world_{w}": w for w in self.worlds}
         groups = {a: (a,) for a in (*TRAJECTORY_ACTIONS, ros_rules.GRIPPER_ACTION)}
         if self._sim is not None:
@@ -116,13 +129,12 @@ class ArmfleetNode:
 
     def _simulation_interfaces(self, log: Any) -> Any:
         """The module of the standard simulator services, where the installation has the
-        package (else None), and the scene's free bodies they name."""
+        package (else None)."""
         try:
             from armfleet_ros import sim
         except ImportError as exc:
             log.warning(f"simulation_interfaces is not installed ({exc}): its services are off")
             return None
-        self.free_bodies = sim.free_bodies(self.http)
         return sim
 
     def _make(self, ns: str, world: int, group: str) -> None:

@@ -182,11 +182,6 @@ def reset(owner: Any, world: Any, req: Any, res: Any) -> Any:
     return _result(res, Result.RESULT_OK)
 
 
-def free_bodies(http: Any) -> list[str]:
-    """The scene's free bodies (every world has the same scene): read once, at start."""
-    return [e["name"] for e in http.entities(0)["entities"]]
-
-
 # the per-world services (namespaces.py opens them together, on the first use of any)
 WORLD_SERVICES = (
     "reset_simulation",
@@ -204,7 +199,7 @@ class WorldSim:
         self.owner, self.world = owner, world
         node, group = part.servers, part.group
         self.bodies = {b["name"]: b["id"] for b in owner.frames["bodies"]}
-        self.free = list(owner.free_bodies)  # the same scene in every world
+        self.free = list(owner.free_bodies)  # the same scene in every world (read at start)
         self.bodies |= {name: -1 for name in self.free if name not in self.bodies}
         srv = node.create_service
         if ns:  # the root's reset_simulation is the global one
