@@ -3,13 +3,16 @@ of tests/ros2_judge.py).
 
 One realtime service (native MuJoCo) with `--ros2` serving every world's namespace (256 by
 default) and, in the same run:
-- the node's start (service ready → node connected with every namespace created), the graph a
-  ROS user sees (topics, services, actions, endpoints) and the node's CPU and memory, idle;
+- the node's start (service ready → node connected: the root namespace made, the others are
+  made at their first use), the graph a ROS user sees then (topics, services, actions,
+  endpoints) and the node's CPU and memory, idle;
+- the first use of the latency worlds' namespaces: the judge's publishers and subscriptions
+  made → matched and states flowing (each world's topics opened on the way);
 - JointState command → first `/world_N/joint_states` showing the joint move toward the new
   target (>= 1e-4 rad; the arm at rest before each round),
   through the node (a judge rclpy node publishes and subscribes), against the direct path (the
   client's WebSocket: set_targets, then the first state frame showing it), same worlds, same
-  60 Hz state rate;
+  60 Hz state rate, the two paths in turns of a third of the rounds;
 - 1000 JointState commands/s over 16 worlds' `joint_commands`: what the node accepted, what it
   refused, and that each world's last command is its target.
 
@@ -36,6 +39,7 @@ LATENCY_WORLDS = 4
 FLOOD_WORLDS = 16
 FLOOD_RATE = 1000.0
 ELBOW = 2
+BATCHES = 3  # of latency rounds, each path in turn
 GAP_S = 0.4  # between rounds: with 4 worlds each arm rests 1.6 s before it is commanded again
 
 
@@ -161,12 +165,23 @@ def ros(ctx: Context) -> Result:
         node = _node(http)
         data["node_start_s"] = time.perf_counter() - t0
         data["namespaces"] = node["report"]["worlds"]
+        data["open_at_start"] = node["report"].get("open", data["namespaces"])
         data["graph"] = _judge("graph", "counts")
         data["idle"] = _usage(node["pid"], ctx.pick(5.0, 3.0))
         ctx.say(f"  node up in {data['node_start_s']:.1f} s; graph {data['graph']}")
         n_lat = min(LATENCY_WORLDS, worlds)
-        data["node_latency"] = _stats(_judge("latency", str(n_lat), str(rounds), str(GAP_S))["ms"])
-        data["direct_latency"] = _stats(direct_round_trips(server.url, n_lat, rounds))
+        # the two paths take turns, BATCHES times: a shared box's load changes within a run
+        node_ms: list[float] = []
+        direct_ms: list[float] = []
+        for b in range(BATCHES):
+            n = rounds // BATCHES
+            seen = _judge("latency", str(n_lat), str(n), str(GAP_S))
+            node_ms += seen["ms"]
+            if b == 0:  # the namespaces' first use: later batches find them open
+                data["first_use_s"] = seen.get("ready_s")
+            direct_ms += direct_round_trips(server.url, n_lat, n)
+        data["node_latency"] = _stats(node_ms)
+        data["direct_latency"] = _stats(direct_ms)
         before = _node(http)["report"]
         flood = _judge("flood", str(FLOOD_WORLDS), str(FLOOD_RATE), str(flood_s))
         time.sleep(1.0)
@@ -180,19 +195,32 @@ def ros(ctx: Context) -> Result:
             "last_is_target": all(abs(targets[w] - v) < 1e-9 for w, v in flood["last"].items()),
         }
         data["busy"] = _usage(node["pid"], 0.5)
+        data["open_at_end"] = after.get("open", data["namespaces"])
     lat_n, lat_d = data["node_latency"], data["direct_latency"]
     rows = [
         {
-            "measure": "node start (ready → all namespaces up)",
+            "measure": "node start (ready → connected, root namespace made)",
             "value": f"{data['node_start_s']:.1f} s",
         },
         {
-            "measure": "topics / services / actions",
+            "measure": "namespaces served / open at start / open at the end",
+            "value": "{namespaces} / {open_at_start} / {open_at_end}".format(**data),
+        },
+        {
+            "measure": f"first use of {n_lat} worlds' topics: made → matched, states flowing",
+            "value": f"{data['first_use_s']:.2f} s",
+        },
+        {
+            "measure": "topics / services / actions (at start)",
             "value": "{topics} / {services} / {actions}".format(**data["graph"]),
         },
         {
             "measure": "node idle CPU, RSS",
             "value": f"{data['idle']['cpu_percent']:.0f} %, {data['idle']['rss_mb']:.0f} MB",
+        },
+        {
+            "measure": "node RSS at the end (the namespaces used open)",
+            "value": f"{data['busy']['rss_mb']:.0f} MB",
         },
         {
             "measure": "round trip via node p50 / p99",

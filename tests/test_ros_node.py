@@ -33,7 +33,7 @@ pytestmark = pytest.mark.skipif(
     ros2_judge.skip_reason() is not None, reason=str(ros2_judge.skip_reason())
 )
 
-WORLDS = "0-3"
+WORLDS = "0-4"  # world 4: only test_a_world_namespace_opens_at_first_use uses it
 
 
 OWN_GRAPH = 100  # domain offset of tests that start their own armfleet beside the module's
@@ -65,7 +65,7 @@ def ros_server(port: int | None = None, log_dir: Any = None, domain: int = 0) ->
     args = ["--engine", "mujoco", "--ros2", "--ros2-worlds", WORLDS]
     args += ["--ros2-python", ros2_judge.python()]
     with serve(
-        worlds=4, port=port, extra_args=args, env=server_env(domain), log_dir=log_dir
+        worlds=5, port=port, extra_args=args, env=server_env(domain), log_dir=log_dir
     ) as srv:
         yield srv
 
@@ -274,6 +274,9 @@ def test_robot_description_for_a_late_joiner(ros: tuple[Server, httpx.Client]) -
 
 
 def test_graph_lists_the_node_topics_and_actions(ros: tuple[Server, httpx.Client]) -> None:
+    """The root's names from the start; /world_1's topics once used (here by a late joiner
+    of its robot_description)."""
+    assert judge("description", "/world_1")["urdf"]
     topic_names = ["joint_commands", "joint_states", "tf", "tf_static", "robot_description"]
     topic_names += ["forward_position_controller/commands"]
     topic_names += ["scaled_joint_trajectory_controller/joint_trajectory"]
@@ -283,7 +286,7 @@ def test_graph_lists_the_node_topics_and_actions(ros: tuple[Server, httpx.Client
     ]
     action_names += ["robotiq_gripper_controller/gripper_cmd"]
     expect = [f"{ns}/{t}" for ns in ("", "/world_1") for t in topic_names]
-    expect += ["/clock", *(f"{ns}/{a}" for ns in ("", "/world_3") for a in action_names)]
+    expect += ["/clock", *action_names]
     seen = judge("graph", *expect)  # once all of these are discovered (a busy box is slow)
     assert ["armfleet", "/"] in seen["nodes"]
     topics = dict((name, types) for name, types in seen["topics"])
@@ -301,12 +304,55 @@ def test_graph_lists_the_node_topics_and_actions(ros: tuple[Server, httpx.Client
     assert topics["/clock"] == ["rosgraph_msgs/msg/Clock"]
     actions = dict((name, types) for name, types in seen["actions"])
     fjt = ["control_msgs/action/FollowJointTrajectory"]
-    for ns in ("", "/world_3"):
-        assert actions[f"{ns}/scaled_joint_trajectory_controller/follow_joint_trajectory"] == fjt
-        assert actions[f"{ns}/joint_trajectory_controller/follow_joint_trajectory"] == fjt
-        assert actions[f"{ns}/robotiq_gripper_controller/gripper_cmd"] == [
-            "control_msgs/action/GripperCommand"
-        ]
+    assert actions["/scaled_joint_trajectory_controller/follow_joint_trajectory"] == fjt
+    assert actions["/joint_trajectory_controller/follow_joint_trajectory"] == fjt
+    assert actions["/robotiq_gripper_controller/gripper_cmd"] == [
+        "control_msgs/action/GripperCommand"
+    ]
+
+
+def test_a_world_namespace_opens_at_first_use(ros: tuple[Server, httpx.Client]) -> None:
+    """World 4, used by no other test: the node has no endpoint under /world_4 until a ROS
+    user names one; then each group comes whole and alone. A subscriber of joint_states brings
+    the world's topics (and no service), an action client the gripper's server (and not the
+    trajectory ones), a service client the world's simulation_interfaces services. The node's
+    endpoints are read per node, as `ros2 node info` shows them."""
+    _, http = ros
+    ns = "/world_4"
+    seen = judge("opening", ns, timeout=240)
+    assert seen["before"] == {"publishers": {}, "subscriptions": {}, "services": {}}
+    topics = seen["topics"]
+    assert seen["state_names"] == JOINTS
+    assert topics["publishers"] == {
+        f"{ns}/joint_states": ["sensor_msgs/msg/JointState"],
+        f"{ns}/tf": ["tf2_msgs/msg/TFMessage"],
+        f"{ns}/tf_static": ["tf2_msgs/msg/TFMessage"],
+        f"{ns}/robot_description": ["std_msgs/msg/String"],
+    }
+    assert topics["subscriptions"] == {
+        f"{ns}/joint_commands": ["sensor_msgs/msg/JointState"],
+        f"{ns}/forward_position_controller/commands": ["std_msgs/msg/Float64MultiArray"],
+        f"{ns}/scaled_joint_trajectory_controller/joint_trajectory": [
+            "trajectory_msgs/msg/JointTrajectory"
+        ],
+        f"{ns}/joint_trajectory_controller/joint_trajectory": [
+            "trajectory_msgs/msg/JointTrajectory"
+        ],
+    }
+    assert topics["services"] == {}
+    gripper = f"{ns}/robotiq_gripper_controller/gripper_cmd/_action"
+    assert seen["action_ready"]
+    assert set(seen["action"]["services"]) == {
+        f"{gripper}/{s}" for s in ("send_goal", "cancel_goal", "get_result")
+    }
+    new_topics = set(seen["action"]["publishers"]) - set(topics["publishers"])
+    assert new_topics == {f"{gripper}/feedback", f"{gripper}/status"}
+    assert seen["service_ready"] and "cube" in seen["entities"]
+    sim = set(seen["sim"]["services"]) - set(seen["action"]["services"])
+    names = ("reset_simulation", "get_entities", "get_entity_state", "get_entities_states")
+    assert sim == {f"{ns}/{name}" for name in (*names, "set_entity_state")}
+    report = http.get("/v1/ros").json()["node"]["report"]
+    assert report["worlds"] == 6 and 2 <= report["open"] <= 6  # "" and /world_0../world_4
 
 
 def test_simulation_interfaces(ros: tuple[Server, httpx.Client]) -> None:

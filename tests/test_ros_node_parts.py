@@ -17,7 +17,7 @@ from tests.pythons import interpreter
 
 NODE_SRC = ROOT / "packaging" / "armfleet-ros"
 sys.path.insert(0, str(NODE_SRC))
-from armfleet_ros import convert  # noqa: E402
+from armfleet_ros import convert, namespaces  # noqa: E402
 
 
 def test_joint_state_rules() -> None:
@@ -34,6 +34,41 @@ def test_joint_state_rules() -> None:
         with pytest.raises(convert.BadMessage) as err:
             convert.joint_state_targets(JOINTS, names, values)
         assert err.value.kind == kind
+
+
+def test_graph_names_open_their_group_once() -> None:
+    """Which group of which namespace a graph name opens (the node's own use of it is judged
+    on a real ROS in test_ros_node.py::test_a_world_namespace_opens_at_first_use)."""
+    made: list[tuple[str, int, str]] = []
+    gripper = ros_rules.GRIPPER_ACTION
+    groups = {gripper: (gripper,), "sim": ("get_entities", "get_entity_state")}
+    served = {"": 0, "/world_2": 2, "/world_10": 10}
+    spaces = namespaces.Namespaces(None, served, groups, lambda *a: made.append(a))
+    spaces.open_all("")
+    assert made == [("", 0, "topics"), ("", 0, gripper), ("", 0, "sim")]
+    names = [
+        "/joint_commands",  # the root's: open already
+        "/world_2/joint_states",
+        "/world_2/joint_commands",  # the same group: once
+        f"/world_2/{gripper}/_action/feedback",
+        "/world_2/get_entity_state",
+        "/world_2/get_entity_statex",  # not a service of the group: a topic
+        "/world_1/joint_states",  # not served
+        "/world_10",  # the namespace itself names nothing in it
+        "/world_10/robotiq_gripper_controller",  # above the action's name: a topic
+    ]
+    wanted = spaces.wanted(names)
+    assert wanted == [
+        ("/world_2", "topics"),
+        ("/world_2", gripper),
+        ("/world_2", "sim"),
+        ("/world_10", "topics"),
+    ]
+    for ns, group in wanted:
+        assert spaces.open(ns, group)
+    assert not spaces.open("/world_2", "sim") and not spaces.open("/world_1", "topics")
+    assert made[3:] == [(ns, served[ns], group) for ns, group in wanted]
+    assert spaces.wanted(names) == [] and spaces.open_namespaces() == 3
 
 
 def test_forward_and_trajectory_bodies() -> None:

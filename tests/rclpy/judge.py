@@ -1,7 +1,7 @@
 """Judge nodes on a real rclpy (../shared/ros2_judge): each subcommand plays a ROS user against
 the armfleet_ros node and prints one JSON line of what it saw; the pytest side decides.
 
-    python judge.py seed|bad|command|actions|tf|description|graph|isaac|sim [args]
+    python judge.py seed|bad|command|actions|tf|description|graph|opening|isaac|sim [args]
 
 Nothing of armfleet is imported here: only rclpy and the distribution's message packages.
 """
@@ -325,6 +325,10 @@ def main() -> None:
             from load_judge import isaac
 
             isaac(float(args[0]), float(args[1]))
+        elif cmd == "opening":
+            from open_judge import opening
+
+            opening(args[0])
         elif cmd == "graph":
             graph(bool(args and args[0] == "counts"), tuple(a for a in args if a != "counts"))
         else:

@@ -11,9 +11,12 @@ from rclpy.node import Node
 
 def latency(worlds: int, rounds: int, gap: float) -> None:
     """publish → first /world_N/joint_states showing the joint move toward the new target
-    (>= 1e-4 rad), one world at a time, `gap` s between rounds (the arm at rest each time)."""
+    (>= 1e-4 rad), one world at a time, `gap` s between rounds (the arm at rest each time).
+    Also `ready_s`: from the judge's publishers and subscriptions made to every one of them
+    matched and publishing states (for a namespace not used before: its opening included)."""
     from sensor_msgs.msg import JointState
 
+    t_made = time.perf_counter()
     node = Node("judge_latency")
     latest: dict = {}
     pubs = {}
@@ -30,6 +33,7 @@ def latency(worlds: int, rounds: int, gap: float) -> None:
         lambda: len(latest) == worlds and all(p.get_subscription_count() for p in pubs.values()),
         60,
     )
+    ready_s = time.perf_counter() - t_made
     spin_until(node, lambda: False, 1.0)
     out_ms = []
     for i in range(rounds):
@@ -51,7 +55,7 @@ def latency(worlds: int, rounds: int, gap: float) -> None:
         if moved:
             out_ms.append((latest[w][0] - t0) * 1e3)
         spin_until(node, lambda: False, gap)  # each world rests again before its next round
-    out(ms=out_ms, rounds=rounds)
+    out(ms=out_ms, rounds=rounds, ready_s=ready_s)
 
 
 def flood(worlds: int, rate: float, seconds: float) -> None:

@@ -62,17 +62,18 @@ def _server(part: Any, kind: Any, name: str, handler: Any) -> ActionServer:
     )
 
 
-class TrajectoryActions:
-    """FollowJointTrajectory servers of one world (both controller names)."""
+TRAJECTORY_ACTIONS = tuple(f"{c}/follow_joint_trajectory" for c in FJT_CONTROLLERS)
 
-    def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
+
+class TrajectoryAction:
+    """The FollowJointTrajectory server of one world under one controller's name
+    (`name`: one of TRAJECTORY_ACTIONS)."""
+
+    def __init__(self, owner: Any, world: int, ns: str, part: Any, name: str) -> None:
         self.owner, self.world = owner, world
         self._started: dict[int, int] = {}  # id(goal message) → trajectory id
         self._lock = threading.Lock()
-        self.servers = [
-            _server(part, FollowJointTrajectory, f"{ns}/{name}/follow_joint_trajectory", self)
-            for name in FJT_CONTROLLERS
-        ]
+        self.server = _server(part, FollowJointTrajectory, f"{ns}/{name}", self)
 
     def _goal(self, goal: Any) -> GoalResponse:
         where = f"world {self.world} follow_joint_trajectory"

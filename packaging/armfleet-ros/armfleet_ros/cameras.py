@@ -1,8 +1,9 @@
 """Camera images on the ROS graph: sensor_msgs/Image (rgb8) and CameraInfo, as a camera driver.
 
 For each camera of the node's `cameras` parameter (`armfleet serve --ros2-cameras wrist,...`),
-every namespace gets `<ns>/<camera>/image_raw` and `<ns>/<camera>/camera_info`, frame
-`[world_N/]<camera>_optical_frame`, stamped with the simulated time of the tick the image shows.
+every namespace gets `<ns>/<camera>/image_raw` and `<ns>/<camera>/camera_info` when it opens
+(namespaces.py), frame `[world_N/]<camera>_optical_frame`, stamped with the simulated time of
+the tick the image shows.
 CameraInfo is `plumb_bob` with no distortion, K as `GET /v1/cameras` gives it, P = [K | 0].
 
 The pixels come from armfleet's camera stream (`WS /v1/ws/cameras`, raw RGB, newest only) at
@@ -51,11 +52,9 @@ class CameraTopics:
     def __init__(self, owner: Any, spec: dict, rate: float) -> None:
         self.owner, self.spec, self.rate = owner, spec, rate
         self.name = str(spec["name"])
-        # world -> [(image publisher, info publisher, frame id)] (world 0 may have two names)
+        # world -> [(image publisher, info publisher, frame id)] (world 0 may have two names),
+        # of the open namespaces (`add`); replaced, never changed, as the refresh reads it
         self.pubs: dict[int, list[tuple[Any, Any, str]]] = {}
-        for part, spaces in owner.parts:
-            for ns, world in spaces:
-                self._add(part.topics, ns, world)
         self.listened: tuple[int, ...] = ()
         self.published = 0
         self._changed = threading.Event()
@@ -64,11 +63,12 @@ class CameraTopics:
         self._thread.daemon = True
         self._thread.start()
 
-    def _add(self, node: Any, ns: str, world: int) -> None:
+    def add(self, node: Any, ns: str, world: int) -> None:
+        """This camera's topics in a namespace being opened (node.py)."""
         image = node.create_publisher(Image, f"{ns}/{self.name}/image_raw", QOS_DEPTH)
         info = node.create_publisher(CameraInfo, f"{ns}/{self.name}/camera_info", QOS_DEPTH)
         frame = f"{ns.lstrip('/') + '/' if ns else ''}{self.name}_optical_frame"
-        self.pubs.setdefault(world, []).append((image, info, frame))
+        self.pubs = {**self.pubs, world: [*self.pubs.get(world, []), (image, info, frame)]}
 
     def refresh(self) -> None:
         """Which worlds' image or info topics somebody subscribes to now."""

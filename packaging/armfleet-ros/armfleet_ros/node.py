@@ -8,7 +8,8 @@ is the installation's own. Parameters: `url`, `worlds` (worlds with `/world_N/..
 also at the root, the seed's names), `rate` (Hz of `/joint_states`, `/clock`, `/tf`),
 `play_mode` (what simulation_interfaces' PLAYING means: realtime or fast), `command_rate`
 (armfleet's `--command-rate`, the budget of each of the node's command lanes: lanes.py),
-`cameras` and `camera_rate` (camera images per namespace: cameras.py).
+`cameras` and `camera_rate` (camera images per namespace: cameras.py). The root namespace
+is made at start, a `/world_N`'s endpoints at their first use on the graph (namespaces.py).
 Written for Python 3.10 and rclpy 3.3 (Humble) on: no newer API is used.
 """
 
@@ -19,6 +20,7 @@ import logging
 import sys
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import rclpy
@@ -26,17 +28,24 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
 from armfleet_ros import auth
+from armfleet_ros.actions import TRAJECTORY_ACTIONS, GripperAction, TrajectoryAction
 from armfleet_ros.cameras import camera_topics
 from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
+from armfleet_ros.namespaces import TOPICS, Namespaces
 from armfleet_ros.params import param
-from armfleet_ros.parts import slices
+from armfleet_ros.parts import Parts
 from armfleet_ros.world import WorldTopics
 from clients import ArmfleetClient, ros_rules
 from clients.calls import Call
 from clients.errors import ArmfleetError
 
 NODE_NAME = "armfleet"
+SIM = "simulation_interfaces"  # the group of a world's simulation_interfaces services
+
+
+def _urdf(body: dict) -> str:
+    return body["urdf"]
 
 
 def parse_worlds(spec: str, nworld: int) -> list[int]:
@@ -56,7 +65,9 @@ class ArmfleetNode:
 
     def __init__(self, node: Node) -> None:
         self.node = node  # parameters, /clock and the first slice's topics (parts.py)
-        log = node.get_logger()
+        # Start's lines go to Python's logging, as the link's do: rclpy's logger reads the
+        # caller's source on its first call (inspect: about a second on a busy 2-core box)
+        log = logging.getLogger("armfleet_ros")
         self.url = str(param(node, "url", "http://127.0.0.1:8000"))
         spec = str(param(node, "worlds", ""))  # `worlds:=3` arrives as an integer
         self.rate = float(param(node, "rate", 60.0))  # `rate:=100` too
@@ -66,10 +77,17 @@ class ArmfleetNode:
         self.joints = info.names
         self.tick_dt = 1.0 / info.control_hz
         self.worlds = parse_worlds(spec, info.nworld)
-        self.urdf = self.http.call(Call("GET", "/v1/ros/robot_description", lambda d: d["urdf"]))
-        self.frames = self.http.call(Call("GET", "/v1/ros/frames", lambda d: d))
+        with ThreadPoolExecutor(3, thread_name_prefix="armfleet-start") as pool:
+            # the reads the root namespace needs, in flight together and beside the import
+            urdf = pool.submit(self.http.call, Call("GET", "/v1/ros/robot_description", _urdf))
+            frames = pool.submit(self.http.call, Call("GET", "/v1/ros/frames", lambda d: d))
+            free = pool.submit(self.http.entities, 0)  # every world has the same scene
+            self._sim = self._simulation_interfaces(log)
+            self.urdf, self.frames = urdf.result(), frames.result()
+            self.free_bodies = [e["name"] for e in free.result()["entities"]]
         self.tree = TfTree(self.frames)
-        self.bad = ros_rules.RefusalCounter("armfleet_ros", log.warning)
+        # refusals are warnings of the ROS node (on /rosout too)
+        self.bad = ros_rules.RefusalCounter("armfleet_ros", node.get_logger().warning)
         self.accepted = 0
         self._publish_lock = threading.Lock()
         self._clock_tick = -1
@@ -78,33 +96,63 @@ class ArmfleetNode:
         self._reported: dict = {}
         self._reported_at = 0.0
         self.clock = node.create_publisher(Clock, "/clock", 10)
-        spaces = [("", 0)] + [(f"/world_{w}", w) for w in self.worlds]
-        self.parts = slices(spaces, NODE_NAME, node)
-        self.spaces = [WorldTopics(self, w, ns, part) for part, sl in self.parts for ns, w in sl]
-        self._simulation_interfaces(log)
+        self.parts = Parts(NODE_NAME, node)
+        # what the open namespaces have made (namespaces.py); lists replaced, never changed
+        self.spaces: list[WorldTopics] = []
+        self.servers: list[Any] = []  # action servers and WorldSim services
+        self._part_of: dict[str, Any] = {}  # a namespace's groups share its slice
         names = [c.strip() for c in str(param(node, "cameras", "")).split(",") if c.strip()]
         self.cameras = camera_topics(self, names, float(param(node, "camera_rate", 10.0)))
-        served = sorted({w for _, w in spaces})
+        served = {"": 0} | {f"/world_{w}": w for w in self.worlds}
+        groups = {a: (a,) for a in (*TRAJECTORY_ACTIONS, ros_rules.GRIPPER_ACTION)}
+        if self._sim is not None:
+            groups[SIM] = self._sim.WORLD_SERVICES
+        self.namespaces = Namespaces(node, served, groups, self._make)
+        self.namespaces.open_all("")  # the root: the seed's names; the others at first use
+        if self._sim is not None:
+            self.sim = self._sim.GlobalSim(self, self.parts.first)
+        worlds = sorted(set(served.values()))
         command_rate = float(param(node, "command_rate", 200.0))
-        self.link = FleetLink(self.url, served, self.rate, self._publish, command_rate)
+        self.link = FleetLink(self.url, worlds, self.rate, self._publish, command_rate)
         self.link.start()
         self._stop = threading.Event()
         # not an executor timer: a wake-up of the topics executor walks all its entities
         threading.Thread(target=self._refresh_loop, name="armfleet-refresh", daemon=True).start()
+        watch = threading.Thread(
+            target=self.namespaces.watch, args=(self._stop,), name="armfleet-graph", daemon=True
+        )
+        watch.start()
         log.info(
-            f"serving {len(served)} worlds of {self.url} "
-            f"({len(self.spaces)} namespaces, {self.rate:g} Hz)"
+            f"serving {len(worlds)} worlds of {self.url} ({len(served)} namespaces, "
+            f"each made at its first use; {self.rate:g} Hz)"
         )
 
-    def _simulation_interfaces(self, log: Any) -> None:
-        """The standard simulator services, where the installation has the package."""
+    def _simulation_interfaces(self, log: Any) -> Any:
+        """The module of the standard simulator services, where the installation has the
+        package (else None)."""
         try:
-            from armfleet_ros.sim import GlobalSim, WorldSim
+            from armfleet_ros import sim
         except ImportError as exc:
             log.warning(f"simulation_interfaces is not installed ({exc}): its services are off")
-            return
-        self.sim = GlobalSim(self, self.parts[0][0])
-        self.entities = [WorldSim(self, w, ns, part) for part, sl in self.parts for ns, w in sl]
+            return None
+        return sim
+
+    def _make(self, ns: str, world: int, group: str) -> None:
+        """One group of a namespace's endpoints (namespaces.py), on the namespace's slice."""
+        part = self._part_of.get(ns)
+        if part is None:
+            part = self._part_of[ns] = self.parts.place()
+        if group == TOPICS:
+            space = WorldTopics(self, world, ns, part)
+            for camera in self.cameras:
+                camera.add(part.topics, ns, world)
+            self.spaces = [*self.spaces, space]
+        elif group == SIM:
+            self.servers = [*self.servers, self._sim.WorldSim(self, world, ns, part)]
+        elif group == ros_rules.GRIPPER_ACTION:
+            self.servers = [*self.servers, GripperAction(self, world, ns, part)]
+        else:
+            self.servers = [*self.servers, TrajectoryAction(self, world, ns, part, group)]
 
     def _wait_for_armfleet(self, log: Any) -> None:
         """Whichever starts first: wait (for ever) until armfleet answers /readyz."""
@@ -136,7 +184,8 @@ class ArmfleetNode:
         body = {
             "name": f"/{NODE_NAME}",
             "connected": self.link.connected,
-            "worlds": len(self.spaces),
+            "worlds": len(self.namespaces.served),
+            "open": self.namespaces.open_namespaces(),
             "accepted": self.accepted,
             "merged": sum(lane.merged for lane in self.link.lanes),
             "rejected": self.bad.counts(),
@@ -192,9 +241,6 @@ class ArmfleetNode:
         except ArmfleetError as exc:
             self.node.get_logger().warning(f"states after a step: {exc}")
 
-    def executors(self) -> list[Any]:
-        return [ex for part, _ in self.parts for ex in part.executors()]
-
     def close(self) -> None:
         self._stop.set()
         for camera in self.cameras:
@@ -215,24 +261,15 @@ def main(args: list | None = None) -> None:
         node.destroy_node()
         rclpy.shutdown()
         sys.exit(2)
-    first, *others = fleet.executors()
-    for ex in others:
-        threading.Thread(target=_spin, args=(ex,), name="armfleet-executor", daemon=True).start()
     try:
-        first.spin()
+        fleet.parts.first.topic_executor.spin()  # the other executors: threads (parts.py)
     except KeyboardInterrupt:
         pass
     finally:
         fleet.close()
-        for part, _ in fleet.parts:
-            part.close()
+        fleet.parts.close()
         if rclpy.ok():
             rclpy.shutdown()
-
-
-def _spin(executor: Any) -> None:
-    with contextlib.suppress(Exception):  # ends with the context at shutdown
-        executor.spin()
 
 
 if __name__ == "__main__":

@@ -1,16 +1,19 @@
-"""The node's namespaces in slices, each slice on ROS nodes and executors of its own.
+"""The node's open namespaces in slices, each slice on ROS nodes and executors of its own.
 
 rclpy walks every entity of an executor's nodes on each wake-up (Python work per entity), so
 one node holding 256 worlds' endpoints (about 1,000 subscriptions and 7,000 service and action
 endpoints) answers a command only after walking all of them: hundreds of milliseconds. So
-every 16 namespaces get their own pair of nodes: one for the topics, spun by a single thread,
-and one for the actions and services, whose callbacks block, spun by a small pool. Slice 0's
-topics node is `armfleet` itself (parameters, `/clock`); the others are `armfleet_<k>` and
-`armfleet_actions[_<k>]`.
+every 16 namespaces opened (namespaces.py: in the order they are first used) get their own pair
+of nodes: one for the topics, spun by a single thread, and one for the actions and services,
+whose callbacks block, spun by a small pool. A slice is made, and its threads started, when its
+first namespace opens. Slice 0's topics node is `armfleet` itself (parameters, `/clock`; `main`
+spins its executor); the others are `armfleet_<k>` and `armfleet_actions[_<k>]`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import threading
 from typing import Any
 
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -44,10 +47,39 @@ class Part:
             n.destroy_node()
 
 
-def slices(spaces: list[tuple[str, int]], name: str, main: Node) -> list[tuple[Part, list]]:
-    """(part, its namespaces) for every SLICE namespaces; the first part's topics are `main`."""
-    out = []
-    for k in range(0, len(spaces), SLICE):
-        part = Part(k // SLICE, name, main if k == 0 else None)
-        out.append((part, spaces[k : k + SLICE]))
-    return out
+class Parts:
+    """The slices so far; `place` gives each namespace opened its slice."""
+
+    def __init__(self, name: str, main: Node) -> None:
+        self.name, self.main = name, main
+        self.all: list[Part] = []
+        self._placed = 0
+        self._lock = threading.Lock()
+
+    def place(self) -> Part:
+        """The slice of the next namespace opened: a new one (spinning) every SLICE."""
+        with self._lock:
+            if self._placed % SLICE == 0:
+                index = len(self.all)
+                part = Part(index, self.name, self.main if index == 0 else None)
+                # slice 0's topics executor is spun by `main` (the process's main thread)
+                for ex in part.executors()[1 if index == 0 else 0 :]:
+                    threading.Thread(
+                        target=_spin, args=(ex,), name="armfleet-executor", daemon=True
+                    ).start()
+                self.all = [*self.all, part]
+            self._placed += 1
+            return self.all[-1]
+
+    @property
+    def first(self) -> Part:
+        return self.all[0]
+
+    def close(self) -> None:
+        for part in self.all:
+            part.close()
+
+
+def _spin(executor: Any) -> None:
+    with contextlib.suppress(Exception):  # ends with the context at shutdown
+        executor.spin()

@@ -182,6 +182,16 @@ def reset(owner: Any, world: Any, req: Any, res: Any) -> Any:
     return _result(res, Result.RESULT_OK)
 
 
+# the per-world services (namespaces.py opens them together, on the first use of any)
+WORLD_SERVICES = (
+    "reset_simulation",
+    "get_entities",
+    "get_entity_state",
+    "get_entities_states",
+    "set_entity_state",
+)
+
+
 class WorldSim:
     """The entity services of one world namespace (and its own reset)."""
 
@@ -189,7 +199,7 @@ class WorldSim:
         self.owner, self.world = owner, world
         node, group = part.servers, part.group
         self.bodies = {b["name"]: b["id"] for b in owner.frames["bodies"]}
-        self.free = [e["name"] for e in owner.http.entities(world)["entities"]]
+        self.free = list(owner.free_bodies)  # the same scene in every world (read at start)
         self.bodies |= {name: -1 for name in self.free if name not in self.bodies}
         srv = node.create_service
         if ns:  # the root's reset_simulation is the global one

@@ -4,7 +4,8 @@ In: `joint_commands` (sensor_msgs/JointState, the seed's message), `forward_posi
 commands` (std_msgs/Float64MultiArray, six arm joints), `scaled_joint_trajectory_controller/
 joint_trajectory` and `joint_trajectory_controller/joint_trajectory` (trajectory_msgs/
 JointTrajectory; no points = stop and hold). Out: `joint_states`, `tf`, `tf_static`,
-`robot_description`. A state topic costs nothing until something subscribes to it.
+`robot_description`. A state topic costs nothing until something subscribes to it. Made when
+the namespace opens (namespaces.py: the root at start, `/world_N` at its first use).
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
 from armfleet_ros import convert
-from armfleet_ros.actions import GripperAction, TrajectoryActions
 from clients import ros_rules
 from clients import trajectory as tj
 from clients.errors import ArmfleetError
@@ -33,7 +33,7 @@ COMMAND_DEPTH = 1000
 
 
 class WorldTopics:
-    """The publishers, subscriptions and action servers of one world under one namespace."""
+    """The publishers and subscriptions of one world under one namespace."""
 
     def __init__(self, owner: Any, world: int, ns: str, part: Any) -> None:
         node = part.topics
@@ -72,8 +72,6 @@ class WorldTopics:
                     callback_group=group,
                 )
             )
-        self.actions = TrajectoryActions(owner, world, ns, part)
-        self.gripper = GripperAction(owner, world, ns, part)
         self.listened_states = False
         self.listened_tf = False
 

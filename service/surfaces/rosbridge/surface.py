@@ -48,6 +48,7 @@ class NodeReport(BaseModel):
             "name": "/armfleet",
             "connected": True,
             "worlds": 9,
+            "open": 2,
             "accepted": 120,
             "merged": 0,
             "rejected": {"unknown_joint": 1},
@@ -56,7 +57,10 @@ class NodeReport(BaseModel):
 
     name: str = Field(max_length=200)
     connected: StrictBool
-    worlds: _COUNT  # type: ignore[valid-type]
+    worlds: _COUNT  # type: ignore[valid-type]  # namespaces served
+    # namespaces whose endpoints exist: the root from the start, the others once used
+    # (armfleet_ros/namespaces.py)
+    open: _COUNT = 0  # type: ignore[valid-type]
     accepted: _COUNT  # type: ignore[valid-type]
     merged: _COUNT = 0  # type: ignore[valid-type]  # sent merged with a later one (lanes.py)
     rejected: dict[str, _COUNT] = Field(max_length=64)  # type: ignore[valid-type]
