@@ -13,6 +13,7 @@ import time
 import httpx
 import numpy as np
 import pytest
+from conftest import rotvec_matrix
 from websockets.sync.client import connect
 
 from clients import ArmfleetClient, AsyncArmfleetClient
@@ -32,21 +33,11 @@ def _rot(q: np.ndarray) -> np.ndarray:
     )
 
 
-def _rotvec(r: list[float]) -> np.ndarray:
-    r = np.asarray(r, dtype=float)
-    t = np.linalg.norm(r)
-    if t < 1e-12:
-        return np.eye(3)
-    k = r / t
-    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(t) * kx + (1 - np.cos(t)) * kx @ kx
-
-
 def _in_world(tcp: dict, pose: list[float]) -> tuple[np.ndarray, np.ndarray]:
     """A base-frame pose in MuJoCo's world frame (the reply's base_in_world)."""
     base = tcp["base_in_world"]
     rb, pb = _rot(base["quaternion"]), np.array(base["position"])
-    return rb @ np.array(pose[:3]) + pb, rb @ _rotvec(pose[3:])
+    return rb @ np.array(pose[:3]) + pb, rb @ rotvec_matrix(pose[3:])
 
 
 def test_the_tcp_pose_is_mujocos_flange_and_ik_round_trips(paused) -> None:
@@ -80,7 +71,7 @@ def test_set_tcp_targets_and_jogs_over_rest_and_websocket(paused) -> None:
         assert bad.status_code == 422 and "tcp[2]" in bad.text and "1" in bad.text, bad.text
         start = http.get("/v1/worlds/2/tcp").json()
         flange, tcp = np.array(start["flange"]), np.array(start["tcp"])
-        z_tool = _rotvec(flange[3:]) @ [0, 0, 0.2]
+        z_tool = rotvec_matrix(flange[3:]) @ [0, 0, 0.2]
         assert tcp[:3] == pytest.approx(flange[:3] + z_tool, abs=1e-9)
         goal = (np.array(start["target_tcp"]) + [0.05, -0.1, -0.05, 0, 0, 0]).tolist()
         moved = http.put("/v1/worlds/2/tcp_target", json={"pose": goal})
@@ -123,7 +114,7 @@ def test_set_tcp_targets_and_jogs_over_rest_and_websocket(paused) -> None:
         # a tool-frame rz step turns the TCP about its own z: the position stays
         tcp_now = np.array(turned["target_tcp"])
         assert tcp_now[:3] - [0, 0, 0] == pytest.approx(
-            np.array(after[:3]) - _rotvec(after[3:]) @ [0, 0, 0.1], abs=1e-6
+            np.array(after[:3]) - rotvec_matrix(after[3:]) @ [0, 0, 0.1], abs=1e-6
         )
         assert http.get("/v1/worlds/3/tcp").json() == other  # the other world never noticed
 
