@@ -21,7 +21,7 @@ from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import InvalidURI
 
-from clients import calls, cell, models, stream
+from clients import calls, cartesian, cell, models, stream
 from clients import trajectory as tj
 from clients.calls import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable, unreachable
@@ -44,7 +44,7 @@ class _Closes:
         await self.close()
 
 
-class AsyncArmfleetClient(_Closes):
+class AsyncArmfleetClient(_Closes, cartesian.AsyncCalls):
     """REST + WebSocket client for one armfleet service, for asyncio."""
 
     def __init__(
@@ -271,7 +271,7 @@ async def _open(url: str, timeout: float, token: str | None = None) -> ClientCon
         raise ArmfleetError(None, str(exc)) from exc
 
 
-class AsyncWorldSession(_Closes):
+class AsyncWorldSession(_Closes, cartesian.AsyncWorldOps):
     """One world over one WebSocket. A reader task routes acks to their commands (by id), so
     several tasks may send commands at once; state frames queue up for iteration (the oldest
     are dropped past 256)."""

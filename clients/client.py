@@ -30,7 +30,7 @@ from websockets.exceptions import InvalidURI
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as ws_connect
 
-from clients import calls, cell, models, stream
+from clients import calls, cartesian, cell, models, stream
 from clients import trajectory as tj
 from clients.calls import DEFAULT_TIMEOUT, DEFAULT_URL, Call
 from clients.errors import ArmfleetError, Unreachable
@@ -53,7 +53,7 @@ class _Closes:
         self.close()
 
 
-class ArmfleetClient(_Closes):
+class ArmfleetClient(_Closes, cartesian.Calls):
     """REST + WebSocket client for one armfleet service. Thread-safe for HTTP calls."""
 
     def __init__(
@@ -314,7 +314,7 @@ def _open(url: str, timeout: float, token: str | None = None) -> ClientConnectio
         raise ArmfleetError(None, str(exc)) from exc
 
 
-class WorldSession(_Closes):
+class WorldSession(_Closes, cartesian.WorldOps):
     """One world over one WebSocket: commands get their acks back (matched by id) and state
     frames that arrive meanwhile are kept for iteration. Does not reconnect: a command on a
     dropped socket raises Unreachable. Use from one thread at a time (a lock enforces it).

@@ -154,6 +154,10 @@ class CommandIds:
     def reset(self, world: int | None = None):
         return self._msg("reset", {}, world)
 
+    def op(self, op: str, body: dict[str, Any], world: int | None = None):
+        """Any other op with its body (clients.cartesian's jog and tcp_target)."""
+        return self._msg(op, body, world)
+
 
 # -- drops --------------------------------------------------------------------------------------
 

@@ -41,23 +41,24 @@ LAYERS: tuple[tuple[str, int], ...] = (
     # the rooms of the core, lowest first (service/core/__init__.py says what each holds)
     ("service.core.process", 1),
     ("service.core.sim", 2),
-    ("service.core.access", 3),
-    ("service.core.streams", 4),
-    ("service.core.commands", 5),
-    ("service.core.cameras", 6),
-    ("service.core.contract", 7),
-    ("service.core.metrics", 8),
-    ("service.core.surface", 9),
-    ("service.engines", 10),
-    ("service.persistence", 11),
-    ("service.surfaces", 12),
+    ("service.core.kinematics", 3),
+    ("service.core.access", 4),
+    ("service.core.streams", 5),
+    ("service.core.commands", 6),
+    ("service.core.cameras", 7),
+    ("service.core.contract", 8),
+    ("service.core.metrics", 9),
+    ("service.core.surface", 10),
+    ("service.engines", 11),
+    ("service.persistence", 12),
+    ("service.surfaces", 13),
     # the app: everything else under service/ (api/, app, runtime, serving, cli), so that a
     # module added at the top is above every layer, never below one
-    ("service", 13),
+    ("service", 14),
     # the bench: beside the app (`armfleet bench` runs it; it drives the service's parts)
-    ("bench", 13),
+    ("bench", 14),
     # the ROS node, on top: it imports only the client library, and nothing imports it
-    ("armfleet_ros", 14),
+    ("armfleet_ros", 15),
 )
 # What the client library keeps to itself: nothing outside `clients` imports these.
 PRIVATE = "clients._"

@@ -18,6 +18,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from service.api import (
     camera_ws,
     cameras,
+    cartesian,
     health,
     info,
     leases,
@@ -187,6 +188,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for module in (
         info,
         worlds,
+        cartesian,
         trajectory,
         sim,
         scene,

@@ -10,6 +10,8 @@ Rooms, lowest first; a room may import the rooms below it, never one above
   read from the MJCF, the scene, the entity table, the loop and its parts (command desk,
   waiters, listeners, pace), the JointState rule and the target arithmetic the loop applies;
   its settings (`sim/settings`).
+- `kinematics/`: the arm's kinematics from the model (UR poses, forward, the closed-form
+  inverse, the Jacobian, moveL's line) and each world's TCP offset.
 - `access/`: who may read and command: tokens, leases, the middlewares, the redacting filter;
   their settings (`access/settings`).
 - `streams/`: state out to sockets: the hub, frame formats, frames and their wire forms.

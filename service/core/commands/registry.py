@@ -9,11 +9,13 @@ its module plus one line below.
 from __future__ import annotations
 
 from service.core.commands.base import Command
+from service.core.commands.cartesian import Jog, MoveLinear, MoveTcp
 from service.core.commands.entities import SetEntities
 from service.core.commands.params import SetParams
 from service.core.commands.payload import SetPayload
 from service.core.commands.randomize import Randomize
 from service.core.commands.targets import Increment, SetMany, SetTargets
+from service.core.commands.tcp import SetTcp
 from service.core.commands.trajectory.commands import (
     CancelTrajectory,
     ResumeTrajectory,
@@ -35,6 +37,10 @@ COMMANDS: tuple[type[Command], ...] = (
     SetParams,
     SetPayload,
     Randomize,
+    SetTcp,
+    MoveTcp,
+    Jog,
+    MoveLinear,
 )
 
 BY_KIND: dict[str, type[Command]] = {c.kind: c for c in COMMANDS}

@@ -1,0 +1,206 @@
+"""Cartesian commands end to end on real servers over real sockets: the TCP pose a world
+reports equals MuJoCo's flange pose, IK round-trips, set_tcp, TCP targets, jogs in base and
+tool frames and moveL through REST, the WebSocket ops and the Python clients (sync and async);
+a pose no configuration reaches is a 422 naming the field, and other worlds never notice."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+import time
+
+import httpx
+import numpy as np
+import pytest
+from websockets.sync.client import connect
+
+from clients import ArmfleetClient, AsyncArmfleetClient
+from clients.errors import ArmfleetError
+from clients.testing import serve
+
+
+def _rot(q: np.ndarray) -> np.ndarray:
+    """A rotation matrix from a quaternion w x y z (the test's own, not the service's)."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _rotvec(r: list[float]) -> np.ndarray:
+    r = np.asarray(r, dtype=float)
+    t = np.linalg.norm(r)
+    if t < 1e-12:
+        return np.eye(3)
+    k = r / t
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(t) * kx + (1 - np.cos(t)) * kx @ kx
+
+
+def _in_world(tcp: dict, pose: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """A base-frame pose in MuJoCo's world frame (the reply's base_in_world)."""
+    base = tcp["base_in_world"]
+    rb, pb = _rot(base["quaternion"]), np.array(base["position"])
+    return rb @ np.array(pose[:3]) + pb, rb @ _rotvec(pose[3:])
+
+
+def test_the_tcp_pose_is_mujocos_flange_and_ik_round_trips(paused) -> None:
+    with httpx.Client(base_url=paused.url, timeout=10) as http:
+        http.put("/v1/worlds/1/targets", json={"position": [0.3, -1.2, 1.4, -1.6, -1.2, 0.4, 0]})
+        http.post("/v1/sim/step", json={"ticks": 30})
+        state = http.get("/v1/worlds/1/state").json()
+        tcp = http.get("/v1/worlds/1/tcp").json()
+        assert tcp["tick"] == state["tick"] and tcp["tcp"] == tcp["flange"]  # no offset yet
+        pos, rot = _in_world(tcp, tcp["flange"])
+        assert np.abs(pos - state["flange"]["position"]).max() < 1e-6
+        assert np.abs(rot - _rot(state["flange"]["quaternion"])).max() < 1e-6
+        # the actual q (as the state's JSON rounds it) through POST fk gives the same pose;
+        # IK of it gives q back
+        q = state["position"][:6]
+        assert http.post("/v1/worlds/1/fk", json={"q": q}).json()["pose"] == pytest.approx(
+            tcp["flange"], abs=1e-6
+        )
+        ik = http.post("/v1/worlds/1/ik", json={"pose": tcp["flange"], "q_near": q}).json()
+        assert ik["ok"] and np.abs(np.array(ik["q"]) - q).max() < 1e-6
+        far = http.post("/v1/worlds/1/ik", json={"pose": [2.5, 0, 0, 0, 0, 0]}).json()
+        assert far == {"world": 1, "ok": False, "q": None, "reason": "out_of_reach", "singular": []}
+
+
+def test_set_tcp_targets_and_jogs_over_rest_and_websocket(paused) -> None:
+    with httpx.Client(base_url=paused.url, timeout=10) as http:
+        other = http.get("/v1/worlds/3/tcp").json()
+        ack = http.put("/v1/worlds/2/tcp_offset", json={"tcp": [0, 0, 0.2, 0, 0, 0]})
+        assert ack.status_code == 200 and ack.json()["tcp"] == [0, 0, 0.2, 0, 0, 0]
+        bad = http.put("/v1/worlds/2/tcp_offset", json={"tcp": [0, 0, 2.0, 0, 0, 0]})
+        assert bad.status_code == 422 and "tcp[2]" in bad.text and "1" in bad.text, bad.text
+        start = http.get("/v1/worlds/2/tcp").json()
+        flange, tcp = np.array(start["flange"]), np.array(start["tcp"])
+        z_tool = _rotvec(flange[3:]) @ [0, 0, 0.2]
+        assert tcp[:3] == pytest.approx(flange[:3] + z_tool, abs=1e-9)
+        goal = (np.array(start["target_tcp"]) + [0.05, -0.1, -0.05, 0, 0, 0]).tolist()
+        moved = http.put("/v1/worlds/2/tcp_target", json={"pose": goal})
+        assert moved.status_code == 200, moved.text
+        assert http.get("/v1/worlds/2/tcp").json()["target_tcp"] == pytest.approx(goal, abs=1e-7)
+        for body, field in (
+            ({"pose": [2.9, 0, 0, 0, 0, 0]}, "pose"),  # out of reach
+            ({"pose": [0, 0, 0.5, 0, 0]}, "pose"),
+            ({"pose": [0, 0, 9, 0, 0, 0]}, "pose"),  # beyond the schema's ±3 m
+        ):
+            bad = http.put("/v1/worlds/2/tcp_target", json=body)
+            assert bad.status_code == 422 and field in bad.text, bad.text
+        before = http.get("/v1/worlds/2/tcp").json()["target_tcp"]
+        jog = http.post("/v1/worlds/2/jog", json={"axis": "z", "step": 0.02, "frame": "base"})
+        assert jog.status_code == 200, jog.text
+        after = http.get("/v1/worlds/2/tcp").json()["target_tcp"]
+        assert np.array(after) - before == pytest.approx([0, 0, 0.02, 0, 0, 0], abs=1e-7)
+        bad = http.post("/v1/worlds/2/jog", json={"axis": "q", "step": 0.02})
+        assert bad.status_code == 422 and "axis" in bad.text
+        bad = http.post("/v1/worlds/2/jog", json={"axis": "x", "step": 0.5})
+        assert bad.status_code == 422 and "step" in bad.text
+    with connect(f"{paused.ws_url}/v1/ws/worlds/2") as ws:
+        msgs = [
+            {"op": "jog", "id": 1, "axis": "rz", "step": 0.1, "frame": "tool"},
+            {"op": "tcp_target", "id": 2, "pose": [2.9, 0, 0, 0, 0, 0]},
+            {"op": "set_tcp", "id": 3, "tcp": [0, 0, 0.1, 0, 0, 0]},
+        ]
+        for m in msgs:
+            ws.send(json.dumps(m))
+        replies = {}
+        while len(replies) < 3:
+            msg = json.loads(ws.recv(timeout=5))
+            if msg["op"] in ("ack", "error"):
+                replies[msg["id"]] = msg
+    assert replies[1]["op"] == "ack" and len(replies[1]["target"]) == 7
+    assert replies[2]["op"] == "error" and "out_of_reach" in replies[2]["detail"]
+    assert replies[3]["op"] == "ack" and replies[3]["tcp"] == [0, 0, 0.1, 0, 0, 0]
+    with httpx.Client(base_url=paused.url, timeout=10) as http:
+        turned = http.get("/v1/worlds/2/tcp").json()
+        # a tool-frame rz step turns the TCP about its own z: the position stays
+        tcp_now = np.array(turned["target_tcp"])
+        assert tcp_now[:3] - [0, 0, 0] == pytest.approx(
+            np.array(after[:3]) - _rotvec(after[3:]) @ [0, 0, 0.1], abs=1e-6
+        )
+        assert http.get("/v1/worlds/3/tcp").json() == other  # the other world never noticed
+
+
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    u = b - a
+    t = np.clip((p - a) @ u / (u @ u), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[:, None] * u), axis=1)
+
+
+@pytest.fixture(scope="module")
+def realtime(tmp_path_factory: pytest.TempPathFactory):
+    log = tmp_path_factory.mktemp("cartesian")
+    with serve(worlds=2, mode="realtime", extra_args=("--engine", "mujoco"), log_dir=log) as srv:
+        yield srv
+
+
+def test_move_linear_keeps_the_tcp_within_a_millimetre_of_the_line(realtime) -> None:
+    """moveL through the sync client; every state streamed over the WebSocket while it runs:
+    MuJoCo's own flange pose, plus the TCP offset, measured against the straight segment."""
+    arm = ArmfleetClient(realtime.url, timeout=20)
+    offset = [0.0, 0.0, 0.2, 0.0, 0.0, 0.0]
+    arm.set_tcp(0, offset)
+    start = arm.tcp(0)
+    goal = (np.array(start["target_tcp"]) + [0.15, -0.25, -0.1, 0, 0, 0]).tolist()
+    states, stop = [], threading.Event()
+
+    def record() -> None:
+        for s in arm.stream(0):
+            states.append(s)
+            if stop.is_set():
+                return
+
+    reader = threading.Thread(target=record, daemon=True)
+    reader.start()
+    while not states:
+        time.sleep(0.05)
+    started = arm.move_linear(0, goal, speed=0.25, accel=0.5)
+    done = arm.trajectory(0, wait=30)
+    time.sleep(0.3)
+    stop.set()
+    reader.join(5)
+    assert done.state == "succeeded", done
+    a, _ = _in_world(start, start["target_tcp"])
+    b, _ = _in_world(start, goal)
+    during = [s for s in states if started.start_tick <= s.tick <= started.end_tick + 30]
+    assert len(during) > 0.8 * (started.end_tick - started.start_tick)
+    tcp = np.array([s.flange_position + _rot(s.flange_quaternion) @ offset[:3] for s in during])
+    deviation = _segment_distance(tcp, a, b)
+    print(f"moveL 0.25 m/s 0.5 m/s²: max {1000 * deviation.max():.3f} mm from the line")
+    assert deviation.max() < 1e-3
+    assert np.linalg.norm(tcp[-1] - b) < 1e-3
+    assert np.linalg.norm(tcp[len(tcp) // 2] - a) > 0.05  # it did travel
+    with pytest.raises(ArmfleetError) as fast:
+        arm.move_linear(0, start["target_tcp"], speed=3.0, accel=150)
+    assert fast.value.status == 422 and "speed" in str(fast.value)
+
+
+def test_the_async_client_and_the_websocket_op_start_a_line(realtime) -> None:
+    async def go() -> tuple[dict, dict]:
+        async with AsyncArmfleetClient(realtime.url, timeout=20) as arm:
+            now = await arm.tcp(1)
+            ack = await arm.jog(1, "x", 0.01, frame="tool")
+            assert len(ack.target) == 7
+            ik = await arm.ik(1, now["target_tcp"])
+            return now, ik
+
+    now, ik = asyncio.run(go())
+    assert ik["ok"]
+    goal = (np.array(now["target_tcp"]) + [0, 0, -0.05, 0, 0, 0]).tolist()
+    with connect(f"{realtime.ws_url}/v1/ws/worlds/1") as ws:
+        ws.send(json.dumps({"op": "move_linear", "id": 9, "pose": goal, "speed": 0.1}))
+        while (msg := json.loads(ws.recv(timeout=5)))["op"] not in ("ack", "error"):
+            pass
+    assert msg["op"] == "ack" and msg["trajectory"]["world"] == 1, msg
+    arm = ArmfleetClient(realtime.url, timeout=20)
+    status = arm.wait_trajectory(msg["trajectory"]["id"], timeout=30)
+    assert status.succeeded
+    time.sleep(1.0)  # the servos settle on the goal
+    assert arm.tcp(1)["tcp"][:3] == pytest.approx(goal[:3], abs=1e-3)

@@ -1,0 +1,155 @@
+"""The arm's kinematics (service.core.kinematics) against MuJoCo's own: forward kinematics of
+the flange equals `mj_kinematics`' site pose on the served model at random joint angles, the
+closed-form IK round-trips, and what it cannot reach it says so, for many worlds in one call."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from mjcf import SCENE_XML
+from service.core.errors import BadCommand
+from service.core.kinematics.line import plan_line
+from service.core.kinematics.pose import (
+    matrix_to_pose,
+    matrix_to_quat,
+    pose_to_matrix,
+    quat_to_matrix,
+    rotvec_to_matrix,
+)
+from service.core.kinematics.servo import ServoLag
+from service.core.kinematics.ur import NotDH, Singularity, Unsolved, URKinematics
+from service.core.sim.robot import FLANGE_SITE, load_robot
+
+ROBOT = load_robot()
+ARM = ROBOT.spec.names[:6]
+KIN = URKinematics.from_model(ROBOT.mjm, ARM)
+LIMITS = np.array([j.velocity_limit for j in ROBOT.spec.joints[:6]])
+RNG = np.random.default_rng(40)
+
+
+def _mujoco_flange(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """MuJoCo's flange site poses (world frame) at arm angles q (n, 6): positions, matrices."""
+    data = mujoco.MjData(ROBOT.mjm)
+    site = mujoco.mj_name2id(ROBOT.mjm, mujoco.mjtObj.mjOBJ_SITE, FLANGE_SITE)
+    pos, mat = [], []
+    for row in q:
+        data.qpos[ROBOT.qpos_adr[:6]] = row
+        mujoco.mj_kinematics(ROBOT.mjm, data)
+        pos.append(data.site_xpos[site].copy())
+        mat.append(data.site_xmat[site].reshape(3, 3).copy())
+    return np.array(pos), np.array(mat)
+
+
+def test_forward_kinematics_equals_mujoco_within_a_micrometre_at_random_angles() -> None:
+    q = RNG.uniform(KIN.lower, KIN.upper, (500, 6))
+    pos, mat = _mujoco_flange(q)
+    world = KIN.to_world(KIN.flange(q))
+    assert np.abs(world[:, :3, 3] - pos).max() < 1e-6
+    assert np.abs(world[:, :3, :3] - mat).max() < 1e-6
+    # the base frame is MuJoCo's `base` body: at (0, 0, 0.5) turned π about z in the scene
+    assert KIN.base_in_world[:3, 3] == pytest.approx([0, 0, 0.5])
+    assert np.diag(KIN.base_in_world[:3, :3]) == pytest.approx([-1, -1, 1])
+    # the DH lengths read off the model are UR's published UR10e table
+    assert KIN.d[[0, 3, 4, 5]] == pytest.approx([0.1807, 0.17415, 0.11985, 0.11655], abs=1e-12)
+    assert KIN.a[[1, 2]] == pytest.approx([-0.6127, -0.57155], abs=1e-12)
+
+
+def test_the_tcp_offset_is_composed_in_the_flange_frame_as_set_tcp() -> None:
+    q = RNG.uniform(-np.pi, np.pi, (50, 6))
+    tcp = np.array([0.01, -0.02, 0.2, 0.1, -0.2, 0.3])
+    pos, mat = _mujoco_flange(q)
+    got = KIN.to_world(KIN.tcp(q, np.tile(tcp, (50, 1))))
+    want = pos + np.einsum("nij,j->ni", mat, tcp[:3])
+    assert np.abs(got[:, :3, 3] - want).max() < 1e-6
+    assert np.abs(got[:, :3, :3] - mat @ rotvec_to_matrix(tcp[3:])).max() < 1e-6
+
+
+def test_ik_round_trips_within_1e_6_for_many_worlds_at_once() -> None:
+    q = RNG.uniform(KIN.lower, KIN.upper, (2000, 6))
+    tcp = np.tile([0.0, 0.0, 0.15, 0.0, 0.0, 0.5], (2000, 1))
+    pose = KIN.fk(q, tcp)
+    got = KIN.ik(pose, q + RNG.normal(0, 0.05, q.shape), tcp)
+    assert got.ok.all()
+    assert np.abs(KIN.fk(got.q, tcp)[:, :3] - pose[:, :3]).max() < 1e-6
+    back = KIN.tcp(got.q, tcp)[:, :3, :3] - pose_to_matrix(pose)[:, :3, :3]
+    assert np.abs(back).max() < 1e-6
+    # nearest q_near: the configuration it came from, each joint on its own turn
+    assert np.abs(KIN.ik(pose, q, tcp).q - q).max() < 1e-6
+    sols, valid = KIN.ik_all(pose[:10], tcp[:10])
+    assert sols.shape == (10, 8, 6) and valid.any(axis=1).all()
+
+
+def test_unreachable_poses_and_singularities_are_reported_not_raised() -> None:
+    home = ROBOT.spec.home[None, :6]
+    far = np.array([[2.0, 0, 0.5, 0, 0, 0], [0, 0, 0.18, 0, 0, 0]])  # beyond reach; in the base
+    got = KIN.ik(far, np.repeat(home, 2, 0))
+    assert not got.ok.any() and (got.reason == Unsolved.OUT_OF_REACH).all()
+    assert got.why(0) == "out_of_reach" and np.array_equal(got.q, np.repeat(home, 2, 0))
+    # a pose only an elbow past ±π reaches: solutions exist, none inside the elbow's range
+    lower, upper = KIN.lower.copy(), KIN.upper.copy()
+    lower[2], upper[2] = -0.1, 0.1
+    narrow = URKinematics(KIN.d, KIN.a, lower, upper, KIN.flange_in_dh6, KIN.base_in_world)
+    q = np.array([[0.3, -1.0, 1.5, -1.0, 1.2, 0.2]])
+    assert narrow.ik(narrow.fk(q), q).why(0) == "joint_limits"
+    straight = np.array([[0.0, -1.0, 0.0, -1.0, 0.0, 0.0]])  # elbow straight, wrist aligned
+    bits = int(KIN.singularity(straight)[0])
+    assert Singularity.names(bits) == ["wrist", "elbow"]
+    got = KIN.ik(KIN.fk(straight), straight)
+    assert got.ok[0] and np.abs(KIN.fk(got.q) - KIN.fk(straight))[:, :3].max() < 1e-6
+
+
+def test_the_jacobian_is_the_derivative_of_the_tcp_pose() -> None:
+    q, tcp = RNG.uniform(-3, 3, (20, 6)), np.tile([0.0, 0.05, 0.2, 0.3, 0, 0], (20, 1))
+    jac, eps = KIN.jacobian(q, tcp), 1e-6
+    for j in range(6):
+        dq = np.zeros(6)
+        dq[j] = eps
+        hi, lo = KIN.tcp(q + dq, tcp), KIN.tcp(q - dq, tcp)
+        v = (hi[:, :3, 3] - lo[:, :3, 3]) / (2 * eps)
+        w = (
+            (hi[:, :3, :3] - lo[:, :3, :3])
+            / (2 * eps)
+            @ KIN.tcp(q, tcp)[:, :3, :3].transpose(0, 2, 1)
+        )
+        assert np.abs(jac[:, :3, j] - v).max() < 1e-7
+        assert np.abs(jac[:, 3:, j] - w[:, [2, 0, 1], [1, 2, 0]]).max() < 1e-7
+
+
+def test_pose_conversions_keep_the_axis_near_half_a_turn() -> None:
+    r = np.array([[np.pi, 0, 0], [0, np.pi - 1e-12, 0], [1e-12, 0, 0], [0.3, -2.0, 1.0]])
+    t = np.zeros((4, 4, 4))
+    t[:, :3, :3], t[:, 3, 3] = rotvec_to_matrix(r), 1
+    back = matrix_to_pose(t)[:, 3:]
+    assert np.abs(rotvec_to_matrix(back) - t[:, :3, :3]).max() < 1e-12
+    assert back[1] == pytest.approx([0, np.pi - 1e-12, 0]) and back[3] == pytest.approx(r[3])
+    assert np.abs(quat_to_matrix(matrix_to_quat(t[:, :3, :3])) - t[:, :3, :3]).max() < 1e-12
+
+
+def test_a_line_plan_stays_on_the_line_and_refuses_what_no_arm_can_follow() -> None:
+    home, tcp = ROBOT.spec.home[:6], np.array([0, 0, 0.2, 0, 0, 0.0])
+    start = KIN.fk(home[None], tcp[None])[0]
+    goal = start + [0.2, -0.3, -0.1, 0, 0, 0]
+    plan = plan_line(KIN, home, goal, tcp, 0.25, 1.2, LIMITS, tuple(ARM))
+    p = KIN.fk(plan.q, np.tile(tcp, (len(plan.q), 1)))[:, :3] - start[:3]
+    u = (goal - start)[:3] / np.linalg.norm((goal - start)[:3])
+    assert np.linalg.norm(p - np.outer(p @ u, u), axis=1).max() < 1e-9
+    assert plan.qd[-1] == pytest.approx(np.zeros(6)) and plan.q[-1] == pytest.approx(
+        KIN.ik(goal[None], home[None], tcp[None]).q[0]
+    )
+    led = plan_line(KIN, home, goal, tcp, 0.25, 1.2, LIMITS, tuple(ARM), ServoLag(ROBOT.mjm, ARM))
+    assert 1e-5 < np.abs(led.q - plan.q).max() < 0.05  # ahead by the servos' lag, not more
+    with pytest.raises(BadCommand) as fast:
+        plan_line(KIN, home, goal, tcp, 3.0, 100, LIMITS, tuple(ARM))
+    assert fast.value.field == "speed" and "rad/s" in fast.value.message
+    with pytest.raises(BadCommand) as far:
+        plan_line(KIN, home, start + [3, 0, 0, 0, 0, 0], tcp, 0.2, 1, LIMITS, tuple(ARM))
+    assert far.value.field == "pose"
+
+
+def test_a_model_that_is_not_the_dh_chain_is_refused() -> None:
+    spec = mujoco.MjSpec.from_file(str(SCENE_XML))
+    spec.body("forearm_link").quat = [0.9999, 0.01, 0, 0]  # an elbow axis not parallel
+    with pytest.raises(NotDH, match="DH chain"):
+        URKinematics.from_model(spec.compile(), ARM)
