@@ -179,6 +179,13 @@ class Controller:
         self.program = state
         self.changed()
 
+    def can_run_script(self) -> bool:
+        """A program sent to a script port runs only on a ready robot (RUNNING, not stopped)."""
+        return self.robot_mode is RobotMode.RUNNING and self.safety_mode in (
+            SafetyMode.NORMAL,
+            SafetyMode.REDUCED,
+        )
+
     def can_play(self) -> bool:
         return (
             self.loaded_program is not None

@@ -172,6 +172,9 @@ class DashboardSession(asyncio.Protocol):
         if len(self._buffer) > _MAX_LINE:
             self.refuse_connection(f"a line longer than {_MAX_LINE} bytes")
 
+    def send(self, data: bytes) -> None:
+        """Robot messages go to the script ports' clients, not to the Dashboard's."""
+
     def refuse_connection(self, why: str) -> None:
         log.warning("world %d Dashboard connection closed: %s", self.robot.world, why)
         if self.transport is not None:
