@@ -53,9 +53,10 @@ def _pause(ctl: Controller) -> str:
 
 
 def _stop(ctl: Controller) -> str:
-    if ctl.program is ProgramState.STOPPED:
-        return "Failed to execute: stop"
-    ctl.set_program(ProgramState.STOPPED)
+    """ "Stopped" also when nothing runs: ur_rtde's reuploadScript() stops a script that has
+    just ended and throws on any other answer."""
+    if ctl.program is not ProgramState.STOPPED:
+        ctl.set_program(ProgramState.STOPPED)
     return "Stopped"
 
 
