@@ -91,7 +91,7 @@ def test_movej_and_movel_reach_their_targets_and_movel_keeps_to_its_line(arm) ->
 
 
 def test_forward_kinematics_equals_mujocos_flange_and_ik_round_trips(arm) -> None:
-    c, r, _, server = arm
+    c, _r, _, server = arm
     assert c.moveJ([0.5, -1.2, 1.0, -1.3, -1.4, 0.4], 1.0, 2.0)
     wait_for(lambda: c.isSteady(), "steady")
     st = httpx.get(f"{server.url}/v1/worlds/0/state").json()
@@ -135,8 +135,10 @@ def test_servoj_streamed_at_500_hz_is_followed(arm) -> None:
     ]
     best = int(np.argmin(errs))
     raw = float(np.abs(act[half:] - cmd[half:]).max())
-    print(f"servoJ 500 Hz x 10 s: lag {lags[best] * 1e3:.0f} ms, error after lag {errs[best]:.4f} rad, "
-          f"error at the same instant {raw:.4f} rad, sent in {ts[-1]:.2f} s")  # fmt: skip
+    print(
+        f"servoJ 500 Hz x 10 s: lag {lags[best] * 1e3:.0f} ms, error after lag "
+        f"{errs[best]:.4f} rad, at the same instant {raw:.4f} rad, sent in {ts[-1]:.2f} s"
+    )
     assert errs[best] < 0.1 and lags[best] < 0.3  # followed, late by the servos' lag
 
 
@@ -168,7 +170,7 @@ def test_a_protective_stop_is_raised_reported_and_unlocked(arm) -> None:
 
 
 def test_bad_register_values_and_a_second_control_connection_are_refused(arm) -> None:
-    c, r, addr, server = arm
+    c, _r, addr, server = arm
     before = _targets(server, 0)
     other = _targets(server, 1)
     assert not c.moveJ([math.nan, -1.5, 1.5, -1.5, -1.5, 0.0], 1.0, 1.0)

@@ -38,7 +38,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import httpx
-
 import pytest
 
 from clients.testing import LeasedWorld, Server, lease_world, serve
