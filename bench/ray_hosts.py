@@ -202,7 +202,7 @@ def _ip(*args: str) -> None:
 def serve_flags(hosts: TwoHosts, nworld: int) -> list[str]:
     """Two shards, paused (ticks only when asked), state copies every 0.5 s, nothing saved."""
     data = str(hosts.tmp / "data")
-    return ["--worlds", str(nworld), "--shards", "2", "--mode", "paused",
+    return ["--engine", "warp", "--worlds", str(nworld), "--shards", "2", "--mode", "paused",
             "--ray-checkpoint-s", "0.5", "--no-save-on-exit", "--data-dir", data]  # fmt: skip
 
 

@@ -29,7 +29,7 @@ from service.core.sim.loop import SimLoop
 from service.core.sim.randomizations import Randomized
 from service.core.streams.hub import StreamHub
 from service.core.surface import Finishing, SurfaceContext, Watched
-from service.engines.camera_render import camera_feed
+from service.engines.cameras import camera_feed
 from service.engines.choice import build_batch, check_devices
 from service.persistence import provenance
 from service.persistence.service import Persistence

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import shutil
 import subprocess
 import time
@@ -27,6 +28,16 @@ from clients.testing import pytest_plugin as armfleet_plugin
 from service.core.sim.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
+
+# The servers the suite starts step native MuJoCo unless a test names the engine: the HTTP,
+# WebSocket, ROS and persistence contracts do not depend on it, and a native server is ready
+# after about 2.5 s of CPU where MuJoCo Warp's takes about 8.5 s (importing it and hashing its
+# kernels), which is most of what a server start costs the suite. The engines are held to one
+# contract in-process (test_batch_contract.py); MuJoCo Warp is served end to end where it is
+# the subject (test_engine*.py, test_faults.py, test_shards.py, test_stopping.py, test_frames.py,
+# the `engine`-parametrized tests, Ray). `ARMFLEET_ENGINE=warp python3 scripts/dev.py test`
+# runs the whole suite's servers on MuJoCo Warp.
+os.environ.setdefault("ARMFLEET_ENGINE", "mujoco")
 
 SPEC = load_robot().spec
 JOINTS: list[str] = list(SPEC.names)
@@ -94,6 +105,17 @@ def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout} s waiting for {what}")
         time.sleep(0.05)
+
+
+def replies_of(ws: Any, n: int, ops: tuple[str, ...] = ("ack", "error")) -> list[dict[str, Any]]:
+    """The next `n` messages of a command socket (websockets' sync client) whose op is in
+    `ops`, in order; state frames and other ops in between are passed over."""
+    replies: list[dict[str, Any]] = []
+    while len(replies) < n:
+        msg = json.loads(ws.recv(timeout=5))
+        if msg["op"] in ops:
+            replies.append(msg)
+    return replies
 
 
 def node_armfleet(seen: dict[str, Any], owned: dict[str, str]) -> dict[str, Any]:

@@ -34,7 +34,7 @@ GROUPS = np.array([1, 1, 1, 0, 0, 0], dtype=np.uint8)  # the geom groups the ren
 
 @pytest.fixture(scope="module")
 def warp_server(tmp_path_factory: pytest.TempPathFactory) -> Server:
-    extra = ("--cameras", "wrist=160x120:rgb+depth+seg")
+    extra = ("--engine", "warp", "--cameras", "wrist=160x120:rgb+depth+seg")
     with serve(
         worlds=4, mode="paused", extra_args=extra, log_dir=tmp_path_factory.mktemp("w")
     ) as s:

@@ -37,7 +37,7 @@ def _wrist(http: httpx.Client, world: int) -> np.ndarray:
 
 
 def test_an_engine_in_its_own_process_serves_commands_pictures_and_survives_a_kill(tmp_path):
-    args = ("--engine-worker", *CAMERAS)
+    args = ("--engine", "warp", "--engine-worker", *CAMERAS)
     with serve(worlds=2, extra_args=args, log_dir=tmp_path) as srv:
         http = httpx.Client(base_url=srv.url, timeout=30)
         (worker,) = _workers(srv.process.pid)
@@ -90,6 +90,7 @@ def test_cameras_on_the_engines_own_device_keep_the_engine_in_the_server():
     assert Settings(engine_worker=True).engine_apart()
     with pytest.raises(ValueError, match="engine_worker: a worker process holds the warp"):
         Settings(engine="mujoco", engine_worker=True)
-    with serve(worlds=1, extra_args=("--camera-device", "cpu", *CAMERAS)) as srv:
+    args = ("--engine", "warp", "--camera-device", "cpu", *CAMERAS)
+    with serve(worlds=1, extra_args=args) as srv:
         assert _workers(srv.process.pid) == []
         assert httpx.get(f"{srv.url}/v1/info").json()["shards"] == 1

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import httpx
 import numpy as np
 import pytest
+from conftest import replies_of
 from websockets.sync.client import connect
 
 from service.core.commands.entities import SetEntities
@@ -128,11 +129,7 @@ def test_the_websocket_op_sets_an_entity_and_refuses_non_finite_values(paused):
             )
         )
         ws.send('{"op": "set_entity", "id": 2, "world": 1, "name": "cube", "linear": [NaN, 0, 0]}')
-        replies = []
-        while len(replies) < 2:
-            msg = json.loads(ws.recv(timeout=5))
-            if msg["op"] in ("ack", "error"):
-                replies.append(msg)
+        replies = replies_of(ws, 2)
     assert replies[0]["op"] == "ack" and replies[0]["world"] == 1 and replies[0]["tick"] > 0
     assert replies[1]["op"] == "error" and "linear" in replies[1]["detail"]
     assert "not finite" in replies[1]["detail"]

@@ -34,7 +34,7 @@ def _shard_workers(pid: int) -> list[psutil.Process]:
 
 
 def test_a_killed_shard_worker_is_noticed_rebuilt_and_its_worlds_restored(tmp_path):
-    with running_server(tmp_path, worlds=4, extra=("--shards", "2")) as srv:
+    with running_server(tmp_path, worlds=4, extra=("--engine", "warp", "--shards", "2")) as srv:
         http = httpx.Client(base_url=srv.url, timeout=10)
         assert http.get("/v1/info").json()["shards"] == 2
         moved = http.put("/v1/worlds/3/targets", json={"name": ["elbow_joint"], "position": [1.2]})

@@ -10,10 +10,10 @@ import time
 
 import pytest
 
-from service.core.access.callers import Caller, Forbidden, Gate
+from service.core.access.callers import Caller, Gate
 from service.core.access.leases import LeaseBook, digest
 from service.core.access.settings import AccessSettings
-from service.core.errors import BadCommand, Conflict, Unavailable
+from service.core.errors import BadCommand, Conflict, Forbidden, Unavailable
 
 
 class Resets:
@@ -146,8 +146,8 @@ class _Always:
 
 
 def test_a_lease_has_one_rate_limit_over_all_its_connections() -> None:
-    from service.core.access.callers import OverRate
     from service.core.access.policy import RateLimiter
+    from service.core.errors import OverRate
 
     b, _ = book(2)
     lease, _ = b.grant(count=1, ttl_s=60)

@@ -17,6 +17,7 @@ import httpx
 import mujoco
 import numpy as np
 import pytest
+from conftest import replies_of
 from test_model import solve_ik
 from websockets.sync.client import connect
 
@@ -214,11 +215,7 @@ def test_http_and_websocket_set_read_and_refuse(paused):
     with connect(f"{paused.ws_url}/v1/ws/worlds/3") as ws:
         ws.send(json.dumps({"op": "set_params", "id": 9, "params": {"finger_joint.kp": 30}}))
         ws.send(json.dumps({"op": "set_params", "id": 10, "params": {"finger_joint.kp": -1}}))
-        replies = []
-        while len(replies) < 2:
-            msg = json.loads(ws.recv(timeout=5))
-            if msg["op"] in ("ack", "error"):
-                replies.append(msg)
+        replies = replies_of(ws, 2)
     assert replies[0]["op"] == "ack" and replies[0]["id"] == 9
     assert replies[1]["op"] == "error" and "finger_joint.kp" in replies[1]["detail"]
 

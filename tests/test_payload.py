@@ -9,6 +9,7 @@ import json
 
 import httpx
 import pytest
+from conftest import replies_of
 from websockets.sync.client import connect
 
 
@@ -32,11 +33,7 @@ def test_payload_is_set_over_http_and_websocket_and_refused_with_its_limits(paus
     with connect(f"{paused.ws_url}/v1/ws/worlds/3") as ws:
         ws.send(json.dumps({"op": "set_payload", "id": 1, "mass": 2.0, "cog": [0.01, 0, 0.05]}))
         ws.send(json.dumps({"op": "set_payload", "id": 2, "mass": 2.0, "cog": [0.4, 0, 0]}))
-        replies = []
-        while len(replies) < 2:
-            msg = json.loads(ws.recv(timeout=5))
-            if msg["op"] in ("ack", "error"):
-                replies.append(msg)
+        replies = replies_of(ws, 2)
     assert replies[0]["op"] == "ack" and replies[0]["id"] == 1
     assert replies[1]["op"] == "error" and "cog.0" in replies[1]["detail"], replies[1]
     with httpx.Client(base_url=paused.url, timeout=10) as http:

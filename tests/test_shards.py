@@ -85,7 +85,7 @@ def test_auto_shards_uses_cores_only_for_big_cpu_batches():
 
 
 def test_service_serves_worlds_on_a_worker_shard(tmp_path):
-    with serve(worlds=4, extra_args=("--shards", "2"), log_dir=tmp_path) as srv:
+    with serve(worlds=4, extra_args=("--engine", "warp", "--shards", "2"), log_dir=tmp_path) as srv:
         http = httpx.Client(base_url=srv.url, timeout=10)
         assert http.get("/v1/info").json()["shards"] == 2
         r = http.post("/v1/worlds/3/increments", json={"joint": "elbow_joint", "delta": 0.2})

@@ -28,10 +28,11 @@ from service.persistence.snapshots import decode_state
 
 TARGET = 0.5  # elbow target [rad] commanded before the signal (within the joint's range)
 CONFIGS = {
-    "warp": ("--worlds", "4"),
-    "shards": ("--worlds", "64", "--shards", "2"),  # worlds 32..63 on a worker process
+    "warp": ("--engine", "warp", "--worlds", "4"),
+    # worlds 32..63 on a worker process
+    "shards": ("--engine", "warp", "--worlds", "64", "--shards", "2"),
     "native": ("--engine", "mujoco", "--worlds", "4"),
-    "ray": ("--worlds", "8", "--ray", "local", "--shards", "2"),
+    "ray": ("--engine", "warp", "--worlds", "8", "--ray", "local", "--shards", "2"),
 }
 # Both signals, each configuration once (the signal to the parent alone: test_snapshots,
 # test_reliability). Shard workers and Ray's processes are what a group signal adds.

@@ -63,7 +63,10 @@ class CameraInfo(BaseModel):
 
 class CameraList(BaseModel):
     cameras: list[CameraInfo]
-    ready: bool = Field(description="the renderer is built and its kernels loaded")
+    ready: bool = Field(
+        description="the renderer is built and its kernels loaded (on the CPU, this list or "
+        "the first picture asked starts the build)"
+    )
     warm_s: float | None = Field(description="seconds the first draw of every camera took")
 
 
@@ -78,6 +81,8 @@ _IMAGE = {
 
 @router.get("/cameras", response_model=CameraList, summary="The cameras, their size and K")
 async def list_cameras(feed: Feed) -> CameraList:
+    if feed.available:
+        feed.open()  # a CPU service builds its renderer when cameras are first asked about
     ready = feed.available and feed.warm_s is not None
     return CameraList(
         cameras=[

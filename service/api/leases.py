@@ -14,11 +14,11 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Path, Request
 
 from service.api.deps import get_runtime
-from service.core.access.callers import Caller, Forbidden
+from service.core.access.callers import Caller
 from service.core.access.leases import LeaseBook
 from service.core.contract.leases import LeaseList, LeaseReply, LeaseRequest, RenewRequest
 from service.core.contract.replies import errors
-from service.core.errors import Conflict, NotFound, Unavailable
+from service.core.errors import Conflict, Forbidden, NotFound, Unavailable
 from service.runtime import Runtime
 
 # Every route answers 404 when leases are off (armfleet serve --leases optional|required).

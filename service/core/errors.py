@@ -53,6 +53,24 @@ class NotFound(ArmfleetError):
     status = 404
 
 
+class Forbidden(ArmfleetError):
+    """This caller may not command that world (access/callers.py decides): 403, nothing changed."""
+
+    status = 403
+
+
+class OverRate(ArmfleetError):
+    """A lease's commands, over all its connections together, came faster than its rate: 429."""
+
+    status = 429
+
+
+class BadToken(ArmfleetError):
+    """A token that is neither the administrator's nor a live lease's: 401."""
+
+    status = 401
+
+
 class NotPaused(ArmfleetError):
     """Stepping by request only makes sense while paused: 409."""
 

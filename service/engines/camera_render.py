@@ -29,11 +29,8 @@ import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
-from service.core.cameras.catalog import CameraSpec, camera_specs
-from service.core.cameras.feed import CameraFeed
-from service.core.cameras.settings import CameraSettings
+from service.core.cameras.catalog import CameraSpec
 from service.core.sim.device_turns import DeviceTurns
-from service.core.sim.loop import SimLoop
 from service.engines.cuda_streams import render_stream
 
 
@@ -353,20 +350,3 @@ class BatchRenderer:
             seg = _host(rc.seg_data, k, self._pools)[:, : h * w, 0]
             seg = seg.reshape(k, h, w).astype(np.int32)
         return depth, seg
-
-
-def camera_feed(loop: SimLoop, settings: CameraSettings) -> CameraFeed:
-    """The service's cameras: the scene's cameras at the sizes and outputs of the settings,
-    drawn by a BatchRenderer on --camera-device, else on the engine's device (CPU engines:
-    warp's CPU device), built and warmed on the feed's own thread. On a device of its own the
-    renderer takes no turns with the engine (service/core/sim/device_turns.py): nothing else
-    launches there."""
-    batch = loop.batch
-    mjm = batch.robot.mjm
-    specs = camera_specs(mjm, settings.size, settings.outputs, settings.per_camera)
-    engine = batch.device_name if batch.device_name.startswith("cuda") else "cpu"
-    device = settings.device or engine
-    slots = min(settings.batch, batch.nworld)
-    shared = str(wp.get_device(device)) == str(wp.get_device(engine))
-    turns = getattr(batch, "device_turns", None) if shared else None
-    return CameraFeed(loop, specs, lambda: BatchRenderer(mjm, specs, slots, device, turns))

@@ -23,25 +23,7 @@ from typing import Literal, Protocol
 
 from service.core.access.leases import LeaseBook, looks_like_lease
 from service.core.access.settings import AccessSettings
-from service.core.errors import ArmfleetError
-
-
-class Forbidden(ArmfleetError):
-    """This caller may not command that world: 403 (nothing was changed)."""
-
-    status = 403
-
-
-class OverRate(ArmfleetError):
-    """A lease's commands, over all its connections together, came faster than its rate: 429."""
-
-    status = 429
-
-
-class BadToken(ArmfleetError):
-    """A token that is neither the administrator's nor a live lease's: 401."""
-
-    status = 401
+from service.core.errors import BadToken, Forbidden, OverRate
 
 
 @dataclass(frozen=True)

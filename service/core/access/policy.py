@@ -34,9 +34,10 @@ from starlette.responses import JSONResponse
 from starlette.routing import Match
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from service.core.access.callers import OPEN, BadToken, Caller, identify
+from service.core.access.callers import OPEN, Caller, identify
 from service.core.access.leases import LeaseBook
 from service.core.access.settings import AccessSettings
+from service.core.errors import BadToken
 
 TOKEN_SUBPROTOCOL = "armfleet.token."  # + the token: how a browser socket presents it
 APP_SUBPROTOCOL = "armfleet"  # offered beside the token one; the server answers with this

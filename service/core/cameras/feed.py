@@ -80,8 +80,14 @@ class CameraFeed:
     """The service's cameras: the specs served, and pictures on request."""
 
     def __init__(
-        self, loop: SimLoop, specs: list[CameraSpec], build: Callable[[], ImageRenderer]
+        self,
+        loop: SimLoop,
+        specs: list[CameraSpec],
+        build: Callable[[], ImageRenderer],
+        at_start: bool = True,
     ) -> None:
+        """`build` makes the renderer on the render thread: now (`at_start`), else when the
+        feed is first `open`ed (a picture or the camera list asked)."""
         self.loop = loop
         self.specs = {s.name: s for s in specs}
         self.renders = 0  # render calls (one per request, whatever its number of worlds)
@@ -98,7 +104,19 @@ class CameraFeed:
         self._collect = concurrent.futures.ThreadPoolExecutor(
             1, thread_name_prefix="armfleet-pixels"
         )
-        self._renderer = self._pool.submit(self._build, build)  # at start, off every hot path
+        self._make = build
+        self._renderer: concurrent.futures.Future[ImageRenderer] | None = None
+        self.at_start = at_start
+        if at_start:
+            self.open()  # off every hot path: the render thread builds it
+
+    def open(self) -> concurrent.futures.Future[ImageRenderer]:
+        """The renderer, being built or built (the build starts on the first call). Pictures
+        asked meanwhile wait for it on the render thread, which builds before it draws."""
+        with self._lock:
+            if self._renderer is None and self.specs:
+                self._renderer = self._pool.submit(self._build, self._make)
+            return self._renderer or _no_cameras()
 
     def _build(self, build: Callable[[], ImageRenderer]) -> ImageRenderer:
         try:
@@ -157,8 +175,11 @@ class CameraFeed:
         self.spec(camera)
         if not isinstance(self.loop.batch, Renderable):
             raise Conflict("this engine cannot hand its state to the cameras", "camera")
-        if not self._renderer.done() or self._renderer.exception() is not None:
-            raise Unavailable(self.error or "the cameras are starting (compiling kernels)")
+        renderer = self.open()
+        if renderer.done() and renderer.exception() is not None:
+            raise Unavailable(self.error or "the cameras failed to start")
+        if not renderer.done() and self.at_start:
+            raise Unavailable("the cameras are starting (compiling kernels)")
         out: concurrent.futures.Future[Shot] = concurrent.futures.Future()
         with self._lock:
             group = self._waiting.setdefault(camera, [])
@@ -225,7 +246,7 @@ class CameraFeed:
             return
         t0 = time.perf_counter()
         try:
-            pending = self._renderer.result().launch(qpos, spec.name)
+            pending = self.open().result().launch(qpos, spec.name)
         except BaseException as exc:
             for _, out in group:
                 out.set_exception(exc)
@@ -276,3 +297,10 @@ def rows_of(drawn: np.ndarray, worlds: np.ndarray) -> slice | np.ndarray:
     if len(at) and at[-1] - at[0] == len(at) - 1 and np.all(np.diff(at) == 1):
         return slice(int(at[0]), int(at[-1]) + 1)
     return at
+
+
+def _no_cameras() -> concurrent.futures.Future[ImageRenderer]:
+    """What `open` gives when no camera is served: a future failed with NotFound."""
+    done: concurrent.futures.Future[ImageRenderer] = concurrent.futures.Future()
+    done.set_exception(NotFound("no camera is served (see --cameras)", "camera"))
+    return done

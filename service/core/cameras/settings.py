@@ -2,7 +2,7 @@
 changes, how many worlds one render draws, on which device, and how often surfaces show them.
 
 Why a model of its own: the renderer is built from these once, at start
-(`engines/camera_render.camera_feed`), and surfaces read only the rate. Each string is parsed
+(`engines/cameras.camera_feed`), and surfaces read only the rate. Each string is parsed
 here (a bad one names its setting); what needs another part of the settings (the render
 batch's pixel limit against the number of worlds, camera names against the scene) is checked
 by the service's `Settings`, which holds both. A field's `validation_alias` is its flat name

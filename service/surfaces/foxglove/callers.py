@@ -11,10 +11,11 @@ from __future__ import annotations
 
 from collections import OrderedDict
 
-from service.core.access.callers import BadToken, Caller, identify
+from service.core.access.callers import Caller, identify
 from service.core.access.leases import LeaseBook
 from service.core.access.policy import RateLimiter
 from service.core.access.settings import AccessSettings
+from service.core.errors import BadToken
 
 TOKEN_PARAMETER = "armfleet.token"
 _MAX_KEPT = 1024  # clients remembered (the SDK does not tell when one leaves): the oldest go

@@ -28,8 +28,8 @@ from fastapi import WebSocket
 
 from clients.ros_rules import BadMessage, RefusalCounter
 from service.core.access import policy as access
-from service.core.access.callers import Forbidden, book_of
-from service.core.errors import ArmfleetError
+from service.core.access.callers import book_of
+from service.core.errors import ArmfleetError, Forbidden
 from service.core.sim.rules import BadJointState
 from service.core.sim.types import Snapshot
 from service.core.streams.formats import FrameFormat
