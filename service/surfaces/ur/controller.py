@@ -83,7 +83,6 @@ class Controller:
     loaded_program: str | None = None
     protective_stop_at: float = 0.0  # time.monotonic() of the last protective stop
     speed_fraction: float = 1.0  # the speed slider (RTDE input speed_slider_fraction)
-    tcp_offset: tuple[float, ...] = (0.0,) * 6  # set_tcp: x y z rx ry rz in the flange frame
     # Registers: the control script writes outputs; RTDE input recipes write inputs (any input
     # variable, by name, as the client sent it).
     output_int: list[int] = field(default_factory=lambda: [0] * 48)

@@ -158,6 +158,7 @@ class RtdeSession(asyncio.Protocol):
             return
         recipe_id = self._new_id("in")
         self._inputs[recipe_id] = (tuple(names), rv.struct_of(types))
+        log.debug("world %d RTDE input recipe %d: %s", self.robot.world, recipe_id, names)
         self.robot.hold_inputs(names, self)
         self._send(wire.recipe_answer(wire.SETUP_INPUTS, recipe_id, types))
 

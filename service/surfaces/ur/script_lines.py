@@ -81,11 +81,19 @@ class LineSpeed:
         self.timer = asyncio.get_running_loop().call_later(PERIOD_S, self._tick)
 
 
+def line_speed(robot: WorldRobot) -> LineSpeed:
+    """The world's speed loop for speedj/speedl lines, made at its first use."""
+    loop = robot.speed_loop
+    if not isinstance(loop, LineSpeed):
+        loop = robot.speed_loop = LineSpeed(robot)
+    return loop
+
+
 def run(robot: WorldRobot, call: urscript.Call) -> None:
     """Carry out one call on `robot`'s world; Refused (or urscript.ScriptError) otherwise."""
     a = urscript.bind(call)
     robot.end_script(f"a line of URScript ({call.name}) replaced it")
-    speed = robot.line_speed()
+    speed = line_speed(robot)
     speed.end()
     try:
         _carry_out(robot, call.name, a, speed)
@@ -121,8 +129,6 @@ def _carry_out(robot: WorldRobot, name: str, a: dict[str, Any], speed: LineSpeed
         m.stop(w, a["a"])
     elif name == "set_tcp":
         m.set_tcp(w, a["pose"])
-        robot.controller.tcp_offset = tuple(a["pose"])
-        robot.controller.changed()
     elif name == "set_payload":
         m.set_payload(w, a["m"], a["cog"])
     else:  # signal_async_progress: only inside ur_rtde's paths

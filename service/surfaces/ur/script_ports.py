@@ -16,11 +16,9 @@ from __future__ import annotations
 import asyncio
 import logging
 import re
-import struct
-import time
 from typing import TYPE_CHECKING
 
-from service.surfaces.ur import control_script, script_lines, urscript
+from service.surfaces.ur import control_script, script_lines, script_runner, urscript
 
 if TYPE_CHECKING:
     from service.surfaces.ur.world_robot import WorldRobot
@@ -28,15 +26,7 @@ if TYPE_CHECKING:
 log = logging.getLogger("armfleet.ur")
 _MAX_PROGRAM = 1 << 20  # bytes of one program (ur_rtde's script is about 42 kB)
 _PROGRAM_END = re.compile(rb"\n[ \t]*end[ \t]*\r?\n?\s*$")
-ROBOT_MESSAGE, TEXT, SOURCE_CONTROLLER = 20, 0, -2
 LOG_PORTS = (30001, 30002)
-
-
-def robot_message(text: str) -> bytes:
-    """A primary-interface robot message package: size, type 20, timestamp, source, type 0."""
-    body = struct.pack(">QbB", int(time.time() * 1000), SOURCE_CONTROLLER, TEXT)
-    body += text.encode("utf-8", "replace")[:1000]
-    return struct.pack(">iB", 5 + len(body), ROBOT_MESSAGE) + body
 
 
 class ScriptSession(asyncio.Protocol):
@@ -82,7 +72,7 @@ class ScriptSession(asyncio.Protocol):
             script = control_script.recognise(program)
         except (control_script.NotControlScript, urscript.ScriptError) as exc:
             return self.refuse(f"rtde_control(): {exc}")
-        self.robot.start_script(script)
+        script_runner.start_script(self.robot, script)
 
     def _line(self, line: str) -> None:
         try:

@@ -45,6 +45,23 @@ SETTLE_S = 1.0
 STEADY = 2e-3  # rad/s: isSteady below this on every joint with no move running
 
 
+def start_script(robot: WorldRobot, script: ControlScript) -> None:
+    """ur_rtde's control script arrived: it replaces the running program, if it may run."""
+    robot.end_script("a new program replaced it")
+    robot.end_speed_loop()
+    ctl = robot.controller
+    if not ctl.can_run_script():
+        log.warning(
+            "world %d: control script not started: robot mode %s, safety mode %s",
+            robot.world, ctl.robot_mode.name, ctl.safety_mode.name,
+        )  # fmt: skip
+        robot.log_message("program not started: the robot is not ready (mode, safety)")
+        return
+    runner = ScriptRunner(robot, script, robot.motion)
+    robot.runner = runner
+    runner.start()
+
+
 class ScriptRunner:
     """One world's running control script (see the module docstring)."""
 
@@ -201,8 +218,6 @@ class ScriptRunner:
             m.set_payload(w, a["mass"], a["cog"])
         elif name == "setTcp":
             m.set_tcp(w, a["pose"])
-            self.ctl.tcp_offset = tuple(a["pose"])
-            self.ctl.changed()
         elif name == "getTCPOffset":
             self._out_doubles(m.tcp(w))
         elif name == "getStepTime":

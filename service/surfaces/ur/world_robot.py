@@ -1,8 +1,10 @@
-"""One world's controller as its connections see it: address, state, sessions, input owners.
+"""One world's controller as its connections see it: address, state, clients, input owners.
 
-Why a module of its own: the sessions (RTDE, Dashboard, script ports) and the listeners
+Why a module of its own: the connections (RTDE, Dashboard, script ports) and the listeners
 (endpoints.py) both hold it; it knows the listeners only as a `Fleet` (the latest frame, the
-kinematics, the payloads, the count of streaming sessions), so no import runs in a circle.
+kinematics, the payloads, the count of streaming connections), and the running control script and
+the URScript lines' speed loop only as `Program` and `Loop`: script_runner.start_script and
+script_lines.line_speed make them, so no import runs in a circle (type-only ones included).
 """
 
 from __future__ import annotations
@@ -10,18 +12,18 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING, Protocol
 
+from service.core.errors import Unavailable
 from service.surfaces.ur.controller import Controller, ProgramState
+from service.surfaces.ur.robot_messages import robot_message
 from service.surfaces.ur.rtde_outputs import Frame, WorldTick
 from service.surfaces.ur.tcp_pose import ToolKinematics
 
 if TYPE_CHECKING:
-    from service.surfaces.ur.control_script import ControlScript
     from service.surfaces.ur.motion import Motion
-    from service.surfaces.ur.script_lines import LineSpeed
-    from service.surfaces.ur.script_runner import ScriptRunner
 
 log = logging.getLogger("armfleet.ur")
 NO_PAYLOAD = (0.0, 0.0, 0.0, 0.0)
+NO_TCP = (0.0,) * 6
 
 
 class Fleet(Protocol):
@@ -40,6 +42,22 @@ class Session(Protocol):
     def send(self, data: bytes) -> None: ...
 
 
+class Program(Protocol):
+    """ur_rtde's control script while it runs (script_runner.ScriptRunner)."""
+
+    alive: bool
+
+    def on_inputs(self) -> None: ...
+
+    def end(self, why: str, halt: bool = True) -> None: ...
+
+
+class Loop(Protocol):
+    """The speed loop of URScript's speedj/speedl lines (script_lines.LineSpeed)."""
+
+    def end(self) -> None: ...
+
+
 class WorldRobot:
     """One world's controller: its address, state, connections and input-variable owners."""
 
@@ -52,8 +70,8 @@ class WorldRobot:
         self._writers: dict[str, Session] = {}  # input variable → the session writing it
         self._view: WorldTick | None = None
         self._view_version = -1
-        self.runner: ScriptRunner | None = None  # ur_rtde's control script, while it runs
-        self._line_speed: LineSpeed | None = None
+        self.runner: Program | None = None  # ur_rtde's control script, while it runs
+        self.speed_loop: Loop | None = None  # script_lines.line_speed makes it
 
     def opened(self, session: Session) -> None:
         if not self.open:
@@ -85,9 +103,21 @@ class WorldRobot:
         v = self._view
         if v is None or v.frame is not frame or self._view_version != self.controller.version:
             payload = self.fleet.payloads.get(self.world, NO_PAYLOAD)
-            v = self._view = WorldTick(frame, self.world, self.fleet.kin, self.controller, payload)
+            kin, ctl = self.fleet.kin, self.controller
+            v = self._view = WorldTick(frame, self.world, kin, ctl, payload, self._tcp_offset())
             self._view_version = self.controller.version
         return v
+
+    def _tcp_offset(self) -> tuple[float, ...]:
+        """The world's TCP offset in the core's tool table (one for every surface); the flange
+        where the served arm has no UR kinematics (a cell that changed the arm)."""
+        motion = self.fleet.motion
+        if motion is None:
+            return NO_TCP
+        try:
+            return tuple(float(x) for x in motion.tcp(self.world))
+        except Unavailable:
+            return NO_TCP
 
     def close_all(self, why: str) -> None:
         self.end_script(why)
@@ -105,24 +135,6 @@ class WorldRobot:
             raise RuntimeError("the UR surface has not started")
         return motion
 
-    def start_script(self, script: ControlScript) -> None:
-        """ur_rtde's control script arrived: it replaces the running program, if it may run."""
-        from service.surfaces.ur.script_runner import ScriptRunner
-
-        self.end_script("a new program replaced it")
-        if self._line_speed is not None:
-            self._line_speed.end()
-        ctl = self.controller
-        if not ctl.can_run_script():
-            log.warning(
-                "world %d: control script not started: robot mode %s, safety mode %s",
-                self.world, ctl.robot_mode.name, ctl.safety_mode.name,
-            )  # fmt: skip
-            self.log_message("program not started: the robot is not ready (mode, safety)")
-            return
-        self.runner = ScriptRunner(self, script, self.motion)
-        self.runner.start()
-
     def end_script(self, why: str) -> None:
         if self.runner is not None:
             self.runner.end(why)
@@ -136,12 +148,9 @@ class WorldRobot:
             else:
                 self.runner = None
 
-    def line_speed(self) -> LineSpeed:
-        from service.surfaces.ur.script_lines import LineSpeed
-
-        if self._line_speed is None:
-            self._line_speed = LineSpeed(self)
-        return self._line_speed
+    def end_speed_loop(self) -> None:
+        if self.speed_loop is not None:
+            self.speed_loop.end()
 
     def protective_stop(self, why: str) -> None:
         """The arm stops where it is, the program ends, the safety mode says so until the
@@ -150,16 +159,13 @@ class WorldRobot:
             return
         log.warning("world %d: protective stop: %s", self.world, why)
         self.end_script(f"protective stop: {why}")
-        if self._line_speed is not None:
-            self._line_speed.end()
+        self.end_speed_loop()
         self.controller.protective_stop()
         self.motion.halt(self.world)
         self.log_message(f"Protective stop: {why}")
 
     def log_message(self, text: str) -> None:
         """A robot message to every client of the primary and secondary ports."""
-        from service.surfaces.ur.script_ports import robot_message
-
         data = robot_message(text)
         for session in list(self.sessions):
             session.send(data)
