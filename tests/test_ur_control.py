@@ -90,41 +90,73 @@ def test_movej_and_movel_reach_their_targets_and_movel_keeps_to_its_line(arm) ->
     assert _targets(server, 1) == other  # the other world never noticed
 
 
+def _flange_in_base(st: dict) -> tuple[np.ndarray, np.ndarray]:
+    """MuJoCo's flange pose of a world's state in the robot's base frame (the base is turned
+    half a turn about z and stands at BASE_Z)."""
+    x, y, z = st["flange"]["position"]
+    w, qx, qy, qz = st["flange"]["quaternion"]
+    rot = np.array(
+        [
+            [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * w), 2 * (qx * qz + qy * w)],
+            [2 * (qx * qy + qz * w), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * w)],
+            [2 * (qx * qz - qy * w), 2 * (qy * qz + qx * w), 1 - 2 * (qx * qx + qy * qy)],
+        ]
+    )
+    return np.array([-x, -y, z - BASE_Z]), np.diag([-1.0, -1.0, 1.0]) @ rot
+
+
 def test_forward_kinematics_equals_mujocos_flange_and_ik_round_trips(arm) -> None:
+    """getForwardKinematics(q, tcp) with a non-zero TCP: ur_rtde 1.6.5 sends an all-zero TCP's
+    twelve values under its six-value recipe (a package the server refuses, see the guide), so
+    the flange is read through a TCP that only turns about z."""
     c, _r, _, server = arm
     assert c.moveJ([0.5, -1.2, 1.0, -1.3, -1.4, 0.4], 1.0, 2.0)
     wait_for(lambda: c.isSteady(), "steady")
     st = httpx.get(f"{server.url}/v1/worlds/0/state").json()
     q = np.asarray(st["position"][:6], np.float32).astype(np.float64)
-    x, y, z = st["flange"]["position"]
-    fk = np.array(c.getForwardKinematics(q.tolist(), [0.0] * 6))
-    np.testing.assert_allclose(fk[:3], [-x, -y, z - BASE_Z], atol=1e-6)
-    q_ik = np.array(c.getInverseKinematics(fk.tolist(), q.tolist()))
-    np.testing.assert_allclose(q_ik, q, atol=1e-6)
-    back = np.array(c.getForwardKinematics(q_ik.tolist(), [0.0] * 6))
-    np.testing.assert_allclose(back, fk, atol=1e-6)
-    assert c.getInverseKinematicsHasSolution(fk.tolist())
-    assert not c.getInverseKinematicsHasSolution([2.5, 0, 0, 0, 0, 0])
+    pos, rot = _flange_in_base(st)
+    flange = np.array(c.getForwardKinematics(q.tolist(), [0.0] * 5 + [0.3]))
+    np.testing.assert_allclose(flange[:3], pos, atol=1e-6)
+    tcp = [0.01, -0.02, 0.15, 0.0, 0.0, 0.3]
+    fk = np.array(c.getForwardKinematics(q.tolist(), tcp))
+    np.testing.assert_allclose(fk[:3], pos + rot @ tcp[:3], atol=1e-6)
+    assert c.setTcp(tcp)  # IK is of the active TCP, as the script's get_inverse_kin
+    try:
+        q_ik = np.array(c.getInverseKinematics(fk.tolist(), q.tolist()))
+        np.testing.assert_allclose(q_ik, q, atol=1e-6)
+        back = np.array(c.getForwardKinematics(q_ik.tolist(), tcp))
+        np.testing.assert_allclose(back, fk, atol=1e-6)
+        assert c.getInverseKinematicsHasSolution(fk.tolist())
+        assert not c.getInverseKinematicsHasSolution([2.5, 0, 0, 0, 0, 0])
+    finally:
+        assert c.setTcp([0.0] * 6)
 
 
 def test_servoj_streamed_at_500_hz_is_followed(arm) -> None:
+    """10 s of servoJ at 500 Hz (ur_rtde's initPeriod/waitPeriod) along a path of simulated
+    time (sample k at k x 2 ms, whatever the client's clock does): every command is taken, the
+    arm passes through the path's range and stops on its last point, the program runs on and
+    no protective stop is raised. The lag and the error are reported, not asserted: they are
+    wall-clock properties of a shared box (bench/ measures speed)."""
     c, r, _, _ = arm
     q0 = np.array([0.0, -1.3, 1.2, -1.5, -1.57, 0.0])
+    amp = np.array([0.3, 0.2, -0.2, 0.3, 0.3, 0.5])
     assert c.moveJ(q0.tolist(), 1.0, 2.0)
-    sent, got = [], []
+    sent, got, taken = [], [], []
     start = time.perf_counter()
-    for k in range(5000):  # 10 s at 500 Hz
+    for k in range(5000 + 250):  # 10 s at 500 Hz, then 0.5 s holding the last point
         t0 = c.initPeriod()
-        t = k * 0.002
-        q = q0 + np.array([0.3, 0.2, -0.2, 0.3, 0.3, 0.5]) * math.sin(2 * math.pi * 0.25 * t)
-        c.servoJ(q.tolist(), 0.5, 0.5, 0.002, 0.1, 300)
+        q = q0 + amp * math.sin(2 * math.pi * 0.25 * min(k, 5000) * 0.002)
+        taken.append(c.servoJ(q.tolist(), 0.5, 0.5, 0.002, 0.1, 300))
         sent.append((time.perf_counter() - start, q))
         got.append((time.perf_counter() - start, np.array(r.getActualQ())))
         c.waitPeriod(t0)
-    c.servoStop(2.0)
-    ts = np.array([s[0] for s in sent])
-    cmd = np.array([s[1] for s in sent])
-    act = np.array([g[1] for g in got])
+    last = sent[-1][1]
+    wait_for(lambda: np.abs(np.array(r.getActualQ()) - last).max() < 1e-3, "on the last point")
+    assert c.servoStop(2.0)
+    ts = np.array([s[0] for s in sent[:5000]])
+    cmd = np.array([s[1] for s in sent[:5000]])
+    act = np.array([g[1] for g in got[:5000]])
     half = len(ts) // 2  # after the start-up
     lags = np.arange(0, 0.3, 0.004)
     errs = [
@@ -136,10 +168,15 @@ def test_servoj_streamed_at_500_hz_is_followed(arm) -> None:
     best = int(np.argmin(errs))
     raw = float(np.abs(act[half:] - cmd[half:]).max())
     print(
-        f"servoJ 500 Hz x 10 s: lag {lags[best] * 1e3:.0f} ms, error after lag "
-        f"{errs[best]:.4f} rad, at the same instant {raw:.4f} rad, sent in {ts[-1]:.2f} s"
+        f"servoJ 500 Hz x 10 s: sent in {ts[-1]:.2f} s ({len(ts) / ts[-1]:.0f} Hz), lag "
+        f"{lags[best] * 1e3:.0f} ms, error after lag {errs[best]:.4f} rad, at the same "
+        f"instant {raw:.4f} rad"
     )
-    assert errs[best] < 0.1 and lags[best] < 0.3  # followed, late by the servos' lag
+    assert all(taken)  # no command refused
+    assert c.isProgramRunning() and r.getSafetyMode() == 1  # NORMAL: no protective stop
+    assert np.abs(np.array(r.getActualQ()) - last).max() < 1e-3  # stopped on the last point
+    reached = act.max(axis=0) - act.min(axis=0)  # the arm went through the path's range
+    assert (reached > 1.9 * np.abs(amp) * 0.9).all(), reached
 
 
 def test_a_protective_stop_is_raised_reported_and_unlocked(arm) -> None:
