@@ -2,9 +2,9 @@
 
 Why a module of its own: the connections (RTDE, Dashboard, script ports) and the listeners
 (endpoints.py) both hold it; it knows the listeners only as a `Fleet` (the latest frame, the
-kinematics, the payloads, the count of streaming connections), and the running control script and
-the URScript lines' speed loop only as `Program` and `Loop`: script_runner.start_script and
-script_lines.line_speed make them, so no import runs in a circle (type-only ones included).
+kinematics, the payloads, the count of streaming connections), and the running control script
+and the URScript lines' speed loop only as `Program` and `Loop`: script_runner.start_script
+and script_lines.line_speed make them, so no import runs in a circle (type-only ones too).
 """
 
 from __future__ import annotations
