@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import os
 import random
+import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -117,6 +118,19 @@ def armfleet_ur_world(request: pytest.FixtureRequest) -> Iterator[UrWorld]:
     token = os.environ.get("ARMFLEET_TOKEN")
     with lease_world(url, token, label) as world:
         headers = {"Authorization": f"Bearer {world.lease.token}"} if world.lease.token else {}
+        yield UrWorld(world, _open_ur_address(url, world.world, headers))
+
+
+def _open_ur_address(url: str, world: int, headers: dict[str, str]) -> str:
+    """The world's UR address once its ports accept connections: the UR surface opens a lent
+    world's ports at its next look at the leases (a fraction of a second), and a ur_rtde
+    program connecting before that would be refused."""
+    deadline = time.monotonic() + 15
+    while True:
         worlds = httpx.get(f"{url}/v1/ur", headers=headers, timeout=10).json()["worlds"]
-        address = next(w["address"] for w in worlds if w["world"] == world.world)
-        yield UrWorld(world, address)
+        mine = next(w for w in worlds if w["world"] == world)
+        if mine["open"]:
+            return str(mine["address"])
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"world {world}'s UR ports did not open within 15 s of its lease")
+        time.sleep(0.05)
