@@ -15,6 +15,13 @@ depends on armfleet gets the fixtures without any conftest:
   server needs one to lend), else from a 4-world server of the module's own that lends
   (`--leases optional`). pytest-xdist workers each get their own world:
   `ARMFLEET_URL=http://ci-box:8000 pytest -n 4`.
+- `armfleet_ur_world`: the same, on a server with UR ports (`serve --ur`): a `UrWorld` with the
+  leased world and its UR controller's address (from `GET /v1/ur`), so that a ur_rtde program
+  under test connects to `ur.address`. Without ARMFLEET_URL, a 4-world server of the module's
+  own lends, with its UR ports on a random loopback block (tests at once never share one).
+
+      def test_moves(armfleet_ur_world):
+          rtde_c = rtde_control.RTDEControlInterface(armfleet_ur_world.address)
 
       def test_elbow_moves(armfleet_world):
           arm, w = armfleet_world.client, armfleet_world.world
@@ -24,10 +31,14 @@ depends on armfleet gets the fixtures without any conftest:
 from __future__ import annotations
 
 import os
+import random
+import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
+from dataclasses import dataclass
 from typing import Any
 
+import httpx
 import pytest
 
 from clients.testing import LeasedWorld, Server, lease_world, serve
@@ -72,3 +83,54 @@ def armfleet_world(request: pytest.FixtureRequest) -> Iterator[LeasedWorld]:
     label = f"pytest {worker} {request.node.nodeid}"[:120]
     with lease_world(url, os.environ.get("ARMFLEET_TOKEN"), label) as world:
         yield world
+
+
+@pytest.fixture(scope="module")
+def armfleet_ur_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
+    """A 4-world realtime server that lends worlds and gives each UR ports (`--ur`), on
+    127.A.B.1-4 of a random block so that servers of tests running at once never collide."""
+    a, b = random.randrange(2, 250), random.randrange(0, 250)
+    args = ("--leases", "optional", "--ur", "--ur-addresses", f"127.{a}.{b}.1-127.{a}.{b}.4")
+    with serve(worlds=4, extra_args=args, log_dir=tmp_path_factory.mktemp("armfleet-ur")) as s:
+        yield s
+
+
+@dataclass(frozen=True)
+class UrWorld:
+    """A leased world with UR ports: `address` is its controller's (RTDE, Dashboard, ...)."""
+
+    leased: LeasedWorld
+    address: str
+
+    @property
+    def world(self) -> int:
+        return self.leased.world
+
+
+@pytest.fixture
+def armfleet_ur_world(request: pytest.FixtureRequest) -> Iterator[UrWorld]:
+    """A leased world and its UR address for this test (see the module docstring)."""
+    url = os.environ.get("ARMFLEET_URL")
+    if not url:
+        url = request.getfixturevalue("armfleet_ur_server").url
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    label = f"pytest {worker} {request.node.nodeid}"[:120]
+    token = os.environ.get("ARMFLEET_TOKEN")
+    with lease_world(url, token, label) as world:
+        headers = {"Authorization": f"Bearer {world.lease.token}"} if world.lease.token else {}
+        yield UrWorld(world, _open_ur_address(url, world.world, headers))
+
+
+def _open_ur_address(url: str, world: int, headers: dict[str, str]) -> str:
+    """The world's UR address once its ports accept connections: the UR surface opens a lent
+    world's ports at its next look at the leases (a fraction of a second), and a ur_rtde
+    program connecting before that would be refused."""
+    deadline = time.monotonic() + 15
+    while True:
+        worlds = httpx.get(f"{url}/v1/ur", headers=headers, timeout=10).json()["worlds"]
+        mine = next(w for w in worlds if w["world"] == world)
+        if mine["open"]:
+            return str(mine["address"])
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"world {world}'s UR ports did not open within 15 s of its lease")
+        time.sleep(0.05)

@@ -83,7 +83,6 @@ class Controller:
     loaded_program: str | None = None
     protective_stop_at: float = 0.0  # time.monotonic() of the last protective stop
     speed_fraction: float = 1.0  # the speed slider (RTDE input speed_slider_fraction)
-    tcp_offset: tuple[float, ...] = (0.0,) * 6  # set_tcp: x y z rx ry rz in the flange frame
     # Registers: the control script writes outputs; RTDE input recipes write inputs (any input
     # variable, by name, as the client sent it).
     output_int: list[int] = field(default_factory=lambda: [0] * 48)
@@ -178,6 +177,13 @@ class Controller:
     def set_program(self, state: ProgramState) -> None:
         self.program = state
         self.changed()
+
+    def can_run_script(self) -> bool:
+        """A program sent to a script port runs only on a ready robot (RUNNING, not stopped)."""
+        return self.robot_mode is RobotMode.RUNNING and self.safety_mode in (
+            SafetyMode.NORMAL,
+            SafetyMode.REDUCED,
+        )
 
     def can_play(self) -> bool:
         return (

@@ -53,9 +53,10 @@ def _pause(ctl: Controller) -> str:
 
 
 def _stop(ctl: Controller) -> str:
-    if ctl.program is ProgramState.STOPPED:
-        return "Failed to execute: stop"
-    ctl.set_program(ProgramState.STOPPED)
+    """ "Stopped" also when nothing runs: ur_rtde's reuploadScript() stops a script that has
+    just ended and throws on any other answer."""
+    if ctl.program is not ProgramState.STOPPED:
+        ctl.set_program(ProgramState.STOPPED)
     return "Stopped"
 
 
@@ -171,6 +172,9 @@ class DashboardSession(asyncio.Protocol):
             self.transport.write((reply + "\n").encode())
         if len(self._buffer) > _MAX_LINE:
             self.refuse_connection(f"a line longer than {_MAX_LINE} bytes")
+
+    def send(self, data: bytes) -> None:
+        """Robot messages go to the script ports' clients, not to the Dashboard's."""
 
     def refuse_connection(self, why: str) -> None:
         log.warning("world %d Dashboard connection closed: %s", self.robot.world, why)

@@ -22,7 +22,7 @@ import logging
 import resource
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from service.surfaces.ur import addresses
 from service.surfaces.ur.dashboard import DashboardSession
@@ -31,6 +31,9 @@ from service.surfaces.ur.rtde_session import RtdeSession
 from service.surfaces.ur.script_ports import ScriptSession
 from service.surfaces.ur.tcp_pose import ToolKinematics
 from service.surfaces.ur.world_robot import WorldRobot
+
+if TYPE_CHECKING:
+    from service.surfaces.ur.motion import Motion
 
 log = logging.getLogger("armfleet.ur")
 _LEASE_POLL_S = 0.2
@@ -64,6 +67,7 @@ class Endpoints:
     ) -> None:
         self.robots = {w: WorldRobot(w, a, self) for w, a in worlds.items()}
         self.kin = kin
+        self.motion: Motion | None = None  # set by the surface at start
         self._owner_of = owner_of  # None: leases off, every world always open
         self._read_payloads = read_payloads
         self.frame: Frame | None = None  # set by the sink (sim thread), read here
@@ -172,6 +176,12 @@ class Endpoints:
         for server in self._servers:
             with contextlib.suppress(Exception):
                 await server.wait_closed()
+
+    def protective_stop(self, world: int, why: str) -> None:
+        """From any thread: protective-stop `world` on the UR event loop."""
+        loop, robot = self._loop, self.robots.get(world)
+        if loop is not None and robot is not None and loop.is_running():
+            loop.call_soon_threadsafe(robot.protective_stop, why)
 
     def stop(self) -> None:
         loop = self._loop

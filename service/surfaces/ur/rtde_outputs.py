@@ -5,7 +5,9 @@ finger is not a UR joint). `actual_current`, `target_current` and `target_moment
 actuator force MuJoCo applies to each joint [N·m] (armfleet has no motor currents);
 `target_qd`/`target_qdd` are the rate of change of the position target over the last ticks
 (the servos track position targets); TCP pose and speed come from `tcp_pose` with the world's
-TCP offset; `timestamp` is tick × tick length (simulated seconds since the service started).
+TCP offset as the core's tool table holds it (`kinematics.tools`: set by setTcp, set_tcp, REST
+or WebSocket alike); `timestamp` is tick × tick length (simulated seconds since the service
+started).
 Outputs a simulated arm has no source for (temperatures, voltages, analog inputs, the
 accelerometer, wrenches, euromap) are 0; the guide says so.
 
@@ -51,8 +53,10 @@ class WorldTick:
         kin: ToolKinematics,
         ctl: Controller,
         payload: Sequence[float],
+        tcp_offset: Sequence[float] = (0.0,) * 6,
     ):
         self.frame, self.w, self.kin, self.ctl, self.payload = frame, world, kin, ctl, payload
+        self.tcp_offset = tuple(float(x) for x in tcp_offset)
 
     def _row(self, a: np.ndarray) -> list[float]:
         return [float(x) for x in a[self.w, :ARM]]
@@ -83,11 +87,11 @@ class WorldTick:
 
     @cached_property
     def _actual_tcp(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.kin.tcp(np.array(self.q), np.array(self.qd), self.ctl.tcp_offset)
+        return self.kin.tcp(np.array(self.q), np.array(self.qd), self.tcp_offset)
 
     @cached_property
     def _target_tcp(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.kin.tcp(np.array(self.target), np.array(self.target_qd), self.ctl.tcp_offset)
+        return self.kin.tcp(np.array(self.target), np.array(self.target_qd), self.tcp_offset)
 
 
 _ZERO6, _ZERO3 = (0.0,) * 6, (0.0,) * 3

@@ -44,7 +44,7 @@ class RtdeSession(asyncio.Protocol):
         self._buffer = bytearray()
         self._outputs: dict[int, OutputRecipe] = {}
         self._inputs: dict[int, tuple[tuple[str, ...], struct.Struct]] = {}
-        self._next_id = 1
+        self._next_id = {"out": 1, "in": 1}  # outputs and inputs are numbered apart
         self._timers: dict[int, asyncio.TimerHandle] = {}  # recipe id → its next send
         self.started = False
         self.sent = 0  # data packages sent
@@ -115,11 +115,13 @@ class RtdeSession(asyncio.Protocol):
         else:
             self._error(f"unknown package type {p.name!r} ({kind})")
 
-    def _new_id(self) -> int:
-        if self._next_id > _MAX_RECIPES:
+    def _new_id(self, side: str) -> int:
+        """The next recipe id of `side` ("out" or "in"): a controller numbers output and
+        input recipes each from 1 (ur_rtde sends its first input recipe's data as id 1)."""
+        if self._next_id[side] > _MAX_RECIPES:
             raise wire.Malformed(f"more than {_MAX_RECIPES} recipes on one connection")
-        self._next_id += 1
-        return self._next_id - 1
+        self._next_id[side] += 1
+        return self._next_id[side] - 1
 
     def _setup_outputs(self, body: bytes) -> None:
         if len(body) < 8:
@@ -139,7 +141,7 @@ class RtdeSession(asyncio.Protocol):
             self._send(wire.text(problem, level=wire.ERROR))
             self._send(wire.recipe_answer(wire.SETUP_OUTPUTS, 0, types))
             return
-        recipe = OutputRecipe.build(self._new_id(), names, frequency)
+        recipe = OutputRecipe.build(self._new_id("out"), names, frequency)
         self._outputs[recipe.id] = recipe
         self._send(wire.recipe_answer(wire.SETUP_OUTPUTS, recipe.id, types))
 
@@ -154,8 +156,9 @@ class RtdeSession(asyncio.Protocol):
             log.info("world %d RTDE input setup refused: %s", self.robot.world, ", ".join(bad[:4]))
             self._send(wire.recipe_answer(wire.SETUP_INPUTS, 0, types))
             return
-        recipe_id = self._new_id()
+        recipe_id = self._new_id("in")
         self._inputs[recipe_id] = (tuple(names), rv.struct_of(types))
+        log.debug("world %d RTDE input recipe %d: %s", self.robot.world, recipe_id, names)
         self.robot.hold_inputs(names, self)
         self._send(wire.recipe_answer(wire.SETUP_INPUTS, recipe_id, types))
 
@@ -177,6 +180,7 @@ class RtdeSession(asyncio.Protocol):
             grouped.append(values[i] if n == 1 else list(values[i : i + n]))
             i += n
         apply_inputs(self.robot.controller, names, grouped)
+        self.robot.inputs_changed()
 
     # -- streaming --------------------------------------------------------------------------
 
@@ -224,6 +228,9 @@ class RtdeSession(asyncio.Protocol):
     def _error(self, why: str) -> None:
         log.warning("world %d RTDE: %s", self.robot.world, why)
         self._send(wire.text(why, level=wire.ERROR))
+
+    def send(self, data: bytes) -> None:
+        """Robot messages go to the script ports' clients, not to RTDE's."""
 
     def refuse_connection(self, why: str) -> None:
         """Close this connection (a package that cannot be framed, or the world not lent)."""

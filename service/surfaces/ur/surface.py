@@ -25,7 +25,9 @@ from service.core.sim.worlds import world_list
 from service.core.surface import ServiceFacts, SurfaceContext
 from service.surfaces.ur import addresses
 from service.surfaces.ur.endpoints import Endpoints
+from service.surfaces.ur.motion import Motion
 from service.surfaces.ur.rtde_outputs import Frame
+from service.surfaces.ur.safety import SafetyWatch
 from service.surfaces.ur.settings import UrSettings
 from service.surfaces.ur.tcp_pose import ToolKinematics
 
@@ -35,8 +37,10 @@ log = logging.getLogger("armfleet.ur")
 class UrSink(SnapshotSink):
     """Keeps the latest snapshot as RTDE's `Frame` (sim thread; see the module docstring)."""
 
-    def __init__(self, endpoints: Endpoints, tick_dt: float, first: Snapshot) -> None:
-        self._ep, self._dt = endpoints, tick_dt
+    def __init__(
+        self, endpoints: Endpoints, tick_dt: float, first: Snapshot, watch: SafetyWatch
+    ) -> None:
+        self._ep, self._dt, self._watch = endpoints, tick_dt, watch
         zero = np.zeros_like(first.target, dtype=np.float64)
         self._last = Frame(first, zero, zero, tick_dt)
         endpoints.frame = self._last
@@ -57,6 +61,9 @@ class UrSink(SnapshotSink):
             qdd = (qd - last.target_qd) / dt
         self._last = Frame(snap, qd, qdd, self._dt)
         self._ep.frame = self._last
+        if ticks > 0:
+            for world, why in self._watch.check(snap):
+                self._ep.protective_stop(world, why)
 
 
 class UrSurface:
@@ -84,11 +91,14 @@ class UrSurface:
         owner_of = book.owner if book is not None else None
         read = lambda worlds: loop.call(lambda b: params.read(b, worlds))  # noqa: E731
         ep = Endpoints(self.addresses, ToolKinematics(loop.batch.robot), owner_of, read)
+        ep.motion = Motion(ctx.control, lambda: ep.frame)
         if owner_of is not None or self._leases:
             ep.begin_leases()
         self.endpoints = ep
         ep.start()
-        self._sink = UrSink(ep, loop.batch.tick_dt, loop.latest)
+        limits = [j.effort_limit for j in loop.spec.joints]
+        watch = SafetyWatch(self.worlds, np.array(limits), loop.batch.tick_dt)
+        self._sink = UrSink(ep, loop.batch.tick_dt, loop.latest, watch)
         loop.listeners.add_sink(self._sink)
         first, last = self.addresses[self.worlds[0]], self.addresses[self.worlds[-1]]
         log.info(

@@ -1,19 +1,29 @@
-"""One world's controller as its connections see it: address, state, connections, input owners.
+"""One world's controller as its connections see it: address, state, clients, input owners.
 
 Why a module of its own: the connections (RTDE, Dashboard, script ports) and the listeners
 (endpoints.py) both hold it; it knows the listeners only as a `Fleet` (the latest frame, the
-kinematics, the payloads, the count of streaming connections), so no import runs in a circle.
+kinematics, the payloads, the count of streaming connections), and the running control script
+and the URScript lines' speed loop only as `Program` and `Loop`: script_runner.start_script
+and script_lines.line_speed make them, so no import runs in a circle (type-only ones too).
 """
 
 from __future__ import annotations
 
-from typing import Protocol
+import logging
+from typing import TYPE_CHECKING, Protocol
 
-from service.surfaces.ur.controller import Controller
+from service.core.errors import Unavailable
+from service.surfaces.ur.controller import Controller, ProgramState
+from service.surfaces.ur.robot_messages import robot_message
 from service.surfaces.ur.rtde_outputs import Frame, WorldTick
 from service.surfaces.ur.tcp_pose import ToolKinematics
 
+if TYPE_CHECKING:
+    from service.surfaces.ur.motion import Motion
+
+log = logging.getLogger("armfleet.ur")
 NO_PAYLOAD = (0.0, 0.0, 0.0, 0.0)
+NO_TCP = (0.0,) * 6
 
 
 class Fleet(Protocol):
@@ -21,12 +31,31 @@ class Fleet(Protocol):
 
     frame: Frame | None
     kin: ToolKinematics
+    motion: Motion | None
     payloads: dict[int, tuple[float, ...]]
     streaming: int
 
 
 class Session(Protocol):
     def refuse_connection(self, why: str) -> None: ...
+
+    def send(self, data: bytes) -> None: ...
+
+
+class Program(Protocol):
+    """ur_rtde's control script while it runs (script_runner.ScriptRunner)."""
+
+    alive: bool
+
+    def on_inputs(self) -> None: ...
+
+    def end(self, why: str, halt: bool = True) -> None: ...
+
+
+class Loop(Protocol):
+    """The speed loop of URScript's speedj/speedl lines (script_lines.LineSpeed)."""
+
+    def end(self) -> None: ...
 
 
 class WorldRobot:
@@ -41,6 +70,8 @@ class WorldRobot:
         self._writers: dict[str, Session] = {}  # input variable → the session writing it
         self._view: WorldTick | None = None
         self._view_version = -1
+        self.runner: Program | None = None  # ur_rtde's control script, while it runs
+        self.speed_loop: Loop | None = None  # script_lines.line_speed makes it
 
     def opened(self, session: Session) -> None:
         if not self.open:
@@ -71,20 +102,83 @@ class WorldRobot:
             return None
         v = self._view
         payload = self.fleet.payloads.get(self.world, NO_PAYLOAD)
-        # the payload is polled apart from the frames: a paused world gets no new frame, so a
-        # changed payload must renew the view by itself
+        tcp = self._tcp_offset()
+        # the payload and the TCP offset are read apart from the frames: a paused world gets no
+        # new frame, so a change of either must renew the view by itself
         if (
             v is None
             or v.frame is not frame
             or v.payload != payload
+            or v.tcp_offset != tcp
             or self._view_version != self.controller.version
         ):
-            v = self._view = WorldTick(frame, self.world, self.fleet.kin, self.controller, payload)
+            kin, ctl = self.fleet.kin, self.controller
+            v = self._view = WorldTick(frame, self.world, kin, ctl, payload, tcp)
             self._view_version = self.controller.version
         return v
 
+    def _tcp_offset(self) -> tuple[float, ...]:
+        """The world's TCP offset in the core's tool table (one for every surface); the flange
+        where the served arm has no UR kinematics (a cell that changed the arm)."""
+        motion = self.fleet.motion
+        if motion is None:
+            return NO_TCP
+        try:
+            return tuple(float(x) for x in motion.tcp(self.world))
+        except Unavailable:
+            return NO_TCP
+
     def close_all(self, why: str) -> None:
+        self.end_script(why)
         for session in list(self.sessions):
             session.refuse_connection(why)
         self.sessions.clear()
         self._writers.clear()
+
+    # -- programs (script ports, RTDE registers) and safety --------------------------------
+
+    @property
+    def motion(self) -> Motion:
+        motion = self.fleet.motion
+        if motion is None:
+            raise RuntimeError("the UR surface has not started")
+        return motion
+
+    def end_script(self, why: str) -> None:
+        if self.runner is not None:
+            self.runner.end(why)
+            self.runner = None
+
+    def inputs_changed(self) -> None:
+        """An RTDE input package was applied: the running control script reads it."""
+        if self.runner is not None:
+            if self.runner.alive:
+                self.runner.on_inputs()
+            else:
+                self.runner = None
+
+    def end_speed_loop(self) -> None:
+        if self.speed_loop is not None:
+            self.speed_loop.end()
+
+    def protective_stop(self, why: str) -> None:
+        """The arm stops where it is, the program ends, the safety mode says so until the
+        Dashboard's `unlock protective stop` (5 s later at the earliest)."""
+        if self.controller.safety_mode.name == "PROTECTIVE_STOP":
+            return
+        log.warning("world %d: protective stop: %s", self.world, why)
+        self.end_script(f"protective stop: {why}")
+        self.end_speed_loop()
+        self.controller.protective_stop()
+        self.motion.halt(self.world)
+        self.log_message(f"Protective stop: {why}")
+
+    def log_message(self, text: str) -> None:
+        """A robot message to every client of the primary and secondary ports."""
+        data = robot_message(text)
+        for session in list(self.sessions):
+            session.send(data)
+
+    @property
+    def program_running(self) -> bool:
+        return self.controller.program is ProgramState.PLAYING
