@@ -89,9 +89,10 @@ class CellPhysics:
             replaced.append(f"{self.solver} solver")
         if not replaced:
             return None
+        ours = "CG" if solver == "cg" else solver.capitalize()
         return (
             f"physics: the cell's {' and '.join(replaced)} replaced by armfleet's: {how}, "
-            f"{'CG' if solver == 'cg' else solver.capitalize()} solver (its {self.integrator} integrator kept); to keep the cell's own, add "
+            f"{ours} solver (its {self.integrator} integrator kept); to keep the cell's own, add "
             f'<custom><numeric name="{KEEP_OWN}" data="1"/></custom> to it'
         )
 
