@@ -204,10 +204,18 @@ def engine_capacity(
     }
 
 
+def _has_cuda() -> bool:
+    """An NVIDIA driver is installed and Warp sees a GPU (Warp is not asked without a driver:
+    it would import for seconds and warn)."""
+    import ctypes.util
+
+    return ctypes.util.find_library("cuda") is not None and common.cuda_available()
+
+
 def engines_here(names: Sequence[str] | None) -> list[Engine]:
     """The engines to measure: `names` (keys), else every CPU one and CUDA when a GPU is seen."""
     every = [*CPU_ENGINES]
-    if (not names or "warp_cuda" in names) and common.cuda_available():
+    if (not names or "warp_cuda" in names) and _has_cuda():
         every.append(CUDA_ENGINE)
     if not names:
         return every

@@ -190,6 +190,8 @@ class TrajectoryManager:
         For state frames of many worlds: running ones come from the table in one pass."""
         out: dict[str, dict[str, Any]] = {}
         with self.loop.commands.staging() as _:
+            if not self._by_world:  # no trajectory has run: nothing to say, every frame
+                return out
             t = self.table
             elapsed = (max(self._last_tick, 0) - t.start_tick + 1) * t.tick_dt
             progress = np.clip(elapsed / np.maximum(t.duration, 1e-9), 0.0, 1.0)
