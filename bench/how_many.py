@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -275,7 +276,8 @@ def measure(
                 )
     with_load = os.getloadavg() if hasattr(os, "getloadavg") else None
     return {
-        "command": "armfleet capacity",
+        # argv as the bench's result files keep it (bench.figures.command reads it back)
+        "command": [Path(sys.argv[0]).name, *sys.argv[1:]],
         "quick": quick,
         "started": started,
         "finished": common.now_iso(),
@@ -286,7 +288,27 @@ def measure(
         "timing": timing.__dict__,
         "limit": limit,
         "engines": results,
+        "rows": _rows(limit, results),
     }
+
+
+def _rows(limit: dict[str, Any], results: dict[str, Any]) -> list[dict[str, Any]]:
+    """The table of the answer (bench.figures.section_table shows result files by it)."""
+    rows: list[dict[str, Any]] = [
+        {"what": "rollout limit", "worlds": round(limit["worlds"]), "× the limit": 1.0}
+    ]
+    for res in results.values():
+        held = next((r for r in res.get("runs", []) if r["nworld"] == res.get("worlds")), None)
+        rows.append(
+            {
+                "what": res["label"],
+                "worlds": res.get("worlds"),
+                "× the limit": res.get("ratio_to_limit"),
+                "RTF": held["realtime_factor"] if held else None,
+                "check RTF": res["check"]["realtime_factor"] if res.get("check") else None,
+            }
+        )
+    return rows
 
 
 def report(result: dict[str, Any]) -> str:

@@ -51,6 +51,9 @@ def test_capacity_prints_and_writes_the_same_answer(tmp_path: Path) -> None:
     else:  # a box too busy for even 8 worlds: said, and the exit status says so
         assert "none held" in text and proc.returncode == 1, text
     assert f"wrote {out}" in text
+    # the table the docs show a result file by (bench.figures.section_table)
+    assert [r["worlds"] for r in result["rows"]] == [round(limit["worlds"]), native["worlds"]]
+    assert result["command"][1:3] == ["capacity", "--quick"]
 
 
 def test_an_unknown_engine_is_refused_by_name() -> None:
