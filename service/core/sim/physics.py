@@ -25,10 +25,11 @@ DEFAULT_PHYSICS_DT = 1.0 / 120.0
 # The constraint solver each engine steps the served model with, chosen by measurement (issue 39;
 # docs/performance.md, "The solver"). Native MuJoCo: Newton converges in 1-2 iterations where CG
 # takes ~10 (up to ~50 while the worlds settle), and a step costs 5% fewer instructions (callgrind,
-# 240 steps from home: 42.2M vs 44.6M), 10% less time on a 2-core AMD EPYC, the same within the
-# noise on a 2-core Xeon. MuJoCo Warp on the CPU: CG, ~20% less CPU time a tick than Newton (64
-# worlds, interleaved). Every fidelity test passes with these (tests/test_model.py,
-# tests/test_engine.py warp vs native, tests/test_native.py, tests/test_params.py).
+# 240 steps from home: 42.2M vs 44.6M); raw rollout on both cores of a 2-core Xeon stepped 8-19%
+# more (best blocks, bench section 20), 10% on a 2-core AMD EPYC. MuJoCo Warp on the CPU: CG,
+# ~20% less CPU time a tick than Newton (64 worlds, interleaved). Every fidelity test passes
+# with these (tests/test_model.py, tests/test_engine.py warp vs native, tests/test_native.py,
+# tests/test_params.py, tests/test_batch_contract.py).
 ENGINE_SOLVER = {"mujoco": mujoco.mjtSolver.mjSOL_NEWTON, "warp": mujoco.mjtSolver.mjSOL_CG}
 
 
