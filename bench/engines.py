@@ -76,19 +76,20 @@ def _engine_rate(
 class _Rollout:
     """Raw native MuJoCo: `mujoco.rollout.Rollout` on `nthread` threads, chained calls."""
 
-    def __init__(self, nworld: int, nthread: int, physics_dt: float) -> None:
+    def __init__(self, nworld: int, nthread: int, physics_dt: float, solver: Any = None) -> None:
+        """`solver`: a mujoco.mjtSolver; None: the native engine's (physics.ENGINE_SOLVER)."""
         import math
 
         import mujoco
         import numpy as np
         from mujoco import rollout
 
-        from service.core.sim.physics import configure
+        from service.core.sim.physics import ENGINE_SOLVER, configure
         from service.core.sim.robot import load_robot
 
         robot = load_robot()
         self.mjm = mjm = robot.mjm
-        configure(mjm, physics_dt)
+        configure(mjm, physics_dt, ENGINE_SOLVER["mujoco"] if solver is None else solver)
         data = mujoco.MjData(mjm)
         mujoco.mj_resetDataKeyframe(mjm, data, robot.home_key)
         mujoco.mj_forward(mjm, data)

@@ -125,6 +125,13 @@ FIGURES: dict[str, Callable[[], str]] = {
     "cpu.native_per_core": _per_core,
     "cpu.limit_worlds": lambda: _int(load(CPU_CAPACITY)["limit_worlds"]),
     "cpu.native_share": lambda: common.fmt_ratio(load(CPU_CAPACITY)["mujoco"]["share_held"]),
+    # Capacity as a ratio to the rollout limit of the same run (the best limit reading): what
+    # carries to another machine, where the limit itself differs (`armfleet capacity`).
+    "cpu.native_ratio": lambda: common.fmt_ratio(load(CPU_CAPACITY)["mujoco"]["capacity_vs_limit"]),
+    "cpu.native_binary_ratio": lambda: common.fmt_ratio(
+        load(CPU_CAPACITY)["mujoco_binary"]["capacity_vs_limit"]
+    ),
+    "cpu.warp_ratio": lambda: common.fmt_ratio(load(CPU_CAPACITY)["warp"]["capacity_vs_limit"]),
     "gpu.machine": lambda: _cores(load(GPU_BINARY)),
     "gpu.date": lambda: load(GPU_BINARY)["started"][:10],
     "gpu.realtime_worlds": _gpu_realtime_worlds,
@@ -247,11 +254,14 @@ def headline() -> str:
     """The answer to "how many worlds in real time?", for the README and the site."""
     f = figure
     return (
-        f"- **CPU** ({f('cpu.machine')}): native MuJoCo (`--engine mujoco`) keeps "
-        f"**{f('cpu.native_worlds')} worlds** at 60 Hz in real time with every world streamed "
-        f"as JSON ({f('cpu.native_binary_worlds')} in binary in the same run), about "
-        f"{f('cpu.native_per_core')} per core; MuJoCo Warp on the CPU "
-        f"{f('cpu.warp_worlds')}.\n"
+        f"- **CPU**: native MuJoCo (`--engine mujoco`) holds **{f('cpu.native_ratio')} of the "
+        f"rollout limit** at 60 Hz in real time with every world streamed as JSON "
+        f"({f('cpu.native_binary_ratio')} in binary), MuJoCo Warp on the CPU "
+        f"{f('cpu.warp_ratio')}. The limit is how many worlds raw `mujoco.rollout` of the "
+        f"same model steps at 60 Hz on all cores, and it is the machine's: measured on "
+        f"{f('cpu.machine')} ({f('cpu.date')}), it was {f('cpu.limit_worlds')} worlds, so "
+        f"{f('cpu.native_worlds')} native and {f('cpu.warp_worlds')} Warp worlds there. "
+        f"`armfleet capacity` measures yours in about a minute.\n"
         f"- **GPU** ({f('gpu.machine')}): MuJoCo Warp serves {f('gpu.largest_worlds')} worlds "
         f"at {f('gpu.largest_ticks_per_s')} ticks/s in fast mode, every world streamed in "
         f"binary; at that rate about **{f('gpu.realtime_worlds')} worlds** keep 60 Hz. The "

@@ -124,8 +124,8 @@ def bench_engine_cores(nworld: int, device: str, min_time: float, warmup_time: f
     return _result(timing, batch.substeps, nworld, build_s=build_s, shards=shards, faults=faults)
 
 
-def engine_model(device: str = "cpu"):
-    """(MjModel, home key id) configured exactly as the engine configures its own.
+def engine_model(device: str = "cpu", engine: str = "mujoco"):
+    """(MjModel, home key id) configured exactly as `engine` configures its own (its solver).
 
     Both engines load the robot and set their options with `service.core.sim.physics.configure` at
     the default step: doing the same here keeps the baselines on the same physics whatever the
@@ -133,11 +133,11 @@ def engine_model(device: str = "cpu"):
     `device` is accepted for the callers' symmetry; the model is host data. A fresh model each
     call.
     """
-    from service.core.sim.physics import configure
+    from service.core.sim.physics import ENGINE_SOLVER, configure
     from service.core.sim.robot import load_robot
 
     robot = load_robot()
-    configure(robot.mjm, physics_dt()[1])
+    configure(robot.mjm, physics_dt()[1], ENGINE_SOLVER[engine])
     return robot.mjm, robot.home_key
 
 
@@ -167,7 +167,7 @@ def _raw_warp(nworld: int, device: str, substeps: int, dt: float):
 
     from service.engines.warp import NCONMAX, NJMAX
 
-    mjm, home_key = engine_model(device)
+    mjm, home_key = engine_model(device, "warp")
     assert abs(mjm.opt.timestep - dt) < 1e-12, (mjm.opt.timestep, dt)
     mjd = mujoco.MjData(mjm)
     mujoco.mj_resetDataKeyframe(mjm, mjd, home_key)

@@ -1,4 +1,5 @@
-"""`armfleet` command line: serve, setup (warm the kernel cache), controller, watch, bench, docs.
+"""`armfleet` command line: serve, setup (warm the kernel cache), controller, watch, bench,
+capacity (how many worlds this machine holds), docs.
 
 Heavy imports (warp, mujoco_warp, tkinter) happen inside each command so `armfleet --help`
 is instant and `setup` can switch Warp's compile log on before Warp is imported.
@@ -293,6 +294,38 @@ def bench(
         return
     report = runner.run(section or None, quick, device, worlds or None, out)
     if report["errors"]:
+        raise typer.Exit(1)
+
+
+@app.command()
+def capacity(
+    engine: Annotated[
+        list[str] | None,
+        typer.Option(help="mujoco, warp or warp_cuda (repeatable; default: every one here)"),
+    ] = None,
+    quick: Annotated[bool, typer.Option(help="short windows: a first look in ~30 s")] = False,
+    check: Annotated[
+        bool, typer.Option(help="then run each answer again for 30 s (RTF >= 0.99 = it holds)")
+    ] = False,
+    out: Annotated[
+        Path | None, typer.Option(help="JSON file (default bench/results/capacity.json)")
+    ] = None,
+    worlds: Annotated[
+        int | None, typer.Option(help="fast-mode probe size instead of a share of the limit")
+    ] = None,
+    max_worlds: Annotated[int | None, typer.Option(help="never try more worlds than this")] = None,
+) -> None:
+    """How many worlds this machine holds in real time, per engine, in about a minute: the
+    raw rollout limit, and each engine's worlds with a 30 Hz subscriber of every world, as a
+    number and a ratio to the limit. Exit 1 when an engine holds none or misses its check."""
+    from bench import how_many
+
+    try:
+        result = how_many.run(engine or None, quick, check, out, worlds, max_worlds)
+    except ValueError as exc:  # an unknown engine
+        typer.echo(f"armfleet capacity: {exc}", err=True)
+        raise typer.Exit(2) from None
+    if not how_many.held_everywhere(result):
         raise typer.Exit(1)
 
 

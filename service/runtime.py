@@ -27,6 +27,7 @@ from service.core.metrics import Metrics
 from service.core.process.stopping import reclaim_stop_signals
 from service.core.sim.batch import Batch, Supervised
 from service.core.sim.loop import SimLoop
+from service.core.sim.physics import solver_name
 from service.core.sim.randomizations import Randomized
 from service.core.streams.hub import StreamHub
 from service.core.surface import Finishing, SurfaceContext, Watched
@@ -228,7 +229,8 @@ class Runtime:
         reclaim_stop_signals()  # building may have loaded a library that took them (Ray)
         self.header = provenance.batch_header(batch)
         own = batch.robot.own  # a user's cell: say what of its step options armfleet replaced
-        line = own.told(batch.control_hz, s.sim.physics_dt) if own is not None else None
+        solver = solver_name(batch.robot.mjm)  # the engine's, as configured
+        line = own.told(batch.control_hz, s.sim.physics_dt, solver) if own else None
         if s.sim.scene is not None and line:
             log.warning("%s", line)
         restore = s.persistence.restore

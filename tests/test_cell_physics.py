@@ -40,8 +40,9 @@ def test_replaced_options_are_said_in_one_line(tmp_path: Path) -> None:
     assert info["physics_dt"] == pytest.approx(1 / 120)  # armfleet's own step
     assert len(lines) == 1, srv.log()
     line = lines[0]
-    assert "timestep 2 ms and newton solver replaced" in line, line
-    assert "CG solver" in line and "implicitfast integrator kept" in line, line
+    # native MuJoCo steps with Newton (physics.ENGINE_SOLVER), the cell's own: not replaced
+    assert "timestep 2 ms replaced" in line and "solver replaced" not in line, line
+    assert "Newton solver" in line and "implicitfast integrator kept" in line, line
     assert '<numeric name="armfleet_own_physics" data="1"/>' in line, line
 
 

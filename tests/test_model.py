@@ -16,7 +16,12 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from mjcf import MJCF_DIR, ROBOT_XML, SCENE_XML  # noqa: E402
-from service.core.sim.physics import DEFAULT_PHYSICS_DT, configure, tick_timing  # noqa: E402
+from service.core.sim.physics import (  # noqa: E402
+    DEFAULT_PHYSICS_DT,
+    ENGINE_SOLVER,
+    configure,
+    tick_timing,
+)
 from tests.rclpy import ur_joints  # noqa: E402
 
 ENGINE_DT = tick_timing(60.0, DEFAULT_PHYSICS_DT)[1]
@@ -50,7 +55,7 @@ DH_ALPHA = (np.pi / 2, 0.0, 0.0, np.pi / 2, -np.pi / 2, 0.0)
 @pytest.fixture(scope="module")
 def model():
     m = mujoco.MjModel.from_xml_path(str(SCENE_XML))
-    configure(m, ENGINE_DT)
+    configure(m, ENGINE_DT, ENGINE_SOLVER["mujoco"])  # as the native engine steps it
     return m
 
 

@@ -31,7 +31,13 @@ from mujoco import batch as mjbatch
 from mjcf import SCENE_XML
 from service.core.sim.batch import Batch, Renderable, Restorable, StateWrite
 from service.core.sim.packed_rows import PackedRows
-from service.core.sim.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
+from service.core.sim.physics import (
+    DEFAULT_PHYSICS_DT,
+    ENGINE_SOLVER,
+    configure,
+    feedforward_gain,
+    tick_timing,
+)
 from service.core.sim.robot import LoadedRobot, load_robot
 from service.core.sim.types import PHYSICS_FIELDS, BatchState, Poses, Snapshot
 from service.engines.chain_pose import ChainPose
@@ -125,7 +131,7 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         self.device_name = f"cpu (native MuJoCo, {self.nthread} thread{'s' * (self.nthread > 1)})"
 
         mjm = self.robot.mjm
-        configure(mjm, self.physics_dt)
+        configure(mjm, self.physics_dt, ENGINE_SOLVER["mujoco"])
         self.home_target = np.array(mjm.key_ctrl[self.robot.home_key], dtype=np.float64)
         self._key = self.robot.home_key
         self._dof = self.robot.dof_adr

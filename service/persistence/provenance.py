@@ -7,6 +7,7 @@ recordings carry this header and refuse to be restored or replayed into anything
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import importlib.metadata
 from typing import TYPE_CHECKING, Any
@@ -21,7 +22,15 @@ _PACKAGES = ("mujoco", "mujoco-warp", "warp-lang", "numpy", "armfleet")
 
 
 def model_hash(mjm: mujoco.MjModel) -> str:
-    """sha256 of the compiled model as MuJoCo saves it (MJB): geometry, masses and options."""
+    """sha256 of the compiled model as MuJoCo saves it (MJB): geometry, masses and options.
+
+    The constraint solver is left out (hashed as CG): each engine steps with its own
+    (physics.ENGINE_SOLVER), and a state moves between engines, as it does between devices;
+    within one engine the solver is the same, so the hash still says "the same model".
+    """
+    if mjm.opt.solver != mujoco.mjtSolver.mjSOL_CG:
+        mjm = copy.copy(mjm)
+        mjm.opt.solver = mujoco.mjtSolver.mjSOL_CG
     buf = np.zeros(mujoco.mj_sizeModel(mjm), dtype=np.uint8)
     mujoco.mj_saveModel(mjm, None, buf)
     return hashlib.sha256(buf.tobytes()).hexdigest()

@@ -1,8 +1,9 @@
 """The physics options every engine shares, so that warp and native MuJoCo step the same system.
 
-Both engines derive their substep from the control rate the same way and set the same solver
-options on the MjModel they load; the fidelity tests (warp vs native) and the benchmarks rely on
-that. Nothing here imports warp: the native engine and the tests use it without paying for it.
+Both engines derive their substep from the control rate the same way and set their solver on
+the MjModel they load (`ENGINE_SOLVER`: each engine's faster one on the served model, with every
+fidelity test passing); the fidelity tests (warp vs native) and the benchmarks rely on that.
+Nothing here imports warp: the native engine and the tests use it without paying for it.
 """
 
 from __future__ import annotations
@@ -20,6 +21,22 @@ import numpy as np
 # 2.083 ms steps the joints differ by at most 2.2 mrad over 2 s of presses (0.75 mrad at
 # 4.17 ms). Four times fewer steps per tick: see bench/ for the gain in worlds held real time.
 DEFAULT_PHYSICS_DT = 1.0 / 120.0
+
+# The constraint solver each engine steps the served model with, chosen by measurement (issue 39;
+# docs/performance.md, "The solver"). Native MuJoCo: Newton converges in 1-2 iterations where CG
+# takes ~10 (up to ~50 while the worlds settle), and a step costs 5% fewer instructions (callgrind,
+# 240 steps from home: 42.2M vs 44.6M); raw rollout on both cores of a 2-core Xeon stepped 8-19%
+# more (best blocks, bench section 20), 10% on a 2-core AMD EPYC. MuJoCo Warp on the CPU: CG,
+# ~20% less CPU time a tick than Newton (64 worlds, interleaved). Every fidelity test passes
+# with these (tests/test_model.py, tests/test_engine.py warp vs native, tests/test_native.py,
+# tests/test_params.py, tests/test_batch_contract.py).
+ENGINE_SOLVER = {"mujoco": mujoco.mjtSolver.mjSOL_NEWTON, "warp": mujoco.mjtSolver.mjSOL_CG}
+
+
+def solver_name(mjm: mujoco.MjModel) -> str:
+    """The model's solver as MJCF spells it: 'newton', 'cg', 'pgs'."""
+    return mujoco.mjtSolver(int(mjm.opt.solver)).name.removeprefix("mjSOL_").lower()
+
 
 # A cell that sets this custom numeric to 1 is stepped with its own <option> timestep and solver
 # (issue 38: a tuned cell must not get other physics without a word): `own_physics`.
@@ -42,7 +59,7 @@ class CellPhysics:
         keep = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_NUMERIC, KEEP_OWN)
         return cls(
             float(mjm.opt.timestep),
-            mujoco.mjtSolver(int(mjm.opt.solver)).name.removeprefix("mjSOL_").lower(),
+            solver_name(mjm),
             mujoco.mjtIntegrator(int(mjm.opt.integrator)).name.removeprefix("mjINT_").lower(),
             keep >= 0 and bool(mjm.numeric_data[mjm.numeric_adr[keep]]),
         )
@@ -51,10 +68,11 @@ class CellPhysics:
         """The approximate physics step to use: the cell's own when it keeps it."""
         return self.timestep if self.keep else physics_dt
 
-    def told(self, control_hz: float, physics_dt: float) -> str | None:
+    def told(self, control_hz: float, physics_dt: float, solver: str = "cg") -> str | None:
         """The one line `serve` logs at start about the cell's step options (None: nothing was
         replaced and the step is the cell's): what was replaced and how to keep the cell's own,
-        or, when kept, that a timestep not dividing the control tick was rounded."""
+        or, when kept, that a timestep not dividing the control tick was rounded. `solver`:
+        the one the engine steps with (`solver_name` of the configured model)."""
         substeps, exact = tick_timing(control_hz, self.step(physics_dt))
         how = f"{substeps} substeps of {exact * 1e3:.4g} ms per 1/{control_hz:g} s tick"
         if self.keep:
@@ -68,13 +86,14 @@ class CellPhysics:
         replaced = []
         if abs(exact - self.timestep) > 1e-12:
             replaced.append(f"timestep {self.timestep * 1e3:.4g} ms")
-        if self.solver != "cg":
+        if self.solver != solver:
             replaced.append(f"{self.solver} solver")
         if not replaced:
             return None
+        ours = "CG" if solver == "cg" else solver.capitalize()
         return (
-            f"physics: the cell's {' and '.join(replaced)} replaced by armfleet's: {how}, CG "
-            f"solver (its {self.integrator} integrator kept); to keep the cell's own, add "
+            f"physics: the cell's {' and '.join(replaced)} replaced by armfleet's: {how}, "
+            f"{ours} solver (its {self.integrator} integrator kept); to keep the cell's own, add "
             f'<custom><numeric name="{KEEP_OWN}" data="1"/></custom> to it'
         )
 
@@ -86,13 +105,16 @@ def tick_timing(control_hz: float, physics_dt: float) -> tuple[int, float]:
     return substeps, tick_dt / substeps
 
 
-def configure(mjm: mujoco.MjModel, physics_dt: float) -> None:
-    """Set the step and solver options on a model, in place, as every engine runs it.
+def configure(
+    mjm: mujoco.MjModel,
+    physics_dt: float,
+    solver: mujoco.mjtSolver = ENGINE_SOLVER["warp"],
+) -> None:
+    """Set the step and solver options on a model, in place, as an engine runs it.
 
-    Conjugate gradient instead of Newton: ~15-20% less work per step on this model (measured in
-    bench/), and every fidelity test (hold, step response, grasp, warp-vs-native) passes. A cell
-    that keeps its own physics (`CellPhysics.keep`) keeps its solver; the step is the exact one
-    the engine derived from its timestep (`tick_timing`).
+    `solver`: the engine's (`ENGINE_SOLVER`). A cell that keeps its own physics
+    (`CellPhysics.keep`) keeps its solver; the step is the exact one the engine derived from
+    its timestep (`tick_timing`).
 
     Sleeping is cleared: a model with it needs a persistent native batch (its bookkeeping is not
     in the state rows) and the Newton solver on MuJoCo Warp. A scene that asks for it
@@ -102,7 +124,7 @@ def configure(mjm: mujoco.MjModel, physics_dt: float) -> None:
     keep = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_NUMERIC, KEEP_OWN)
     mjm.opt.timestep = physics_dt
     if keep < 0 or not mjm.numeric_data[mjm.numeric_adr[keep]]:
-        mjm.opt.solver = mujoco.mjtSolver.mjSOL_CG
+        mjm.opt.solver = solver
     mjm.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
 
 

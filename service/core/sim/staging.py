@@ -132,7 +132,12 @@ class CommandTable:
         return bool(self.state) or bool(self.dirty.any()) or bool(self.reset.any())
 
     def take(self) -> TickWrites:
-        """Everything staged, as the engine's `TickWrites`; the table starts empty again."""
+        """Everything staged, as the engine's `TickWrites`; the table starts empty again.
+
+        Most ticks of a large batch stage nothing: then no index arrays are built (a tick's
+        serial Python work leaves the engine's other cores idle)."""
+        if not self.state and not self.dirty.any() and not self.reset.any():
+            return TickWrites()
         dirty = np.flatnonzero(self.dirty)
         velocity = self.velocity[dirty].copy()
         writes = TickWrites(

@@ -180,11 +180,11 @@ class TrajectoryManager:
         return None if status is None else status.brief()
 
     def briefs(self, worlds: np.ndarray) -> dict[str, dict[str, Any]]:
-        """`brief` of those of `worlds` that have run a trajectory, keyed by world id (str).
-
-        For state frames of many worlds: running ones come from the table in one pass."""
+        """`brief` of the `worlds` that ran a trajectory, by world id (str), in one pass."""
         out: dict[str, dict[str, Any]] = {}
         with self.loop.commands.staging() as _:
+            if not self._by_world:  # no trajectory has run: nothing to say, every frame
+                return out
             t = self.table
             elapsed = (max(self._last_tick, 0) - t.start_tick + 1) * t.tick_dt
             progress = np.clip(elapsed / np.maximum(t.duration, 1e-9), 0.0, 1.0)
