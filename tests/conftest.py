@@ -207,10 +207,22 @@ def settled_tcp(client: ArmfleetClient, world: int, timeout: float = 20) -> dict
     within 1 mrad of its target and slower than 0.01 rad/s), so that a difference between two
     readings is what the servos made of the commands in between."""
 
+    last: list[dict[str, Any]] = []
+
     def check() -> dict[str, Any] | None:
         s = client.state(world)
         at = np.abs(s.position[:6] - s.target[:6]).max() < 1e-3
-        return client.tcp(world) if at and np.abs(s.velocity[:6]).max() < 1e-2 else None
+        if not (at and np.abs(s.velocity[:6]).max() < 1e-2):
+            last.clear()
+            return None
+        # Within 1 mrad the servos still creep (a wrist's mrad is a fraction of a mm at the
+        # TCP): settled is when the TCP stopped moving between two readings 0.1 s apart.
+        now = client.tcp(world)
+        still = bool(last) and np.abs(np.subtract(now["tcp"][:3], last[0]["tcp"][:3])).max() < 2e-5
+        last[:] = [now]
+        if not still:
+            time.sleep(0.1)
+        return now if still else None
 
     return wait_for(check, f"world {world}'s arm to settle at its targets", timeout)
 
