@@ -34,7 +34,7 @@ import os
 import random
 import time
 from collections.abc import Callable, Iterator
-from contextlib import ExitStack
+from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass
 from typing import Any
 
@@ -73,15 +73,19 @@ def armfleet_lending_server(tmp_path_factory: pytest.TempPathFactory) -> Iterato
         yield server
 
 
+def _leased(request: pytest.FixtureRequest, own_server: str) -> AbstractContextManager[LeasedWorld]:
+    """A world leased for this test from ARMFLEET_URL (token: ARMFLEET_TOKEN), else from the
+    module's own server, the fixture named `own_server`; labelled with the worker and test."""
+    url = os.environ.get("ARMFLEET_URL") or request.getfixturevalue(own_server).url
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    label = f"pytest {worker} {request.node.nodeid}"[:120]
+    return lease_world(url, os.environ.get("ARMFLEET_TOKEN"), label)
+
+
 @pytest.fixture
 def armfleet_world(request: pytest.FixtureRequest) -> Iterator[LeasedWorld]:
     """A leased world of its own for this test (see the module docstring)."""
-    url = os.environ.get("ARMFLEET_URL")
-    if not url:
-        url = request.getfixturevalue("armfleet_lending_server").url
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
-    label = f"pytest {worker} {request.node.nodeid}"[:120]
-    with lease_world(url, os.environ.get("ARMFLEET_TOKEN"), label) as world:
+    with _leased(request, "armfleet_lending_server") as world:
         yield world
 
 
@@ -110,15 +114,9 @@ class UrWorld:
 @pytest.fixture
 def armfleet_ur_world(request: pytest.FixtureRequest) -> Iterator[UrWorld]:
     """A leased world and its UR address for this test (see the module docstring)."""
-    url = os.environ.get("ARMFLEET_URL")
-    if not url:
-        url = request.getfixturevalue("armfleet_ur_server").url
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
-    label = f"pytest {worker} {request.node.nodeid}"[:120]
-    token = os.environ.get("ARMFLEET_TOKEN")
-    with lease_world(url, token, label) as world:
+    with _leased(request, "armfleet_ur_server") as world:
         headers = {"Authorization": f"Bearer {world.lease.token}"} if world.lease.token else {}
-        yield UrWorld(world, _open_ur_address(url, world.world, headers))
+        yield UrWorld(world, _open_ur_address(world.url, world.world, headers))
 
 
 def _open_ur_address(url: str, world: int, headers: dict[str, str]) -> str:
