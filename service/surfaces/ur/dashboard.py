@@ -19,10 +19,11 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from service.surfaces.ur import rtde_wire
+from service.surfaces.ur.connection import RobotConnection
 from service.surfaces.ur.controller import Controller, ProgramState, SafetyMode
 
 if TYPE_CHECKING:
-    from service.surfaces.ur.world_robot import WorldRobot
+    pass
 
 log = logging.getLogger("armfleet.ur")
 GREETING = "Connected: Universal Robots Dashboard Server"
@@ -138,22 +139,13 @@ def answer(ctl: Controller, line: str) -> str:
     return f"could not understand: '{line}'"
 
 
-class DashboardSession(asyncio.Protocol):
+class DashboardSession(RobotConnection):
     """One Dashboard client of one world (runs on the UR event loop)."""
 
-    def __init__(self, robot: WorldRobot) -> None:
-        self.robot = robot
-        self.transport: asyncio.Transport | None = None
-        self._buffer = bytearray()
-
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
-        self.robot.opened(self)
-        transport.write((GREETING + "\n").encode())
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        self.robot.closed(self)
+        super().connection_made(transport)
+        assert self.transport is not None
+        self.transport.write((GREETING + "\n").encode())
 
     def data_received(self, data: bytes) -> None:
         self._buffer += data

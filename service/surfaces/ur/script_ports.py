@@ -13,12 +13,12 @@ saying what and why, the place where a robot's log messages come. Nothing else i
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import re
 from typing import TYPE_CHECKING
 
 from service.surfaces.ur import control_script, script_lines, script_runner, urscript
+from service.surfaces.ur.connection import RobotConnection
 
 if TYPE_CHECKING:
     from service.surfaces.ur.world_robot import WorldRobot
@@ -29,21 +29,12 @@ _PROGRAM_END = re.compile(rb"\n[ \t]*end[ \t]*\r?\n?\s*$")
 LOG_PORTS = (30001, 30002)
 
 
-class ScriptSession(asyncio.Protocol):
+class ScriptSession(RobotConnection):
     """One client of port 30001, 30002 or 30003 of one world (the UR event loop)."""
 
     def __init__(self, robot: WorldRobot, port: int) -> None:
-        self.robot, self.port = robot, port
-        self.transport: asyncio.Transport | None = None
-        self._buffer = bytearray()
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
-        self.robot.opened(self)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        self.robot.closed(self)
+        super().__init__(robot)
+        self.port = port
 
     def data_received(self, data: bytes) -> None:
         self._buffer += data
