@@ -228,6 +228,22 @@ def test_the_readme_links_resolve() -> None:
             assert anchor in slugs, link
 
 
+def test_every_test_the_promises_table_names_exists() -> None:
+    """docs/reference/promises.md names the test that holds each promise (`file::name`, or a
+    whole file): a renamed or removed test would leave a promise that nothing checks."""
+    table = (DOCS / "reference/promises.md").read_text()
+    named = set(re.findall(r"\b(test_\w+\.py)(?:::(\w+))?", table))
+    assert len(named) > 100
+    missing = []
+    for file, name in sorted(named):
+        path = ROOT / "tests" / file
+        if not path.is_file():
+            missing.append(file)
+        elif name and not re.search(rf"^(async )?def {name}\(", path.read_text(), re.M):
+            missing.append(f"{file}::{name}")
+    assert missing == []
+
+
 def test_the_pytest_guide_example_is_the_one_the_suite_runs() -> None:
     """docs/guides/testing.md's example is tests/test_pytest_plugin.py's first test, word for
     word, so the page shows a test that passes."""

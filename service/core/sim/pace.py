@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 
 from service.core.sim.loop_types import LoopStats
 from service.core.sim.types import Mode
@@ -25,22 +26,26 @@ STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time fact
 
 class Cadence:
     """Real time: one tick every `tick_dt` of wall time. Overrun ticks are made up at once, up
-    to `MAX_LAG_S` (or one tick) behind; further behind, time is given up (the RTF shows it)."""
+    to `MAX_LAG_S` (or one tick) behind; further behind, time is given up (the RTF shows it).
 
-    def __init__(self, tick_dt: float) -> None:
+    `clock` is the wall clock (a test passes one it moves by hand, to stall the loop for a
+    known time)."""
+
+    def __init__(self, tick_dt: float, clock: Callable[[], float] = time.perf_counter) -> None:
         self.tick_dt = tick_dt
-        self._deadline = time.perf_counter()
+        self._clock = clock
+        self._deadline = clock()
 
     def restart(self) -> None:
-        self._deadline = time.perf_counter()
+        self._deadline = self._clock()
 
     def delay(self) -> float:
         """Seconds until the next tick is due (<= 0: due now)."""
-        return self._deadline - time.perf_counter()
+        return self._deadline - self._clock()
 
     def ticked(self) -> None:
         self._deadline += self.tick_dt
-        now = time.perf_counter()
+        now = self._clock()
         if now - self._deadline > max(self.tick_dt, MAX_LAG_S):
             self._deadline = now
 
@@ -48,14 +53,17 @@ class Cadence:
 class RateWindow:
     """Ticks per second and the real-time factor, measured over `STATS_WINDOW` of wall time."""
 
-    def __init__(self, tick: int, mode: Mode, tick_dt: float) -> None:
+    def __init__(
+        self, tick: int, mode: Mode, tick_dt: float, clock: Callable[[], float] = time.monotonic
+    ) -> None:
         self._tick_dt = tick_dt
+        self._clock = clock  # the clock of `update`'s `now`
         self.stats = LoopStats(tick, mode, 0.0, 0.0)
-        self._start = (time.monotonic(), tick)
+        self._start = (clock(), tick)
 
     def restart(self, tick: int) -> None:
         """Measure from now (a mode change or a restore: the old window means nothing)."""
-        self._start = (time.monotonic(), tick)
+        self._start = (self._clock(), tick)
 
     def update(self, now: float, tick: int, mode: Mode) -> None:
         t0, tick0 = self._start
