@@ -11,12 +11,15 @@ consent as the HTTP server's own non-loopback bind (`--token` or `--insecure`).
 
 File descriptors: five listening sockets per world plus one per connected client (a ur_rtde
 program holds two to four), so 32 worlds cost 160 descriptors at rest; `endpoints` raises the
-soft RLIMIT_NOFILE towards the hard one when the listeners need it.
+soft RLIMIT_NOFILE towards the hard one when the listeners need it. A hard limit too low for
+them is refused when the options are read (`check_hard_limit`), before the engine is built: a
+service that could never open its ports does not start.
 """
 
 from __future__ import annotations
 
 import ipaddress
+import resource
 from collections.abc import Sequence
 
 from service.core.access.policy import check_bind
@@ -28,6 +31,7 @@ ALL_PORTS = (*PORTS.values(), RTDE_PORT)
 _PER_OCTET = 254  # last octets 1..254
 MAX_LOOPBACK_WORLDS = _PER_OCTET * 255  # third octet 1..255
 _SETTING = "ur_addresses"
+SPARE_DESCRIPTORS = 512  # beside the listeners: connections, the service's own files
 
 
 def loopback_address(world: int) -> str:
@@ -91,3 +95,21 @@ def assign(worlds: Sequence[int], spec: str | None, access: AccessSettings) -> d
 def descriptors(worlds: int) -> int:
     """The file descriptors the listeners take (connections come on top, one each)."""
     return worlds * len(ALL_PORTS)
+
+
+def descriptors_wanted(worlds: int) -> int:
+    """The open-file limit the UR ports of `worlds` worlds want: listeners and spare."""
+    return descriptors(worlds) + SPARE_DESCRIPTORS
+
+
+def check_hard_limit(worlds: int) -> None:
+    """ValueError naming `ur_worlds` when the hard open-file limit cannot hold the listeners
+    of `worlds` worlds and the spare (the soft limit can only be raised up to the hard one)."""
+    hard = resource.getrlimit(resource.RLIMIT_NOFILE)[1]
+    if hard != resource.RLIM_INFINITY and hard < descriptors_wanted(worlds):
+        raise ValueError(
+            f"ur_worlds: the UR ports of {worlds} world(s) want {descriptors_wanted(worlds)} "
+            f"open files ({descriptors(worlds)} listening sockets, {SPARE_DESCRIPTORS} spare for "
+            f"connections) and the hard limit is {hard} (ulimit -Hn): give fewer --ur-worlds "
+            "or raise the limit"
+        )

@@ -38,19 +38,16 @@ if TYPE_CHECKING:
 log = logging.getLogger("armfleet.ur")
 _LEASE_POLL_S = 0.2
 _PAYLOAD_POLL_S = 0.5
-_SPARE_DESCRIPTORS = 512  # beside the listeners: connections, the service's own files
 
 
-def _raise_descriptor_limit(needed: int) -> None:
+def _raise_descriptor_limit(worlds: int) -> None:
+    """The soft open-file limit up to what the listeners want (addresses.descriptors_wanted);
+    ValueError naming `ur_worlds` when the hard one cannot hold them."""
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-    want = needed + _SPARE_DESCRIPTORS
+    want = addresses.descriptors_wanted(worlds)
     if soft >= want:
         return
-    if hard != resource.RLIM_INFINITY and hard < want:
-        raise ValueError(
-            f"ur_worlds: the listeners need {needed} file descriptors and the hard limit is "
-            f"{hard} (ulimit -Hn): give fewer --ur-worlds or raise the limit"
-        )
+    addresses.check_hard_limit(worlds)
     resource.setrlimit(resource.RLIMIT_NOFILE, (want, hard))
     log.info("UR ports: open-file limit raised from %d to %d", soft, want)
 
@@ -80,7 +77,7 @@ class Endpoints:
 
     def start(self) -> None:
         """Bind every port of every world (ValueError, nothing left bound, when one fails)."""
-        _raise_descriptor_limit(addresses.descriptors(len(self.robots)))
+        _raise_descriptor_limit(len(self.robots))
         ready: concurrent.futures.Future[None] = concurrent.futures.Future()
         self._thread = threading.Thread(
             target=self._run, args=(ready,), name="armfleet-ur", daemon=True

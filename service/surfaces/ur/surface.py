@@ -78,6 +78,7 @@ class UrSurface:
             else list(range(facts.worlds))
         )
         self.addresses = addresses.assign(self.worlds, settings.addresses, facts.access)
+        addresses.check_hard_limit(len(self.worlds))  # refused before the engine is built
         self._leases = facts.access.leases != "off"
         self.endpoints: Endpoints | None = None
         self._sink: UrSink | None = None
