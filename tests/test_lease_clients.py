@@ -14,7 +14,7 @@ import pytest
 
 from clients import ArmfleetClient, AsyncArmfleetClient, Forbidden, Unauthorized
 from clients.apps.lease_session import session_world
-from clients.testing import LeasedWorld
+from clients.testing import LEASE_WAIT_S, LeasedWorld, lease_world
 from tests.conftest import HOME, Server, serve
 
 
@@ -109,6 +109,29 @@ def test_lending_refusals_say_why_over_rest(lending: Server) -> None:
         stale = {"Authorization": "Bearer lease_0123abcd_" + "x" * 32}
         r = http.post("/v1/worlds/0/increments", json={"joint": 0, "delta": 0.1}, headers=stale)
         assert r.status_code == 401 and "service restarted" in r.json()["detail"], r.text
+
+
+def test_a_test_waits_for_a_world_while_every_world_is_busy(lending: Server) -> None:
+    """The leases guide: "When all worlds are busy, a test waits up to a minute for one":
+    `armfleet_world`'s lease (clients.testing.lease_world) is served when a busy world comes
+    free, not refused. (The minute is LEASE_WAIT_S; a test of the bound would wait it out.)"""
+
+    def counted(http: httpx.Client, name: str) -> float:
+        lines = http.get("/metrics").text.splitlines()
+        return float(next(x for x in lines if x.startswith(f"{name} ")).split()[1])
+
+    with httpx.Client(base_url=lending.url, timeout=30) as http:
+        expired, refused = (
+            counted(http, f"armfleet_leases_{x}_total") for x in ("expired", "refused")
+        )
+        r = http.post("/v1/leases", json={"count": 4, "ttl_s": 1.0, "label": "busy"})
+        assert r.status_code == 201, r.text
+        with lease_world(lending.url, label="waiting") as got:
+            assert got.lease.label == "waiting" and got.world in r.json()["worlds"]
+            assert [x.label for x in got.client.leases()] == ["waiting"]  # busy one: over
+        assert counted(http, "armfleet_leases_expired_total") == expired + 1
+        assert counted(http, "armfleet_leases_refused_total") == refused  # waited, not refused
+        assert LEASE_WAIT_S == 60.0  # the guide's "up to a minute"
 
 
 @pytest.mark.skipif("ARMFLEET_URL" in os.environ, reason="uses the shared server instead")

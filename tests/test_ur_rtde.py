@@ -2,7 +2,9 @@
 (RTDEReceiveInterface) and, where it has no call, by a raw socket: outputs equal armfleet's
 state at the same tick (a paused server stepped, read over REST), two worlds at once, unknown
 variables answered NOT_FOUND, input recipes kept per world (IN_USE for a second writer), and
-malformed packages answered or closed without another world noticing.
+malformed packages answered or closed without another world noticing; RTDEIOInterface's
+speed slider and standard outputs read back by RTDEReceiveInterface; a world outside
+`--ur-worlds` has no ports.
 """
 
 from __future__ import annotations
@@ -19,13 +21,15 @@ from tests.conftest import JOINTS, Server, wait_for
 from tests.ur_judge import RawRtde, package, text_of, ur_server
 
 rtde_receive = pytest.importorskip("rtde_receive")  # the `test` extra: ur-rtde==1.6.5
+rtde_io = pytest.importorskip("rtde_io")
 
 BASE_Z = 0.5  # the scene's robot base: on the pedestal, turned by pi about z (mjcf)
 
 
 @pytest.fixture(scope="module")
 def ur(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Server, list[str]]]:
-    with ur_server(2, tmp_path_factory.mktemp("ur-rtde")) as pair:
+    # three worlds, UR ports on the first two only (--ur-worlds 0-1): world 2 has none
+    with ur_server(3, tmp_path_factory.mktemp("ur-rtde"), ur_worlds=2) as pair:
         yield pair
 
 
@@ -209,3 +213,36 @@ def test_payload_is_the_worlds_parameter_and_what_has_no_source_is_zero(ur) -> N
         assert rx.getActualDigitalInputBits() == 0
     finally:
         rx.disconnect()
+
+
+def test_only_the_ur_worlds_get_ports(ur) -> None:
+    server, addrs = ur
+    listed = httpx.get(f"{server.url}/v1/ur").json()["worlds"]
+    assert [(w["world"], w["address"]) for w in listed] == [(0, addrs[0]), (1, addrs[1])]
+    assert httpx.get(f"{server.url}/v1/worlds/2/state").status_code == 200  # served, no ports
+    assert "UR controllers of 2 worlds" in server.log()
+
+
+def test_the_speed_slider_and_standard_outputs_act_on_what_rtde_reports(ur) -> None:
+    server, addrs = ur
+    io = rtde_io.RTDEIOInterface(addrs[1])
+    rx, other = (rtde_receive.RTDEReceiveInterface(a) for a in (addrs[1], addrs[0]))
+    try:
+        assert io.setSpeedSlider(0.25)
+        assert io.setStandardDigitalOut(3, True) and io.setStandardDigitalOut(5, True)
+        assert io.setStandardDigitalOut(5, False)  # the mask: only output 5 changes
+        assert io.setAnalogOutputVoltage(1, 0.4)
+        tick = _step(server, 1)
+        hz = httpx.get(f"{server.url}/v1/info").json()["control_hz"]
+        for r in (rx, other):
+            wait_for(lambda r=r: r.getTimestamp() == pytest.approx(tick / hz), "the tick")
+        assert rx.getTargetSpeedFraction() == 0.25
+        assert rx.getActualDigitalOutputBits() == 1 << 3 and rx.getDigitalOutState(3)
+        assert rx.getStandardAnalogOutput1() == pytest.approx(0.4)
+        assert rx.getStandardAnalogOutput0() == 0.0
+        # the other world: untouched
+        assert other.getTargetSpeedFraction() == 1.0 and other.getActualDigitalOutputBits() == 0
+    finally:
+        io.disconnect()
+        rx.disconnect()
+        other.disconnect()

@@ -26,12 +26,18 @@ def loopback_block(count: int) -> list[str]:
 
 @contextlib.contextmanager
 def ur_server(
-    worlds: int, log_dir: Path, extra: tuple[str, ...] = (), mode: str = "paused"
+    worlds: int,
+    log_dir: Path,
+    extra: tuple[str, ...] = (),
+    mode: str = "paused",
+    ur_worlds: int | None = None,
 ) -> Iterator[tuple[Server, list[str]]]:
     """A real server (native MuJoCo) whose worlds answer as UR controllers at the addresses
-    yielded, world w at the w-th."""
-    addrs = loopback_block(worlds)
+    yielded, world w at the w-th; with `ur_worlds`, only the first that many (`--ur-worlds`)."""
+    addrs = loopback_block(worlds if ur_worlds is None else ur_worlds)
     args = ("--engine", "mujoco", "--ur", "--ur-addresses", f"{addrs[0]}-{addrs[-1]}", *extra)
+    if ur_worlds is not None:
+        args += ("--ur-worlds", f"0-{ur_worlds - 1}")
     with serve(worlds=worlds, mode=mode, extra_args=args, log_dir=log_dir) as server:
         yield server, addrs
 
