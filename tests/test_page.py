@@ -288,6 +288,27 @@ def test_fleet_view_shows_every_world_and_a_click_focuses_the_clicked_one(srv, h
     expect(labels).to_have_count(NWORLD)  # the layout stays while the focus moves
 
 
+def test_the_fleet_view_shows_at_most_256_worlds(browser, tmp_path):
+    """The browser guide's "up to 256 worlds", on 257 (a paused native server of its own: no
+    tick runs): the page's grid holds worlds 0-255, and the view socket refuses a 257th,
+    naming the limit."""
+    extra = ("--engine", "mujoco")
+    with serve(worlds=257, mode="paused", extra_args=extra, log_dir=tmp_path) as big:
+        with (
+            connect(f"{big.ws_url}/v1/ws/view?worlds=0-256") as ws,
+            pytest.raises(ConnectionClosed) as closed,
+        ):
+            ws.recv(timeout=5)
+        assert closed.value.rcvd.code == 1008
+        assert "257 asked, at most 256" in closed.value.rcvd.reason
+        with page_of(browser, width=1000, height=640) as page:
+            open_page(page, big, "?view=fleet")
+            labels = page.locator(".wlabel")
+            expect(labels).to_have_count(256)
+            shown = labels.evaluate_all("els => els.map(e => Number(e.dataset.world))")
+            assert shown == list(range(256))
+
+
 def test_a_world_that_does_not_exist_says_so(srv, page):
     page.goto(f"{srv.url}/?world=99")
     banner = page.locator("#banner")
