@@ -209,6 +209,10 @@ def test_actions_goal_feedback_result_cancel_refusal(ros: tuple[Server, httpx.Cl
     assert seen["cancel"]["status"] == 5  # CANCELED
     assert seen["cancel"]["feedback"] >= 1
     assert not seen["refused_finger"] and not seen["refused_nan"] and not seen["refused_limits"]
+    broken, preempted = seen["path_tolerance"], seen["preempted"]  # ABORTED (6), and the codes
+    assert (broken["status"], broken["code"]) == (6, -4) and broken["why"].startswith("path_tol")
+    assert (preempted["status"], preempted["code"]) == (6, -1), preempted
+    assert preempted["why"].startswith("preempted") and seen["newer"] == 4
     grip = seen["gripper"]
     assert grip["status"] == 4 and grip["reached_goal"] and grip["feedback"] >= 1
     assert abs(grip["position"] - 0.7) < 0.01
@@ -413,6 +417,38 @@ def test_set_entity_state_places_the_cube(ros: tuple[Server, httpx.Client]) -> N
     assert "outside the scene's bounds at z" in seen["high"][1]
 
 
+def test_stopped_pauses_and_resets_every_world_and_quitting_is_unsupported(
+    ros: tuple[Server, httpx.Client],
+) -> None:
+    """SetSimulationState STOPPED (the ROS 2 guide: pause and reset every world), read back
+    over HTTP: paused, every world's targets at home and its simulated time back to 0; then
+    QUITTING answers FEATURE_UNSUPPORTED with the reason and changes nothing."""
+    http = ros[1]
+    info = http.get("/v1/info").json()
+    home = [j["home"] for j in info["joints"]]
+    try:
+        assert http.post("/v1/sim/mode", json={"mode": "realtime"}).status_code == 200
+        for w in range(info["nworld"]):  # every world away from home, each its own way
+            body = {"name": ["elbow_joint"], "position": [home[2] + 0.1 * (w + 1)]}
+            assert http.put(f"/v1/worlds/{w}/targets", json=body).status_code == 200
+        wait_for(
+            lambda: all(http.get(f"/v1/worlds/{w}/state").json()["sim_time"] > 0
+                        for w in range(info["nworld"])),
+            "simulated time in every world",
+        )  # fmt: skip
+        stopped, quitting = judge("states", "0", "3", timeout=120)["steps"]  # STOPPED, QUITTING
+        after = [http.get(f"/v1/worlds/{w}/state").json() for w in range(info["nworld"])]
+        mode = http.get("/v1/info").json()["mode"]
+    finally:
+        http.post("/v1/sim/mode", json={"mode": "realtime"})
+    assert stopped["result"] == [1, ""] and mode == "paused"  # RESULT_OK
+    assert stopped["state"] == quitting["state"] == 2  # STATE_PAUSED
+    for w, state in enumerate(after):
+        assert state["target"] == home and state["sim_time"] == 0.0, (w, state)
+    assert quitting["result"][0] == 0  # RESULT_FEATURE_UNSUPPORTED
+    assert "not one armfleet can be put in" in quitting["result"][1]
+
+
 # -- supervision and start orders ----------------------------------------------------------------
 
 
@@ -445,10 +481,12 @@ def test_node_restarts_when_it_dies_and_readyz_says_so(tmp_path: Any) -> None:
 
 
 def test_node_started_before_armfleet(tmp_path: Any) -> None:
-    """The node waits for armfleet, whichever starts first (here: the node, standalone)."""
+    """The node waits for armfleet, whichever starts first (here: the node, standalone).
+    Its `play_mode:=fast` is what simulation_interfaces' PLAYING then puts armfleet in."""
     port = free_port()
     cmd = [ros2_judge.python(), "-m", "armfleet_ros.node", "--ros-args"]
     cmd += ["-p", f"url:=http://127.0.0.1:{port}", "-p", "worlds:=0-1"]
+    cmd += ["-p", "play_mode:=fast"]
     node = subprocess.Popen(
         cmd,
         env=ros2_judge.on_domain(ros2_judge.node_env(), OWN_GRAPH),
@@ -466,6 +504,10 @@ def test_node_started_before_armfleet(tmp_path: Any) -> None:
             seen = judge("seed", "/world_1", "0.25", domain=OWN_GRAPH)
             assert seen["reached"]
             assert targets(http, 1)[6] == 0.25
+            paused, playing = judge("states", "2", "1", domain=OWN_GRAPH)["steps"]
+            assert paused["result"][0] == playing["result"][0] == 1  # RESULT_OK
+            assert (paused["state"], playing["state"]) == (2, 1)
+            assert http.get("/v1/info").json()["mode"] == "fast"  # PLAYING: the play_mode
     finally:
         node.send_signal(signal.SIGINT)
         out, _ = node.communicate(timeout=15)

@@ -1,7 +1,8 @@
 """Judge nodes on a real rclpy (../shared/ros2_judge): each subcommand plays a ROS user against
 the armfleet_ros node and prints one JSON line of what it saw; the pytest side decides.
 
-    python judge.py seed|bad|command|actions|tf|description|graph|opening|isaac|sim [args]
+    python judge.py seed|bad|command|actions|tf|description|graph|opening|isaac|sim|entity|
+                    states|latency|flood [args]
 
 Nothing of armfleet is imported here: only rclpy and the distribution's message packages.
 """
@@ -195,6 +196,7 @@ def actions(ns: str) -> None:
     report["refused_nan"] = r["accepted"]
     r = run(fjt[names[0]], traj([9.0] * 6, 1.0))
     report["refused_limits"] = r["accepted"]
+    report.update(aborted(node, fjt[names[0]], run, traj))
     g = GripperCommand.Goal()
     g.command.position, g.command.max_effort = 0.7, 100.0
     r = run(grip, g)
@@ -211,6 +213,34 @@ def actions(ns: str) -> None:
     g.command.max_effort = -1.0
     report["gripper_refused"] = run(grip, g)["accepted"]
     out(**report)
+
+
+def aborted(node, client, run, traj) -> dict:
+    """Goals that end ABORTED: a path tolerance the move breaks, and a long goal preempted
+    by a newer one (each: status, error_code, error_string)."""
+    from control_msgs.msg import JointTolerance
+
+    def outcome(status: int, result) -> dict:
+        return {"status": status, "code": result.error_code, "why": result.error_string}
+
+    far = [0.8, -1.0, 1.0, -1.0, -1.0, 0.8]
+    goal = traj(far, 1.0)
+    tight = JointTolerance()
+    tight.name, tight.position = "elbow_joint", 1e-4
+    goal.path_tolerance = [tight]
+    r = run(client, goal)
+    seen = {"path_tolerance": outcome(r["status"], r["result"])}
+    feedback: list = []
+    fut = client.send_goal_async(traj(far, 20.0), feedback_callback=feedback.append)
+    rclpy.spin_until_future_complete(node, fut, timeout_sec=15)
+    first = fut.result()
+    spin_until(node, lambda: bool(feedback), 10)
+    newer = run(client, traj([0.2, -1.5, 1.5, -1.5, -1.5, 0.2], 0.5))
+    rf = first.get_result_async()
+    rclpy.spin_until_future_complete(node, rf, timeout_sec=30)
+    seen["preempted"] = outcome(rf.result().status, rf.result().result)
+    seen["newer"] = newer["status"]
+    return seen
 
 
 def tf(ns: str) -> None:
@@ -313,6 +343,10 @@ def main() -> None:
             from sim_judge import entity
 
             entity(args[0])
+        elif cmd == "states":
+            from sim_judge import states
+
+            states([int(a) for a in args])
         elif cmd == "latency":
             from load_judge import latency
 

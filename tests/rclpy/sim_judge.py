@@ -10,7 +10,7 @@ from rclpy.node import Node
 def call_service(node, kind, name, **fields):
     """One service call from `node`, waiting for the server and the reply."""
     client = node.create_client(kind, name)
-    assert client.wait_for_service(timeout_sec=20), name
+    assert client.wait_for_service(timeout_sec=60), name  # a loaded box discovers slowly
     req = kind.Request()
     for k, v in fields.items():
         setattr(req, k, v)
@@ -159,3 +159,21 @@ def entity(ns: str) -> None:
     cube = many.states[list(many.entities).index("cube")]
     r["many_angular"] = [cube.twist.angular.x, cube.twist.angular.y, cube.twist.angular.z]
     out(**r)
+
+
+def states(values: list[int]) -> None:
+    """SetSimulationState to each of `values` in turn (0 STOPPED, 1 PLAYING, 2 PAUSED,
+    3 QUITTING), as a harness starts and ends episodes: each answer (result, error message)
+    and the state GetSimulationState reports after it."""
+    from simulation_interfaces import srv
+    from simulation_interfaces.msg import SimulationState
+
+    node = Node("judge_states")
+    steps = []
+    for value in values:
+        want = SimulationState()
+        want.state = value
+        res = call_service(node, srv.SetSimulationState, "/set_simulation_state", state=want)
+        now = call_service(node, srv.GetSimulationState, "/get_simulation_state").state.state
+        steps.append({"result": [res.result.result, res.result.error_message], "state": now})
+    out(steps=steps)
