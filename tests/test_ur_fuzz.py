@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import collections
 import itertools
+import re
 import struct
 import threading
 import time
@@ -31,6 +32,7 @@ from tests.ur_judge import RawRtde, text_of, ur_server
 rtde_control = pytest.importorskip("rtde_control")  # the `test` extra: ur-rtde==1.6.5
 
 SEED = 40
+LOG_LINE = re.compile(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d|[A-Z]+: ")  # ours, uvicorn's
 CASES = 3000
 WATCH_HZ = 125.0  # the other world's stream: ur_rtde's rate for a CB3, a common client rate
 
@@ -101,6 +103,8 @@ def outcome(raw: RawRtde, case: Case) -> tuple[str, list[tuple[str, bytes]]]:
                     got.append((kind, body))
             elif kind != "U":  # data packages of recipes the case started
                 got.append((kind, body))
+    except TimeoutError:  # no sentinel answer in the socket's 5 s: the service stalled
+        return "stalled", got
     except (ConnectionError, OSError):
         return "closed", got
     setup = _setup_answer(got)
@@ -143,6 +147,9 @@ def test_rtde_fuzz_gets_the_robots_answers_and_nobody_notices(ur) -> None:
     watcher = Watcher(other)
     watcher.start()
     wait_for(lambda: len(watcher.got) > 10, "the other world's stream")
+    b0, n0 = time.perf_counter(), len(watcher.got)  # its rate before the fuzz, on this box now
+    wait_for(lambda: len(watcher.got) >= n0 + 150, "150 packages of the other world's stream")
+    baseline = (len(watcher.got) - n0) / (time.perf_counter() - b0)
     fuzz = Fuzz(SEED, CONTROL)
     counts: collections.Counter[tuple[str, str]] = collections.Counter()
     wrong: list[str] = []
@@ -193,7 +200,8 @@ def test_rtde_fuzz_gets_the_robots_answers_and_nobody_notices(ur) -> None:
     print(
         f"\nRTDE fuzz (seed {SEED}): {sum(counts.values())} cases in {t1 - t0:.1f} s: "
         + ", ".join(f"{k} {v}" for k, v in sorted(by_outcome.items()))
-        + f"; the other world's {WATCH_HZ:g} Hz stream meanwhile: {rate:.1f} packages/s, "
+        + f"; the other world's {WATCH_HZ:g} Hz stream meanwhile: {rate:.1f} packages/s "
+        f"({baseline:.1f} before), "
         f"longest silence {max(gaps) * 1e3:.0f} ms"
     )
     for (category, got), n in sorted(counts.items()):
@@ -202,8 +210,13 @@ def test_rtde_fuzz_gets_the_robots_answers_and_nobody_notices(ur) -> None:
     assert sum(counts.values()) == CASES
     assert _targets(server, 0) == before  # the fuzzed world's joint targets
     assert watcher.error is None, f"the other world's stream broke: {watcher.error}"
-    assert rate >= 0.8 * WATCH_HZ, f"the other world's stream slowed to {rate:.1f}/s"
+    slowed = f"the other world's stream slowed to {rate:.1f}/s from {baseline:.1f}/s"
+    assert rate >= 0.8 * min(WATCH_HZ, baseline), slowed
     assert max(gaps) < 0.5, f"the other world's stream stopped for {max(gaps):.2f} s"
     assert all(b[1] >= a[1] for a, b in itertools.pairwise(stream))
     assert stream[-1][1] > stream[0][1]  # its ticks went on
-    assert "Traceback" not in server.log()
+    log = server.log()
+    assert "Traceback" not in log
+    # a client's bytes (text messages, names) never make lines of their own in the log
+    stray = [ln for ln in log.splitlines() if not LOG_LINE.match(ln)]
+    assert not stray, stray[:3]

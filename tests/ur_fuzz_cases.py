@@ -198,7 +198,7 @@ class Fuzz:
         types = ",".join(OUTPUTS[n] for n in names)
         want = REFUSED if c.started else RECIPE  # no setup while synchronising
         c.outputs += not c.started
-        return Case("O valid", package(ord("O"), hz + ",".join(names).encode()), want, types)
+        return Case("O valid", package(ord("O"), hz + ",".join(names).encode()), want, types=types)
 
     def _inputs(self, c: Connection) -> Case:
         """Input setups: unknown, duplicated, held by another client (IN_USE), valid."""
@@ -216,7 +216,7 @@ class Fuzz:
         if self.held & set(names):
             return Case("I in use", package(ord("I"), body), REFUSED, types="IN_USE")
         types = ",".join(input_type(n) for n in names)
-        return Case("I valid", package(ord("I"), body), RECIPE, types, names=tuple(names))
+        return Case("I valid", package(ord("I"), body), RECIPE, types=types, names=tuple(names))
 
     def _data(self, c: Connection) -> Case:
         """Input data: NaN, infinities and extremes to a recipe, wrong sizes, unknown ids."""
