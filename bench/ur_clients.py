@@ -61,12 +61,13 @@ def program(address: str, world: int, barrier: Any, out: Any) -> None:
     if c is None or r is None or res["error"]:
         out.put(res)
         return
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.process_time()
     try:
         res["ok"] = _moves(c, r, calls, res)
     except Exception as exc:
         res["error"] = f"{type(exc).__name__}: {exc}"
     res["run_s"] = time.perf_counter() - started
+    res["run_cpu_s"] = time.process_time() - cpu  # this process, all its threads
     with contextlib.suppress(Exception):
         c.stopScript()
         c.disconnect()

@@ -37,6 +37,7 @@ import time
 from typing import Any
 
 import httpx
+import psutil
 
 from bench import common, ur_clients
 from bench.registry import Context, Result, section
@@ -54,10 +55,19 @@ def _load() -> float:
     return round(os.getloadavg()[0], 2)
 
 
+def _cpu(proc: psutil.Process) -> float:
+    """CPU seconds of a process and its children so far (the service's engine workers)."""
+    t = proc.cpu_times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
 class RtfSampler:
-    """The service's ticks sampled every second (/v1/info) in a thread: each 1 s window's RTF."""
+    """The service's ticks sampled every second (/v1/info) in a thread: each 1 s window's RTF;
+    and the CPU the service and this process used over the whole window."""
 
     def __init__(self, srv: common.Served) -> None:
+        self.proc = psutil.Process(srv.server.process.pid)
+        self.cpu0, self.own0 = _cpu(self.proc), time.process_time()
         self.srv, self.samples = srv, [srv.get_info()]
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -76,7 +86,10 @@ class RtfSampler:
         self.samples.append(self.srv.get_info())
         pairs = list(zip(self.samples, self.samples[1:], strict=False))
         per_s = [common.rtf_between(a, b) for a, b in pairs if b[0] - a[0] > 0.5]
+        wall = self.samples[-1][0] - self.samples[0][0]
         return {
+            "service_cpu": round((_cpu(self.proc) - self.cpu0) / wall, 3),  # cores busy
+            "bench_cpu": round((time.process_time() - self.own0) / wall, 3),
             "rtf": round(common.rtf_between(self.samples[0], self.samples[-1]), 3),
             "rtf_min_1s": round(min(per_s), 3) if per_s else None,
             "ticks": self.samples[-1][1]["tick"] - self.samples[0][1]["tick"],
@@ -86,7 +99,7 @@ class RtfSampler:
 
 def _ms(values: list[float], q: float) -> float | None:
     p = common.percentile(values, q)
-    return None if p is None else round(p * 1e3, 2)
+    return None if p is None else round(p * 1e3, 4)
 
 
 def _collect(out: Any, procs: list[Any], limit_s: float = 600.0) -> list[dict[str, Any]]:
@@ -136,6 +149,7 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
             "error": r["error"] or ("; ".join(r.get("failed", [])) or None),
             "connect_s": round(r.get("connect_s", 0.0), 3),
             "run_s": round(r.get("run_s", 0.0), 3),
+            "run_cpu_s": round(r.get("run_cpu_s", 0.0), 3),
             "moveL_error_mm": round(r["moveL_error_m"] * 1e3, 3) if "moveL_error_m" in r else None,
             "moveJ_ms": [round(x * 1e3, 1) for x in r["calls"].get("moveJ", [])],
             "moveL_ms": [round(x * 1e3, 1) for x in r["calls"].get("moveL", [])],
@@ -146,8 +160,11 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
         }
         for r in results
     ]
+    wall = ticks["seconds"]
+    cpu = sum(r.get("run_cpu_s", 0.0) for r in results)
     return {
         "programs": n,
+        "programs_cpu": round(cpu / wall, 3) if wall else None,  # cores busy, all programs
         "ok": sum(r["ok"] for r in results),
         "connect_all_s": round(connected_s, 2),
         "load_1m_at_start": load,
@@ -204,38 +221,43 @@ def _addresses(srv: common.Served) -> list[str]:
 
 
 def _rows(n: int, prog: dict[str, Any], recv: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row a run; latencies as p50/p99."""
     lat = prog.get("latency_ms", {})
 
-    def p(k: str) -> str:
+    def p(k: str, scale: float = 1.0, digits: int = 0) -> str:
         d = lat.get(k) or {}
-        return f"{d.get('p50')}/{d.get('p99')}"
+        if d.get("p50") is None:
+            return "-"
+        return f"{d['p50'] * scale:.{digits}f}/{d['p99'] * scale:.{digits}f}"
 
     rows = []
     if prog:
         rows.append(
             {
-                "run": f"{n} ur_rtde programs",
-                "load 1m": f"{prog['load_1m_at_start']}→{prog['load_1m_at_end']}",
+                "run": f"{n} programs",
+                "load 1m": f"{prog['load_1m_at_start']:.1f}→{prog['load_1m_at_end']:.1f}",
                 "ok": f"{prog['ok']}/{prog['programs']}",
                 "RTF": prog["rtf"],
                 "RTF min 1 s": prog["rtf_min_1s"],
-                "moveJ p50/p99 ms": p("moveJ"),
-                "moveL p50/p99 ms": p("moveL"),
-                "command p50/p99 ms": p("command"),
-                "read p50/p99 ms": p("read"),
-                "connect max s": round(prog["connect_s_max"] or 0.0, 2),
+                "moveJ ms": p("moveJ"),
+                "moveL ms": p("moveL"),
+                "command ms": p("command", digits=1),
+                "read µs": p("read", 1e3),
+                "connect s": round(prog["connect_s_max"] or 0.0, 2),
+                "CPU service/clients": f"{prog['service_cpu']:.2f}/{prog['programs_cpu']:.2f}",
             }
         )
     if recv:
         rows.append(
             {
-                "run": f"{recv['clients']} receivers × {recv['frequency_hz']:g} Hz",
-                "load 1m": f"{recv['load_1m_at_start']}→{recv['load_1m_at_end']}",
+                "run": f"{recv['clients']} × {recv['frequency_hz']:g} Hz",
+                "load 1m": f"{recv['load_1m_at_start']:.1f}→{recv['load_1m_at_end']:.1f}",
                 "ok": f"{recv['clients'] - len(recv['errors'])}/{recv['clients']}",
                 "RTF": recv["rtf"],
                 "RTF min 1 s": recv["rtf_min_1s"],
-                "rate min/median Hz": f"{recv['rate_min']}/{recv['rate_median']}",
-                "longest silence ms": recv["max_silence_ms"],
+                "Hz min/median": f"{recv['rate_min']:.0f}/{recv['rate_median']:.0f}",
+                "silence ms": recv["max_silence_ms"],
+                "CPU service/clients": f"{recv['service_cpu']:.2f}/{recv['bench_cpu']:.2f}",
             }
         )
     return rows
@@ -287,15 +309,18 @@ def ur_programs(ctx: Context) -> Result:
                 next(iter(recv["errors"].values()))
             )
     notes = [
-        f"{n} worlds, engine {engine} on {ctx.device}, 60 Hz ticks, realtime; idle RTF "
-        f"{idle_ticks['rtf']} (3 s before the runs); load 1m: the box's load average at the "
-        "run's start→end (a shared box: read each figure beside it)",
+        f"{n} worlds, engine {engine} on {ctx.device}, 60 Hz ticks, realtime; idle (3 s before "
+        f"the runs): RTF {idle_ticks['rtf']}, service CPU {idle_ticks['service_cpu']}; load 1m: "
+        "the box's load average at the run's start→end (a shared box: read each figure beside it)",
         "programs: the registry's ur-rtde 1.6.5, RTDEControlInterface + RTDEReceiveInterface "
-        "(default 500 Hz each) per world, one process each; moveJ/moveL durations include the "
-        "motion; command = getForwardKinematics / isSteady round trip; read = a receive getter",
+        "(default 500 Hz each) per world, one process each; p50/p99 over all programs' calls: "
+        "moveJ/moveL include the motion; command = a getForwardKinematics or isSteady round "
+        "trip through the registers; read = a receive getter; connect = the slowest program's "
+        "two constructors",
         "receivers: raw RTDE clients (ur_rtde has no package count), one 500 Hz output recipe "
-        f"of {recv.get('package_bytes')} bytes each, all in the bench's process; rate = "
-        "packages delivered per second per client; RTF over the counting window",
+        f"of {recv.get('package_bytes')} bytes each, all in the bench's process; Hz = packages "
+        "delivered per second per client (min/median over clients); silence = the longest "
+        "time a client got nothing; RTF over the counting window",
     ]
     data = {
         "worlds": n,
