@@ -267,6 +267,7 @@ def _rows(n: int, prog: dict[str, Any], recv: dict[str, Any]) -> list[dict[str, 
     32,
     "ur_programs",
     "UR programs: 32 ur_rtde programs at once, RTDE at 500 Hz to 32 clients",
+    devices=("cpu", "cuda"),
     default_on=(),
 )
 def ur_programs(ctx: Context) -> Result:
