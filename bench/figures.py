@@ -112,6 +112,17 @@ def _ray_rt() -> dict[str, Any]:
     return rt[min(rt, key=int)]
 
 
+def _ur(part: str, key: str, fmt: str = "{}") -> Callable[[], str]:
+    """A figure of section 32's last run (bench/ur_programs.py): `part` programs or receive."""
+    return lambda: fmt.format(load("ur_programs.json")[part][key])
+
+
+def _ur_load() -> str:
+    runs = [load("ur_programs.json")[part] for part in ("programs", "receive")]
+    loads = [r[k] for r in runs for k in ("load_1m_at_start", "load_1m_at_end")]
+    return f"{min(loads):.0f} to {max(loads):.0f}"
+
+
 def _replay_rate(mode: str) -> float:
     return load("replay_cuda.json")["modes"][mode]["rate"]["ticks_per_s"]
 
@@ -153,6 +164,15 @@ FIGURES: dict[str, Callable[[], str]] = {
     "ray.round_trip_p99_ms": lambda: f"{_ray_rt()['ray_overhead']['p99_ms']:.1f}",
     "ray.gpu_rebuild_s": lambda: f"{load('ray_cuda.json')['loss']['rebuild_s']:.1f}",
     "ray.host_recover_s": lambda: f"{load('ray_hosts.json')['rows'][0]['recover s']:.1f}",
+    "ur.load": _ur_load,
+    "ur.programs_ok": lambda: "{ok}/{programs}".format(**load("ur_programs.json")["programs"]),
+    "ur.programs_rtf": _ur("programs", "rtf", "{:.2f}"),
+    "ur.programs_service_cores": _ur("programs", "service_cpu", "{:.2f}"),
+    "ur.command_p50_ms": lambda: (
+        f"{load('ur_programs.json')['programs']['latency_ms']['command']['p50']:.0f}"
+    ),
+    "ur.receive_hz": _ur("receive", "rate_median", "{:.0f}"),
+    "ur.receive_rtf": _ur("receive", "rtf", "{:.2f}"),
     "cuda_replay.default_ticks_per_s": lambda: f"{_replay_rate('default'):.0f}",
     "cuda_replay.atomics_ticks_per_s": lambda: f"{_replay_rate('atomics'):.0f}",
     "cuda_replay.atomics_slower": lambda: (

@@ -120,7 +120,7 @@ WITH_ARGUMENT: dict[str, Callable[[Controller, str], str]] = {
     "load": _load,
     "popup": lambda c, text: "showing popup",
     "addtolog": lambda c, text: (
-        log.info("world %d addToLog: %s", c.world, text[:200]),
+        log.info("world %d addToLog: %r", c.world, text[:200]),
         "Added log message",
     )[1],
 }

@@ -93,8 +93,8 @@ class RtdeSession(asyncio.Protocol):
             self._send(wire.control_version())
         elif kind == wire.TEXT_MESSAGE:
             message, source, level = wire.read_text(body)
-            log.info(
-                "world %d RTDE client says (%s, level %d): %s",
+            log.info(  # quoted: a client's bytes never make lines of their own in the log
+                "world %d RTDE client says (%r, level %d): %r",
                 self.robot.world,
                 source,
                 level,
