@@ -207,6 +207,9 @@ class Job:
     formats: Sequence[str]
     targets: Any  # passed back to `deliver` untouched (the subscriptions that asked)
     names: list[str]  # the joint names the frames carry
+    # the worlds' ids as bytes (the hub's, hashed once); None: made from the ids, which costs
+    # ~0.5 ms of the sim thread a frame at 65,536 worlds
+    selection: bytes | None = None
 
 
 class FrameSender:
@@ -260,7 +263,7 @@ class FrameSender:
             self._deliver(job, {fmt: fut.result()})
 
     def submit(self, job: Job) -> None:
-        key = job.data.ids.tobytes()
+        key = job.selection if job.selection is not None else job.data.ids.tobytes()
         with self._cv:
             old = self._jobs.get(key)
             self._jobs[key] = job
