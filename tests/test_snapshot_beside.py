@@ -84,9 +84,8 @@ def test_the_loop_shows_periodic_snapshots_in_order_and_readers_get_their_tick(b
         need = loop.tick
         assert loop.fresh_snapshot().result(timeout=10).tick >= need
         loop.set_mode(Mode.PAUSED)
-        wait_for(lambda: loop.latest.tick == loop.tick, "the pause's tick shown")
-        stopped = loop.tick
-        assert loop.fresh_snapshot().result(timeout=10).tick == stopped
+        stopped = loop.step(1).result(timeout=10)  # at rest after this tick
+        assert loop.fresh_snapshot().result(timeout=10).tick == stopped == loop.latest.tick
     finally:
         loop.stop()
         del batch.snapshot_beside
