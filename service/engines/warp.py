@@ -22,10 +22,9 @@ import warp as wp
 
 from mjcf import SCENE_XML
 from service.core.sim.batch import Batch, ModelWrite, Renderable, Restorable, StateWrite
-from service.core.sim.packed_rows import PackedRows
 from service.core.sim.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
 from service.core.sim.robot import LoadedRobot, load_robot
-from service.core.sim.types import PHYSICS_FIELDS, BatchState, Snapshot
+from service.core.sim.types import PHYSICS_FIELDS, BatchState
 from service.engines import warp_frames as frames
 from service.engines.cuda_streams import engine_streams
 from service.engines.mirror import SETCONST_INPUTS, HostMirror
@@ -37,7 +36,8 @@ from service.engines.warp_model import (
     writable_fields,
     write_rows,
 )
-from service.engines.warp_snapshot import NCOL, SnapshotArrays, snapshot_from
+from service.engines.warp_reads import DeviceReads
+from service.engines.warp_snapshot import NCOL
 
 log = logging.getLogger("armfleet.engine")
 
@@ -62,7 +62,7 @@ NCONMAX = 32
 NJMAX = 128
 
 
-class WorldBatch(HostMirror, Batch, Restorable, Renderable):
+class WorldBatch(HostMirror, DeviceReads, Batch, Restorable, Renderable):
     """N worlds of one model on one Warp device, advanced in captured control ticks.
 
     Targets live in a float64 host mirror (what was commanded, reported as `target`) and are
@@ -135,6 +135,8 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
             self._faults_dev = wp.zeros(nworld, dtype=wp.int32)
             self._packer = frames.DevicePacker(self.device, self.tick_dt)
             self._pinned = frames.PinnedPool(self.device_turns)
+            self._beside = frames.BesideCopy(self.device, self._pinned)
+            self.copies_beside = self.device.is_cuda  # SnapshotsBeside: where it gains
             # One uncaptured tick compiles (or loads from cache) every kernel the tick uses;
             # capture needs them loaded. Then every world goes back to home.
             self._run_tick_ops()
@@ -264,30 +266,7 @@ class WorldBatch(HostMirror, Batch, Restorable, Renderable):
 
     # -- reading ----------------------------------------------------------------------------
 
-    def snapshot(self) -> Snapshot:
-        """All worlds at the end of the last completed tick, copied to host memory."""
-        return snapshot_from(self.snapshot_arrays(), self._targets.copy())
-
-    def snapshot_arrays(self) -> SnapshotArrays:
-        """The snapshot as the few contiguous host arrays it is made of (cheap to ship: Ray).
-
-        On a GPU they are views of pinned buffers, reused once no reader holds them: one copy
-        and no allocation per snapshot. On the CPU .numpy() is a view the next tick overwrites.
-        """
-        if self.device.is_cuda:
-            state, bodies = self._pinned.copy_out((self._state, self._bodies), self.device)
-        else:
-            state, bodies = self._state.numpy().copy(), self._bodies.numpy().copy()
-        return SnapshotArrays(
-            self._tick, self._world_ticks * self.tick_dt, state, bodies, self._faults.copy()
-        )
-
-    def pack_rows(self, ids: np.ndarray) -> PackedRows | None:
-        """The frame rows of worlds `ids` at the last tick, gathered and copied on the device
-        (service.device_frames); None when that selection's buffers are all in flight."""
-        return self._packer.pack(
-            self._tick, ids, self._state, self._targets_dev, self._wticks, self._faults_dev
-        )
+    # snapshot, snapshot_arrays, snapshot_beside and pack_rows: warp_reads.DeviceReads
 
     # -- state -----------------------------------------------------------------------------
 

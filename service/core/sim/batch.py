@@ -6,7 +6,8 @@ their feed-forward, resets, a slice of a world's qpos/qvel) is a field of `TickW
 command that writes state the engines already hold needs no change in any engine. Optional
 capabilities are protocols of their own (`Restorable`: save and restore the full state;
 `Supervised`: workers that can be lost and are rebuilt; `PacksFrames`: gathers stream rows on
-its side; `Renderable`: hands the cameras the state of some worlds), checked with `isinstance`,
+its side; `SnapshotsBeside`: a snapshot's copy beside the next tick; `Renderable`: hands the
+cameras the state of some worlds), checked with `isinstance`,
 so that a caller never guesses from attributes or bodies.
 Lives in the core with the types it speaks in; imports nothing above the core.
 """
@@ -14,7 +15,7 @@ Lives in the core with the types it speaks in; imports nothing above the core.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Protocol, Self, runtime_checkable
 
@@ -224,6 +225,18 @@ class PacksFrames(Protocol):
 
     def host_columns(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(sim_time [s] float64, targets (k, 7) float64, faults int64) of `ids`, host copies."""
+        ...
+
+
+@runtime_checkable
+class SnapshotsBeside(Protocol):
+    """An engine whose snapshot can reach the host beside the next tick (on a GPU: a copy on the
+    device now, the copy to the host on a side stream while the next tick runs). The loop takes
+    its periodic snapshot, which nobody waits for, this way: the tick is not held up for it."""
+
+    def snapshot_beside(self) -> tuple[Snapshot, Callable[[], None]] | None:
+        """`snapshot()` of the last tick, its arrays valid once the callable (a wait) returned;
+        None when this engine or this moment gains nothing by it: take `snapshot()`."""
         ...
 
 

@@ -30,13 +30,9 @@ from service.core.sim.command_share import CommandShare
 from service.core.sim.device_turns import DeviceTurns
 from service.core.sim.listeners import Listeners
 from service.core.sim.loop_state import StateDoor
-from service.core.sim.loop_types import (
-    LoopStats,
-    SnapshotSink,
-    resolve,
-    run_request,
-)
+from service.core.sim.loop_types import LoopStats, SnapshotSink, resolve, run_request
 from service.core.sim.pace import LATE_S, Cadence, FailureLog, RateWindow
+from service.core.sim.snapshot_beside import BesideSnapshot
 from service.core.sim.staging import CommandTable, Staging, TrajectoryHook
 from service.core.sim.types import Mode, Snapshot
 from service.core.sim.waiters import Waiters
@@ -45,7 +41,7 @@ log = logging.getLogger("armfleet.loop")
 T = TypeVar("T")
 
 # Snapshots are taken when a sink wants one, a reader waits for one, or at least this often so
-# that `latest` is never older than this; readers that need the current tick ask for one.
+# that `latest` is never older than this (+ a tick: snapshot_beside.py); fresh_snapshot waits.
 _IDLE_SNAPSHOT_PERIOD = 0.1
 
 
@@ -89,6 +85,7 @@ class SimLoop(StateDoor):
         self.engine_seconds = 0.0  # wall time in batch.step, all ticks: the rest is the loop's
         self._latest = batch.snapshot()
         self._last_snapshot_wall = 0.0
+        self._beside = BesideSnapshot(batch, lambda s: self.listeners.extend(s, batch), self._show)
         self._rate = RateWindow(self._tick, self._mode, batch.tick_dt)
         self._cadence = Cadence(batch.tick_dt)
         self._rested_at = -1  # the tick the sinks were last told time stopped at (`_at_rest`)
@@ -208,6 +205,8 @@ class SimLoop(StateDoor):
     def _serve_requests(self) -> None:
         with self._lock:
             requests = self._waiters.take_requests()
+        if requests:
+            self._beside.finish()  # shown before anything changes the batch
         for fn, fut in requests:
             run_request(fn, fut, self.batch)
 
@@ -324,8 +323,11 @@ class SimLoop(StateDoor):
         t_step = time.perf_counter()
         faulted = self.batch.step(1)
         self.engine_seconds += time.perf_counter() - t_step
+        self._beside.finish()  # the last tick's periodic snapshot, copied beside this one
         now = time.monotonic()
-        if self._finish_tick(faulted, mode, now):
+        wanted = self._finish_tick(faulted, mode, now)
+        periodic = now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
+        if wanted or (periodic and not self._beside.start(now)):
             self._publish(now)
         self.listeners.ticked(self.batch, now)
         if mode is Mode.PAUSED and self._tick >= self._step_goal:  # a step burst's last tick
@@ -366,15 +368,18 @@ class SimLoop(StateDoor):
                 traj
                 or (mode is Mode.PAUSED and self._tick >= self._step_goal)
                 or bool(self._waiters.readers)
-                or now - self._last_snapshot_wall >= _IDLE_SNAPSHOT_PERIOD
                 or self.listeners.wants_snapshot(now)
             )
 
     def _publish(self, now: float, settled: bool = False) -> None:
         """Take a snapshot, wake the readers waiting for one, hand it to every sink.
         `settled`: it shows paused writes just applied (readers waited for those)."""
+        if self._beside.finish() == self.batch.tick and not settled:
+            return  # the periodic snapshot on its way showed this very tick
         snap = self.batch.snapshot()
-        snap = self.listeners.extend(snap, self.batch)
+        self._show(self.listeners.extend(snap, self.batch), now, settled)
+
+    def _show(self, snap: Snapshot, now: float, settled: bool = False) -> None:
         with self._lock:
             self._latest = snap
             self._last_snapshot_wall = now

@@ -63,7 +63,10 @@ class Subscription:
         skip snapshots taken before anyone asked for them. `close`: closes the owning socket
         (code, reason), e.g. 1001 at shutdown. `ready`: an event shared with other
         subscriptions of one socket (rosbridge: one writer for every topic)."""
-        self.worlds = worlds
+        # A read-only copy of its own: an engine may know the selection by this very array
+        # (warp_frames.DevicePacker), so its ids never change.
+        self.worlds = np.array(worlds)
+        self.worlds.flags.writeable = False
         self.format = fmt
         self.entities = fmt.entities
         self.binary = fmt.binary  # frames go out as binary WebSocket messages
@@ -71,7 +74,7 @@ class Subscription:
         self.names = list(fmt.names)
         self.status_frames = fmt.status_frames
         # Sockets with the same kind of frame over the same worlds share one serialisation.
-        self.key = (fmt.key, worlds.tobytes())
+        self.key = (fmt.key, self.worlds.tobytes())
         self.period = 1.0 / rate if rate else 0.0  # 0: every tick
         self.render = render
         if skip is None and fmt.entities:
@@ -210,7 +213,7 @@ class StreamHub(SnapshotSink):
         groups: dict[bytes, list[Subscription]] = {}
         for sub in subs:
             groups.setdefault(sub.key[1], []).append(sub)
-        for group in groups.values():
+        for selection, group in groups.items():
             formats = sorted({s.packed for s in group if s.packed})
             json = any(f.startswith("json") for f in formats)
             data = frames.pack(batch, group[0].worlds, json)
@@ -223,7 +226,7 @@ class StreamHub(SnapshotSink):
             if asked and not self._read_entities(batch, data):
                 formats = [f for f in formats if f not in asked]
                 self.frames_skipped += sum(s.packed in asked for s in group)
-            self._sender.submit(frames.Job(data, formats, group, group[0].names))
+            self._sender.submit(frames.Job(data, formats, group, group[0].names, selection))
 
     @staticmethod
     def _read_entities(batch: Batch, data: frames.FrameData) -> bool:

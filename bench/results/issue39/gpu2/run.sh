@@ -1,0 +1,34 @@
+# Call B (issue 39 item 3 on nvidia-h100-x2): setup from an empty kernel cache, the first service
+# run after it, sections 1+7 at 16,384/65,536 (this branch, then main's section 7 against the same
+# section 1), the beside snapshot checked, cameras on cuda:1 and cuda:0 with the ticks' RTF.
+set -o pipefail
+R=$(pwd)
+L=$OUT/log.txt
+source .whl/gpu2/b/env.sh >>$L 2>&1 || { echo "INSTALL FAILED"; tail -5 $L; exit 1; }
+nvidia-smi -L | tee -a $L; nproc | tee -a $L
+S=/tmp/site; NEW=/tmp/new; T=$OUT/res.tar
+keep() { (cd /tmp && tar -rf $T "$@" 2>/dev/null); }
+step() { local name=$1 lim=$2; shift 2; local t0=$SECONDS; echo "== $name" >>$L; timeout $lim "$@" >/tmp/$name.log 2>&1; local rc=$?; echo "$name rc=$rc $((SECONDS-t0)) s" | tee -a $L; grep -E "world-steps/s|FAILED|Error|ready in|svc/engine|ratio|RTF|ticks/s|pictures|batches/s|served|beside|snapshot|alone" /tmp/$name.log | tail -40 >>$L; keep $name.log; }
+cd $NEW; export PYTHONPATH=$NEW:$S
+rm -rf ~/.cache/warp
+step setup 240 python3 -m service.cli setup --device cuda
+step first 100 python3 -m bench.service_bench --section 7 --device cuda --worlds 16384 --quick --out /tmp/r_first
+keep r_first
+step s17 170 python3 -m bench.runner --device cuda --section 1 --section 7 --worlds 16384 --worlds 65536 --quick --out /tmp/r_new
+keep r_new
+mkdir -p /tmp/r_main && cp /tmp/r_new/throughput_cuda.json /tmp/r_main/
+cd $R; export PYTHONPATH=$R:$S
+step main7 100 python3 -m bench.service_bench --section 7 --device cuda --worlds 16384 --worlds 65536 --quick --out /tmp/r_main
+keep r_main
+cd $NEW; export PYTHONPATH=$NEW:$S
+step beside 60 python3 $R/.whl/gpu2/b/check.py 65536
+P="import json,sys; from bench.tick_profile import profile; r=profile(65536,'cuda:0','binary',4.0,'packed'); print('served', json.dumps({k: r[k] for k in ('engine_ms_per_tick','served_ms_per_tick','served_vs_engine','seconds_per_s','ms_per_call')}))"
+step prof_new 80 python3 -c "$P"
+cd $R; export PYTHONPATH=$R:$S
+step prof_main 80 python3 -c "$P"
+cd $NEW; export PYTHONPATH=$NEW:$S
+export ARMFLEET_BENCH_STREAMS=realtime:8@cuda:1,realtime:8 ARMFLEET_BENCH_FITS=0
+step cam 200 python3 -m bench.runner --section 30 --device cuda --worlds 16384 --out /tmp/r_cam
+unset ARMFLEET_BENCH_STREAMS ARMFLEET_BENCH_FITS
+keep r_cam
+echo done | tee -a $L
