@@ -126,6 +126,8 @@ class WorldState:
     flange_position: np.ndarray  # (3,) x y z [m], world frame
     flange_quaternion: np.ndarray  # (4,) w x y z
     faults: int  # times this world was reset for NaN or capacity overflow
+    # "NORMAL", or "PROTECTIVE_STOP" until the Dashboard unlocks it (or the world is reset)
+    safety_mode: str = "NORMAL"
     # Only while the service is paused: targets as of every accepted command (a paused service
     # applies them at once, so they equal `target` once applied).
     pending_target: np.ndarray | None = None
@@ -148,6 +150,7 @@ class WorldState:
             flange_position=_arr(d["flange"]["position"]),
             flange_quaternion=_arr(d["flange"]["quaternion"]),
             faults=int(d["faults"]),
+            safety_mode=str(d.get("safety_mode", "NORMAL")),
             pending_target=_arr(d["pending_target"]) if "pending_target" in d else None,
             entities=EntityStates.from_list(d["entities"]) if "entities" in d else None,
         )
@@ -175,6 +178,7 @@ class BatchStates:
     flange_quaternion: np.ndarray  # (n, 4) w x y z
     faults: np.ndarray  # (n,) int
     pending_target: np.ndarray | None = None  # (n, 7), only while the service is paused
+    safety_mode: tuple[str, ...] | None = None  # (n,) names; None: not in the frame (binary)
     entities: EntityStates | None = None  # (n, ne, ...) arrays, only when asked for
 
     def __len__(self) -> int:
@@ -196,6 +200,7 @@ class BatchStates:
             sim_time=float(self.sim_time[i]),
             name=self.name,
             faults=int(self.faults[i]),
+            safety_mode="NORMAL" if self.safety_mode is None else self.safety_mode[i],
             pending_target=None if self.pending_target is None else self.pending_target[i],
             entities=None if self.entities is None else self.entities.row(i),
             **rows,
@@ -214,6 +219,7 @@ class BatchStates:
             "worlds": [r["world"] for r in rows],
             "sim_time": [r["sim_time"] for r in rows],
             "faults": [r["faults"] for r in rows],
+            "safety_mode": [r.get("safety_mode", "NORMAL") for r in rows],
             "flange_position": [r["flange"]["position"] for r in rows],
             "flange_quaternion": [r["flange"]["quaternion"] for r in rows],
         }
@@ -235,6 +241,7 @@ class BatchStates:
         floats.update({k: _arr2(d[k], width) for k, width in _FLANGE_COLUMNS})
         pending = d.get("pending_target")
         entities = d.get("entities")
+        safety = d.get("safety_mode")
         return cls(
             tick=int(d["tick"]),
             name=names,
@@ -242,6 +249,7 @@ class BatchStates:
             sim_time=_arr(d["sim_time"]),
             faults=np.array(d["faults"], dtype=np.int64).reshape(n),
             pending_target=None if pending is None else _arr2(pending, len(names)),
+            safety_mode=None if safety is None else tuple(safety),
             entities=None if entities is None else EntityStates.from_columns(entities, n),
             **floats,
         )

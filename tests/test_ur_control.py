@@ -9,6 +9,7 @@ world unchanged, a second control connection is refused, and the other world nev
 
 from __future__ import annotations
 
+import json
 import math
 import socket
 import struct
@@ -19,6 +20,7 @@ from collections.abc import Iterator
 import httpx
 import numpy as np
 import pytest
+from websockets.sync.client import connect
 
 from tests.conftest import Server, wait_for
 from tests.ur_judge import ur_server
@@ -180,25 +182,109 @@ def test_servoj_streamed_at_500_hz_is_followed(arm) -> None:
     assert (reached > 1.9 * np.abs(amp) * 0.9).all(), reached
 
 
-def test_a_protective_stop_is_raised_reported_and_unlocked(arm) -> None:
+def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[str, object]:
+    """The world's safety mode as RTDE, the Dashboard, REST, the WebSocket state frame and
+    GET /v1/ur each report it."""
+    with connect(f"{server.ws_url}/v1/ws/worlds/{world}") as ws:
+        while (frame := json.loads(ws.recv(timeout=5)))["op"] != "state":
+            pass
+    return {
+        "rtde": (r.getSafetyMode(), bool(r.getSafetyStatusBits() & (1 << 2))),
+        "dashboard": (dash.safetystatus(), dash.safetymode()),
+        "rest": httpx.get(f"{server.url}/v1/worlds/{world}/state").json()["safety_mode"],
+        "ws": frame["safety_mode"],
+        "ur": httpx.get(f"{server.url}/v1/ur").json()["worlds"][world]["safety_mode"],
+    }
+
+
+STOPPED = {
+    "rtde": (3, True),
+    "dashboard": ("Safetystatus: PROTECTIVE_STOP", "Safetymode: PROTECTIVE_STOP"),
+    "rest": "PROTECTIVE_STOP",
+    "ws": "PROTECTIVE_STOP",
+    "ur": "PROTECTIVE_STOP",
+}
+NORMAL = {
+    "rtde": (1, False),
+    "dashboard": ("Safetystatus: NORMAL", "Safetymode: NORMAL"),
+    "rest": "NORMAL",
+    "ws": "NORMAL",
+    "ur": "NORMAL",
+}
+PADS_OVER_TABLE = 0.215  # m between the gripper's pads and the table top at HOME
+
+
+def test_driving_through_the_table_is_a_protective_stop_reported_everywhere_and_unlocked(
+    arm,
+) -> None:
+    """moveL straight down beside the cube, 10 cm into the table: the world is protective-
+    stopped before the gripper's pads are 1 cm in, the arm holds there, every surface says
+    PROTECTIVE_STOP, REST refuses to move it (409), the Dashboard refuses to unlock it within
+    5 s of the stop and unlocks it after, and then the program moves the arm back up."""
+    c, r, addr, server = arm
+    dash = dashboard_client.DashboardClient(addr)
+    dash.connect()
+    try:
+        assert c.moveJ(HOME, 1.0, 2.0)
+        above = np.array(r.getActualTCPPose())
+        above[1] += 0.15  # beside the cube, still over the table
+        assert c.moveL(above.tolist(), 0.25, 1.2)
+        assert _safety_on_every_surface(server, r, dash) == NORMAL
+        down = above.copy()
+        down[2] -= PADS_OVER_TABLE + 0.10  # the pads 10 cm into the table
+        assert c.moveL(down.tolist(), 0.25, 1.2, True)  # asynchronous: it will not finish
+        wait_for(lambda: r.isProtectiveStopped(), "a protective stop", timeout=20)
+        seen = time.monotonic()
+        assert _safety_on_every_surface(server, r, dash) == STOPPED
+        held = np.array(r.getActualTCPPose())
+        assert held[2] > down[2] + 0.08  # stopped with the pads at most 2 cm in, not 10
+        assert not c.isProgramRunning()
+        bad = httpx.put(
+            f"{server.url}/v1/worlds/0/targets", json={"name": ["elbow_joint"], "position": [1.0]}
+        )
+        assert bad.status_code == 409 and "protective" in bad.json()["detail"], bad.text
+        assert "into the table" in server.log()  # the service log says why
+        with pytest.raises(RuntimeError, match="5s after"):  # within 5 s: the robot's refusal
+            dash.unlockProtectiveStop()
+        assert np.abs(np.array(r.getActualTCPPose())[:3] - held[:3]).max() < 1e-3  # it holds
+
+        def unlocked() -> bool:
+            try:
+                dash.unlockProtectiveStop()
+            except RuntimeError:
+                time.sleep(0.1)
+                return False
+            return True
+
+        wait_for(unlocked, "the unlock accepted", timeout=10)
+        assert time.monotonic() - seen > 4.5
+        wait_for(lambda: not r.isProtectiveStopped(), "unlocked")
+        assert _safety_on_every_surface(server, r, dash) == NORMAL
+        assert c.reuploadScript()
+        wait_for(lambda: c.isProgramRunning(), "the script runs again")
+        assert c.moveL(above.tolist(), 0.25, 1.2)  # back up: out of the table is allowed
+        assert _safety_on_every_surface(server, r, dash, world=1) == NORMAL  # never noticed
+    finally:
+        dash.disconnect()
+
+
+def test_trigger_protective_stop_is_reported_and_a_reset_clears_it(arm) -> None:
     c, r, addr, server = arm
     dash = dashboard_client.DashboardClient(addr)
     dash.connect()
     try:
         c.triggerProtectiveStop()
         wait_for(lambda: r.isProtectiveStopped(), "RTDE reports the stop")
-        assert r.getSafetyMode() == 3 and r.getSafetyStatusBits() & (1 << 2)
-        assert "PROTECTIVE_STOP" in dash.safetystatus()
+        assert _safety_on_every_surface(server, r, dash) == STOPPED
         ur = httpx.get(f"{server.url}/v1/ur").json()["worlds"][0]
-        assert ur["safety_mode"] == "PROTECTIVE_STOP" and ur["program_state"] == "STOPPED"
+        assert ur["program_state"] == "STOPPED"
         assert not c.isProgramRunning() and not dash.running()
         assert not c.moveJ(HOME, 1.0, 1.0)  # refused while stopped
         with pytest.raises(RuntimeError, match="5s after"):  # within 5 s: the robot's refusal
             dash.unlockProtectiveStop()
-        assert r.isProtectiveStopped()
-        time.sleep(5.1)
-        dash.unlockProtectiveStop()
-        wait_for(lambda: not r.isProtectiveStopped(), "unlocked")
+        assert httpx.post(f"{server.url}/v1/worlds/0/reset").status_code == 200
+        wait_for(lambda: not r.isProtectiveStopped(), "a reset clears the stop")
+        assert _safety_on_every_surface(server, r, dash) == NORMAL
         assert c.reuploadScript()
         wait_for(lambda: c.isProgramRunning(), "the script runs again")
         assert dash.running()

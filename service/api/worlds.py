@@ -63,7 +63,11 @@ async def _read(
             asyncio.wrap_future(loop.fresh_snapshot(worlds)), timeout=_READ_TIMEOUT
         )
         if with_entities:
-            fut = loop.call(lambda b: entity_frames.attach(b.snapshot(), b))
+            fut = loop.call(
+                lambda b: entity_frames.attach(
+                    dataclasses.replace(b.snapshot(), safety=loop.safety.modes()), b
+                )
+            )
             snap = await asyncio.wait_for(asyncio.wrap_future(fut), timeout=_READ_TIMEOUT)
     except TimeoutError:
         why = loop.failure or "no tick completed"

@@ -83,6 +83,11 @@ class Conflict(ArmfleetError):
     status = 409
 
 
+class ProtectiveStopped(Conflict):
+    """A command that would move the arm of a protective-stopped world (core/sim/safety.py):
+    409 until the stop is unlocked or the world reset."""
+
+
 class Unavailable(ArmfleetError):
     """The engine is starting, failed or is being rebuilt: 503 (retry later)."""
 

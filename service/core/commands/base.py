@@ -92,12 +92,15 @@ class Command(ABC, Generic[R]):
         None when it has none; a command with an op implements `from_wire` and `ack`
     http: the last segments of its HTTP write paths (metrics count refusals by them)
     replayed: replay applies it at its recorded tick (a mode switch is not: replay steps)
+    moves: it sets joint targets or starts a trajectory, so `Control.run` refuses it (409) on
+        a protective-stopped world (core/sim/safety.py)
     """
 
     kind: ClassVar[str]
     op: ClassVar[str | None] = None
     http: ClassVar[tuple[str, ...]] = ()
     replayed: ClassVar[bool] = True
+    moves: ClassVar[bool] = False
 
     @property
     def touches(self) -> Sequence[int] | None:

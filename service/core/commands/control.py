@@ -10,6 +10,8 @@ resulting targets, effective tick and record fields.
 Who may run a command is checked here too, once for every surface: a surface that knows its
 caller runs commands through `acting_for(caller)`, and `run` asks the `gate`
 (service.core.access.callers.Gate) about the worlds the command touches before staging it.
+So is the safety mode: a command that moves the arm (`Command.moves`) of a protective-stopped
+world is refused (409, core/sim/safety.py) whichever surface sent it.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from service.core.access.callers import Caller, Gate
-from service.core.commands.base import Accepted, Command, Door
+from service.core.commands.base import REPLAY, Accepted, Command, Door
 from service.core.commands.targets import Increment, SetMany, SetTargets
 from service.core.commands.trajectory import JointTrajectorySpec, Started, TrajectoryStatus
 from service.core.commands.trajectory.commands import (
@@ -76,6 +78,8 @@ class Control(Door):
         with self._ordered():
             if caller is not None and self.gate is not None:
                 self.gate.check(caller, command.touches, source)
+            if command.moves and source != REPLAY:  # a recording replays what was accepted
+                self.loop.safety.refuse_if_stopped(command.touches)
             result = command.stage(self, source)
             if self._listeners:
                 said = command.announce(self, result)

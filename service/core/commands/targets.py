@@ -205,6 +205,8 @@ class _OneWorld(Command[CommandResult]):
     world: int
     values: Mapping[int, float]
 
+    moves: ClassVar[bool] = True
+
     @property
     def touches(self) -> Sequence[int]:
         return (self.world,)
@@ -286,6 +288,7 @@ class SetMany(Command[list[CommandResult]]):
     """Full targets for many worlds, staged together for one tick boundary; with `joints`
     (indices, a replay's) only those joints of each row change."""
 
+    moves: ClassVar[bool] = True
     kind: ClassVar[str] = "set_many"
 
     worlds: list[int]

@@ -85,6 +85,7 @@ class Reset(Command[ResetResult]):
     def stage(self, door: Door, source: str) -> ResetResult:
         ids = list(range(door.nworld)) if self.worlds is None else self.worlds
         tick = door.loop.commands.reset(ids)
+        door.loop.safety.clear(ids)  # a new episode: back at home, no protective stop
         return ResetResult(ids, tick, np.tile(door.loop.batch.home_target, (len(ids), 1)))
 
     def announce(self, door: Door, result: ResetResult) -> Announcement:

@@ -6,7 +6,7 @@ Joint-state fields follow sensor_msgs/JointState (`name`, `position`, `velocity`
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import (
     BaseModel,
@@ -58,6 +58,12 @@ class WorldState(BaseModel):
     target: list[float]
     flange: Flange
     faults: int = Field(description="times this world was reset for NaN or capacity overflow")
+    safety_mode: Literal["NORMAL", "PROTECTIVE_STOP"] = Field(
+        description="UR's safety mode: PROTECTIVE_STOP (raised on worlds served with UR ports: "
+        "a joint at its torque limit, a target through the table, triggerProtectiveStop) "
+        "until the Dashboard's `unlock protective stop` or a reset; commands that move the arm "
+        "are refused (409) meanwhile"
+    )
     pending_target: list[float] | None = Field(
         None,
         description="only while paused: the targets as of every accepted command (a paused "
@@ -109,7 +115,8 @@ _ERROR_MEANING = {
     403: "a write from a browser page of a foreign origin, or a lease token's on a world (or a "
     "route) not its own",
     404: "no such world (the detail names the ids and the valid range)",
-    409: "the request does not fit the current state (e.g. step while not paused)",
+    409: "the request does not fit the current state (e.g. step while not paused, or a "
+    "command that moves the arm of a protective-stopped world)",
     413: "the body is over the size limit",
     429: "a lease's commands came faster than its rate (all its connections together)",
     503: "the engine is starting, failed or is rebuilding a shard; or too many clients at once",

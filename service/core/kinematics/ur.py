@@ -157,6 +157,11 @@ class URKinematics:
         """Flange transforms in the base frame (n, 4, 4) at arm joint angles q (n, 6) [rad]."""
         return _chain(self.d, self.a, np.asarray(q, dtype=np.float64)) @ self.flange_in_dh6
 
+    def frames(self, q: np.ndarray) -> np.ndarray:
+        """DH frames 0..6 in the base frame (n, 7, 4, 4) at q (n, 6): frame i moves with
+        joint i (1-based), frame 6 with the flange."""
+        return _frames(self.d, self.a, np.asarray(q, dtype=np.float64))
+
     def tcp(self, q: np.ndarray, tcp: np.ndarray | None = None) -> np.ndarray:
         """TCP transforms in the base frame (n, 4, 4); tcp: offsets (n, 6) or (6,), None: 0."""
         t = self.flange(q)

@@ -32,6 +32,7 @@ from service.core.sim.listeners import Listeners
 from service.core.sim.loop_state import StateDoor
 from service.core.sim.loop_types import LoopStats, SnapshotSink, resolve, run_request
 from service.core.sim.pace import LATE_S, Cadence, FailureLog, RateWindow
+from service.core.sim.safety import SafetyTable
 from service.core.sim.snapshot_beside import BesideSnapshot
 from service.core.sim.staging import CommandTable, Staging, TrajectoryHook
 from service.core.sim.types import Mode, Snapshot
@@ -56,7 +57,8 @@ class SimLoop(StateDoor):
     ):
         self.batch = batch
         self.spec = batch.spec
-        self.listeners = Listeners(sinks)  # sinks, tick and restore listeners
+        self.safety = SafetyTable(batch.nworld)  # each world's, stamped on every snapshot
+        self.listeners = Listeners((self.safety, *sinks))  # sinks, tick and restore listeners
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._mode = Mode(mode)
@@ -92,8 +94,7 @@ class SimLoop(StateDoor):
         # launches on a device shared with the camera renderer go in turns (device_turns.py)
         self._turns: DeviceTurns = getattr(batch, "device_turns", None) or DeviceTurns()
         self.randomizations = self.commands.randomizations
-        # Ticks first: the commands' budget beside real-time ticks (command_share.py).
-        self.share = CommandShare(batch.tick_dt)
+        self.share = CommandShare(batch.tick_dt)  # ticks first: the commands' budget per tick
 
     # -- life cycle -------------------------------------------------------------------------
 

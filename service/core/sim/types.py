@@ -159,6 +159,8 @@ class Snapshot:
         (bodies in MjModel order, 0 = world; what viewers draw, see GET /v1/scene)
     entities: every world's entities (`EntityFrame`), only in snapshots taken while a client
       asks for entities in its frames (None otherwise: no cost for those that do not)
+    safety: every world's safety mode (UR's numbers: 1 NORMAL, 3 PROTECTIVE_STOP; safety.py)
+      at the snapshot, stamped by the loop; None (all NORMAL) in an engine's own snapshot (nworld,)
     """
 
     tick: int
@@ -171,6 +173,7 @@ class Snapshot:
     flange: Poses
     bodies: Poses
     entities: EntityFrame | None = None
+    safety: np.ndarray | None = None
 
     # positions (.., 3) and quaternions (.., 4, w x y z), computed when first read
     flange_pos = property(lambda self: self.flange.get()[0])

@@ -15,6 +15,7 @@ import orjson
 
 from clients.wire import BINARY_COLUMNS, BINARY_MAGIC, ENTITY_COLUMNS, POSE_MAGIC
 from service.core.errors import ArmfleetError
+from service.core.sim import safety
 from service.core.sim.types import EntityFrame, Snapshot
 
 if TYPE_CHECKING:
@@ -54,7 +55,8 @@ def world_state(
     pending: np.ndarray | None = None,
     entities: bool = False,
 ) -> dict[str, Any]:
-    """One world as sensor_msgs/JointState fields plus target, flange and fault count.
+    """One world as sensor_msgs/JointState fields plus target, flange, fault count and safety
+    mode ("NORMAL" or "PROTECTIVE_STOP": core/sim/safety.py).
 
     `pending` (paused only): the world's targets as of every accepted command. `entities`: the
     world's entities too (`entity_list`; the snapshot must carry them).
@@ -70,12 +72,20 @@ def world_state(
         "target": snap.target[world],
         "flange": {"position": snap.flange_pos[world], "quaternion": snap.flange_quat[world]},
         "faults": int(snap.faults[world]),
+        "safety_mode": _safety_names(snap, np.array([world]))[0],
     }
     if pending is not None:
         out["pending_target"] = pending
     if entities:
         out["entities"] = entity_list(_entities_of(snap), world)
     return out
+
+
+def _safety_names(snap: Snapshot, worlds: np.ndarray) -> list[str]:
+    """The worlds' safety modes by name (an engine's own snapshot has none: all NORMAL)."""
+    if snap.safety is None:
+        return ["NORMAL"] * len(worlds)
+    return safety.names(snap.safety[worlds])
 
 
 def _entities_of(snap: Snapshot) -> EntityFrame:
@@ -175,6 +185,7 @@ def batch_frame(
         "flange_position": snap.flange_pos[worlds],
         "flange_quaternion": snap.flange_quat[worlds],
         "faults": snap.faults[worlds],
+        "safety_mode": _safety_names(snap, worlds),
         "trajectories": trajectories or {},
     }
     if entities:

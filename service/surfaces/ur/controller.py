@@ -7,13 +7,19 @@ interface reads it; all of them run on the UR event loop's thread (endpoints.py)
 no lock. The numbers are UR's (RTDE guide, Dashboard server documentation). A world starts as
 a UR10e ready to move (powered, brakes released: RUNNING, NORMAL), because its servos hold it
 from the first tick; `reset` returns it there when a lease starts or ends.
+
+The safety mode is not kept here but in the core's `SafetyTable` (core/sim/safety.py), read
+and written through `safety_mode`: a protective stop is the world's state, which the REST and
+WebSocket states report too, and a reset over any surface clears it. `version` counts the
+table's changes of this world with the controller's own, so RTDE re-encodes on either.
 """
 
 from __future__ import annotations
 
 import enum
-import time
 from dataclasses import dataclass, field
+
+from service.core.sim.safety import SafetyTable
 
 
 class RobotMode(enum.IntEnum):
@@ -67,7 +73,6 @@ _SAFETY_BIT = {
 }
 _EMERGENCY = {SafetyMode.SYSTEM_EMERGENCY_STOP, SafetyMode.ROBOT_EMERGENCY_STOP}
 _STOPPED_BY_SAFETY = 10  # bit: "stopped due to safety"
-UNLOCK_AFTER_S = 5.0  # a protective stop may be unlocked this long after it happened
 JOINT_RUNNING, JOINT_IDLE, JOINT_POWER_OFF = 253, 255, 239  # joint_mode
 
 
@@ -77,11 +82,10 @@ class Controller:
     RTDE re-encodes a package only when the state or the tick moved."""
 
     world: int
+    safety: SafetyTable = field(repr=False)  # the loop's, every world's safety mode
     robot_mode: RobotMode = RobotMode.RUNNING
-    safety_mode: SafetyMode = SafetyMode.NORMAL
     program: ProgramState = ProgramState.STOPPED
     loaded_program: str | None = None
-    protective_stop_at: float = 0.0  # time.monotonic() of the last protective stop
     speed_fraction: float = 1.0  # the speed slider (RTDE input speed_slider_fraction)
     # Registers: the control script writes outputs; RTDE input recipes write inputs (any input
     # variable, by name, as the client sent it).
@@ -89,17 +93,27 @@ class Controller:
     output_double: list[float] = field(default_factory=lambda: [0.0] * 48)
     output_bits: int = 0  # output_bit_register 0..127 as one integer
     inputs: dict[str, object] = field(default_factory=dict)
-    version: int = 0
+    edits: int = 0
 
     def changed(self) -> None:
-        self.version += 1
+        self.edits += 1
+
+    @property
+    def version(self) -> int:
+        """Changes of this controller and of the world's safety mode (both only count up)."""
+        return self.edits + int(self.safety.versions[self.world])
+
+    @property
+    def safety_mode(self) -> SafetyMode:
+        return SafetyMode(self.safety.mode(self.world))
 
     def reset(self) -> None:
         """Back to a freshly booted, ready controller (a lease started or ended)."""
-        fresh = Controller(self.world)
+        fresh = Controller(self.world, self.safety)
         for name in self.__dataclass_fields__:
-            if name not in ("world", "version"):
+            if name not in ("world", "safety", "edits"):
                 setattr(self, name, getattr(fresh, name))
+        self.safety.clear([self.world])
         self.changed()
 
     # -- what RTDE reports ------------------------------------------------------------------
@@ -158,21 +172,23 @@ class Controller:
         self.changed()
         return True
 
-    def protective_stop(self) -> None:
-        self.safety_mode = SafetyMode.PROTECTIVE_STOP
-        self.protective_stop_at = time.monotonic()
+    def protective_stop(self, why: str) -> bool:
+        """The world's safety mode to PROTECTIVE_STOP, the program stopped; False if it
+        already was stopped."""
+        if not self.safety.stop(self.world, why):
+            return False
         self.program = ProgramState.STOPPED
         self.changed()
+        return True
 
     def unlock_protective_stop(self) -> bool:
-        """False while the stop is younger than UNLOCK_AFTER_S (the robot's rule)."""
-        if self.safety_mode is not SafetyMode.PROTECTIVE_STOP:
-            return True
-        if time.monotonic() - self.protective_stop_at < UNLOCK_AFTER_S:
-            return False
-        self.safety_mode = SafetyMode.NORMAL
-        self.changed()
-        return True
+        """False while the stop is younger than safety.UNLOCK_AFTER_S (the robot's rule)."""
+        return self.safety.unlock(self.world)
+
+    def restart_safety(self) -> None:
+        """The Dashboard's `restart safety`: NORMAL at once, the arm powered off."""
+        self.safety.clear([self.world])
+        self.power_off()
 
     def set_program(self, state: ProgramState) -> None:
         self.program = state

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 from service.surfaces.ur import rtde_wire
 from service.surfaces.ur.connection import RobotConnection
-from service.surfaces.ur.controller import Controller, ProgramState, SafetyMode
+from service.surfaces.ur.controller import Controller, ProgramState
 
 if TYPE_CHECKING:
     pass
@@ -72,8 +72,7 @@ def _unlock(ctl: Controller) -> str:
 
 
 def _restart_safety(ctl: Controller) -> str:
-    ctl.safety_mode = SafetyMode.NORMAL
-    ctl.power_off()
+    ctl.restart_safety()
     return "Restarting safety"
 
 

@@ -24,6 +24,7 @@ import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from service.core.sim.safety import SafetyTable
 from service.surfaces.ur import addresses
 from service.surfaces.ur.dashboard import DashboardSession
 from service.surfaces.ur.rtde_outputs import Frame
@@ -60,8 +61,10 @@ class Endpoints:
         worlds: dict[int, str],
         kin: ToolKinematics,
         owner_of: Callable[[int], str | None] | None,
+        safety: SafetyTable,
         read_payloads: Callable[[list[int]], concurrent.futures.Future[Any]] | None = None,
     ) -> None:
+        self.safety = safety  # the loop's safety modes (every world's controller reads them)
         self.robots = {w: WorldRobot(w, a, self) for w, a in worlds.items()}
         self.kin = kin
         self.motion: Motion | None = None  # set by the surface at start

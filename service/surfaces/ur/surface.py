@@ -11,6 +11,7 @@ thread reads that one reference; nothing else crosses threads.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,11 @@ from fastapi import APIRouter
 from service.core.access.callers import book_of
 from service.core.access.policy import is_loopback
 from service.core.commands import params
+from service.core.commands.control import Control
+from service.core.errors import Unavailable
+from service.core.kinematics.clearance import TableClearance
+from service.core.kinematics.tools import tools_of
+from service.core.sim.batch import Batch
 from service.core.sim.loop_types import SnapshotSink
 from service.core.sim.types import Snapshot
 from service.core.sim.worlds import world_list
@@ -27,7 +33,7 @@ from service.surfaces.ur import addresses
 from service.surfaces.ur.endpoints import Endpoints
 from service.surfaces.ur.motion import Motion
 from service.surfaces.ur.rtde_outputs import Frame
-from service.surfaces.ur.safety import SafetyWatch
+from service.surfaces.ur.safety import SafetyWatch, TableWatch
 from service.surfaces.ur.settings import UrSettings
 from service.surfaces.ur.tcp_pose import ToolKinematics
 
@@ -38,9 +44,16 @@ class UrSink(SnapshotSink):
     """Keeps the latest snapshot as RTDE's `Frame` (sim thread; see the module docstring)."""
 
     def __init__(
-        self, endpoints: Endpoints, tick_dt: float, first: Snapshot, watch: SafetyWatch
+        self,
+        endpoints: Endpoints,
+        tick_dt: float,
+        first: Snapshot,
+        watch: SafetyWatch,
+        table: TableWatch | None,
+        targets: Callable[[np.ndarray], np.ndarray],
     ) -> None:
         self._ep, self._dt, self._watch = endpoints, tick_dt, watch
+        self._table, self._targets = table, targets
         zero = np.zeros_like(first.target, dtype=np.float64)
         self._last = Frame(first, zero, zero, tick_dt)
         endpoints.frame = self._last
@@ -64,6 +77,23 @@ class UrSink(SnapshotSink):
         if ticks > 0:
             for world, why in self._watch.check(snap):
                 self._ep.protective_stop(world, why)
+
+    def on_tick(self, batch: Batch, now: float) -> None:
+        """Every tick: the targets as of every accepted command, through the table check."""
+        if self._table is not None:
+            for world, why in self._table.check(self._targets(self._table.worlds)):
+                self._ep.protective_stop(world, why)
+
+
+def _table_watch(worlds: list[int], control: Control) -> TableWatch | None:
+    """The table check of the served cell; None when it has no table or no UR arm."""
+    try:
+        kin = tools_of(control.loop).kin
+    except Unavailable:
+        return None
+    mjm, arm = control.loop.batch.robot.mjm, control.spec.names[:6]
+    clearance = TableClearance.of_model(mjm, arm, kin)
+    return None if clearance is None else TableWatch(worlds, clearance)
 
 
 class UrSurface:
@@ -91,7 +121,8 @@ class UrSurface:
         book = book_of(ctx.control)
         owner_of = book.owner if book is not None else None
         read = lambda worlds: loop.call(lambda b: params.read(b, worlds))  # noqa: E731
-        ep = Endpoints(self.addresses, ToolKinematics(loop.batch.robot), owner_of, read)
+        kin = ToolKinematics(loop.batch.robot)
+        ep = Endpoints(self.addresses, kin, owner_of, loop.safety, read)
         ep.motion = Motion(ctx.control, lambda: ep.frame)
         if owner_of is not None or self._leases:
             ep.begin_leases()
@@ -99,7 +130,9 @@ class UrSurface:
         ep.start()
         limits = [j.effort_limit for j in loop.spec.joints]
         watch = SafetyWatch(self.worlds, np.array(limits), loop.batch.tick_dt)
-        self._sink = UrSink(ep, loop.batch.tick_dt, loop.latest, watch)
+        table = _table_watch(self.worlds, ctx.control)
+        targets = loop.commands.pending_targets
+        self._sink = UrSink(ep, loop.batch.tick_dt, loop.latest, watch, table, targets)
         loop.listeners.add_sink(self._sink)
         first, last = self.addresses[self.worlds[0]], self.addresses[self.worlds[-1]]
         log.info(

@@ -13,6 +13,7 @@ import logging
 from typing import TYPE_CHECKING, Protocol
 
 from service.core.errors import Unavailable
+from service.core.sim.safety import SafetyTable
 from service.surfaces.ur.controller import Controller, ProgramState
 from service.surfaces.ur.robot_messages import robot_message
 from service.surfaces.ur.rtde_outputs import Frame, WorldTick
@@ -30,6 +31,7 @@ class Fleet(Protocol):
     """What a world's controller reads of the listeners that hold it (endpoints.Endpoints)."""
 
     frame: Frame | None
+    safety: SafetyTable
     kin: ToolKinematics
     motion: Motion | None
     payloads: dict[int, tuple[float, ...]]
@@ -63,7 +65,7 @@ class WorldRobot:
 
     def __init__(self, world: int, address: str, fleet: Fleet) -> None:
         self.world, self.address, self.fleet = world, address, fleet
-        self.controller = Controller(world)
+        self.controller = Controller(world, fleet.safety)
         self.sessions: set[Session] = set()
         self.open = True  # accepting connections (leases: while lent)
         self.owner: str | None = None  # the lease holding it (leases on)
@@ -162,15 +164,17 @@ class WorldRobot:
             self.speed_loop.end()
 
     def protective_stop(self, why: str) -> None:
-        """The arm stops where it is, the program ends, the safety mode says so until the
-        Dashboard's `unlock protective stop` (5 s later at the earliest)."""
+        """The arm stops where it is, the program ends, the world's safety mode says so on
+        every surface until the Dashboard's `unlock protective stop` (5 s later at the
+        earliest) or a reset. The arm is halted before the mode is set: from then on the core
+        refuses every command that would move it (core/sim/safety.py)."""
         if self.controller.safety_mode.name == "PROTECTIVE_STOP":
             return
         log.warning("world %d: protective stop: %s", self.world, why)
         self.end_script(f"protective stop: {why}")
         self.end_speed_loop()
-        self.controller.protective_stop()
         self.motion.halt(self.world)
+        self.controller.protective_stop(why)
         self.log_message(f"Protective stop: {why}")
 
     def log_message(self, text: str) -> None:

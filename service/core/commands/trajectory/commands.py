@@ -32,6 +32,7 @@ class StartTrajectory(Command[list[Started]]):
     kind: ClassVar[str] = "trajectory"
     op: ClassVar[str | None] = "trajectory"
     http: ClassVar[tuple[str, ...]] = ("trajectory",)
+    moves: ClassVar[bool] = True
 
     worlds: list[int]
     spec: JointTrajectorySpec

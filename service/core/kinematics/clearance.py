@@ -1,0 +1,157 @@
+"""How far a joint configuration would put the arm into the table: the robot's safety plane.
+
+A UR stops (protective stop) before its tool or links cross a safety plane or hit what it
+stands on. armfleet checks the *commanded* configuration, not the contact the physics makes:
+every target a world is given (a trajectory's sample, a servo target, a jog) is run through
+the closed-form forward kinematics (ur.py) and the arm's own collision geometry (capsules,
+boxes of the served model, the gripper's pads and base included) is measured against the
+scene's table top. Why the target and not the contact force:
+- it is deterministic: a function of the commands alone, the same on MuJoCo Warp and native
+  MuJoCo, in real time and in a replay, not of contact stiffness, solver iterations or the
+  tick at which a sensor reading crossed a threshold;
+- it stops the arm *before* it presses into the table, as a UR's safety plane does, where a
+  force limit would only notice once the servos push against it (a position servo held a few
+  millimetres inside the table never reaches its torque limit: the contact takes the force);
+- it is cheap: 6 joints' DH frames and a few dozen points per world, vectorised over the
+  worlds, only for the worlds whose target changed.
+Contact with anything else (a body in the way, the arm carrying too much) is the torque rule
+of the UR surface (surfaces/ur/safety.py), which stays beside this one.
+
+Which geometry: every geom below the first arm joint that collides with the table (contype /
+conaffinity), as points with a radius (capsule: its two end centres and radius; box: its
+corners; sphere: its centre and radius; anything else: its bounding sphere), each fixed to the
+DH frame of the arm link that carries it. The gripper's fingers are taken open (finger_joint 0,
+where the linkage is read from the model); a closed finger sits higher, so open is the
+cautious side. The table is the box geom named `table_top` (a cell without one has no check).
+`depth` is how far the deepest point's sphere goes below the top surface, over the top's
+footprint [m]: the space under the top counts as table too, so that a target that jumps
+through it in one command (a servo target far below) is caught as well as one that moves
+into it. The UR surface stops a world whose commanded depth passes `ALLOWED_DEPTH` (a few
+millimetres of touching, as a grasp of something flat on the table needs, are allowed).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from service.core.kinematics.pose import invert
+from service.core.kinematics.ur import URKinematics
+
+__all__ = ["ALLOWED_DEPTH", "TABLE_GEOM", "TableClearance"]
+
+TABLE_GEOM = "table_top"
+ALLOWED_DEPTH = 0.005  # m a commanded configuration may reach into the table top
+
+
+@dataclass(frozen=True)
+class TableClearance:
+    """The arm's collision points (`points` (m, 4) homogeneous, each in the DH frame `frame`
+    (m,), with `radius` (m,) and the geom `geom` (m,) it belongs to) against the table box
+    (`to_table` (4, 4): from the base frame to the box's own, `half` (3,): its half sizes)."""
+
+    kin: URKinematics
+    points: np.ndarray
+    frame: np.ndarray
+    radius: np.ndarray
+    geom: np.ndarray
+    geom_names: tuple[str, ...]
+    to_table: np.ndarray
+    half: np.ndarray
+
+    @classmethod
+    def of_model(
+        cls, mjm: mujoco.MjModel, joints: Sequence[str], kin: URKinematics
+    ) -> TableClearance | None:
+        """None when the model has no box geom `table_top` (no table: nothing to check)."""
+        table = mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_GEOM, TABLE_GEOM)
+        if table < 0 or mjm.geom_type[table] != mujoco.mjtGeom.mjGEOM_BOX:
+            return None
+        ids = [mujoco.mj_name2id(mjm, mujoco.mjtObj.mjOBJ_JOINT, n) for n in joints]
+        link_of = {int(mjm.jnt_bodyid[j]): k for k, j in enumerate(ids)}
+        data = mujoco.MjData(mjm)
+        data.qpos[:] = mjm.qpos0
+        data.qpos[mjm.jnt_qposadr[ids]] = 0.0
+        mujoco.mj_kinematics(mjm, data)
+        # DH frame k+1 (moving with joint k) in the world frame, at q = 0
+        dh_world = kin.base_in_world @ kin.frames(np.zeros((1, 6)))[0]
+        points, frames, radii, owners, names = [], [], [], [], []
+        for g in range(mjm.ngeom):
+            link = _link(mjm, int(mjm.geom_bodyid[g]), link_of)
+            collides = (mjm.geom_contype[g] & mjm.geom_conaffinity[table]) or (
+                mjm.geom_conaffinity[g] & mjm.geom_contype[table]
+            )
+            if link is None or not collides:
+                continue
+            local, r = _probe(mjm, g)
+            geom_world = _transform(data.geom_xpos[g], data.geom_xmat[g])
+            in_frame = invert(dh_world[link + 1]) @ geom_world
+            pts = (in_frame @ np.c_[local, np.ones(len(local))].T).T
+            points.append(pts)
+            frames += [link + 1] * len(pts)
+            radii += [r] * len(pts)
+            owners += [len(names)] * len(pts)
+            names.append(mujoco.mj_id2name(mjm, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom {g}")
+        if not points:
+            return None
+        table_world = _transform(data.geom_xpos[table], data.geom_xmat[table])
+        return cls(
+            kin,
+            np.concatenate(points),
+            np.array(frames),
+            np.array(radii),
+            np.array(owners),
+            tuple(names),
+            invert(invert(kin.base_in_world) @ table_world),
+            mjm.geom_size[table].copy(),
+        )
+
+    def depth(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For arm configurations q (n, 6): how deep the deepest collision point goes into
+        the table [m] (n,) (≤ 0: above it by that much; -inf: nothing over its footprint),
+        and the index into `geom_names` of the geom it belongs to (n,)."""
+        # the points in the table's frame: table⁻¹ · DH frame · point
+        frames = self.kin.frames(q)[:, self.frame, :, :]  # (n, m, 4, 4)
+        base = (frames @ self.points[:, :, None])[..., 0]  # (n, m, 4)
+        local = base @ self.to_table[:3].T  # (n, m, 3)
+        over = np.abs(local[..., :2]) - self.half[:2]  # outside the top's footprint by
+        beside = np.linalg.norm(np.maximum(over, 0.0), axis=-1)
+        # below the top surface, inside the footprint (a sphere: by its radius beside it)
+        below = self.half[2] - local[..., 2]
+        reach = np.sqrt(np.maximum(self.radius**2 - beside**2, 0.0))
+        into = np.where(beside <= self.radius, below + reach, -np.inf)
+        deepest = np.argmax(into, axis=1)
+        return into[np.arange(len(q)), deepest], self.geom[deepest]
+
+
+def _link(mjm: mujoco.MjModel, body: int, link_of: dict[int, int]) -> int | None:
+    """The arm joint (0..5) whose link carries `body`: the nearest one on its way to the
+    world; None for a body that is not on the arm."""
+    while body:
+        if body in link_of:
+            return link_of[body]
+        body = int(mjm.body_parentid[body])
+    return None
+
+
+def _probe(mjm: mujoco.MjModel, g: int) -> tuple[np.ndarray, float]:
+    """Points (k, 3) in the geom's frame and the radius of the spheres around them."""
+    size, kind = mjm.geom_size[g], mjm.geom_type[g]
+    if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        return np.array([[0.0, 0.0, -size[1]], [0.0, 0.0, size[1]]]), float(size[0])
+    if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return np.zeros((1, 3)), float(size[0])
+    if kind == mujoco.mjtGeom.mjGEOM_BOX:
+        corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+        return corners * size, 0.0
+    return np.zeros((1, 3)), float(mjm.geom_rbound[g])  # the bounding sphere
+
+
+def _transform(pos: np.ndarray, xmat: np.ndarray) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3] = np.asarray(xmat).reshape(3, 3)
+    t[:3, 3] = pos
+    return t
