@@ -10,7 +10,7 @@ import pytest
 
 from mjcf import SCENE_XML
 from service.core.errors import BadCommand
-from service.core.kinematics.line import plan_line
+from service.core.kinematics.line import MAX_SAMPLES, plan_line, sample_times
 from service.core.kinematics.pose import (
     matrix_to_pose,
     matrix_to_quat,
@@ -146,6 +146,23 @@ def test_a_line_plan_stays_on_the_line_and_refuses_what_no_arm_can_follow() -> N
     with pytest.raises(BadCommand) as far:
         plan_line(KIN, home, start + [3, 0, 0, 0, 0, 0], tcp, 0.2, 1, LIMITS, tuple(ARM))
     assert far.value.field == "pose"
+
+
+def test_line_samples_fall_on_the_loops_ticks_every_tick_of_the_ramps() -> None:
+    """A sample on every tick is read by the trajectory runner as it is (no Hermite average
+    of the led positions between samples: kinematics/line.py says why it matters)."""
+    home, tcp = ROBOT.spec.home[:6], np.array([0, 0, 0.2, 0, 0, 0.0])
+    goal = KIN.fk(home[None], tcp[None])[0] + [0.15, -0.25, -0.1, 0, 0, 0]
+    plan = plan_line(KIN, home, goal, tcp, 0.25, 1.2, LIMITS, tuple(ARM), tick_dt=1 / 60)
+    assert np.array_equal(plan.times, np.arange(1, len(plan.times) + 1) * (1 / 60))
+    for total, ramp, tick in ((1.56, 0.33, 0.002), (10.0, 0.33, 0.002), (100.0, 3.0, 0.002)):
+        t = sample_times(total, ramp, tick)
+        ticks = np.round(t / tick)
+        assert np.abs(t - ticks * tick).max() < 1e-9 and len(t) <= MAX_SAMPLES
+        assert total <= t[-1] < total + tick and (np.diff(ticks) > 0).all()
+        if len(t) < total / tick and ramp / tick < MAX_SAMPLES / 2:  # spaced: not the ramps
+            each = round(ramp / tick)
+            assert (np.diff(ticks[:each]) == 1).all() and (np.diff(ticks[-each:]) == 1).all()
 
 
 def test_a_model_that_is_not_the_dh_chain_is_refused() -> None:

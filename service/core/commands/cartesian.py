@@ -196,7 +196,8 @@ class MoveLinear(StartTrajectory):
         limits = np.array([j.velocity_limit for j in spec.joints[:ARM]])
         names = tuple(spec.names[:ARM])
         tools = tools_of(door.loop)
-        plan = plan_line(tools.kin, q, goal, tcp, v, a, limits, names, tools.lag)
+        tick = door.loop.batch.tick_dt  # samples on the loop's ticks (kinematics/line.py)
+        plan = plan_line(tools.kin, q, goal, tcp, v, a, limits, names, tools.lag, tick)
         points = [
             TrajectoryPoint(p.tolist(), float(t), v_.tolist())
             for t, p, v_ in zip(plan.times, plan.q, plan.qd, strict=True)

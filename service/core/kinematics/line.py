@@ -3,12 +3,22 @@
 The TCP moves on the segment from its pose at the start q to the goal pose, its orientation
 turning about one fixed axis in step (R(s) = exp(s w) R0, w the rotation vector of R1 R0ᵀ),
 along a speed profile with smooth ramps (speed v, peak acceleration a; for a pure rotation
-they are read as rad/s and rad/s², as UR does). The profile is sampled every `SAMPLE_DT` (at most
-`MAX_SAMPLES` samples); each sample's q is the closed-form solution nearest the previous one
-and its velocity is J(q)⁻¹ × the TCP twist, so the trajectory runner's cubic (Hermite)
-segments pass through the line with the right speed, and its velocity feed-forward takes away
-the position servos' lag (kv/kp × speed). Between samples the TCP leaves the line by far less
-than a micrometre (a Hermite segment of 8 ms); what remains is the servos' tracking.
+they are read as rad/s and rad/s², as UR does). Each sample's q is the closed-form solution
+nearest the previous one and its velocity is J(q)⁻¹ × the TCP twist; the trajectory runner
+feeds that velocity forward (ctrl = q + kv/kp × q̇), which takes away the position servos' lag
+behind a moving target (kv/kp × speed), and with `lag` each sample's position leads by what
+the servos need to accelerate the arm (M(q) q̈ / kp, servo.py): the acceleration feed-forward.
+
+Why the samples fall on the loop's ticks (`tick_dt`; every tick, up to `MAX_SAMPLES`): the
+runner interpolates between samples with cubic (Hermite) segments whose slope averages the
+change of the *led* position over the segment, so between samples the velocity fed forward
+also carries the lead's rate of change, kv/kp × d(M q̈ / kp)/dt: a force in proportion to the
+jerk, different for every joint, which took the TCP 2 mm off the line at the end of a line at
+1.2 m/s² (samples 8 ms apart). A sample on a tick is read as it is, position and velocity, so
+the servos get exactly q + M q̈/kp + kv/kp × q̇: 0.09 mm off the line in the same move
+(native MuJoCo at 60, 125 and 500 Hz). A line longer than `MAX_SAMPLES` ticks keeps a sample
+on every tick of its ramps, where the lead changes, and spaces those of its cruise, where it
+hardly does.
 
 A line that no joint configuration can follow is refused before anything moves (BadCommand,
 422): the goal out of reach or outside the joint ranges (`pose`), a sample out of reach or the
@@ -34,7 +44,7 @@ from service.core.kinematics.ur import TWO_PI, URKinematics
 
 __all__ = ["MAX_SAMPLES", "SAMPLE_DT", "LinePlan", "plan_line", "profile"]
 
-SAMPLE_DT = 0.008  # s between samples (a UR controller's 500 Hz is 0.002 s)
+SAMPLE_DT = 0.008  # s between samples where no tick is given (a UR controller's is 0.002 s)
 MAX_SAMPLES = 1000  # the trajectory runner's MAX_POINTS
 _STILL = 1e-9  # m or rad: a line shorter than this is no move
 _SPEED_SLACK = 1.02  # a sample's joint speed may pass the limit by this factor (rounding)
@@ -78,6 +88,30 @@ def profile(distance: float, v: float, a: float, t: np.ndarray) -> tuple[np.ndar
     return s, rate
 
 
+def _peak(distance: float, v: float, a: float) -> float:
+    """The speed `profile` reaches over `distance` (v, or less on a short one)."""
+    return min(v, math.sqrt(2 * a * distance / math.pi))
+
+
+def sample_times(total: float, ramp: float, tick: float) -> np.ndarray:
+    """Times [s] of a plan's samples: multiples of `tick`, the last at or just after `total`;
+    every tick, or, over MAX_SAMPLES, every tick of the two ramps (`ramp` s each) and evenly
+    spaced ticks between them (evenly spaced throughout if the ramps alone are too many)."""
+    n = max(2, math.ceil(total / tick - 1e-9))
+    if n <= MAX_SAMPLES:
+        return tick * np.arange(1, n + 1)
+    r = math.ceil(ramp / tick)
+    room = MAX_SAMPLES - 2 * r - 2
+    ticks = np.zeros(0)
+    if room >= 1:
+        stride = math.ceil((n - 2 * r) / room)
+        ticks = np.r_[np.arange(1, r + 1), np.arange(r + stride, n - r, stride), n - r : n + 1]
+    if not 0 < len(ticks) <= MAX_SAMPLES:
+        stride = math.ceil(n / (MAX_SAMPLES - 1))
+        ticks = np.r_[np.arange(stride, n, stride), n]
+    return tick * np.unique(ticks).astype(np.float64)
+
+
 def duration(distance: float, v: float, a: float) -> float:
     """How long `profile` takes over `distance`."""
     v = min(v, math.sqrt(2 * a * distance / math.pi))
@@ -94,11 +128,13 @@ def plan_line(
     joint_speed: np.ndarray,
     names: tuple[str, ...],
     lag: ServoLag | None = None,
+    tick_dt: float = SAMPLE_DT,
 ) -> LinePlan:
     """The samples of a line from the TCP pose at q_start (6,) to `goal` (6,), both in the base
     frame with the TCP offset `tcp` (6,); `joint_speed` (6,) the limits [rad/s] named `names`.
     With `lag`, the samples' positions lead by the servos' acceleration lag (servo.py): `q` is
-    then what the servos are given, the line's own joint path being q - lead."""
+    then what the servos are given, the line's own joint path being q - lead. The samples fall
+    on multiples of `tick_dt` [s], the loop's tick (see the module docstring)."""
     q_start = np.asarray(q_start, dtype=np.float64)
     first = kin.ik(goal[None], q_start[None], tcp[None])
     if not first.ok[0]:
@@ -111,8 +147,8 @@ def plan_line(
     if distance <= _STILL:  # already there: hold the start
         return LinePlan(np.array([SAMPLE_DT]), q_start[None], np.zeros((1, 6)), length, angle)
     total = duration(distance, speed, accel)
-    n = min(MAX_SAMPLES, max(2, math.ceil(total / SAMPLE_DT)))
-    times = total * np.arange(1, n + 1) / n
+    times = sample_times(total, total - distance / _peak(distance, speed, accel), tick_dt)
+    n = len(times)
     s, rate = profile(distance, speed, accel, times)
     s, rate = s / distance, rate / distance  # fraction of the line, and its rate
     poses = np.empty((n, 4, 4))

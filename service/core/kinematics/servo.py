@@ -6,7 +6,8 @@ torque M(q) q̈ that only a position error kp × e gives, so each joint lags by 
 inertias and gains differ from joint to joint the TCP leaves a straight line by millimetres
 (4 mm at moveL's default 1.2 m/s², measured). A line's samples are shifted ahead by that lag,
 from the served model's mass matrix and gains (the scene's; a world's own `kp` or payload
-parameter is not seen here), which keeps the TCP within a fraction of a millimetre of it.
+parameter is not seen here); with the samples on the loop's ticks (line.py says why) the TCP
+keeps within 0.1 mm of the line at 1.2 m/s² (native MuJoCo, 60 to 500 Hz).
 """
 
 from __future__ import annotations
