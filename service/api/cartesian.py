@@ -102,6 +102,7 @@ async def put_tcp_offset(control: Ctl, world: CommandWorld, body: tcp.TcpOffset)
     response_model=CommandReply,
     summary="Set the arm's targets so that the TCP reaches a pose (IK nearest the current "
     "targets); 422 when no configuration reaches it",
+    responses=errors(409),  # the arm of a protective-stopped world
 )
 async def put_tcp_target(control: Ctl, world: CommandWorld, body: cartesian.TcpPose) -> Response:
     result = control.run(cartesian.MoveTcp.create(control, world, body.pose), HTTP)
@@ -112,6 +113,7 @@ async def put_tcp_target(control: Ctl, world: CommandWorld, body: cartesian.TcpP
     "/worlds/{world}/jog",
     response_model=CommandReply,
     summary="One pendant jog step: ±x/y/z [m] or ±rx/ry/rz [rad] in the base or tool frame",
+    responses=errors(409),  # the arm of a protective-stopped world
 )
 async def post_jog(control: Ctl, world: CommandWorld, body: cartesian.JogStep) -> Response:
     command = cartesian.Jog.create(control, world, body.axis, body.step, body.frame)
@@ -123,6 +125,7 @@ async def post_jog(control: Ctl, world: CommandWorld, body: cartesian.JogStep) -
     response_model=StartedReply,
     summary="Move the TCP on a straight line (UR's moveL) as a trajectory: its id and ticks "
     "(GET /v1/worlds/{w}/trajectory watches it)",
+    responses=errors(409),  # the arm of a protective-stopped world
 )
 async def post_move_linear(
     control: Ctl, world: CommandWorld, body: cartesian.LinearMove

@@ -43,6 +43,7 @@ def _json(payload: object) -> Response:
     "/worlds/{world}/trajectory",
     response_model=StartedReply,
     summary="Follow a JointTrajectory (replaces a running one); answers its id and ticks",
+    responses=errors(409),  # the arm of a protective-stopped world
 )
 async def start(control: Ctl, world: CommandWorld, body: TrajectoryBody) -> Response:
     spec = parse(control.spec, body.as_json())
@@ -118,6 +119,7 @@ async def cancel(control: Ctl, world: CommandWorld) -> Response:
     "/trajectories",
     response_model=BatchStartedReply,
     summary="Start one trajectory on many worlds, all at the same tick",
+    responses=errors(409),  # the arm of a protective-stopped world
 )
 async def start_many(control: Ctl, body: BatchTrajectoryBody) -> Response:
     worlds = _worlds(control, body.worlds)

@@ -125,6 +125,7 @@ async def get_state(loop: Loop, world: World, entities: WithEntities = False) ->
     "/worlds/{world}/increments",
     response_model=CommandReply,
     summary="Add to joint targets (the seed's Up/Down buttons); clamps to the joint range",
+    responses=errors(409),  # the arm of a protective-stopped world
 )
 async def increment(control: Ctl, world: CommandWorld, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
@@ -136,6 +137,7 @@ async def increment(control: Ctl, world: CommandWorld, body: IncrementRequest) -
     "/worlds/{world}/targets",
     response_model=CommandReply,
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
+    responses=errors(409),  # the arm of a protective-stopped world
 )
 async def put_targets(control: Ctl, world: CommandWorld, body: JointTargets) -> Response:
     result = control.command_targets(world, body.name, body.position, HTTP)
@@ -146,6 +148,7 @@ async def put_targets(control: Ctl, world: CommandWorld, body: JointTargets) -> 
     "/targets",
     response_model=BatchCommandReply,
     summary="Full 7-joint targets for many worlds, applied together at one tick boundary",
+    responses=errors(409),  # the arm of a protective-stopped world
 )
 async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     results = control.set_many(body.worlds, body.position, HTTP)
