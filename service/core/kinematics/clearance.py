@@ -114,9 +114,8 @@ class TableClearance:
         the table [m] (n,) (≤ 0: above it by that much; -inf: nothing over its footprint),
         and the index into `geom_names` of the geom it belongs to (n,)."""
         # the points in the table's frame: table⁻¹ · DH frame · point
-        frames = self.kin.frames(q)[:, self.frame, :, :]  # (n, m, 4, 4)
-        base = (frames @ self.points[:, :, None])[..., 0]  # (n, m, 4)
-        local = base @ self.to_table[:3].T  # (n, m, 3)
+        frames = self.to_table[:3] @ self.kin.frames(q)  # (n, 7, 3, 4): in the table's frame
+        local = (frames[:, self.frame] @ self.points[:, :, None])[..., 0]  # (n, m, 3)
         over = np.abs(local[..., :2]) - self.half[:2]  # outside the top's footprint by
         beside = np.linalg.norm(np.maximum(over, 0.0), axis=-1)
         # below the top surface, inside the footprint (a sphere: by its radius beside it)

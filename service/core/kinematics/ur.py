@@ -317,11 +317,19 @@ def _dh(theta: np.ndarray, d: float, a: float, alpha: float) -> np.ndarray:
 
 
 def _frames(d: np.ndarray, a: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """DH frames 0..6 in the base frame (n, 7, 4, 4)."""
-    out = np.empty((len(q), 7, 4, 4))
+    """DH frames 0..6 in the base frame (n, 7, 4, 4): each link is Rz(θ) then a constant
+    Tz(d) Tx(a) Rx(α), so the six turns are built in one pass and the constants multiplied in
+    one batched product (the per-tick table check runs this for every moving world)."""
+    n = len(q)
+    c, s = np.cos(q), np.sin(q)
+    turn = np.zeros((n, 6, 4, 4))
+    turn[..., 0, 0], turn[..., 0, 1], turn[..., 1, 0], turn[..., 1, 1] = c, -s, s, c
+    turn[..., 2, 2] = turn[..., 3, 3] = 1.0
+    link = turn @ _dh(np.zeros(6), d, a, _ALPHA)  # (n, 6, 4, 4)
+    out = np.empty((n, 7, 4, 4))
     out[:, 0] = np.eye(4)
     for i in range(6):
-        out[:, i + 1] = out[:, i] @ _dh(q[:, i], d[i], a[i], _ALPHA[i])
+        out[:, i + 1] = out[:, i] @ link[:, i]
     return out
 
 
