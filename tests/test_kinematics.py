@@ -10,6 +10,7 @@ import pytest
 
 from mjcf import SCENE_XML
 from service.core.errors import BadCommand
+from service.core.kinematics.clearance import TableClearance
 from service.core.kinematics.line import MAX_SAMPLES, plan_line, sample_times
 from service.core.kinematics.pose import (
     matrix_to_pose,
@@ -163,6 +164,34 @@ def test_line_samples_fall_on_the_loops_ticks_every_tick_of_the_ramps() -> None:
         if len(t) < total / tick and ramp / tick < MAX_SAMPLES / 2:  # spaced: not the ramps
             each = round(ramp / tick)
             assert (np.diff(ticks[:each]) == 1).all() and (np.diff(ticks[-each:]) == 1).all()
+
+
+def test_the_table_clearance_of_a_configuration_is_mujocos_own_contact_depth() -> None:
+    """The commanded configuration's depth into the table (the protective stop's measure) is
+    the penetration MuJoCo's collision finds for the same q, geom for geom, while the arm is
+    clear of it and as it goes in; deeper it keeps counting from the top (through the slab),
+    where MuJoCo's depth turns to the nearer bottom face."""
+    clearance = TableClearance.of_model(ROBOT.mjm, ARM, KIN)
+    assert clearance is not None and "left_pad" in clearance.geom_names
+    m, d = ROBOT.mjm, mujoco.MjData(ROBOT.mjm)
+    table = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "table_top")
+    qs = np.array([ROBOT.spec.home[:6] + [0, s, 0, 0, 0, 0] for s in (0, 0.2, 0.3, 0.32, 0.4)])
+    depth, geom = clearance.depth(qs)
+    for q, ours, g in zip(qs, depth, geom, strict=True):
+        d.qpos[:] = m.qpos0
+        d.qpos[ROBOT.qpos_adr[:6]] = q
+        mujoco.mj_forward(m, d)
+        hits = [c for c in d.contact[: d.ncon] if table in (c.geom[0], c.geom[1])]
+        if not hits:
+            assert ours < 0  # above the table
+            continue
+        deepest = min(hits, key=lambda c: c.dist)
+        other = deepest.geom[0] if deepest.geom[1] == table else deepest.geom[1]
+        if ours < clearance.half[2]:  # in the slab's top half MuJoCo measures from the top too
+            assert ours == pytest.approx(-deepest.dist, abs=1e-6)
+            assert clearance.geom_names[g] == mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, other)
+    assert depth[0] < -0.2 and depth[-1] > 0.05  # home is 21 cm above; the last goes through
+    assert np.all(np.diff(depth) > 0)
 
 
 def test_a_model_that_is_not_the_dh_chain_is_refused() -> None:

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from websockets.sync.client import connect
 
+from clients import ArmfleetClient
 from tests.conftest import Server, wait_for
 from tests.ur_judge import ur_server
 
@@ -188,12 +189,19 @@ def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[st
     with connect(f"{server.ws_url}/v1/ws/worlds/{world}") as ws:
         while (frame := json.loads(ws.recv(timeout=5)))["op"] != "state":
             pass
+    with connect(f"{server.ws_url}/v1/ws?worlds=0-1") as ws:
+        while (batch := json.loads(ws.recv(timeout=5)))["op"] != "states":
+            pass
+    client = ArmfleetClient(server.url)
+    rows = client.states([0, 1])
+    assert client.state(world).safety_mode == rows.world(world).safety_mode  # the Python client
     return {
         "rtde": (r.getSafetyMode(), bool(r.getSafetyStatusBits() & (1 << 2))),
         "dashboard": (dash.safetystatus(), dash.safetymode()),
         "rest": httpx.get(f"{server.url}/v1/worlds/{world}/state").json()["safety_mode"],
-        "ws": frame["safety_mode"],
+        "ws": (frame["safety_mode"], batch["safety_mode"][batch["worlds"].index(world)]),
         "ur": httpx.get(f"{server.url}/v1/ur").json()["worlds"][world]["safety_mode"],
+        "client": rows.world(world).safety_mode,
     }
 
 
@@ -201,15 +209,17 @@ STOPPED = {
     "rtde": (3, True),
     "dashboard": ("Safetystatus: PROTECTIVE_STOP", "Safetymode: PROTECTIVE_STOP"),
     "rest": "PROTECTIVE_STOP",
-    "ws": "PROTECTIVE_STOP",
+    "ws": ("PROTECTIVE_STOP", "PROTECTIVE_STOP"),
     "ur": "PROTECTIVE_STOP",
+    "client": "PROTECTIVE_STOP",
 }
 NORMAL = {
     "rtde": (1, False),
     "dashboard": ("Safetystatus: NORMAL", "Safetymode: NORMAL"),
     "rest": "NORMAL",
-    "ws": "NORMAL",
+    "ws": ("NORMAL", "NORMAL"),
     "ur": "NORMAL",
+    "client": "NORMAL",
 }
 PADS_OVER_TABLE = 0.215  # m between the gripper's pads and the table top at HOME
 
