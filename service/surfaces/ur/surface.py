@@ -5,7 +5,10 @@ The sink runs on the sim thread: after every published snapshot it keeps it as t
 `Frame`, with the position target's rate of change since the last one (RTDE's target_qd and
 target_qdd), and it asks the loop for a snapshot at every tick while an RTDE client streams,
 so that a 500 Hz stream of a 500 Hz world carries every tick. The event loop of the UR
-thread reads that one reference; nothing else crosses threads.
+thread reads that one reference. The sink is also the controllers' safety system (safety.py):
+the torque rule on every snapshot, and after every tick the table check on the targets as of
+every accepted command; a world either stops is handed to the UR thread
+(`Endpoints.protective_stop`), which halts the arm and sets the world's safety mode.
 """
 
 from __future__ import annotations
