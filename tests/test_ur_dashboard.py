@@ -97,3 +97,43 @@ def test_an_unknown_command_gets_the_robots_answer_and_quit_closes(ur) -> None:
             "Disconnected",
         ]
         assert sock.recv(10) == b""  # closed after quit
+
+
+def test_a_paused_world_driven_through_the_table_stops_and_restart_safety_clears_it(ur) -> None:
+    """On a paused server: REST targets that put the gripper 8 cm into the table are taken, one
+    step carries them out and the table check stops the world (the arm held, the Dashboard
+    and the world's state say so, REST moves refused); `restart safety` clears it at once,
+    with no tick between, and the world's state reads NORMAL straight away."""
+    server, addrs = ur
+    dash = dashboard_client.DashboardClient(addrs[1])
+    dash.connect()
+    http = httpx.Client(base_url=server.url, timeout=10)
+    try:
+        home = http.get("/v1/worlds/1/state").json()["target"]
+        down = {"name": ["shoulder_lift_joint"], "position": [home[1] + 0.4]}
+        assert http.put("/v1/worlds/1/targets", json=down).status_code == 200
+        assert http.post("/v1/sim/step", json={"ticks": 1}).status_code == 200
+        wait_for(lambda: dash.safetystatus() == "Safetystatus: PROTECTIVE_STOP", "the stop")
+        state = http.get("/v1/worlds/1/state").json()
+        assert state["safety_mode"] == "PROTECTIVE_STOP"
+        assert abs(state["target"][1] - home[1]) < 0.05  # held near home, not 0.4 rad down
+        refused = http.put("/v1/worlds/1/targets", json=down)
+        assert refused.status_code == 409 and "table" in refused.json()["detail"]
+        assert http.get("/v1/worlds/0/state").json()["safety_mode"] == "NORMAL"
+        tick = state["tick"]
+        dash.restartSafety()
+        state = http.get("/v1/worlds/1/state").json()
+        assert state["safety_mode"] == "NORMAL" and state["tick"] == tick  # no tick between
+        assert dash.robotmode() == "Robotmode: POWER_OFF"  # as the robot: power on again
+        dash.powerOn()
+        dash.brakeRelease()
+        assert (
+            http.put(
+                "/v1/worlds/1/targets",
+                json={"name": ["shoulder_lift_joint"], "position": [home[1]]},
+            ).status_code
+            == 200
+        )
+    finally:
+        dash.disconnect()
+        http.close()

@@ -55,19 +55,16 @@ _READ_TIMEOUT = 5.0
 async def _read(
     loop: SimLoop, worlds: np.ndarray | list[int], with_entities: bool = False
 ) -> tuple[Snapshot, np.ndarray | None]:
-    """Read-your-writes: a snapshot including every accepted command for `worlds`, and while
-    paused their pending targets (which the next step puts in effect). `with_entities`: then
-    one taken on the sim thread with the entities of its own tick (entity_frames.py)."""
+    """Read-your-writes: a snapshot including every accepted command for `worlds` and the
+    worlds' safety modes as of now, and while paused their pending targets (which the next
+    step puts in effect). `with_entities`: then one taken on the sim thread with the entities
+    of its own tick (entity_frames.py)."""
     try:
         snap = await asyncio.wait_for(
             asyncio.wrap_future(loop.fresh_snapshot(worlds)), timeout=_READ_TIMEOUT
         )
         if with_entities:
-            fut = loop.call(
-                lambda b: entity_frames.attach(
-                    dataclasses.replace(b.snapshot(), safety=loop.safety.modes()), b
-                )
-            )
+            fut = loop.call(lambda b: entity_frames.attach(b.snapshot(), b))
             snap = await asyncio.wait_for(asyncio.wrap_future(fut), timeout=_READ_TIMEOUT)
     except TimeoutError:
         why = loop.failure or "no tick completed"
@@ -75,7 +72,9 @@ async def _read(
     pending = (
         loop.commands.pending_targets(np.asarray(worlds)) if loop.mode is Mode.PAUSED else None
     )
-    return snap, pending
+    # the safety mode as of now: a stop, an unlock or a reset between two ticks (paused: no
+    # tick comes) is read at once, like the pending targets
+    return dataclasses.replace(snap, safety=loop.safety.modes()), pending
 
 
 # `?entities=true` on a state read: each world's entities too, of the same tick.
