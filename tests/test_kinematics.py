@@ -166,32 +166,57 @@ def test_line_samples_fall_on_the_loops_ticks_every_tick_of_the_ramps() -> None:
             assert (np.diff(ticks[:each]) == 1).all() and (np.diff(ticks[-each:]) == 1).all()
 
 
+def _closed_hand(m: mujoco.MjModel) -> np.ndarray:
+    """qpos with the gripper closed by MuJoCo itself (its servo, the linkage's constraints)."""
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home"))
+    d.ctrl[:7] = d.qpos[ROBOT.qpos_adr[:7]]
+    d.ctrl[6] = ROBOT.spec.upper[6]
+    for _ in range(1500):
+        mujoco.mj_step(m, d)
+    return d.qpos.copy()
+
+
 def test_the_table_clearance_of_a_configuration_is_mujocos_own_contact_depth() -> None:
     """The commanded configuration's depth into the table (the protective stop's measure) is
-    the penetration MuJoCo's collision finds for the same q, geom for geom, while the arm is
-    clear of it and as it goes in; deeper it keeps counting from the top (through the slab),
-    where MuJoCo's depth turns to the nearer bottom face."""
-    clearance = TableClearance.of_model(ROBOT.mjm, ARM, KIN)
+    the penetration MuJoCo's collision finds for the same q, geom for geom, the gripper open
+    and closed, while the arm is clear of it and as it goes in; through the slab it keeps
+    counting from the top, where MuJoCo's depth turns to the nearer bottom face."""
+    clearance = TableClearance.of_model(ROBOT.mjm, ARM, KIN, ROBOT.spec.names[6])
     assert clearance is not None and "left_pad" in clearance.geom_names
     m, d = ROBOT.mjm, mujoco.MjData(ROBOT.mjm)
     table = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "table_top")
-    qs = np.array([ROBOT.spec.home[:6] + [0, s, 0, 0, 0, 0] for s in (0, 0.2, 0.3, 0.32, 0.4)])
-    depth, geom = clearance.depth(qs)
-    for q, ours, g in zip(qs, depth, geom, strict=True):
-        d.qpos[:] = m.qpos0
-        d.qpos[ROBOT.qpos_adr[:6]] = q
-        mujoco.mj_forward(m, d)
-        hits = [c for c in d.contact[: d.ncon] if table in (c.geom[0], c.geom[1])]
-        if not hits:
-            assert ours < 0  # above the table
-            continue
-        deepest = min(hits, key=lambda c: c.dist)
-        other = deepest.geom[0] if deepest.geom[1] == table else deepest.geom[1]
-        if ours < clearance.half[2]:  # in the slab's top half MuJoCo measures from the top too
-            assert ours == pytest.approx(-deepest.dist, abs=1e-6)
-            assert clearance.geom_names[g] == mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, other)
-    assert depth[0] < -0.2 and depth[-1] > 0.05  # home is 21 cm above; the last goes through
-    assert np.all(np.diff(depth) > 0)
+    qs = np.array(
+        [ROBOT.spec.home[:6] + [0, s, 0, 0, 0, 0] for s in (0, 0.2, 0.25, 0.27, 0.3, 0.4)]
+    )
+    closed = _closed_hand(m)
+    compared = 0
+    for hand in (m.qpos0, closed):
+        opening = np.full(len(qs), hand[ROBOT.qpos_adr[6]])
+        depth, geom = clearance.depth(qs, opening)
+        for q, ours, g in zip(qs, depth, geom, strict=True):
+            d.qpos[:] = hand
+            d.qpos[ROBOT.qpos_adr[:6]] = q
+            mujoco.mj_forward(m, d)
+            hits: dict[str, float] = {}  # the arm's and gripper's deepest (not the cube's)
+            for c in d.contact[: d.ncon]:
+                name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, int(sum(c.geom) - table))
+                if table in c.geom and name in clearance.geom_names:
+                    hits[name] = min(c.dist, hits.get(name, np.inf))
+            if not hits:
+                assert ours < 0  # above the table
+                continue
+            name = min(hits, key=hits.__getitem__)
+            if ours < 2 * clearance.half[2]:  # within the slab: MuJoCo's depth is the same
+                assert ours == pytest.approx(-hits[name], abs=2e-4)  # 1e-6 open, 0.2 mm closed
+                assert clearance.geom_names[g] == name
+                compared += 1
+        assert depth[0] < -0.15 and depth[-1] > 0.05  # home is clear; the last goes through
+        assert np.all(np.diff(depth) > 0)
+    assert compared >= 3
+    # closing lowers the 2F-140's pads by 2.4 cm: the same arm pose reaches deeper closed
+    shut = clearance.depth(qs[:1], np.array([closed[ROBOT.qpos_adr[6]]]))[0][0]
+    assert shut - clearance.depth(qs[:1], np.zeros(1))[0][0] > 0.02
 
 
 def test_a_model_that_is_not_the_dh_chain_is_refused() -> None:

@@ -72,14 +72,15 @@ class TableWatch:
         self._last = np.full((len(worlds), ARM), np.nan)  # targets at the last check
         self._depth = np.full(len(worlds), -np.inf)  # their depth into the table [m]
 
-    def check(self, targets: np.ndarray) -> list[tuple[int, str]]:
-        """(world, why) of each world whose new target (rows of `targets` (k, 7), in the
-        order of `worlds`) goes through the table."""
+    def check(self, targets: np.ndarray, opening: np.ndarray) -> list[tuple[int, str]]:
+        """(world, why) of each world whose new arm target (rows of `targets` (k, 7), in the
+        order of `worlds`) goes through the table, its gripper as open as `opening` (k,)
+        [rad] (the latest state's finger_joint: clearance.py says why not its target)."""
         arm = np.asarray(targets[:, :ARM], np.float64)
         moved = np.flatnonzero((arm != self._last).any(axis=1))
         if moved.size == 0:
             return []
-        depth, geom = self.clearance.depth(arm[moved])
+        depth, geom = self.clearance.depth(arm[moved], np.asarray(opening, np.float64)[moved])
         out: list[tuple[int, str]] = []
         for i, d, g in zip(moved.tolist(), depth.tolist(), geom.tolist(), strict=True):
             if d > ALLOWED_DEPTH and d > self._depth[i]:

@@ -41,6 +41,7 @@ from service.surfaces.ur.settings import UrSettings
 from service.surfaces.ur.tcp_pose import ToolKinematics
 
 log = logging.getLogger("armfleet.ur")
+ARM = 6  # the arm's joints come first; the gripper's finger_joint is next
 
 
 class UrSink(SnapshotSink):
@@ -83,8 +84,10 @@ class UrSink(SnapshotSink):
 
     def on_tick(self, batch: Batch, now: float) -> None:
         """Every tick: the targets as of every accepted command, through the table check."""
-        if self._table is not None:
-            for world, why in self._table.check(self._targets(self._table.worlds)):
+        table = self._table
+        if table is not None:
+            opening = self._last.snap.position[table.worlds, ARM]  # the gripper, as it is
+            for world, why in table.check(self._targets(table.worlds), opening):
                 self._ep.protective_stop(world, why)
 
 
@@ -94,8 +97,9 @@ def _table_watch(worlds: list[int], control: Control) -> TableWatch | None:
         kin = tools_of(control.loop).kin
     except Unavailable:
         return None
-    mjm, arm = control.loop.batch.robot.mjm, control.spec.names[:6]
-    clearance = TableClearance.of_model(mjm, arm, kin)
+    mjm, names = control.loop.batch.robot.mjm, control.spec.names
+    finger = names[ARM] if len(names) > ARM else None
+    clearance = TableClearance.of_model(mjm, names[:ARM], kin, finger)
     return None if clearance is None else TableWatch(worlds, clearance)
 
 
