@@ -184,13 +184,19 @@ def test_servoj_streamed_at_500_hz_is_followed(arm) -> None:
 
 
 def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[str, object]:
-    """The world's safety mode as RTDE, the Dashboard, REST, the WebSocket state frame and
-    GET /v1/ur each report it."""
+    """The world's safety mode as RTDE, the Dashboard, REST, the WebSocket state frames (of
+    a tick after the REST read: a frame is stamped when its tick is published), GET /v1/ur
+    and the Python client each report it."""
+    rest = httpx.get(f"{server.url}/v1/worlds/{world}/state").json()  # as of now
     with connect(f"{server.ws_url}/v1/ws/worlds/{world}") as ws:
-        while (frame := json.loads(ws.recv(timeout=5)))["op"] != "state":
+        while (frame := json.loads(ws.recv(timeout=5)))["op"] != "state" or (
+            frame["tick"] <= rest["tick"]
+        ):
             pass
     with connect(f"{server.ws_url}/v1/ws?worlds=0-1") as ws:
-        while (batch := json.loads(ws.recv(timeout=5)))["op"] != "states":
+        while (batch := json.loads(ws.recv(timeout=5)))["op"] != "states" or (
+            batch["tick"] <= rest["tick"]
+        ):
             pass
     client = ArmfleetClient(server.url)
     rows = client.states([0, 1])
@@ -198,7 +204,7 @@ def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[st
     return {
         "rtde": (r.getSafetyMode(), bool(r.getSafetyStatusBits() & (1 << 2))),
         "dashboard": (dash.safetystatus(), dash.safetymode()),
-        "rest": httpx.get(f"{server.url}/v1/worlds/{world}/state").json()["safety_mode"],
+        "rest": rest["safety_mode"],
         "ws": (frame["safety_mode"], batch["safety_mode"][batch["worlds"].index(world)]),
         "ur": httpx.get(f"{server.url}/v1/ur").json()["worlds"][world]["safety_mode"],
         "client": rows.world(world).safety_mode,
