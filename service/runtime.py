@@ -368,7 +368,7 @@ class Runtime:
         """Snapshot `latest` of the stopped batch; a failure is logged and kept, never raised."""
         assert self.loop is not None
         try:
-            state = self.loop.state_of(self.loop.batch)
+            state = self.loop.state_door.state_of(self.loop.batch)
             info = self.persistence.snapshots.save(LATEST, state, self.header)
             log.info("saved snapshot 'latest' at tick %d (%d bytes)", info.tick, info.size_bytes)
             return

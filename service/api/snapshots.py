@@ -34,7 +34,7 @@ Rt = Annotated[Runtime, Depends(get_runtime)]
 )
 async def save(runtime: Rt, loop: Loop, body: SnapshotRequest) -> SnapshotInfo:
     check_state_support(loop.batch)
-    state = await asyncio.wrap_future(loop.request_state())
+    state = await asyncio.wrap_future(loop.state_door.request_state())
     info = await asyncio.to_thread(
         runtime.persistence.snapshots.save, body.name, state, runtime.header
     )
@@ -62,7 +62,7 @@ async def restore(runtime: Rt, loop: Loop, name: Annotated[SnapshotName, Path()]
     # Read and check the whole file first: a bad one changes nothing.
     state = await asyncio.to_thread(runtime.persistence.snapshots.load, name, runtime.header)
     try:
-        tick = await asyncio.wrap_future(loop.restore(state, name))
+        tick = await asyncio.wrap_future(loop.state_door.restore(state, name))
     except ValueError as exc:
         raise Conflict(f"cannot restore snapshot {name!r}: {exc}") from None
     return RestoreReply(name=name, tick=tick)

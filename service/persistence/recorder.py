@@ -117,7 +117,9 @@ class Recorder(SnapshotSink):
         loop.listeners.add_restore_listener(self._on_restore)
         try:
             # The state and the trajectories running in it, at one tick boundary.
-            taken = loop.call(lambda b: (loop.state_of(b), control.trajectories.running()))
+            taken = loop.call(
+                lambda b: (loop.state_door.state_of(b), control.trajectories.running())
+            )
             state, running = taken.result(timeout=60)
         except BaseException:
             self._give_up()
@@ -131,7 +133,7 @@ class Recorder(SnapshotSink):
             raise error from None
         self._start_tick = state.tick
         # The starting state is that tick's, in the file already: a later snapshot of the same
-        # tick (a paused loop publishes writes it applied at once, SimLoop._settle) is not.
+        # tick (a paused loop publishes writes it applied at once, StateDoor._settle) is not.
         self._last_tick = state.tick
         self._thread = threading.Thread(
             target=self._run, args=(out,), name="armfleet-recorder", daemon=True

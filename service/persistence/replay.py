@@ -223,14 +223,14 @@ def replay_recording(
     recorder = None
     try:
         t0 = time.perf_counter()
-        loop.restore(rec.segments[0].start, "start").result()
+        loop.state_door.restore(rec.segments[0].start, "start").result()
         if out is not None:  # the replayed run, recorded like the live one (from the same state)
             recorder = Recorder(out, rec.worlds, rec.rate, block=True)
             recorder.start(_context(loop, control))
         counts = {"ticks": 0, "states": 0, "commands": 0}
         for i, seg in enumerate(rec.segments):
             if i:
-                loop.restore(seg.start, "restore").result()
+                loop.state_door.restore(seg.start, "restore").result()
             _replay_segment(loop, control, seg, compare, counts)
         wall = time.perf_counter() - t0
     finally:

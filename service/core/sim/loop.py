@@ -8,8 +8,8 @@ reader wants one. A command takes effect at a tick known when it is accepted: th
 reply; the first snapshot whose `tick` is >= it carries the new target.
 
 While paused at rest a write does not wait for a tick that may never come: the loop applies
-it at once, between two ticks, and publishes the state it makes (loop_state.py says why that
-keeps every reply's tick and every recording as they were).
+it at once, between two ticks, and publishes the state it makes (its part `state_door`:
+loop_state.py says why that keeps every reply's tick and every recording as they were).
 """
 
 from __future__ import annotations
@@ -29,12 +29,12 @@ from service.core.sim.command_desk import CommandDesk
 from service.core.sim.command_share import CommandShare
 from service.core.sim.device_turns import DeviceTurns
 from service.core.sim.listeners import Listeners
-from service.core.sim.loop_state import StateDoor
+from service.core.sim.loop_state import LoopHooks, StateDoor
 from service.core.sim.loop_types import LoopStats, SnapshotSink, resolve, run_request
 from service.core.sim.pace import LATE_S, Cadence, FailureLog, RateWindow
 from service.core.sim.safety import SafetyTable
 from service.core.sim.snapshot_beside import BesideSnapshot
-from service.core.sim.staging import CommandTable, Staging, TrajectoryHook
+from service.core.sim.staging import CommandTable, TrajectoryHook
 from service.core.sim.types import Mode, Snapshot
 from service.core.sim.waiters import Waiters
 
@@ -46,7 +46,7 @@ T = TypeVar("T")
 _IDLE_SNAPSHOT_PERIOD = 0.1
 
 
-class SimLoop(StateDoor):
+class SimLoop:
     """Advance a Batch in realtime, fast or paused mode and serialise commands into it."""
 
     def __init__(
@@ -73,14 +73,11 @@ class SimLoop(StateDoor):
             batch.nworld,
             self._accept_tick,
             lambda: self._tick,
-            self._settle_soon,
+            lambda: self.state_door.settle_soon(),
         )
         self._stepping = False
         self._tick = batch.tick
         self._step_goal = self._tick  # paused mode: run until the tick counter reaches this
-        # Paused writes applied at once (`_settle`): one queued; readers must wait for it.
-        self._settle_queued = False
-        self._unsettled = False
         # Work between ticks, `step` futures, readers waiting for a tick (read-your-writes).
         self._waiters = Waiters()
         self._failures = FailureLog()
@@ -94,6 +91,18 @@ class SimLoop(StateDoor):
         # launches on a device shared with the camera renderer go in turns (device_turns.py)
         self._turns: DeviceTurns = getattr(batch, "device_turns", None) or DeviceTurns()
         self.randomizations = self.commands.randomizations
+        # Snapshots taken and restored, paused writes applied at once (loop_state.py).
+        hooks = LoopHooks(
+            call=self.call,
+            publish=self._publish,
+            at_rest=self._at_rest,
+            tick=lambda: self._tick,
+            latest=lambda: self._latest,
+            running=lambda: self._running,
+            resting=self._resting,
+            jump_to=self._jump_to,
+        )
+        self.state_door = StateDoor(self._wake, self.commands, self._waiters, self.listeners, hooks)
         self.share = CommandShare(batch.tick_dt)  # ticks first: the commands' budget per tick
 
     # -- life cycle -------------------------------------------------------------------------
@@ -134,9 +143,9 @@ class SimLoop(StateDoor):
             self._mode = Mode(mode)
             self.share.set_active(self._running and self._mode is Mode.REALTIME)
             self._rate.restart(self._tick)
-            self._settle_soon()  # paused: writes accepted before it are applied now
+            self.state_door.settle_soon()  # paused: writes accepted before it are applied now
             self._wake.notify_all()
-            waiters = self._stranded_waiters()
+            waiters = self.state_door.stranded()
         for fut in waiters:  # paused: the ticks they waited for will not come
             resolve(fut, self._latest)
 
@@ -227,7 +236,7 @@ class SimLoop(StateDoor):
             if effective.size:
                 chosen = effective if worlds is None else effective[worlds]
                 need = max(need, int(chosen.max(initial=0)))
-            if self._latest.tick >= need or not self._running or self._will_not_advance():
+            if self._latest.tick >= need or not self._running or self.state_door.will_not_advance():
                 fut: concurrent.futures.Future[Snapshot] = concurrent.futures.Future()
                 fut.set_result(self._latest)
             else:
@@ -242,24 +251,14 @@ class SimLoop(StateDoor):
         for fut in done:
             fut.set_result(self._tick)
 
-    def _will_not_advance(self) -> bool:
-        """Paused with no step requested, no tick in progress, and `latest` showing the last
-        tick (lock held), with no paused write still to apply (`_settle`). Realtime does not
-        snapshot every tick, so a pause can find `latest` behind: the sim thread then publishes
-        once more, and readers wait for that."""
-        return (
-            self._mode is Mode.PAUSED
-            and self._tick >= self._step_goal
-            and not self._stepping
-            and self._latest.tick >= self._tick
-            and not self._unsettled
-        )
+    def _resting(self) -> bool:
+        """Paused with no tick under way or due (lock held, or the sim thread)."""
+        return self._mode is Mode.PAUSED and not self._stepping and self._tick >= self._step_goal
 
-    def _stranded_waiters(self) -> list[concurrent.futures.Future[Snapshot]]:
-        """Readers whose tick will not come because time stands still (lock held)."""
-        if not self._will_not_advance():
-            return []
-        return self._waiters.readers.take()
+    def _jump_to(self, tick: int) -> None:
+        """Time starts again at `tick` (a restore; lock held): counter, step goal, rate."""
+        self._tick = self._step_goal = tick
+        self._rate.restart(tick)
 
     # -- the loop thread --------------------------------------------------------------------
 
@@ -345,14 +344,10 @@ class SimLoop(StateDoor):
         None when all zero); running trajectories are sampled first."""
         with self._lock:
             if self._traj is not None:
-                self._traj.sample(self._tick + 1, self._staged())
+                self._traj.sample(self._tick + 1, self.commands.view())
             writes = self._table.take()
             self._stepping = True
         return writes
-
-    def _staged(self) -> Staging:
-        """The pending tables for the hook (lock held)."""
-        return self.commands.view()
 
     def _finish_tick(self, faulted: np.ndarray, mode: Mode, now: float) -> bool:
         """Count the tick, forget targets of worlds reset for faults; is a snapshot wanted?"""
@@ -361,9 +356,9 @@ class SimLoop(StateDoor):
             self._stepping = False
             if faulted.size:
                 self._table.faulted(faulted)
-            self._settle_soon()  # a write accepted during the last tick of a burst: now
+            self.state_door.settle_soon()  # a write accepted during the last tick of a burst: now
             traj = self._traj is not None and self._traj.after_step(
-                self._tick, faulted, self._staged()
+                self._tick, faulted, self.commands.view()
             )
             return (
                 traj
@@ -384,11 +379,11 @@ class SimLoop(StateDoor):
         with self._lock:
             self._latest = snap
             self._last_snapshot_wall = now
-            if settled and not self._settle_queued:
-                self._unsettled = False
+            if settled:
+                self.state_door.shown()
             if self._traj is not None:
-                self._traj.observe(snap, self._staged())
-            ready = self._waiters.readers.reached(snap.tick) + self._stranded_waiters()
+                self._traj.observe(snap, self.commands.view())
+            ready = self._waiters.readers.reached(snap.tick) + self.state_door.stranded()
         for fut in ready:
             resolve(fut, snap)
         self.listeners.publish(snap)

@@ -5,7 +5,7 @@ this book answers (`at(tick)`), on the sim thread where the state is taken. A ra
 recorded under the loop's command lock with the tick its reset is staged for (SimLoop.reset),
 so a state of tick T names exactly the randomisations with tick <= T: one accepted but not yet
 applied is not in that state and not in its header. A paused loop applies writes at once,
-before their tick (SimLoop._settle): the entries it applied so are `held`, named at any tick
+before their tick (StateDoor._settle): the entries it applied so are `held`, named at any tick
 since. A restore replaces the book with what the snapshot names; a later plain reset or
 entity write does not clear a world's entry (its worlds started from that draw; what came
 after is in the state, and in a recording).
