@@ -14,17 +14,17 @@ first); (3) the largest batch that fits: per resolution, the worlds doubled from
 until building or drawing the render batch fails (a child process per resolution).
 
 Run it: ``armfleet bench --section 30 --device cuda`` (``--quick``: 1,024 worlds, shorter).
+The renderer alone and the largest fit are measured in bench/gpu_renderer.py; the stream's
+client processes are bench/camera_readers.py; this module serves, streams and compares.
 """
 
 from __future__ import annotations
 
 import contextlib
-import gc
 import json
 import math
 import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -32,11 +32,11 @@ from typing import Any
 import httpx
 
 from bench import common
+from bench.camera_readers import Readers, client_name
+from bench.gpu_renderer import CAMERA, SIZE, largest_fit, renderer_alone, used_gib
 from bench.registry import Context, Result, section
 
 RATE = 30.0  # messages a second asked of the stream
-SIZE = (64, 64)  # the wrist camera's size for the stream and the renderer alone
-CAMERA = "wrist"
 FIT_SIZES = ((64, 64), (128, 128), (256, 256))
 FIT_MAX_WORLDS = 1 << 22  # the doubling stops here even when memory is left
 STREAMS = (("realtime", 1), ("realtime", 8), ("fast", 8))  # (mode, client processes)
@@ -53,45 +53,6 @@ APART_STREAMS = (("realtime", 8, "cuda:1"), ("fast", 8, "cuda:1"))
 FITS_BEFORE = Path(__file__).parent / "results" / "cameras_gpu_cuda.json"
 
 
-def _mjm_and_spec(width: int, height: int) -> tuple[Any, Any]:
-    """The service's scene model and its wrist camera at width x height, RGB only."""
-    from service.core.cameras.catalog import camera_specs
-    from service.core.sim.robot import load_robot
-
-    mjm = load_robot().mjm
-    specs = camera_specs(mjm, f"{width}x{height}", "rgb")
-    return mjm, next(s for s in specs if s.name == CAMERA)
-
-
-def _used_gib(device: str) -> float | None:
-    """Memory in use on the device (every process), GiB; None where it cannot be read."""
-    import warp as wp
-
-    with contextlib.suppress(Exception):
-        dev = wp.get_device(device)
-        if dev.is_cuda:
-            return (dev.total_memory - dev.free_memory) / 2**30
-    return None
-
-
-def _build(mjm: Any, spec: Any, n: int, device: str) -> tuple[Any, Any, Any]:
-    """An mjwarp Model, Data of `n` worlds and render context, as the service's renderer builds."""
-    import mujoco
-    import mujoco_warp as mjw
-    import warp as wp
-
-    with wp.ScopedDevice(device):
-        m = mjw.put_model(mjm)
-        data = mujoco.MjData(mjm)
-        mujoco.mj_kinematics(mjm, data)
-        d = mjw.put_data(mjm, data, nworld=n, nconmax=1, njmax=1)
-        outputs = {"render_rgb": [True], "render_depth": [False], "render_seg": [False]}
-        rc = mjw.create_render_context(
-            mjm, nworld=n, cam_res=[(spec.width, spec.height)], cam_active=[spec.id], **outputs
-        )
-    return m, d, rc
-
-
 def _cuda_count() -> int:
     """CUDA devices on this machine (0 where warp finds none)."""
     import warp as wp
@@ -99,91 +60,6 @@ def _cuda_count() -> int:
     with contextlib.suppress(Exception):
         return int(wp.get_cuda_device_count())
     return 0
-
-
-def _rate(t: common.Timing) -> dict[str, float]:
-    return {"batches_per_s": 1 / t.per_call, "ms_per_batch": 1e3 * t.per_call}
-
-
-def _device_rates(mjm: Any, spec: Any, n: int, device: str, seconds: float) -> dict[str, Any]:
-    """Batches a second on the device alone: refit + render, and the service's whole picture."""
-    import mujoco_warp as mjw
-    import numpy as np
-    import warp as wp
-
-    t0 = time.perf_counter()
-    m, d, rc = _build(mjm, spec, n, device)
-    out: dict[str, Any] = {"build_s": time.perf_counter() - t0}
-
-    def render() -> None:
-        mjw.refit_bvh(m, d, rc)
-        mjw.render(m, d, rc)
-
-    def picture() -> None:
-        mjw.kinematics(m, d)
-        mjw.camlight(m, d)
-        render()
-
-    with wp.ScopedDevice(device):
-        t0 = time.perf_counter()
-        picture()
-        wp.synchronize_device()
-        out["first_draw_s"] = time.perf_counter() - t0  # compiles or loads the kernels
-        for name, fn in (("render", render), ("picture", picture)):
-            out[name] = _rate(common.time_calls(fn, seconds, 0, 3, 2, wp.synchronize_device))
-        out["distinct_colours_world0"] = len(np.unique(rc.rgb_data.numpy()[0]))  # not blank
-    out["gpu_used_gib"] = _used_gib(device)
-    return out
-
-
-def _service_renderer_rate(mjm: Any, spec: Any, n: int, device: str, seconds: float) -> dict:
-    """Batches a second of the service's BatchRenderer: state in, pixels out to the host, one
-    picture at a time, and pipelined as the camera feed runs it (the next picture launched
-    before this one's pixels are waited for); and whether the pipelined pictures are the plain
-    path's, byte for byte (every world posed apart, so a mix-up of worlds or buffers shows)."""
-    import numpy as np
-
-    from service import heap
-    from service.engines.camera_render import BatchRenderer
-
-    heap.keep_large_blocks()  # as `armfleet serve` does
-    renderer = BatchRenderer(mjm, [spec], n, device)
-    rng = np.random.default_rng(7)
-    qpos = np.tile(mjm.qpos0, (n, 1))
-    qpos[:, :6] += rng.uniform(-0.3, 0.3, (n, 6))
-    plain = renderer._render_all(qpos, spec).rgb
-    first = renderer.launch(qpos, CAMERA)
-    second = renderer.launch(qpos[::-1].copy(), CAMERA)  # into the other buffer, meanwhile
-    same = bool(np.array_equal(first.result().rgb, plain))
-    same = same and bool(np.array_equal(second.result().rgb, plain[::-1]))
-    out = _rate(common.time_calls(lambda: renderer.render(qpos, CAMERA), seconds))
-    reps, t0, pending = 0, time.perf_counter(), renderer.launch(qpos, CAMERA)
-    while time.perf_counter() - t0 < seconds or reps < 3:
-        following = renderer.launch(qpos, CAMERA)
-        pending.result()
-        pending, reps = following, reps + 1
-    pending.result()
-    took = (time.perf_counter() - t0) / (reps + 1)
-    out["pipelined"] = {"batches_per_s": 1 / took, "ms_per_batch": 1e3 * took}
-    out["pipelined_equals_plain"] = same
-    return out
-
-
-def renderer_alone(device: str, n: int, seconds: float) -> dict[str, Any]:
-    """The renderer on the device alone, then the service's renderer, N worlds at SIZE."""
-    import warp as wp
-
-    mjm, spec = _mjm_and_spec(*SIZE)
-    with contextlib.suppress(Exception):
-        wp.set_mempool_release_threshold(device, 0)  # freed memory goes back to the device
-    out: dict[str, Any] = {"worlds": n, "size": f"{spec.width}x{spec.height}"}
-    out["gpu_used_before_gib"] = _used_gib(device)
-    out.update(_device_rates(mjm, spec, n, device, seconds))
-    gc.collect()
-    out["service"] = _service_renderer_rate(mjm, spec, n, device, seconds)
-    gc.collect()
-    wp.synchronize_device(device)
-    return out
 
 
 # -- the service, streaming ------------------------------------------------------------------
@@ -194,129 +70,8 @@ def _metrics(url: str) -> dict[str, float]:
     return {x.split()[0]: float(x.split()[1]) for x in lines if x.startswith("armfleet_camera")}
 
 
-def _first(msg: bytes, worlds: list[int]) -> dict[str, Any]:
-    """What the first message of a client says: its worlds, image sizes, wholeness."""
-    hlen = int.from_bytes(msg[4:8], "little")
-    head = json.loads(msg[8 : 8 + hlen])
-    sizes = head["sizes"]
-    return {
-        "every_world": head["worlds"] == worlds,
-        "image_bytes": sorted(set(sizes)),
-        "message_bytes": len(msg),
-        "whole": len(msg) == 8 + hlen + sum(sizes),
-    }
-
-
-def _read(url: str, worlds: list[int], counts: Any, first: Any, stop: Any) -> None:
-    """One camera-stream client (a process of its own: a reader of 6 GB/s must not share a
-    GIL): counts whole messages and bytes into `counts`, checks the first message. The
-    client library is aiohttp (its frame reader is compiled: about twice the websockets sync
-    client's throughput per connection on loopback); ARMFLEET_BENCH_CLIENT=websockets uses
-    the websockets sync client."""
-    try:
-        if _client().startswith("websockets "):
-            _read_websockets(url, worlds, counts, first, stop)
-        else:
-            import asyncio
-
-            asyncio.run(_read_aiohttp(url, worlds, counts, first, stop))
-    except Exception as exc:
-        first.put({"error": f"{type(exc).__name__}: {exc}"})
-
-
-def _client() -> str:
-    """The stream clients' library (ARMFLEET_BENCH_CLIENT), with its version."""
-    from importlib.metadata import version
-
-    name = os.environ.get("ARMFLEET_BENCH_CLIENT", "aiohttp")
-    return f"{name} {version(name)}"
-
-
-def _count(msg: bytes, worlds: list[int], counts: Any, first: Any) -> None:
-    if first.empty():
-        first.put(_first(msg, worlds))
-    with counts.get_lock():
-        counts[0] += 1
-        counts[1] += len(msg)
-
-
-def _read_websockets(url: str, worlds: list[int], counts: Any, first: Any, stop: Any) -> None:
-    from websockets.sync.client import connect
-
-    with connect(url, max_size=None, compression=None, open_timeout=60) as ws:
-        while not stop.is_set():
-            with contextlib.suppress(TimeoutError):
-                _count(ws.recv(timeout=5), worlds, counts, first)
-
-
-async def _read_aiohttp(url: str, worlds: list[int], counts: Any, first: Any, stop: Any) -> None:
-    import aiohttp
-
-    timeout = aiohttp.ClientTimeout(total=None, connect=60)
-    async with (
-        aiohttp.ClientSession(timeout=timeout) as session,
-        session.ws_connect(url, max_msg_size=0, compress=0) as ws,
-    ):
-        while not stop.is_set():
-            try:
-                msg = await ws.receive(timeout=5)
-            except TimeoutError:
-                continue
-            if msg.type != aiohttp.WSMsgType.BINARY:
-                raise RuntimeError(f"the stream ended: {msg.type.name} {msg.data!r}")
-            _count(msg.data, worlds, counts, first)
-
-
-class _Readers:
-    """`k` client processes, each streaming its share of the worlds 0..n-1."""
-
-    def __init__(self, ws_url: str, n: int, k: int) -> None:
-        import multiprocessing as mp
-
-        spawn = mp.get_context("spawn")
-        self.stop = spawn.Event()
-        self.k, self.n = k, n
-        self.counts = [spawn.Array("q", 2) for _ in range(k)]  # messages, bytes
-        self.firsts = [spawn.Queue() for _ in range(k)]
-        self.procs = []
-        self.shares = [(i + 1) * n // k - i * n // k for i in range(k)]  # worlds per client
-        for i in range(k):
-            lo, hi = i * n // k, (i + 1) * n // k - 1
-            q = f"camera={CAMERA}&worlds={lo}-{hi}&rate={RATE:g}&image=rgb&format=raw"
-            args = (f"{ws_url}/v1/ws/cameras?{q}", list(range(lo, hi + 1)))
-            args += (self.counts[i], self.firsts[i], self.stop)
-            self.procs.append(spawn.Process(target=_read, args=args, daemon=True))
-        for proc in self.procs:
-            proc.start()
-
-    def frames(self) -> float:
-        """Pictures of every world delivered so far (each client's messages x its share)."""
-        return sum(c[0] * w for c, w in zip(self.counts, self.shares, strict=True)) / self.n
-
-    def messages(self) -> int:
-        return sum(int(c[0]) for c in self.counts)
-
-    def close(self) -> dict[str, Any]:
-        self.stop.set()
-        for proc in self.procs:
-            proc.join(timeout=30)
-            if proc.is_alive():
-                proc.kill()
-        firsts = [q.get(timeout=5) if not q.empty() else {} for q in self.firsts]
-        return {
-            "clients": self.k,
-            "messages": self.messages(),
-            "bytes": sum(int(c[1]) for c in self.counts),
-            "first": firsts[0],
-            "errors": [f["error"] for f in firsts if "error" in f],
-            "every_world": all(f.get("every_world") for f in firsts),
-            "whole_messages": all(f.get("whole") for f in firsts),
-            "image_bytes": sorted({b for f in firsts for b in f.get("image_bytes", [])}),
-        }
-
-
 def _window(
-    srv: common.Served, seconds: float, readers: _Readers | None, srv_device: str
+    srv: common.Served, seconds: float, readers: Readers | None, srv_device: str
 ) -> dict[str, Any]:
     """Ticks/s, RTF, frames/s (pictures of every world), messages/s, the cameras' metrics."""
 
@@ -338,7 +93,7 @@ def _window(
         "renders_per_s": d.get("renders_total", 0.0) / wall,
         "render_ms": 1e3 * d.get("render_seconds_total", 0.0) / renders,
         "state_ms": 1e3 * d.get("state_seconds_total", 0.0) / renders,
-        "gpu_used_gib": _used_gib(srv_device),
+        "gpu_used_gib": used_gib(srv_device),
     }
 
 
@@ -367,7 +122,7 @@ def stream(
         out["ready_s"], out["cameras_warm_s"] = srv.ready_s, _ready(srv.url)
         time.sleep(2.0)
         out["idle"] = _window(srv, window, None, ctx.device)
-        readers = _Readers(srv.ws_url, n, clients)
+        readers = Readers(srv.ws_url, n, clients, CAMERA, RATE)
         try:
             deadline = time.monotonic() + 120
             while readers.frames() < 2 and time.monotonic() < deadline:
@@ -421,91 +176,6 @@ def _profiled(spy: Any) -> dict[str, Any]:
                 leaves[frame] = leaves.get(frame, 0) + n
     top = sorted(leaves.items(), key=lambda kv: -kv[1])[:25]
     return {"file": str(path), "samples": total, "threads": threads, "top": top, "log": log}
-
-
-# -- the largest batch that fits (child processes) ----------------------------------------
-
-
-def fit_child(device: str, width: int, height: int, start: int, cap: int) -> None:
-    """The largest `start` x 2^k worlds (<= cap) whose render batch builds and draws, a JSON line
-    per try. Memory grows with the worlds: after the first try the search jumps to the largest
-    doubling the memory used predicts to fit, then halves back or doubles on from there: a plain
-    doubling search's answer in fewer builds."""
-    import mujoco_warp as mjw
-    import warp as wp
-
-    import service.engines.warp  # noqa: F401  (Warp's log level)
-
-    mjm, spec = _mjm_and_spec(width, height)
-    with contextlib.suppress(Exception):
-        wp.set_mempool_release_threshold(device, 0)  # what is freed goes back: fair readings
-    base = _used_gib(device)
-
-    def attempt(n: int) -> dict[str, Any]:
-        print(json.dumps({"worlds": n}), flush=True)
-        try:
-            m, d, rc = _build(mjm, spec, n, device)
-            with wp.ScopedDevice(device):
-                t0 = time.perf_counter()
-                mjw.refit_bvh(m, d, rc)
-                mjw.render(m, d, rc)
-                wp.synchronize_device()
-            got = {"ok": True, "gpu_used_gib": _used_gib(device)}
-            got["draw_s"] = time.perf_counter() - t0
-            del m, d, rc
-        except Exception as exc:
-            got = {"ok": False, "error": f"{type(exc).__name__}: {exc}"[:400]}
-        gc.collect()
-        with contextlib.suppress(Exception):
-            wp.synchronize_device()
-        print(json.dumps({"worlds": n, **got}), flush=True)
-        return got
-
-    first = attempt(start)
-    if not first["ok"]:
-        return
-    n, bad, used = start, 2 * cap, first["gpu_used_gib"]
-    if base is not None and used is not None and used > base:
-        total, per_world = wp.get_device(device).total_memory / 2**30, (used - base) / start
-        while n * 2 <= cap and base + per_world * n * 2 <= 0.95 * total:
-            n *= 2
-        while n > start and not attempt(n)["ok"]:
-            bad, n = n, n // 2
-    while n * 2 <= cap and n * 2 < bad and attempt(n * 2)["ok"]:
-        n *= 2
-
-
-def largest_fit(
-    device: str, width: int, height: int, start: int, cap: int, timeout: float
-) -> dict[str, Any]:
-    """The largest worlds that fitted at width x height, and how the next doubling failed."""
-    code = (
-        "from bench.cameras_gpu import fit_child; "
-        f"fit_child({device!r}, {width}, {height}, {start}, {cap})"
-    )
-    try:
-        p = subprocess.run(
-            [sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout
-        )
-        text, err, rc = p.stdout, p.stderr, p.returncode
-    except subprocess.TimeoutExpired as exc:
-        text = exc.stdout.decode() if isinstance(exc.stdout, bytes) else exc.stdout or ""
-        err, rc = f"stopped after {timeout:.0f} s", None
-    lines = [json.loads(x) for x in text.splitlines() if x.startswith("{")]
-    tries = [x for x in lines if "ok" in x]
-    if lines and "ok" not in lines[-1]:  # the child died or ran out of time on this one
-        tries.append({**lines[-1], "ok": False, "error": f"exit {rc}: {(err or '')[-300:]}"})
-    best = max((x for x in tries if x["ok"]), key=lambda x: x["worlds"], default={})
-    above = [x for x in tries if not x["ok"] and x["worlds"] > best.get("worlds", 0)]
-    return {
-        "size": f"{width}x{height}",
-        "largest_worlds": best.get("worlds"),
-        "gpu_used_gib": best.get("gpu_used_gib"),
-        "megapixels": best["worlds"] * width * height / 1e6 if best else None,
-        "next_failed": min(above, key=lambda x: x["worlds"]) if above else None,
-        "capped": bool(best) and best["worlds"] * 2 > cap and not above,
-        "tries": tries,
-    }
 
 
 # -- the section -----------------------------------------------------------------------------
@@ -622,17 +292,18 @@ def cameras_gpu(ctx: Context) -> Result:
     gpu = common.gpu_name(ctx.device) or ""
     card = "H200" if "H200" in gpu else "H100" if "H100" in gpu else gpu or "none"
     notes = [
-        f"card: {card} ({gpu or 'no GPU'}); WebSocket clients ({_client()}) on the same machine, "
-        "each a process asking an equal share of the worlds, raw pixels, no compression; ratio: "
-        "pictures of every world delivered a second over min(30, the renderer's batches/s); "
-        "room: the renderer alone's batches/s x the share of the device the ticks leave (1 - "
-        "ticks/s streaming / ticks/s in fast mode with nobody looking; a model, no overlap); "
-        "largest fit: the renderer alone (the service draws at most 2^26 pixels a render)"
+        f"card: {card} ({gpu or 'no GPU'}); WebSocket clients ({client_name()}) on the same "
+        "machine, each a process asking an equal share of the worlds, raw pixels, no "
+        "compression; ratio: pictures of every world delivered a second over min(30, the "
+        "renderer's batches/s); room: the renderer alone's batches/s x the share of the device "
+        "the ticks leave (1 - ticks/s streaming / ticks/s in fast mode with nobody looking; a "
+        "model, no overlap); largest fit: the renderer alone (the service draws at most 2^26 "
+        "pixels a render)"
     ]
     if fits_from:
         notes.append(f"largest fit: carried from the run started {fits_from} on {fits_card}")
     data = dict(card=card, gpu=gpu, worlds=n, size=f"{SIZE[0]}x{SIZE[1]}", rate=RATE)
-    data["client"] = _client()
+    data["client"] = client_name()
     data.update(renderer_alone=alone, streams=streams, fits=fits, errors=errors)
     data["fits_from"], data["fits_card"] = fits_from, fits_card or card
     return Result(_rows(alone, streams, fits, n), data, notes)

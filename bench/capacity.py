@@ -31,9 +31,10 @@ from collections.abc import Callable
 from typing import Any
 
 from bench import common
-from bench.engines import _default_step, _Rollout
+from bench.baselines import Rollout, physics_dt
 from bench.registry import Context, Result, section
-from bench.service_bench import RTF_GOAL, _measure_realtime, capacity_search
+from bench.service_bench import RTF_GOAL, capacity_search
+from bench.service_probe import measure_realtime
 
 LIMIT_WORLDS = 1024  # batch size at which the rollout limit is measured
 TARGET_SHARE = 0.9  # issue 20: native MuJoCo at >= 0.9x the rollout limit
@@ -89,9 +90,9 @@ def ladder(
 def capacity_engines(ctx: Context) -> Result:
     """Per engine and frame format: the largest realtime batch, each candidate beside a limit."""
     window, warmup, block_s = ctx.pick((30.0, 3.0, 1.0), (10.0, 2.0, 0.5))
-    _, dt = _default_step()
+    _, dt = physics_dt()
     steps_per_world_s = common.CONTROL_HZ * round(1 / (common.CONTROL_HZ * dt))
-    rollout = _Rollout(LIMIT_WORLDS, common.usable_cores(), dt)
+    rollout = Rollout(LIMIT_WORLDS, common.usable_cores(), dt)
     blocks: list[float] = []  # every limit reading of the run (best of 2 blocks), world-steps/s
 
     def limit_now() -> float:
@@ -121,7 +122,7 @@ def capacity_engines(ctx: Context) -> Result:
                     env = {"ARMFLEET_ENGINE": engine}
                     with ctx.serve(n, "realtime", env=env) as server:
                         res = asyncio.run(
-                            _measure_realtime(server, window, warmup, per_subscriber=n, fmt=fmt)
+                            measure_realtime(server, window, warmup, per_subscriber=n, fmt=fmt)
                         )
                 except Exception as exc:
                     errors[str(n)] = f"{type(exc).__name__}: {exc}"

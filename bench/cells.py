@@ -158,7 +158,7 @@ def cell_rtf(n: int, scene: str | None, window: float) -> dict[str, Any]:
     import asyncio
 
     from bench import common
-    from bench.service_bench import _measure_realtime
+    from bench.service_probe import measure_realtime
 
     env = {"ARMFLEET_ENGINE": "mujoco", **({"ARMFLEET_SCENE": scene} if scene else {})}
     load = [round(x, 2) for x in os.getloadavg()]
@@ -166,7 +166,7 @@ def cell_rtf(n: int, scene: str | None, window: float) -> dict[str, Any]:
         pid = srv.server.process.pid
         proc = os.path.exists(f"/proc/{pid}/stat")
         cpu0, info0 = _cpu_s(pid) if proc else 0.0, srv.get_info()[1]
-        got = asyncio.run(_measure_realtime(srv, window, warmup=2.0, per_subscriber=n))
+        got = asyncio.run(measure_realtime(srv, window, warmup=2.0, per_subscriber=n))
         cpu1, info1 = _cpu_s(pid) if proc else 0.0, srv.get_info()[1]
     sim_s = (info1["tick"] - info0["tick"]) / info1["control_hz"]
     cores = (cpu1 - cpu0) / sim_s if proc and sim_s > 0 else None

@@ -51,13 +51,13 @@ def checkout(rev: str) -> Iterator[Path]:
 
 async def _window(client: Any, window: float) -> float:
     """One fast-mode window of a paused server: world-steps/s; paused again afterwards."""
-    from bench.service_bench import _info
+    from bench.service_probe import timed_info
 
     (await client.post("/v1/sim/mode", json={"mode": "fast"})).raise_for_status()
     await asyncio.sleep(0.5)
-    t0, info0 = await _info(client, str(client.base_url))
+    t0, info0 = await timed_info(client, str(client.base_url))
     await asyncio.sleep(window)
-    t1, info1 = await _info(client, str(client.base_url))
+    t1, info1 = await timed_info(client, str(client.base_url))
     (await client.post("/v1/sim/pause")).raise_for_status()
     ticks = info1["tick"] - info0["tick"]
     return common.world_steps(ticks, info1["nworld"], info1["substeps"]) / (t1 - t0)
@@ -67,7 +67,7 @@ async def _alternate(servers: dict[str, common.Served], rounds: int, window: flo
     """Rounds of one window per server, the order alternating; each streamed to one client."""
     import httpx
 
-    from bench.service_bench import FrameCounter
+    from bench.service_probe import FrameCounter
 
     readers = []
     for srv in servers.values():

@@ -1,4 +1,4 @@
-"""Sections 10, 12 and 13: the two engines side by side (section 11: capacity.py).
+"""Sections 10 and 12: the two engines side by side (11: capacity.py; 13: kernels.py).
 
 10. ``engines``: native MuJoCo vs MuJoCo Warp vs raw ``mujoco.rollout`` on every core, at the
     same sizes in one run: each engine alone in this process, then ``armfleet serve --mode fast
@@ -9,9 +9,7 @@
 12. ``physics_step``: the gain of the larger physics step: each engine alone at the step used
     before issue 13 (2.083 ms, 8 substeps) and at today's default, ticks/s (best block) and the
     worlds that rate would hold at 60 Hz.
-13. ``kernels``: where MuJoCo Warp's CPU tick goes: the uncaptured tick with every ``wp.launch``
-    timed (CPU launches are synchronous), each kernel's median over the ticks, the top kernels
-    at 64 and 1024 worlds.
+13. ``kernels``: moved to bench/kernels.py.
 
 Standalone: ``python -m bench.engines --section 10 --worlds 1024``.
 """
@@ -19,13 +17,12 @@ Standalone: ``python -m bench.engines --section 10 --worlds 1024``.
 from __future__ import annotations
 
 import asyncio
-import collections
-import time
 from typing import Any
 
 from bench import common
+from bench.baselines import Rollout, physics_dt
 from bench.registry import Context, Result, section
-from bench.service_bench import _measure_fast
+from bench.service_probe import FrameCounter, timed_info
 
 ENGINE_NAMES = ("mujoco", "warp")
 
@@ -73,58 +70,9 @@ def _engine_rate(
         batch.close()
 
 
-class _Rollout:
-    """Raw native MuJoCo: `mujoco.rollout.Rollout` on `nthread` threads, chained calls."""
-
-    def __init__(self, nworld: int, nthread: int, physics_dt: float, solver: Any = None) -> None:
-        """`solver`: a mujoco.mjtSolver; None: the native engine's (physics.ENGINE_SOLVER)."""
-        import math
-
-        import mujoco
-        import numpy as np
-        from mujoco import rollout
-
-        from service.core.sim.physics import ENGINE_SOLVER, configure
-        from service.core.sim.robot import load_robot
-
-        robot = load_robot()
-        self.mjm = mjm = robot.mjm
-        configure(mjm, physics_dt, ENGINE_SOLVER["mujoco"] if solver is None else solver)
-        data = mujoco.MjData(mjm)
-        mujoco.mj_resetDataKeyframe(mjm, data, robot.home_key)
-        mujoco.mj_forward(mjm, data)
-        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        state0 = np.empty(mujoco.mj_stateSize(mjm, spec))
-        mujoco.mj_getState(mjm, data, state0, spec)
-        # ~50 ms a call at ~1e5 steps/s per thread, as section 1 does.
-        self.nstep = int(min(200, max(1, math.ceil(0.05 * 1e5 * nthread / nworld))))
-        self.nworld = nworld
-        self.initial = np.tile(state0, (nworld, 1))
-        self.control = np.tile(data.ctrl.copy(), (nworld, self.nstep, 1))
-        self.states = np.empty((nworld, self.nstep, state0.size))
-        self.datas = [mujoco.MjData(mjm) for _ in range(nthread)]
-        self.pool = rollout.Rollout(nthread=nthread)
-
-    def block(self, seconds: float) -> float:
-        """World-steps/s over one block of about `seconds`."""
-
-        def call() -> None:
-            out = self.states
-            self.pool.rollout(
-                self.mjm, self.datas, self.initial, self.control, nstep=self.nstep, state=out
-            )
-            self.initial[:] = self.states[:, -1, :]
-
-        timing = common.time_calls(call, seconds)
-        return timing.reps * self.nstep * self.nworld / timing.elapsed
-
-    def close(self) -> None:
-        self.pool.close()
-
-
 async def _served_vs_rollout(
     server: common.Served,
-    rollout: _Rollout,
+    rollout: Rollout,
     rounds: int,
     window: float,
     block_s: float,
@@ -136,8 +84,6 @@ async def _served_vs_rollout(
     rollout runs keeps the two from sharing the cores. Best of the rounds for each.
     """
     import httpx
-
-    from bench.service_bench import FrameCounter, _info
 
     counter = FrameCounter()
     reader = asyncio.create_task(counter.run(f"{server.ws_url}/v1/ws?rate=30&format={fmt}"))
@@ -152,9 +98,9 @@ async def _served_vs_rollout(
                 (await client.post("/v1/sim/mode", json={"mode": "fast"})).raise_for_status()
                 await asyncio.sleep(0.5)
                 counter.reset()
-                t0, info0 = await _info(client, server.url)
+                t0, info0 = await timed_info(client, server.url)
                 await asyncio.sleep(window)
-                t1, info1 = await _info(client, server.url)
+                t1, info1 = await timed_info(client, server.url)
                 steps = common.world_steps(
                     info1["tick"] - info0["tick"], server.nworld, info1["substeps"]
                 )
@@ -172,11 +118,6 @@ async def _served_vs_rollout(
     }
 
 
-def _serve_fast(ctx: Context, engine: str, nworld: int, duration: float, warmup: float) -> dict:
-    with ctx.serve(nworld, "fast", env={"ARMFLEET_ENGINE": engine}) as server:
-        return asyncio.run(_measure_fast(server, duration, warmup, "json"))
-
-
 @section(10, "engines", "Native MuJoCo vs MuJoCo Warp vs raw rollout, world-steps/s, one run")
 def engines(ctx: Context) -> Result:
     """Each engine served in fast mode, rollout blocks between its windows; engines alone too.
@@ -187,13 +128,13 @@ def engines(ctx: Context) -> Result:
     sizes = ctx.sizes((64, 256, 1024), (1024,))
     rounds, window, block_s = ctx.pick((5, 2.0, 1.0), (2, 1.0, 0.5))
     cores = common.usable_cores()
-    _, dt = _default_step()
+    _, dt = physics_dt()
 
     def one(n: int) -> dict[str, Any]:
         out: dict[str, Any] = {"nworld": n, "threads": cores}
         for engine in ENGINE_NAMES:
             out[f"{engine}_alone"] = _engine_rate(engine, n, dt, block_s, rounds)
-        rollout = _Rollout(n, cores, dt)
+        rollout = Rollout(n, cores, dt)
         try:
             for engine in ENGINE_NAMES:
                 with ctx.serve(n, "fast", env={"ARMFLEET_ENGINE": engine}) as server:
@@ -262,12 +203,6 @@ def engines(ctx: Context) -> Result:
     return Result(rows, data, notes)
 
 
-def _default_step() -> tuple[int, float]:
-    from service.core.sim.physics import tick_timing
-
-    return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
-
-
 @section(12, "physics_step", "Physics step: before (2.083 ms) vs today's default, engine alone")
 def physics_step(ctx: Context) -> Result:
     """Each engine alone at the old and the new step: ticks/s and 60 Hz worlds that rate holds."""
@@ -277,7 +212,7 @@ def physics_step(ctx: Context) -> Result:
     block_s, rounds = ctx.pick((1.0, 5), (0.3, 2))
     steps = {
         "old": tick_timing(common.CONTROL_HZ, common.OLD_PHYSICS_DT),
-        "new": _default_step(),
+        "new": physics_dt(),
     }
 
     def one(n: int) -> dict[str, Any]:
@@ -315,93 +250,6 @@ def physics_step(ctx: Context) -> Result:
     }
     note = "60 Hz worlds = worlds x ticks/s / 60: the engine alone, before any service overhead"
     return Result(rows, data, [note])
-
-
-def _kernel_profile(nworld: int, ticks: int) -> dict[str, Any]:
-    """Time every wp.launch of `ticks` uncaptured ticks (CPU launches run to completion).
-
-    Each kernel's figure is its median over the ticks, so that a tick in which another process
-    took the core does not count (the machine may be shared).
-    """
-    import statistics
-
-    import warp as wp
-
-    from service.engines.warp import WorldBatch
-
-    batch = WorldBatch(nworld, capture=False)
-    batch.step(2)
-    per_tick: list[dict[str, float]] = []
-    calls: collections.Counter[str] = collections.Counter()
-    launch = wp.launch
-
-    def timed(kernel: Any, *args: Any, **kwargs: Any) -> Any:
-        t0 = time.perf_counter()
-        try:
-            return launch(kernel, *args, **kwargs)
-        finally:
-            name = getattr(kernel, "key", str(kernel)).replace("__locals__", ".")
-            per_tick[-1][name] = per_tick[-1].get(name, 0.0) + time.perf_counter() - t0
-            calls[name] += 1
-
-    walls = []
-    wp.launch = timed  # mujoco_warp launches through the `wp` module's attribute
-    try:
-        for _ in range(ticks):
-            per_tick.append({})
-            t0 = time.perf_counter()
-            batch.step(1)
-            walls.append(time.perf_counter() - t0)
-    finally:
-        wp.launch = launch
-    names = set().union(*per_tick)
-    spent = {k: statistics.median(t.get(k, 0.0) for t in per_tick) for k in names}
-    total = sum(spent.values())
-    top = sorted(spent.items(), key=lambda kv: -kv[1])
-    return {
-        "nworld": nworld,
-        "ticks": ticks,
-        "ms_per_tick_uncaptured": statistics.median(walls) * 1e3,
-        "ms_per_tick_in_launches": total * 1e3,
-        "launches_per_tick": sum(calls.values()) / ticks,
-        "kernels": [
-            {
-                "kernel": k,
-                "ms_per_tick": v * 1e3,
-                "share": v / total,
-                "launches_per_tick": calls[k] / ticks,
-            }
-            for k, v in top
-        ],
-    }
-
-
-@section(13, "kernels", "MuJoCo Warp CPU tick: top kernels (uncaptured, each launch timed)")
-def kernels(ctx: Context) -> Result:
-    """The uncaptured warp tick at 64 and 1024 worlds, every launch timed; the top ten each."""
-    sizes = ctx.sizes((64, 1024), (64,))
-    ticks = ctx.pick(15, 5)
-    results, errors = ctx.each(
-        sizes,
-        lambda n: _kernel_profile(n, ticks),
-        lambda r: f"{r['ms_per_tick_uncaptured']:.1f} ms/tick, top {r['kernels'][0]['kernel']}",
-    )
-    rows = [
-        {
-            "worlds": int(n),
-            "kernel": k["kernel"][:48],
-            "ms/tick": k["ms_per_tick"],
-            "share": k["share"],
-            "launches/tick": k["launches_per_tick"],
-        }
-        for n, r in results.items()
-        for k in r["kernels"][:10]
-    ]
-    note = (
-        "launch overhead (~tens of µs each, ~190 launches a tick) is inside each figure; the "
-        "service replays a captured tick, which removes it"
-    )
-    return Result(rows, {"results": results, "errors": errors}, [note])
 
 
 if __name__ == "__main__":

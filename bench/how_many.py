@@ -6,13 +6,13 @@ here, with the model as served:
 
 1. **The limit**: raw ``mujoco.rollout`` of the served model on every core (the native engine's
    solver and step), as worlds at 60 Hz: world-steps/s over the steps one world needs a second.
-   The best of a few short blocks (bench.engines._Rollout).
+   The best of a few short blocks (bench.baselines.Rollout).
 2. **Per engine** (native MuJoCo, MuJoCo Warp on the CPU, and MuJoCo Warp on CUDA where a GPU
    is present): ``armfleet serve --mode fast`` at a first guess N0 with one 30 Hz subscriber
    of every world measures the served tick rate; N = N0 x ticks/s / 60 (a little under) is the
    prediction (probed once more at N when it is far from N0), and ``--mode realtime`` at N
    with that subscriber for a short window verifies it (RTF >= 0.99,
-   bench.service_bench._measure_realtime); a miss steps N down (twice at most).
+   bench.service_probe.measure_realtime); a miss steps N down (twice at most).
 3. ``--check``: each engine's answer run again right after, for a longer window: the answer
    holds when RTF >= 0.99 there too.
 
@@ -35,7 +35,8 @@ from typing import Any
 import httpx
 
 from bench import common
-from bench.service_bench import RTF_GOAL, FrameCounter, _info, _measure_realtime
+from bench.service_bench import RTF_GOAL
+from bench.service_probe import FrameCounter, measure_realtime, timed_info
 
 LIMIT_WORLDS = 1024  # batch size at which raw rollout is timed (bench/capacity.py's)
 UNDER = 0.97  # the prediction from fast mode, a little under (realtime waits between ticks)
@@ -79,6 +80,19 @@ class Timing:
     check_window_s: float
 
 
+@dataclass(frozen=True)
+class Ask:
+    """What `armfleet capacity` was asked: the engines (None: every one here), `--quick`,
+    `--check`, the fast-mode probe size (`--worlds`; None: a share of the limit) and
+    `--max-worlds`."""
+
+    engines: Sequence[str] | None = None
+    quick: bool = False
+    check: bool = False
+    first: int | None = None
+    max_worlds: int | None = None
+
+
 FULL = Timing(1.0, 3, 3.0, 2.0, 10.0, 30.0)
 QUICK = Timing(0.3, 2, 1.5, 1.0, 3.0, 5.0)
 
@@ -98,12 +112,12 @@ def rollout_limit(timing: Timing) -> dict[str, Any]:
     """Raw rollout of the served model on every core: world-steps/s and worlds at 60 Hz."""
     import mujoco
 
-    from bench.engines import _default_step, _Rollout
+    from bench.baselines import Rollout, physics_dt
 
-    _, dt = _default_step()
+    _, dt = physics_dt()
     steps_per_world_s = common.CONTROL_HZ * round(1 / (common.CONTROL_HZ * dt))
     cores = common.usable_cores()
-    rollout = _Rollout(LIMIT_WORLDS, cores, dt)
+    rollout = Rollout(LIMIT_WORLDS, cores, dt)
     try:
         rollout.block(timing.limit_block_s / 2)  # warm: the worlds settle from home
         blocks = [rollout.block(timing.limit_block_s) for _ in range(timing.limit_blocks)]
@@ -131,9 +145,9 @@ async def _fast(server: common.Served, window: float, warmup: float, fmt: str) -
     try:
         async with httpx.AsyncClient(timeout=60) as client:
             await asyncio.sleep(warmup)
-            t0, info0 = await _info(client, server.url)
+            t0, info0 = await timed_info(client, server.url)
             await asyncio.sleep(window)
-            t1, info1 = await _info(client, server.url)
+            t1, info1 = await timed_info(client, server.url)
     finally:
         reader.cancel()
         await asyncio.gather(reader, return_exceptions=True)
@@ -156,7 +170,7 @@ def realtime_run(engine: Engine, n: int, window: float, warmup: float) -> dict[s
     """`n` worlds in realtime mode, one 30 Hz subscriber of every world: RTF over `window`."""
     with _serve(engine, n, "realtime") as server:
         res = asyncio.run(
-            _measure_realtime(server, window, warmup, per_subscriber=n, fmt=engine.fmt)
+            measure_realtime(server, window, warmup, per_subscriber=n, fmt=engine.fmt)
         )
     res["held"] = res["realtime_factor"] >= RTF_GOAL
     return res
@@ -236,17 +250,10 @@ def engines_here(names: Sequence[str] | None) -> list[Engine]:
     return [e for e in every if e.key in names]
 
 
-def measure(
-    names: Sequence[str] | None = None,
-    quick: bool = False,
-    check: bool = False,
-    first: int | None = None,
-    max_worlds: int | None = None,
-    say: Callable[[str], None] = print,
-) -> dict[str, Any]:
+def measure(ask: Ask = Ask(), say: Callable[[str], None] = print) -> dict[str, Any]:
     """The whole answer as a JSON-able dict (see the module docstring)."""
-    timing = QUICK if quick else FULL
-    engines = engines_here(names)
+    timing = QUICK if ask.quick else FULL
+    engines = engines_here(ask.engines)
     started = common.now_iso()
     t0 = time.perf_counter()
     machine = common.machine_info("cuda" if CUDA_ENGINE in engines else "cpu")
@@ -258,13 +265,13 @@ def measure(
     results: dict[str, Any] = {}
     for engine in engines:
         try:
-            res = engine_capacity(engine, limit["worlds"], timing, say, first, max_worlds)
+            res = engine_capacity(engine, limit["worlds"], timing, say, ask.first, ask.max_worlds)
         except Exception as exc:  # one engine failing (e.g. Warp's kernels) loses that one
             res = {"label": engine.label, "worlds": None, "error": f"{type(exc).__name__}: {exc}"}
             say(f"  {engine.key}: FAILED: {res['error']}")
         res["ratio_to_limit"] = res["worlds"] / limit["worlds"] if res.get("worlds") else None
         results[engine.key] = res
-    if check:
+    if ask.check:
         for key, res in results.items():
             engine = next(e for e in engines if e.key == key)
             if res.get("worlds"):
@@ -278,7 +285,7 @@ def measure(
     return {
         # argv as the bench's result files keep it (bench.figures.command reads it back)
         "command": [Path(sys.argv[0]).name, *sys.argv[1:]],
-        "quick": quick,
+        "quick": ask.quick,
         "started": started,
         "finished": common.now_iso(),
         "seconds": round(time.perf_counter() - t0, 1),
@@ -347,17 +354,11 @@ def report(result: dict[str, Any]) -> str:
 
 
 def run(
-    names: Sequence[str] | None = None,
-    quick: bool = False,
-    check: bool = False,
-    out: Path | None = None,
-    first: int | None = None,
-    max_worlds: int | None = None,
-    say: Callable[[str], None] = print,
+    ask: Ask = Ask(), out: Path | None = None, say: Callable[[str], None] = print
 ) -> dict[str, Any]:
     """`armfleet capacity`: measure, print the answer, write the JSON; returns the result."""
-    say(f"armfleet capacity{' (quick)' if quick else ''}: measuring on this machine ...")
-    result = measure(names, quick, check, first, max_worlds, say)
+    say(f"armfleet capacity{' (quick)' if ask.quick else ''}: measuring on this machine ...")
+    result = measure(ask, say)
     path = Path(out) if out else common.RESULTS_DIR / "capacity.json"
     result["out"] = str(common.write_json(path.name, result, path.parent))
     say(report(result))

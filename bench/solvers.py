@@ -39,12 +39,12 @@ def _iterations(mjm: Any, state: Any, steps: int = 120) -> float:
 def solvers(ctx: Context) -> Result:
     import mujoco
 
-    from bench.engines import _default_step, _Rollout
+    from bench.baselines import Rollout, physics_dt
 
     nworld = (ctx.worlds or [1024])[0]
     rounds, block_s = ctx.pick((6, 1.0), (2, 0.3))
-    _, dt = _default_step()
-    rollout = _Rollout(nworld, common.usable_cores(), dt)
+    _, dt = physics_dt()
+    rollout = Rollout(nworld, common.usable_cores(), dt)
     kinds = {name: getattr(mujoco.mjtSolver, f"mjSOL_{name.upper()}") for name in SOLVERS}
     blocks: dict[str, list[float]] = {name: [] for name in SOLVERS}
     iterations: dict[str, float] = {}

@@ -23,7 +23,6 @@ Standalone: ``python -m bench.throughput --quick --worlds 1 16``.
 from __future__ import annotations
 
 import gc
-import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -31,6 +30,15 @@ from typing import Any
 import numpy as np
 
 from bench import common
+from bench.baselines import (
+    Rollout,
+    engine_model,
+    finite,
+    home_key,
+    model_options,
+    physics_dt,
+    raw_warp,
+)
 from bench.registry import Context, Result, section
 
 CPU_SIZES = (1, 16, 64, 256, 1024, 4096)
@@ -55,13 +63,6 @@ DESCRIPTIONS = {
     ROLLOUT_1T: "native MuJoCo, mujoco.rollout.Rollout(nthread=0): the calling thread",
     ROLLOUT_ALL: "native MuJoCo, mujoco.rollout.Rollout(nthread=usable cores)",
 }
-
-
-def physics_dt() -> tuple[int, float]:
-    """(substeps, physics_dt) of the engine's defaults, exactly as WorldBatch derives them."""
-    from service.core.sim.physics import tick_timing
-
-    return tick_timing(common.CONTROL_HZ, common.PHYSICS_DT)
 
 
 # -- the engines -------------------------------------------------------------------------------
@@ -124,60 +125,6 @@ def bench_engine_cores(nworld: int, device: str, min_time: float, warmup_time: f
     return _result(timing, batch.substeps, nworld, build_s=build_s, shards=shards, faults=faults)
 
 
-def engine_model(device: str = "cpu", engine: str = "mujoco"):
-    """(MjModel, home key id) configured exactly as `engine` configures its own (its solver).
-
-    Both engines load the robot and set their options with `service.core.sim.physics.configure` at
-    the default step: doing the same here keeps the baselines on the same physics whatever the
-    engine changes, without building (and on a GPU run compiling CPU kernels for) a batch.
-    `device` is accepted for the callers' symmetry; the model is host data. A fresh model each
-    call.
-    """
-    from service.core.sim.physics import ENGINE_SOLVER, configure
-    from service.core.sim.robot import load_robot
-
-    robot = load_robot()
-    configure(robot.mjm, physics_dt()[1], ENGINE_SOLVER[engine])
-    return robot.mjm, robot.home_key
-
-
-def model_options(mjm) -> dict[str, Any]:
-    """The options that decide the cost of a step, for the JSON."""
-    import mujoco
-
-    o = mjm.opt
-    return {
-        "timestep": o.timestep,
-        "solver": mujoco.mjtSolver(o.solver).name,
-        "integrator": mujoco.mjtIntegrator(o.integrator).name,
-        "cone": mujoco.mjtCone(o.cone).name,
-        "iterations": o.iterations,
-        "ls_iterations": o.ls_iterations,
-        "nq": mjm.nq,
-        "nv": mjm.nv,
-        "ngeom": mjm.ngeom,
-    }
-
-
-def _raw_warp(nworld: int, device: str, substeps: int, dt: float):
-    """(mjw model, mjw data) of the scene at `home`, sized like the engine's."""
-    import mujoco
-    import mujoco_warp as mjw
-    import warp as wp
-
-    from service.engines.warp import NCONMAX, NJMAX
-
-    mjm, home_key = engine_model(device, "warp")
-    assert abs(mjm.opt.timestep - dt) < 1e-12, (mjm.opt.timestep, dt)
-    mjd = mujoco.MjData(mjm)
-    mujoco.mj_resetDataKeyframe(mjm, mjd, home_key)
-    mujoco.mj_forward(mjm, mjd)
-    with wp.ScopedDevice(device):
-        m = mjw.put_model(mjm)
-        d = mjw.put_data(mjm, mjd, nworld=nworld, nconmax=NCONMAX, njmax=NJMAX)
-    return m, d
-
-
 def bench_warp(
     nworld: int,
     device: str,
@@ -194,7 +141,6 @@ def bench_warp(
     starts there), `ticks` = (warm-up, timed) ticks as the engine ran them; else by time.
     """
     import mujoco_warp as mjw
-    import numpy as np
     import warp as wp
 
     substeps, dt = physics_dt()
@@ -207,19 +153,19 @@ def bench_warp(
     with wp.ScopedDevice(dev):
         if WARP_PYTHON in which:
             t0 = time.perf_counter()
-            m, d = _raw_warp(nworld, device, substeps, dt)
+            m, d = raw_warp(nworld, device, dt)
             build_s = time.perf_counter() - t0
             mjw.step(m, d)  # the first step loads every kernel
             sync()
             timing = common.time_calls(lambda: mjw.step(m, d), min_time, warmup_time, sync=sync)
-            out[WARP_PYTHON] = _result(timing, 1, nworld, build_s=build_s, finite=_finite(d))
+            out[WARP_PYTHON] = _result(timing, 1, nworld, build_s=build_s, finite=finite(d))
             del m, d
         if WARP_CAPTURED in which:
             t0 = time.perf_counter()
-            m, d = _raw_warp(nworld, device, substeps, dt)
+            m, d = raw_warp(nworld, device, dt)
             build_s = time.perf_counter() - t0
             mjw.step(m, d)  # loads every kernel (capture needs them), then back to home
-            mjw.reset_data_keyframe(m, d, wp.array(np.full(nworld, _home_key()), dtype=int))
+            mjw.reset_data_keyframe(m, d, wp.array(np.full(nworld, home_key()), dtype=int))
             t1 = time.perf_counter()
             with wp.ScopedCapture(device=dev) as cap:
                 for _ in range(substeps):
@@ -249,62 +195,19 @@ def bench_warp(
                 capture_s=capture_s,
                 warmup_calls=timing.warmup,
                 same_window_as_engine=ticks is not None,
-                finite=_finite(d),
+                finite=finite(d),
             )
     return out
 
 
-def _home_key() -> int:
-    return engine_model()[1]
-
-
-def _finite(d: Any) -> bool:
-    import numpy as np
-
-    return bool(np.isfinite(d.qpos.numpy()).all())
-
-
-def bench_rollout(
-    nworld: int, nthread: int, min_time: float, warmup_time: float, target_call_s: float = 0.05
-) -> dict:
+def bench_rollout(nworld: int, nthread: int, min_time: float, warmup_time: float) -> dict:
     """Native MuJoCo: chained `Rollout.rollout` calls, each continuing from the last state."""
-    import mujoco
-    from mujoco import rollout
-
-    _, dt = physics_dt()
-    mjm, home_key = engine_model()
-    assert abs(mjm.opt.timestep - dt) < 1e-12, (mjm.opt.timestep, dt)
-    mjd = mujoco.MjData(mjm)
-    mujoco.mj_resetDataKeyframe(mjm, mjd, home_key)
-    mujoco.mj_forward(mjm, mjd)
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    nstate = mujoco.mj_stateSize(mjm, spec)
-    state0 = np.empty(nstate)
-    mujoco.mj_getState(mjm, mjd, state0, spec)
-
-    # Steps per call: enough that the Python call overhead is noise (~target_call_s per call,
-    # from the reference figure of ~100k steps/s per core), at most 200 to bound the output.
-    est_rate = 1e5 * max(1, nthread)
-    nstep = int(min(200, max(1, math.ceil(target_call_s * est_rate / nworld))))
-    initial = np.tile(state0, (nworld, 1))
-    control = np.tile(mjd.ctrl.copy(), (nworld, nstep, 1))
-    states = np.empty((nworld, nstep, nstate))
-    datas = [mujoco.MjData(mjm) for _ in range(max(1, nthread))]
-
-    with rollout.Rollout(nthread=nthread) as pool:
-
-        def call() -> None:
-            pool.rollout(mjm, datas, initial, control, nstep=nstep, state=states)
-            initial[:] = states[:, -1, :]
-
-        timing = common.time_calls(call, min_time, warmup_time)
-    return _result(
-        timing,
-        nstep,
-        nworld,
-        nthread=nthread,
-        finite=bool(np.isfinite(initial).all()),
-    )
+    pool = Rollout(nworld, nthread, physics_dt()[1])
+    try:
+        timing = common.time_calls(pool.call, min_time, warmup_time)
+    finally:
+        pool.close()
+    return _result(timing, pool.nstep, nworld, nthread=nthread, finite=pool.finite())
 
 
 # -- the section -------------------------------------------------------------------------------

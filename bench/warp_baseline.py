@@ -58,13 +58,13 @@ def _raw(n: int, device: Any, variant: str, substeps: int) -> tuple[Any, Any, An
     import numpy as np
     import warp as wp
 
-    from bench.throughput import _home_key, _raw_warp, physics_dt
+    from bench.baselines import home_key, physics_dt, raw_warp
 
-    m, d = _raw_warp(n, str(device), substeps, physics_dt()[1])
+    m, d = raw_warp(n, str(device), physics_dt()[1])
     with wp.ScopedDevice(device):
         mjw.step(m, d)  # loads every kernel (capture needs them)
         if variant == "raw_reset":
-            mjw.reset_data_keyframe(m, d, wp.array(np.full(n, _home_key(), np.int32), dtype=int))
+            mjw.reset_data_keyframe(m, d, wp.array(np.full(n, home_key(), np.int32), dtype=int))
         if variant == "raw_as_bench":
             t0 = time.perf_counter()
             while time.perf_counter() - t0 < 1.0:
@@ -91,7 +91,7 @@ def measure(n: int, device_name: str, ticks: int) -> dict[str, Any]:
     """Engine vs raw captured ticks from `home`, tick by tick over the same simulated window."""
     import warp as wp
 
-    from bench.throughput import physics_dt
+    from bench.baselines import physics_dt
     from service.engines.warp import WorldBatch
 
     device = wp.get_device(device_name)

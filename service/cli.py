@@ -321,7 +321,8 @@ def capacity(
     from bench import how_many
 
     try:
-        result = how_many.run(engine or None, quick, check, out, worlds, max_worlds)
+        ask = how_many.Ask(engine or None, quick, check, worlds, max_worlds)
+        result = how_many.run(ask, out)
     except ValueError as exc:  # an unknown engine
         typer.echo(f"armfleet capacity: {exc}", err=True)
         raise typer.Exit(2) from None
