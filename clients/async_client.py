@@ -19,7 +19,6 @@ from typing import TYPE_CHECKING, Any
 import httpx
 from websockets.asyncio.client import ClientConnection
 from websockets.asyncio.client import connect as ws_connect
-from websockets.exceptions import InvalidURI
 
 from clients import calls, cartesian, cell, models, stream
 from clients import trajectory as tj
@@ -44,18 +43,14 @@ class _Closes:
         await self.close()
 
 
-class AsyncArmfleetClient(_Closes, cartesian.AsyncCalls):
+class AsyncArmfleetClient(_Closes, cartesian.AsyncCalls, calls.Endpoint):
     """REST + WebSocket client for one armfleet service, for asyncio."""
 
     def __init__(
         self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
     ) -> None:
-        self.url = url.rstrip("/")
-        self.timeout = timeout
-        self.token = token  # the administrator's or a lease's; sent with every request
-        self.leased: models.Lease | None = None  # what the client `lease()` yields holds
-        headers = calls.auth_headers(token)
-        self._http = httpx.AsyncClient(base_url=self.url, timeout=timeout, headers=headers)
+        super().__init__(url, timeout, token)
+        self._http = httpx.AsyncClient(**self.http_options())
 
     async def call(self, call: Call) -> Any:
         """Run one `Call` (clients.calls): its parsed result, or the `ArmfleetError` the reply
@@ -259,16 +254,8 @@ class AsyncArmfleetClient(_Closes, cartesian.AsyncCalls):
 
 
 async def _open(url: str, timeout: float, token: str | None = None) -> ClientConnection:
-    try:
-        return await ws_connect(
-            url,
-            open_timeout=timeout,
-            max_size=stream.MAX_SIZE,
-            proxy=None,
-            additional_headers=calls.auth_headers(token),
-        )
-    except InvalidURI as exc:
-        raise ArmfleetError(None, str(exc)) from exc
+    with stream.bad_url():
+        return await ws_connect(url, **stream.connect_options(timeout, token))
 
 
 class AsyncWorldSession(_Closes, cartesian.AsyncWorldOps):

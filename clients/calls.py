@@ -221,5 +221,21 @@ def auth_headers(token: str | None) -> dict[str, str]:
     return {"Authorization": f"Bearer {token}"} if token else {}
 
 
+class Endpoint:
+    """What a client of one service holds, blocking or asyncio: where the service is, how
+    long a request may take, the token it sends, the lease it holds. Both clients start so;
+    each then opens its own kind of HTTP client with `http_options`."""
+
+    def __init__(self, url: str, timeout: float, token: str | None) -> None:
+        self.url = url.rstrip("/")
+        self.timeout = timeout
+        self.token = token  # the administrator's or a lease's; sent with every request
+        self.leased: Lease | None = None  # what the client `lease()` yields holds
+
+    def http_options(self) -> dict[str, Any]:
+        """The arguments of the httpx client (sync or async) that sends this client's calls."""
+        return {"base_url": self.url, "timeout": self.timeout, "headers": auth_headers(self.token)}
+
+
 def readyz_call() -> Call:
     return Call("GET", "/readyz", _identity)

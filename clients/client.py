@@ -26,7 +26,6 @@ from collections.abc import Iterable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import httpx
-from websockets.exceptions import InvalidURI
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as ws_connect
 
@@ -53,18 +52,14 @@ class _Closes:
         self.close()
 
 
-class ArmfleetClient(_Closes, cartesian.Calls):
+class ArmfleetClient(_Closes, cartesian.Calls, calls.Endpoint):
     """REST + WebSocket client for one armfleet service. Thread-safe for HTTP calls."""
 
     def __init__(
         self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
     ) -> None:
-        self.url = url.rstrip("/")
-        self.timeout = timeout
-        self.token = token  # the administrator's or a lease's; sent with every request
-        self.leased: models.Lease | None = None  # what the client `lease()` yields holds
-        headers = calls.auth_headers(token)
-        self._http = httpx.Client(base_url=self.url, timeout=timeout, headers=headers)
+        super().__init__(url, timeout, token)
+        self._http = httpx.Client(**self.http_options())
 
     def call(self, call: Call) -> Any:
         """Run one `Call` (clients.calls): its parsed result, or the `ArmfleetError` the reply
@@ -302,16 +297,8 @@ class ArmfleetClient(_Closes, cartesian.Calls):
 
 
 def _open(url: str, timeout: float, token: str | None = None) -> ClientConnection:
-    try:
-        return ws_connect(
-            url,
-            open_timeout=timeout,
-            max_size=stream.MAX_SIZE,
-            proxy=None,
-            additional_headers=calls.auth_headers(token),
-        )
-    except InvalidURI as exc:
-        raise ArmfleetError(None, str(exc)) from exc
+    with stream.bad_url():
+        return ws_connect(url, **stream.connect_options(timeout, token))
 
 
 class WorldSession(_Closes, cartesian.WorldOps):

@@ -7,21 +7,22 @@ trying again are decided here, once.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import random
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypedDict
 from urllib.parse import urlencode, urlsplit, urlunsplit
 
 import numpy as np
 import orjson
-from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
-from clients.calls import increment_body, targets_body, worlds_param
+from clients.calls import auth_headers, increment_body, targets_body, worlds_param
 from clients.entity_states import EntityStates
-from clients.errors import CommandRejected, NotFound, Unreachable, unreachable
+from clients.errors import ArmfleetError, CommandRejected, NotFound, Unreachable, unreachable
 from clients.models import (
     BatchStates,
     CommandAck,
@@ -160,6 +161,26 @@ class CommandIds:
 
 
 # -- drops --------------------------------------------------------------------------------------
+
+
+def connect_options(timeout: float, token: str | None) -> dict[str, Any]:
+    """What both clients open a WebSocket with (websockets' `connect`, sync or asyncio): the
+    handshake's timeout, frames of up to MAX_SIZE, no proxy, the token's header."""
+    return {
+        "open_timeout": timeout,
+        "max_size": MAX_SIZE,
+        "proxy": None,
+        "additional_headers": auth_headers(token),
+    }
+
+
+@contextlib.contextmanager
+def bad_url() -> Iterator[None]:
+    """A URL websockets cannot open is the caller's mistake (ArmfleetError), not a drop."""
+    try:
+        yield
+    except InvalidURI as exc:
+        raise ArmfleetError(None, str(exc)) from exc
 
 
 def drop_reason(exc: BaseException) -> str:
