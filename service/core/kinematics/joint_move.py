@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.core.errors import BadCommand
-from service.core.kinematics.line import MAX_SAMPLES, SAMPLE_DT, duration, profile
+from service.core.kinematics.line import MAX_SAMPLES, SAMPLE_DT, duration, profile, refuse_first
 
 __all__ = ["UR10E_JOINT_SPEED", "JointPlan", "plan_joint_move", "plan_stop"]
 
@@ -81,14 +81,14 @@ def plan_joint_move(
     q = q_start + frac[:, None] * step
     qd = frac_rate[:, None] * step
     q[-1], qd[-1] = goal, 0.0
-    over = np.abs(qd) > limits * _SLACK
-    if over.any():
-        k, j = np.argwhere(over)[0]
-        raise BadCommand(
-            "speed",
+    refuse_first(
+        np.abs(qd) > limits * _SLACK,
+        "speed",
+        lambda k, j: (
             f"{names[j]} would turn at {abs(qd[k, j]):.4g} rad/s, over its limit of "
-            f"{limits[j]:.4g} rad/s",
-        )
+            f"{limits[j]:.4g} rad/s"
+        ),
+    )
     return JointPlan(times, q, qd)
 
 

@@ -29,6 +29,7 @@ lower it, or move around the singularity).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -118,6 +119,14 @@ def duration(distance: float, v: float, a: float) -> float:
     return distance / v + math.pi * v / (2 * a)
 
 
+def refuse_first(over: np.ndarray, field: str, why: Callable[[int, int], str]) -> None:
+    """Refuse a plan at the first (sample k, joint j) where `over` holds: BadCommand(`field`,
+    `why(k, j)`), so that the reply names the joint, the limit and where the plan breaks it."""
+    if over.any():
+        k, j = (int(x) for x in np.argwhere(over)[0])
+        raise BadCommand(field, why(k, j))
+
+
 def plan_line(
     kin: URKinematics,
     q_start: np.ndarray,
@@ -187,14 +196,14 @@ def _follow(
         cand = sols[k][valid[k]]
         cand = cand + TWO_PI * np.round((prev - cand) / TWO_PI)
         prev = out[k] = cand[np.argmin(((cand - prev) ** 2).sum(axis=1))]
-    outside = (out < kin.lower) | (out > kin.upper)
-    if outside.any():
-        k, j = np.argwhere(outside)[0]
-        raise BadCommand(
-            "pose",
+    refuse_first(
+        (out < kin.lower) | (out > kin.upper),
+        "pose",
+        lambda k, j: (
             f"the line takes {names[j]} to {out[k, j]:.4g} rad, outside its range "
-            f"[{kin.lower[j]:.6g}, {kin.upper[j]:.6g}], at {100 * s[k]:.0f}% of it",
-        )
+            f"[{kin.lower[j]:.6g}, {kin.upper[j]:.6g}], at {100 * s[k]:.0f}% of it"
+        ),
+    )
     return out
 
 
@@ -224,12 +233,12 @@ def _check_speeds(
     dt = np.diff(np.concatenate([[0.0], times]))
     dq = np.diff(np.concatenate([q_start[None], q]), axis=0)
     need = np.maximum(np.abs(qd), np.abs(dq) / dt[:, None])
-    over = need > limit * _SPEED_SLACK
-    if over.any():
-        k, j = np.argwhere(over)[0]
-        raise BadCommand(
-            "speed",
+    refuse_first(
+        need > limit * _SPEED_SLACK,
+        "speed",
+        lambda k, j: (
             f"{names[j]} would turn at {need[k, j]:.3g} rad/s, over its limit of "
             f"{limit[j]:.4g} rad/s, at {100 * s[k]:.0f}% of the line: lower the speed, or "
-            f"the line passes too near a singularity",
-        )
+            f"the line passes too near a singularity"
+        ),
+    )
