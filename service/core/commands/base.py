@@ -85,7 +85,10 @@ def no_worlds(tick: int, **record: Any) -> Announcement:
 
 
 class Command(ABC, Generic[R]):
-    """One kind of command. Subclasses set `kind` and implement `stage`; the rest is optional.
+    """One kind of command. Subclasses name themselves in their class line and implement
+    `stage`; the rest is optional:
+
+        class Reset(Command[ResetResult], kind="reset", op="reset", http=("reset",)):
 
     kind: its name in metrics labels, recordings and the registry (spelled only in its module)
     op: its op on the JSON WebSocket protocol (`/v1/ws`, `/v1/ws/worlds/{w}`, `/v1/ws/view`),
@@ -94,6 +97,7 @@ class Command(ABC, Generic[R]):
     replayed: replay applies it at its recorded tick (a mode switch is not: replay steps)
     moves: it sets joint targets or starts a trajectory, so `Control.run` refuses it (409) on
         a protective-stopped world (core/sim/safety.py)
+    What a class does not name it inherits from its base (`_OneWorld` names only `moves`).
     """
 
     kind: ClassVar[str]
@@ -101,6 +105,21 @@ class Command(ABC, Generic[R]):
     http: ClassVar[tuple[str, ...]] = ()
     replayed: ClassVar[bool] = True
     moves: ClassVar[bool] = False
+
+    def __init_subclass__(
+        cls,
+        kind: str | None = None,
+        op: str | None = None,
+        http: tuple[str, ...] | None = None,
+        replayed: bool | None = None,
+        moves: bool | None = None,
+        **kwargs: Any,
+    ) -> None:
+        super().__init_subclass__(**kwargs)
+        named = {"kind": kind, "op": op, "http": http, "replayed": replayed, "moves": moves}
+        for name, value in named.items():
+            if value is not None:
+                setattr(cls, name, value)
 
     @property
     def touches(self) -> Sequence[int] | None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field
@@ -104,12 +104,8 @@ class _ArmTargets(_OneWorld):
 
 
 @dataclass(frozen=True)
-class MoveTcp(_ArmTargets):
+class MoveTcp(_ArmTargets, kind="tcp_target", op="tcp_target", http=("tcp_target",)):
     """Set the arm's targets so that the TCP reaches `pose` (base frame)."""
-
-    kind: ClassVar[str] = "tcp_target"
-    op: ClassVar[str | None] = "tcp_target"
-    http: ClassVar[tuple[str, ...]] = ("tcp_target",)
 
     @classmethod
     def create(cls, door: Door, world: object, pose: Any) -> MoveTcp:
@@ -122,13 +118,9 @@ class MoveTcp(_ArmTargets):
 
 
 @dataclass(frozen=True)
-class Jog(_ArmTargets):
+class Jog(_ArmTargets, kind="jog", op="jog", http=("jog",)):
     """Move the TCP one step along or about an axis of the base or the tool frame (the
     rotation turns about the TCP itself), from the pose of the current targets."""
-
-    kind: ClassVar[str] = "jog"
-    op: ClassVar[str | None] = "jog"
-    http: ClassVar[tuple[str, ...]] = ("jog",)
 
     @classmethod
     def create(cls, door: Door, world: object, axis: Any, step: Any, frame: Any = "base") -> Jog:
@@ -175,12 +167,8 @@ class Jog(_ArmTargets):
 
 
 @dataclass(frozen=True)
-class MoveLinear(StartTrajectory):
+class MoveLinear(StartTrajectory, kind="move_linear", op="move_linear", http=("move_linear",)):
     """A straight TCP line to `pose` (UR's moveL): a trajectory of the arm's joints."""
-
-    kind: ClassVar[str] = "move_linear"
-    op: ClassVar[str | None] = "move_linear"
-    http: ClassVar[tuple[str, ...]] = ("move_linear",)
 
     @classmethod
     def line(

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from pydantic import Field
@@ -177,12 +177,8 @@ def _checked(
 
 
 @dataclass(frozen=True)
-class SetEntities(ManyWrites[EntityResult]):
+class SetEntities(ManyWrites[EntityResult], kind="set_entity", op="set_entity", http=("entities",)):
     """Poses and twists of entities in any worlds, written together at one tick boundary."""
-
-    kind: ClassVar[str] = "set_entity"
-    op: ClassVar[str | None] = "set_entity"
-    http: ClassVar[tuple[str, ...]] = ("entities",)
 
     normalised: tuple[str, ...]  # the orientations normalised, by field
 

@@ -30,7 +30,7 @@ import math
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -293,12 +293,8 @@ def _writes(mjm: mujoco.MjModel, world: int, edits: list[Edit]) -> list[ModelWri
 
 
 @dataclass(frozen=True)
-class SetParams(ManyWrites[ParamsResult]):
+class SetParams(ManyWrites[ParamsResult], kind="set_params", op="set_params", http=("params",)):
     """Per-world physics parameters of any worlds, written together at one tick boundary."""
-
-    kind: ClassVar[str] = "set_params"
-    op: ClassVar[str | None] = "set_params"
-    http: ClassVar[tuple[str, ...]] = ("params",)
 
     @classmethod
     def create(cls, door: Door, items: Sequence[Mapping[str, Any]]) -> SetParams:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, Any
 
 from pydantic import Field
 
@@ -52,13 +52,9 @@ def _number(value: Any, field: str, low: float, high: float, unit: str) -> float
 
 
 @dataclass(frozen=True)
-class SetPayload(SetParams):
+class SetPayload(SetParams, kind="set_payload", op="set_payload", http=("payload",)):
     """Payloads of any worlds, written together at one tick boundary: `set_params` of the
     `payload` parameter, given and recorded as mass and centre (its stage and ack are theirs)."""
-
-    kind: ClassVar[str] = "set_payload"
-    op: ClassVar[str | None] = "set_payload"
-    http: ClassVar[tuple[str, ...]] = ("payload",)
 
     @classmethod
     def create(cls, door: Door, items: Sequence[Mapping[str, Any]]) -> SetPayload:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from pydantic import Field
@@ -184,12 +184,8 @@ def draw(p: Plan, seed: int, worlds: Sequence[int]) -> tuple[list[dict], list[di
 
 
 @dataclass(frozen=True)
-class Randomize(Command[RandomizeResult]):
+class Randomize(Command[RandomizeResult], kind="randomize", op="randomize", http=("randomize",)):
     """Reset worlds to home with entity poses and parameters drawn from `spec` with `seed`."""
-
-    kind: ClassVar[str] = "randomize"
-    op: ClassVar[str | None] = "randomize"
-    http: ClassVar[tuple[str, ...]] = ("randomize",)
 
     worlds: list[int]
     seed: int

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, Any
 
 import numpy as np
 from pydantic import ConfigDict, Field, ValidationError, model_validator
@@ -197,15 +197,13 @@ def _model(model: Any, body: dict[str, Any]) -> Any:
 
 
 @dataclass(frozen=True)
-class _OneWorld(Command[CommandResult]):
+class _OneWorld(Command[CommandResult], moves=True):
     """A target command on one world's named joints (`values`: joint index → value); the
     subclass says how a value changes the latest row (`update`). Replayed as the rows it made:
     recorded targets after the command, with the joints it named."""
 
     world: int
     values: Mapping[int, float]
-
-    moves: ClassVar[bool] = True
 
     @property
     def touches(self) -> Sequence[int]:
@@ -234,13 +232,9 @@ class _OneWorld(Command[CommandResult]):
 
 
 @dataclass(frozen=True)
-class Increment(_OneWorld):
+class Increment(_OneWorld, kind="increment", op="increment", http=("increments",)):
     """Add to the named joints' latest targets (`values`: deltas), clamped to range: the seed's
     Up/Down."""
-
-    kind: ClassVar[str] = "increment"
-    op: ClassVar[str | None] = "increment"
-    http: ClassVar[tuple[str, ...]] = ("increments",)
 
     @classmethod
     def create(
@@ -262,12 +256,8 @@ class Increment(_OneWorld):
 
 
 @dataclass(frozen=True)
-class SetTargets(_OneWorld):
+class SetTargets(_OneWorld, kind="set_targets", op="set_targets", http=("targets",)):
     """JointState-shaped targets for one world: the named joints move, the others keep theirs."""
-
-    kind: ClassVar[str] = "set_targets"
-    op: ClassVar[str | None] = "set_targets"
-    http: ClassVar[tuple[str, ...]] = ("targets",)
 
     @classmethod
     def create(cls, door: Door, world: object, name: Any, position: Any) -> SetTargets:
@@ -284,12 +274,9 @@ class SetTargets(_OneWorld):
 
 
 @dataclass(frozen=True)
-class SetMany(Command[list[CommandResult]]):
+class SetMany(Command[list[CommandResult]], kind="set_many", moves=True):
     """Full targets for many worlds, staged together for one tick boundary; with `joints`
     (indices, a replay's) only those joints of each row change."""
-
-    moves: ClassVar[bool] = True
-    kind: ClassVar[str] = "set_many"
 
     worlds: list[int]
     rows: np.ndarray

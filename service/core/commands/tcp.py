@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from pydantic import Field
@@ -79,12 +79,8 @@ class TcpSet:
 
 
 @dataclass(frozen=True)
-class SetTcp(Command[TcpSet]):
+class SetTcp(Command[TcpSet], kind="set_tcp", op="set_tcp", http=("tcp_offset",)):
     """Give one world its TCP offset (6,) from the flange."""
-
-    kind: ClassVar[str] = "set_tcp"
-    op: ClassVar[str | None] = "set_tcp"
-    http: ClassVar[tuple[str, ...]] = ("tcp_offset",)
 
     world: int
     tcp: tuple[float, ...]

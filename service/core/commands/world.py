@@ -6,7 +6,7 @@ from __future__ import annotations
 import concurrent.futures
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from pydantic import ConfigDict, Field
@@ -60,12 +60,8 @@ class ResetResult:
 
 
 @dataclass(frozen=True)
-class Reset(Command[ResetResult]):
+class Reset(Command[ResetResult], kind="reset", op="reset", http=("reset",)):
     """Send worlds (all when None) back to `home`, state and targets."""
-
-    kind: ClassVar[str] = "reset"
-    op: ClassVar[str | None] = "reset"
-    http: ClassVar[tuple[str, ...]] = ("reset",)
 
     worlds: list[int] | None
 
@@ -100,12 +96,9 @@ class Reset(Command[ResetResult]):
 
 
 @dataclass(frozen=True)
-class SetMode(Command[int]):
-    """Switch realtime / fast / paused; the tick at which the switch happened."""
-
-    kind: ClassVar[str] = "mode"
-    http: ClassVar[tuple[str, ...]] = ("mode", "pause", "resume")
-    replayed: ClassVar[bool] = False  # replay steps tick by tick whatever the mode was
+class SetMode(Command[int], kind="mode", http=("mode", "pause", "resume"), replayed=False):
+    """Switch realtime / fast / paused; the tick at which the switch happened. Not replayed:
+    replay steps tick by tick whatever the mode was."""
 
     mode: Mode
 
@@ -118,13 +111,9 @@ class SetMode(Command[int]):
 
 
 @dataclass(frozen=True)
-class Step(Command["concurrent.futures.Future[int]"]):
+class Step(Command["concurrent.futures.Future[int]"], kind="step", http=("step",), replayed=False):
     """Paused only: advance exactly `ticks` control ticks; the future resolves with the tick
     reached (NotPaused, 409, otherwise). Not recorded: a recording holds every tick anyway."""
-
-    kind: ClassVar[str] = "step"
-    http: ClassVar[tuple[str, ...]] = ("step",)
-    replayed: ClassVar[bool] = False
 
     ticks: int
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -26,13 +26,10 @@ __all__ = ["CancelTrajectory", "ResumeTrajectory", "StartTrajectory"]
 
 
 @dataclass(frozen=True)
-class StartTrajectory(Command[list[Started]]):
+class StartTrajectory(
+    Command[list[Started]], kind="trajectory", op="trajectory", http=("trajectory",), moves=True
+):
     """Run a validated trajectory on every world of `worlds` from one tick (see trajectory)."""
-
-    kind: ClassVar[str] = "trajectory"
-    op: ClassVar[str | None] = "trajectory"
-    http: ClassVar[tuple[str, ...]] = ("trajectory",)
-    moves: ClassVar[bool] = True
 
     worlds: list[int]
     spec: JointTrajectorySpec
@@ -76,11 +73,10 @@ class StartTrajectory(Command[list[Started]]):
 
 
 @dataclass(frozen=True)
-class CancelTrajectory(Command[list[TrajectoryStatus]]):
+class CancelTrajectory(
+    Command[list[TrajectoryStatus]], kind="trajectory_cancel", op="cancel_trajectory"
+):
     """Stop the worlds' running trajectories; they hold where they were. Those stopped."""
-
-    kind: ClassVar[str] = "trajectory_cancel"
-    op: ClassVar[str | None] = "cancel_trajectory"
 
     worlds: list[int]
 
@@ -123,10 +119,8 @@ class CancelTrajectory(Command[list[TrajectoryStatus]]):
 
 
 @dataclass(frozen=True)
-class ResumeTrajectory(Command[tuple[Started, int]]):
+class ResumeTrajectory(Command[tuple[Started, int]], kind="trajectory_resume"):
     """Put back a trajectory that ran when a recording started (replay; see Resumable)."""
-
-    kind: ClassVar[str] = "trajectory_resume"
 
     run: Resumable
 
