@@ -24,7 +24,7 @@ SIZE = (64, 64)  # the wrist camera's size for the stream and the renderer alone
 CAMERA = "wrist"
 
 
-def mjm_and_spec(width: int, height: int) -> tuple[Any, Any]:
+def _mjm_and_spec(width: int, height: int) -> tuple[Any, Any]:
     """The service's scene model and its wrist camera at width x height, RGB only."""
     from service.core.cameras.catalog import camera_specs
     from service.core.sim.robot import load_robot
@@ -135,7 +135,7 @@ def renderer_alone(device: str, n: int, seconds: float) -> dict[str, Any]:
     """The renderer on the device alone, then the service's renderer, N worlds at SIZE."""
     import warp as wp
 
-    mjm, spec = mjm_and_spec(*SIZE)
+    mjm, spec = _mjm_and_spec(*SIZE)
     with contextlib.suppress(Exception):
         wp.set_mempool_release_threshold(device, 0)  # freed memory goes back to the device
     out: dict[str, Any] = {"worlds": n, "size": f"{spec.width}x{spec.height}"}
@@ -161,7 +161,7 @@ def fit_child(device: str, width: int, height: int, start: int, cap: int) -> Non
 
     import service.engines.warp  # noqa: F401  (Warp's log level)
 
-    mjm, spec = mjm_and_spec(width, height)
+    mjm, spec = _mjm_and_spec(width, height)
     with contextlib.suppress(Exception):
         wp.set_mempool_release_threshold(device, 0)  # what is freed goes back: fair readings
     base = used_gib(device)
