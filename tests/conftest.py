@@ -157,6 +157,15 @@ def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
         time.sleep(0.05)
 
 
+def metric(http: httpx.Client, name: str) -> float:
+    """The value of counter or gauge `name` (with its labels, if any: `x{source="http"}`; a
+    bare name takes the first labelled sample) in the server's /metrics."""
+    for line in http.get("/metrics").text.splitlines():
+        if line.startswith(name + " ") or line.startswith(name + "{"):
+            return float(line.rsplit(" ", 1)[1])
+    raise AssertionError(f"{name} not in /metrics")
+
+
 def replies_of(ws: Any, n: int, ops: tuple[str, ...] = ("ack", "error")) -> list[dict[str, Any]]:
     """The next `n` messages of a command socket (websockets' sync client) whose op is in
     `ops`, in order; state frames and other ops in between are passed over."""

@@ -20,6 +20,7 @@ import httpx
 import pytest
 
 from clients.testing import Server, serve
+from tests.conftest import metric
 
 NWORLD = 16
 SNAPSHOTS = 8
@@ -29,13 +30,6 @@ SNAPSHOTS = 8
 def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     with serve(worlds=NWORLD, log_dir=tmp_path_factory.mktemp("busy")) as srv:
         yield srv
-
-
-def metric(http: httpx.Client, name: str) -> float:
-    for line in http.get("/metrics").text.splitlines():
-        if line.startswith(name + " "):
-            return float(line.rsplit(" ", 1)[1])
-    raise AssertionError(f"{name} not in /metrics")
 
 
 def middle(param: dict[str, Any]) -> float | list[float]:

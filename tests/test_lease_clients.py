@@ -15,7 +15,7 @@ import pytest
 from clients import ArmfleetClient, AsyncArmfleetClient, Forbidden, Unauthorized
 from clients.apps.lease_session import session_world
 from clients.testing import LEASE_WAIT_S, LeasedWorld, lease_world
-from tests.conftest import HOME, Server, serve
+from tests.conftest import HOME, Server, metric, serve
 
 
 @pytest.fixture(scope="module")
@@ -78,13 +78,9 @@ def test_lending_refusals_say_why_over_rest(lending: Server) -> None:
     every world lent (503 with when the next lease ends), and a token this server never
     issued, as every token from before a restart is (401 saying the service restarted)."""
 
-    def counted(http: httpx.Client, name: str) -> float:
-        lines = http.get("/metrics").text.splitlines()
-        return float(next(x for x in lines if x.startswith(f"{name} ")).split()[1])
-
     with httpx.Client(base_url=lending.url, timeout=30) as http:
         granted, released = (
-            counted(http, f"armfleet_leases_{x}_total") for x in ("granted", "released")
+            metric(http, f"armfleet_leases_{x}_total") for x in ("granted", "released")
         )
         r = http.post("/v1/leases", json={"count": 1, "ttl_s": 86401})
         assert r.status_code == 422 and "ttl_s" in r.text and "86400" in r.text, r.text
@@ -104,8 +100,8 @@ def test_lending_refusals_say_why_over_rest(lending: Server) -> None:
         finally:
             given_back = http.delete(f"/v1/leases/{every['id']}", headers=mine)
             assert given_back.status_code == 200, given_back.text
-        assert counted(http, "armfleet_leases_granted_total") == granted + 1
-        assert counted(http, "armfleet_leases_released_total") == released + 1
+        assert metric(http, "armfleet_leases_granted_total") == granted + 1
+        assert metric(http, "armfleet_leases_released_total") == released + 1
         stale = {"Authorization": "Bearer lease_0123abcd_" + "x" * 32}
         r = http.post("/v1/worlds/0/increments", json={"joint": 0, "delta": 0.1}, headers=stale)
         assert r.status_code == 401 and "service restarted" in r.json()["detail"], r.text
@@ -116,21 +112,17 @@ def test_a_test_waits_for_a_world_while_every_world_is_busy(lending: Server) -> 
     `armfleet_world`'s lease (clients.testing.lease_world) is served when a busy world comes
     free, not refused. (The minute is LEASE_WAIT_S; a test of the bound would wait it out.)"""
 
-    def counted(http: httpx.Client, name: str) -> float:
-        lines = http.get("/metrics").text.splitlines()
-        return float(next(x for x in lines if x.startswith(f"{name} ")).split()[1])
-
     with httpx.Client(base_url=lending.url, timeout=30) as http:
         expired, refused = (
-            counted(http, f"armfleet_leases_{x}_total") for x in ("expired", "refused")
+            metric(http, f"armfleet_leases_{x}_total") for x in ("expired", "refused")
         )
         r = http.post("/v1/leases", json={"count": 4, "ttl_s": 1.0, "label": "busy"})
         assert r.status_code == 201, r.text
         with lease_world(lending.url, label="waiting") as got:
             assert got.lease.label == "waiting" and got.world in r.json()["worlds"]
             assert [x.label for x in got.client.leases()] == ["waiting"]  # busy one: over
-        assert counted(http, "armfleet_leases_expired_total") == expired + 1
-        assert counted(http, "armfleet_leases_refused_total") == refused  # waited, not refused
+        assert metric(http, "armfleet_leases_expired_total") == expired + 1
+        assert metric(http, "armfleet_leases_refused_total") == refused  # waited, not refused
         assert LEASE_WAIT_S == 60.0  # the guide's "up to a minute"
 
 

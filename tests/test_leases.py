@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from clients import ArmfleetClient, Forbidden
-from tests.conftest import HOME, ROOT, Server, serve, wait_for
+from tests.conftest import HOME, ROOT, Server, metric, serve, wait_for
 
 ADMIN = "teacher-" + "x" * 24
 NWORLD = 32
@@ -54,13 +54,6 @@ def lease(admin: httpx.Client, **body: Any) -> dict[str, Any]:
 
 def bearer(token: str) -> dict[str, str]:
     return {"Authorization": f"Bearer {token}"}
-
-
-def metric(admin: httpx.Client, name: str) -> float:
-    for line in admin.get("/metrics").text.splitlines():
-        if line.startswith(name + " ") or line.startswith(name + "{"):
-            return float(line.rsplit(" ", 1)[1])
-    raise AssertionError(f"{name} not in /metrics")
 
 
 def test_forty_askers_at_once_get_thirty_two_worlds_and_eight_refusals(
