@@ -164,6 +164,11 @@ class Runtime:
             lambda: None if self.hub is None else self.hub.frames_skipped,
         )
         m.counter_level(
+            "armfleet_streams_direct",
+            "binary state streams written by a thread of their own, without copies",
+            lambda: None if self.hub is None else self.hub.streams_direct,
+        )
+        m.counter_level(
             "armfleet_shard_restarts",
             "shard worker processes rebuilt after dying",
             self._restarts,

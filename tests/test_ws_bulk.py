@@ -1,13 +1,16 @@
-"""Camera streams on a taken-over socket (service/api/ws_bulk.py), against a real server.
+"""Camera streams and binary state streams on a taken-over socket (service/api/ws_bulk.py),
+against a real server.
 
 The websockets library's own client judges the protocol: whole messages, pings answered,
 permessage-deflate negotiated, pull requests read, a client's protocol error closed with the
 library's code; and the service's stop closes the stream with 1001. The frame header is
-judged by the library's own frame parser.
+judged by the library's own frame parser. On /v1/ws?format=binary, commands sent at once
+after the handshake are acked in order (text messages through the same writer as the frames).
 """
 
 from __future__ import annotations
 
+import json
 import signal
 import time
 
@@ -130,3 +133,30 @@ def test_a_paused_service_answers_every_pull_with_the_tick_it_stands_at(tmp_path
         with connect(url) as ws:
             ticks = _pulled_ticks(ws, 3)
     assert ticks == [0, 0, 0]  # nothing moves, and still every ask is answered
+
+
+def test_binary_state_stream_is_written_directly_with_its_acks_in_order(server: Server) -> None:
+    before = _metric(server, "armfleet_streams_direct_total")
+    url = f"{server.ws_url}/v1/ws?worlds=1-3&format=binary&rate=30"
+    with connect(url, compression="deflate") as ws:
+        for i in range(5):  # at once: nothing the client sends before the take-over is lost
+            ws.send(json.dumps({"op": "increment", "world": 2, "joint": "elbow_joint",
+                                "delta": 0.01, "id": i}))  # fmt: skip
+        ws.send(b"not json")  # binary from the client: an error frame, the socket goes on
+        ws.send(json.dumps({"op": "increment", "world": 9, "joint": "elbow_joint", "id": 5}))
+        replies, ticks = [], []
+        while len(replies) < 7 or len(ticks) < 3:
+            msg = ws.recv(timeout=10)
+            if isinstance(msg, bytes):
+                assert msg[:4] == b"AFS1"
+                header = json.loads(msg[8 : 8 + int.from_bytes(msg[4:8], "little")])
+                assert header["n"] == 3
+                ticks.append(header["tick"])
+            else:
+                replies.append(json.loads(msg))
+        assert ws.ping().wait(10)  # answered by the taken-over socket, between frames
+    assert _metric(server, "armfleet_streams_direct_total") == before + 1
+    assert [r["op"] for r in replies] == ["ack"] * 5 + ["error"] * 2
+    assert [r["id"] for r in replies] == [0, 1, 2, 3, 4, None, 5]
+    assert "text" in replies[5]["detail"] and "world" in json.dumps(replies[6])
+    assert ticks == sorted(ticks) and ticks[-1] > ticks[0]

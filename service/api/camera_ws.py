@@ -28,11 +28,11 @@ import contextlib
 import math
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, Query, WebSocket
 
 from service.api import ws_bulk
 from service.api.ws import flag
-from service.api.ws_bulk import BulkSocket
+from service.api.ws_bulk import AsgiSocket, BulkSocket
 from service.core.access import policy as access
 from service.core.cameras import wire as camera_wire
 from service.core.cameras.clock import Reader, clock_for
@@ -82,19 +82,16 @@ async def camera_socket(
         ids = parse_worlds(worlds, feed.loop.batch.nworld)
     except ArmfleetError as exc:
         return await ws.close(code=_CLOSE_POLICY, reason=str(exc)[:120])
-    link: BulkSocket | _AsgiSocket | None = ws_bulk.take_over(ws.scope)
-    if link is None:
-        link = _AsgiSocket(ws)
-    else:
-        feed.streams_direct += 1
+    link = ws_bulk.link(ws)
+    feed.streams_direct += link.direct
     feed.streams.add(link)
     reader = Reader(ids, pull_)
     clock = clock_for(feed, camera, hz)
     clock.join(reader)
     sender = asyncio.create_task(_send(link, reader, image, fmt, quality_))
     try:
-        while await link.receive() is not None:  # pull requests; None: the client left
-            if pull_:
+        while (asked := await link.receive()) is not None:  # pulls; None: the client left
+            if pull_ and isinstance(asked, str):  # a pull is any text message
                 reader.ask()
                 clock.poke()
     finally:
@@ -125,38 +122,8 @@ def _number(
     return value
 
 
-class _AsgiSocket:
-    """BulkSocket's calls on the ASGI socket, where the server's cannot be taken over: each
-    message is joined into bytes and sent through the server (copies that a stream of
-    hundreds of megabytes a second cannot afford, but every ASGI server can do it)."""
-
-    def __init__(self, ws: WebSocket) -> None:
-        self._ws = ws
-
-    async def send(self, parts: list[bytes | memoryview]) -> None:
-        await self._ws.send_bytes(b"".join(parts))
-
-    async def receive(self) -> str | None:
-        try:
-            while True:
-                message = await self._ws.receive()
-                if message["type"] == "websocket.disconnect":
-                    return None
-                if message.get("text") is not None:
-                    return message["text"]
-        except (WebSocketDisconnect, RuntimeError):
-            return None
-
-    async def close(self, code: int = 1000, reason: str = "") -> None:
-        with contextlib.suppress(Exception):
-            await self._ws.close(code=code, reason=reason)
-
-    async def finish(self) -> None:
-        pass
-
-
 async def _send(
-    link: BulkSocket | _AsgiSocket, reader: Reader, image: str, fmt: str, quality: int
+    link: BulkSocket | AsgiSocket, reader: Reader, image: str, fmt: str, quality: int
 ) -> None:
     """Send each picture the clock draws for this reader (service/core/cameras/clock.py): the
     next one is drawn while this one is packed and sent, and none beyond it, so a slow reader

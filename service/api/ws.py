@@ -3,6 +3,11 @@
 One socket = one Subscription. A reader task hands client messages to the control layer and
 queues the acks it returns; a writer task sends acks first (never dropped, never reordered) and then
 the newest state frame (older undelivered frames are replaced, so memory stays bounded).
+
+Binary /v1/ws sockets (10 MB a frame at 65,536 worlds) are taken over once accepted, as the
+camera streams are (service/api/ws_bulk.py): a thread of the socket's own writes each frame
+straight from the frame thread's buffer, where the ASGI send copied it twice on the event
+loop, holding the interpreter that the simulation loop needs.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from typing import Annotated, Literal
 import numpy as np
 from fastapi import APIRouter, Query, WebSocket, WebSocketDisconnect
 
-from service.api import ws_ops
+from service.api import ws_bulk, ws_ops
 from service.core.access import policy as access
 from service.core.access import rates
 from service.core.commands.base import BROWSER, WS
@@ -105,7 +110,8 @@ async def batch_socket(
             def render(s: Snapshot) -> bytes:
                 return wire.batch_frame_binary(s, ids, names, with_entities)
 
-            return Stream(ids, rate, FrameFormat.batch_binary(tuple(names), with_entities), render)
+            fmt = FrameFormat.batch_binary(tuple(names), with_entities)
+            return Stream(ids, rate, fmt, render, direct=True)
         briefs = control.trajectories.briefs
 
         def render_json(s: Snapshot) -> bytes:
@@ -210,6 +216,7 @@ class Stream:
     skip: Callable[[Snapshot], bool] | None = None
     default_world: int | None = None
     source: str = WS
+    direct: bool = False
 
 
 async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
@@ -242,9 +249,12 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
     metrics, share = runtime.metrics, loop.share
     control = control.acting_for(grant.caller)  # each command checked for its worlds
     await ws.accept(subprotocol=grant.subprotocol)
+    # At once after the accept (no await between): what the client sends next is the link's.
+    link = ws_bulk.link(ws, max_incoming=None) if stream.direct else ws_bulk.AsgiSocket(ws)
+    hub.streams_direct += link.direct
 
     async def close(code: int, reason: str) -> None:
-        await ws.close(code=code, reason=reason[:120])
+        await link.close(code=code, reason=reason[:120])
 
     sub = Subscription(
         stream.worlds, stream.rate, stream.format, stream.render, skip=stream.skip, close=close
@@ -254,16 +264,16 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
         first = await asyncio.wrap_future(loop.call(entity_frames.snapshot_with_entities))
     hub.add(sub)
     sub.offer(first, time.monotonic())  # the current state at once, then the stream
-    writer = asyncio.create_task(_write(ws, hub, sub))
+    writer = asyncio.create_task(_write(link, hub, sub))
     busy_until = 0.0  # refused as busy: until then, what cannot run at once is refused at once
     try:
         while True:
-            message = await ws.receive()
-            if message["type"] == "websocket.disconnect":
+            message = await link.receive()
+            if message is None:  # the client left
                 break
             while len(sub.acks) > _MAX_QUEUED_ACKS:
                 await asyncio.sleep(0.005)
-            text = message.get("text")
+            text = message if isinstance(message, str) else None
             if text is None:
                 reply = wire.error_frame(None, "send JSON as text frames")
                 metrics.command_rejected(source, "unknown")
@@ -300,14 +310,17 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
         writer.cancel()
         with contextlib.suppress(asyncio.CancelledError, Exception):
             await writer
+        await link.finish()
 
 
-async def _write(ws: WebSocket, hub: StreamHub, sub: Subscription) -> None:
+async def _write(
+    link: ws_bulk.BulkSocket | ws_bulk.AsgiSocket, hub: StreamHub, sub: Subscription
+) -> None:
     while True:
         await sub.ready.wait()
         sub.ready.clear()
-        while sub.acks:
-            await ws.send_text(sub.acks.popleft().decode())
+        while sub.acks:  # all that wait, in one write where the socket is taken over
+            await link.send_texts([sub.acks.popleft() for _ in range(len(sub.acks))])
         frame, sub.frame = sub.frame, None  # packed and serialised off the loop
         snap, sub.latest = sub.latest, None
         if frame is None:
@@ -315,9 +328,9 @@ async def _write(ws: WebSocket, hub: StreamHub, sub: Subscription) -> None:
                 continue
             frame = hub.frame(sub, snap)
         if sub.binary:
-            await ws.send_bytes(frame)
+            await link.send([frame])
         else:
-            await ws.send_text(frame.decode())
+            await link.send_texts([frame])
 
 
 async def _drain(sub: Subscription, timeout: float = 1.0) -> None:

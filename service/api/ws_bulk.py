@@ -1,4 +1,4 @@
-"""BulkSocket: a WebSocket taken over after its handshake, for messages of hundreds of megabytes.
+"""BulkSocket: a WebSocket taken over after its handshake, for messages of many megabytes.
 
 A camera stream of 16,384 worlds sends a 201 MB message thirty times a second. Through the ASGI
 `send`, each message was copied three times while holding the interpreter (joined into bytes,
@@ -20,9 +20,14 @@ How, on uvicorn's websockets (sans-io) protocol, which did the handshake:
 - every frame (our data, pongs, the close) is written in order by the socket's writer thread,
   through a duplicate of the socket's descriptor.
 
+The same holds, ten times smaller, for binary state frames of /v1/ws (10 MB a frame at 65,536
+worlds, 30 a second): service/api/ws.py takes those sockets over too, and their acks (text)
+go through the same writer, in order.
+
 Where the server is something else (a test client, another ASGI server), `take_over` returns
-None and the caller keeps the ASGI socket. Data frames go out uncompressed, which RFC 7692
-allows on a socket that negotiated permessage-deflate (RSV1 clear).
+None and `AsgiSocket` makes the same calls on the ASGI socket (`link` picks). Data frames go
+out uncompressed, which RFC 7692 allows on a socket that negotiated permessage-deflate (RSV1
+clear).
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.websockets import WebSocket, WebSocketDisconnect
 from websockets.frames import Opcode
 from websockets.protocol import Protocol, Side, State
 
@@ -65,9 +71,12 @@ class RememberOwner:
         await self.app(scope, receive, send)
 
 
-def take_over(scope: Scope) -> BulkSocket | None:
+def take_over(scope: Scope, max_incoming: int | None = MAX_INCOMING) -> BulkSocket | None:
     """The accepted WebSocket of `scope` as a BulkSocket, or None where the server is not
-    uvicorn's websockets sans-io protocol (or the connection is already closing)."""
+    uvicorn's websockets sans-io protocol (or the connection is already closing).
+    `max_incoming`: the longest message the client may send (None: the server's own limit).
+    Call it right after the accept, with no await between: what the client sends after that
+    reaches the BulkSocket alone."""
     owner = scope.get(SCOPE_KEY)
     try:
         from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
@@ -79,7 +88,14 @@ def take_over(scope: Scope) -> BulkSocket | None:
     raw = transport.get_extra_info("socket")
     if raw is None or transport.is_closing() or owner.close_sent:
         return None
-    return BulkSocket(owner, raw.fileno())
+    limit = owner.conn.max_message_size if max_incoming is None else max_incoming
+    return BulkSocket(owner, raw.fileno(), limit)
+
+
+def link(ws: WebSocket, max_incoming: int | None = MAX_INCOMING) -> BulkSocket | AsgiSocket:
+    """The accepted `ws` taken over where the server allows (`take_over`), else its ASGI
+    stand-in; both make the same calls."""
+    return take_over(ws.scope, max_incoming) or AsgiSocket(ws)
 
 
 def frame_header(length: int, opcode: int = Opcode.BINARY.value) -> bytes:
@@ -98,19 +114,24 @@ class Closed(ConnectionError):
 
 
 class BulkSocket:
-    """One taken-over WebSocket: `send` (whole binary messages as parts), `receive` (the
-    client's text messages), `close`; `finish` once done. Used from the event loop's thread;
-    only the writer thread touches the socket."""
+    """One taken-over WebSocket: `send` (whole binary messages as parts), `send_texts`,
+    `receive` (the client's messages), `close`; `finish` once done. Used from the event
+    loop's thread; only the writer thread touches the socket."""
 
-    def __init__(self, owner: Any, fd: int) -> None:
+    direct = True  # written by a thread of its own (metrics count these sockets)
+
+    def __init__(self, owner: Any, fd: int, max_incoming: int | None = MAX_INCOMING) -> None:
         self._owner = owner
         self._aio = asyncio.get_running_loop()
-        self._ws = Protocol(Side.SERVER, state=State.OPEN, max_size=MAX_INCOMING)
+        self._ws = Protocol(Side.SERVER, state=State.OPEN, max_size=max_incoming)
         self._ws.extensions = list(owner.conn.extensions)  # to read compressed client frames
         self._sock = socket.socket(fileno=os.dup(fd))  # same connection, our own descriptor
         self._sock.setblocking(False)
-        self._texts: asyncio.Queue[str | None] = asyncio.Queue()
-        self._text: list[bytes] | None = None  # a fragmented text message being read
+        self._texts: asyncio.Queue[str | bytes | None] = asyncio.Queue()
+        for message in _pending(owner):  # read by uvicorn before the take-over, never taken
+            self._texts.put_nowait(message)
+        self._msg: list[bytes] | None = None  # a fragmented message being read
+        self._msg_text = False  # ... and whether it is text
         self._out: queue.SimpleQueue[tuple[list[Buffer], concurrent.futures.Future] | None]
         self._out = queue.SimpleQueue()
         self._stop = threading.Event()  # the writer gives up on what it is writing
@@ -130,14 +151,25 @@ class BulkSocket:
         if self._ws.state is not State.OPEN or self.gone.is_set():
             raise Closed("the client closed the socket")
         size = sum(memoryview(p).nbytes for p in parts)
-        done = self._write([frame_header(size), *parts])
+        await self._sent(self._write([frame_header(size), *parts]))
+
+    async def send_texts(self, texts: Sequence[bytes]) -> None:
+        """Send each of `texts` (UTF-8) as a text message, in one write; Closed if the client
+        is gone."""
+        if self._ws.state is not State.OPEN or self.gone.is_set():
+            raise Closed("the client closed the socket")
+        text = Opcode.TEXT.value
+        await self._sent(self._write([b for t in texts for b in (frame_header(len(t), text), t)]))
+
+    async def _sent(self, done: concurrent.futures.Future) -> None:
         try:
             await asyncio.wrap_future(done)
         except OSError as exc:
             raise Closed(str(exc)) from exc
 
-    async def receive(self) -> str | None:
-        """The client's next text message; None once the client has gone."""
+    async def receive(self) -> str | bytes | None:
+        """The client's next message (text as str, binary as bytes); None once the client
+        has gone."""
         if self.gone.is_set() and self._texts.empty():
             return None
         return await self._texts.get()
@@ -169,13 +201,16 @@ class BulkSocket:
     def _received(self, data: bytes) -> None:
         self._ws.receive_data(data)
         for frame in self._ws.events_received():
-            if frame.opcode is Opcode.TEXT:
-                self._text = []
-            if frame.opcode in (Opcode.TEXT, Opcode.CONT) and self._text is not None:
-                self._text.append(frame.data)
+            if frame.opcode in (Opcode.TEXT, Opcode.BINARY):
+                self._msg, self._msg_text = [], frame.opcode is Opcode.TEXT
+            if frame.opcode in (Opcode.TEXT, Opcode.BINARY, Opcode.CONT) and self._msg is not None:
+                self._msg.append(frame.data)
                 if frame.fin:
-                    self._texts.put_nowait(b"".join(self._text).decode("utf-8", "replace"))
-                    self._text = None
+                    whole = b"".join(self._msg)
+                    self._texts.put_nowait(
+                        whole.decode("utf-8", "replace") if self._msg_text else whole
+                    )
+                    self._msg = None
         self._flush()  # pongs, the close answer, a protocol error's close
         if self._ws.state is not State.OPEN:
             self._left()
@@ -237,6 +272,52 @@ class BulkSocket:
                     views[0], sent = views[0][sent:], 0
             if views:
                 poll.poll(_POLL_MS)  # room in the socket, or time to look at `_stop` again
+
+
+def _pending(owner: Any) -> list[str | bytes]:
+    """Messages uvicorn read and queued for the ASGI app before the take-over (none when the
+    take-over follows the accept at once, as `take_over` asks; kept for safety)."""
+    out: list[str | bytes] = []
+    queue_ = getattr(owner, "queue", None)
+    while queue_ is not None and not queue_.empty():
+        message = queue_.get_nowait()
+        if message.get("type") == "websocket.receive":
+            out.append(message["text"] if message.get("text") is not None else message["bytes"])
+    return out
+
+
+class AsgiSocket:
+    """BulkSocket's calls on the ASGI socket, where the server's cannot be taken over: each
+    message is joined into bytes and sent through the server (copies that streams of many
+    megabytes a second cannot afford, but every ASGI server can do it)."""
+
+    direct = False
+
+    def __init__(self, ws: WebSocket) -> None:
+        self._ws = ws
+
+    async def send(self, parts: Sequence[Buffer]) -> None:
+        await self._ws.send_bytes(parts[0] if len(parts) == 1 else b"".join(parts))  # type: ignore[arg-type]
+
+    async def send_texts(self, texts: Sequence[bytes]) -> None:
+        for text in texts:
+            await self._ws.send_text(text.decode())
+
+    async def receive(self) -> str | bytes | None:
+        try:
+            message = await self._ws.receive()
+        except (WebSocketDisconnect, RuntimeError):
+            return None
+        if message["type"] == "websocket.disconnect":
+            return None
+        return message["text"] if message.get("text") is not None else message.get("bytes", b"")
+
+    async def close(self, code: int = 1000, reason: str = "") -> None:
+        with contextlib.suppress(Exception):
+            await self._ws.close(code=code, reason=reason)
+
+    async def finish(self) -> None:
+        pass
 
 
 class _Reader(asyncio.Protocol):

@@ -168,6 +168,7 @@ class StreamHub(SnapshotSink):
         self._scheduled = False
         self._frame_cache: dict[tuple[int, tuple[str, bytes]], bytes] = {}
         self.frames_skipped = 0  # frames replaced before a slow reader took them (metrics)
+        self.streams_direct = 0  # sockets written by a thread of their own (service/api/ws.py)
         self._sender: frames.FrameSender | None = None  # started with the first packed socket
         self._resync = False  # after a restore, packed sockets get the restored snapshot too
 
