@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import shutil
 import subprocess
 import time
@@ -30,6 +31,15 @@ from service.core.sim.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# The servers the suite starts step native MuJoCo unless a test names the engine: the HTTP,
+# WebSocket, ROS and persistence contracts do not depend on it, and a native server is ready
+# after about 2.5 s of CPU where MuJoCo Warp's takes about 8.5 s (importing it and hashing its
+# kernels), which is most of what a server start costs the suite. The engines are held to one
+# contract in-process (test_batch_contract.py); MuJoCo Warp is served end to end where it is
+# the subject (test_engine*.py, test_faults.py, test_shards.py, test_stopping.py, test_frames.py,
+# the `engine`-parametrized tests, Ray). `ARMFLEET_ENGINE=warp python3 scripts/dev.py test`
+# runs the whole suite's servers on MuJoCo Warp.
+os.environ.setdefault("ARMFLEET_ENGINE", "mujoco")
 
 SPEC = load_robot().spec
 JOINTS: list[str] = list(SPEC.names)
