@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import shutil
 import subprocess
 import time
@@ -30,6 +31,17 @@ from service.core.sim.robot import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# The servers the suite starts step native MuJoCo unless a test names the engine: the HTTP,
+# WebSocket, ROS and persistence contracts do not depend on it, and a native server is ready
+# after about 1.8 s of CPU where MuJoCo Warp's takes about 6 s (importing it and loading its
+# kernels), which is most of what a server start costs the suite. The engines are held to one
+# contract in-process (test_batch_contract.py); MuJoCo Warp is served end to end where it is
+# the subject (test_engine*.py, test_faults.py, test_shards.py, test_stopping.py, the
+# `engine`-parametrized tests, replays, Ray) and as the default (test_default_engine.py).
+# `ARMFLEET_ENGINE=warp python3 scripts/dev.py test` runs the whole suite's servers on it.
+# Tests that build `Settings` in this process read the environment without this
+# (`hermetic_settings`).
+os.environ.setdefault("ARMFLEET_ENGINE", "mujoco")
 
 SPEC = load_robot().spec
 JOINTS: list[str] = list(SPEC.names)
@@ -143,6 +155,15 @@ LONGEST_FIRST = (
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: files stay whole
+
+
+@pytest.fixture
+def hermetic_settings(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No `ARMFLEET_*` variable of the caller's (or of this suite's engine choice above) reaches
+    a `Settings` built in this process: a test of the defaults sees the defaults."""
+    for name in list(os.environ):
+        if name.startswith("ARMFLEET_"):
+            monkeypatch.delenv(name)
 
 
 def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:

@@ -28,7 +28,9 @@ SNAPSHOTS = 8
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
-    with serve(worlds=NWORLD, log_dir=tmp_path_factory.mktemp("busy")) as srv:
+    with serve(
+        worlds=NWORLD, extra_args=("--engine", "warp"), log_dir=tmp_path_factory.mktemp("busy")
+    ) as srv:
         yield srv
 
 

@@ -82,7 +82,7 @@ def test_an_engine_in_its_own_process_serves_commands_pictures_and_survives_a_ki
         assert "tick failed" not in srv.log()
 
 
-def test_cameras_on_the_engines_own_device_keep_the_engine_in_the_server():
+def test_cameras_on_the_engines_own_device_keep_the_engine_in_the_server(hermetic_settings):
     """`--camera-device` naming the engine's device is no reason to move the engine."""
     from service.settings import Settings
 

@@ -21,6 +21,8 @@ from service.surfaces.registry import REGISTRY, build_surfaces
 from service.surfaces.ros.settings import Ros2Settings
 from tests import ros2_judge
 
+pytestmark = pytest.mark.usefixtures("hermetic_settings")  # Settings built here read no env
+
 ROOT = Path(__file__).resolve().parents[1]
 MAX_LINES = 400
 

@@ -30,7 +30,7 @@ def _cube(http: httpx.Client, world: int) -> dict:
 
 def test_paused_writes_are_instant_on_every_surface_and_replay_bit_for_bit(tmp_path):
     data = tmp_path / "data"
-    extra = ("--data-dir", str(data))
+    extra = ("--data-dir", str(data), "--engine", "warp")
     with running_server(tmp_path, worlds=NWORLD, mode="paused", extra=extra) as srv:
         http = httpx.Client(base_url=srv.url, timeout=30)
         r = http.post("/v1/recordings", json={"name": "paused", "worlds": "0-3", "rate": 60})

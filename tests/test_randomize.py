@@ -96,7 +96,7 @@ def test_a_recording_holds_the_seed_and_spec_and_replays_bit_for_bit(tmp_path):
     from mcap.reader import make_reader
 
     data = tmp_path / "data"
-    extra = ("--data-dir", str(data))  # replay steps the warp engine
+    extra = ("--data-dir", str(data), "--engine", "warp")  # replay steps the warp engine
     with serve(worlds=4, mode="paused", extra_args=extra, log_dir=tmp_path) as srv:
         http = httpx.Client(base_url=srv.url, timeout=60)
         assert http.post("/v1/recordings", json={"name": "rand", "rate": 60}).status_code == 201

@@ -31,7 +31,8 @@ TICKS = 600
 def paused(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Server, Path]]:
     tmp = tmp_path_factory.mktemp("recording")
     data = tmp / "data"
-    extra = ("--data-dir", str(data), "--record-queue", "200")  # a stuck disk shows up sooner
+    # a stuck disk shows up sooner; replay steps MuJoCo Warp, so the recording is made on it
+    extra = ("--data-dir", str(data), "--record-queue", "200", "--engine", "warp")
     with running_server(tmp, worlds=NWORLD, mode="paused", extra=extra) as srv:
         yield srv, data
 

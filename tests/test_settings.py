@@ -13,6 +13,8 @@ from pydantic import ValidationError
 from clients.testing import ServerFailed, serve
 from service.settings import Settings
 
+pytestmark = pytest.mark.usefixtures("hermetic_settings")  # Settings built here read no env
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -19,6 +19,8 @@ from typer.testing import CliRunner
 from mjcf import SCENE_XML
 from service.cli import app
 
+pytestmark = pytest.mark.usefixtures("hermetic_settings")  # Settings built here read no env
+
 SERVE_OPTIONS = [
     "--allow-origins",
     "--camera-batch",
