@@ -246,8 +246,11 @@ class Runtime:
         loop.share.enabled, loop.share.max_wait_s = s.sim.ticks_first, s.sim.command_wait_s
         loop.randomizations.replace(self._restored_randomized)
         self.control = Control(loop)
-        # Packed JSON frames say where each world's trajectory is: the manager's briefs.
-        self.hub = hub = StreamHub(asyncio.get_running_loop(), self.control.trajectories)
+        # Packed JSON frames say where each world's trajectory is (the manager's briefs) and
+        # each world's safety mode (the loop's table), as a snapshot's frame does.
+        self.hub = hub = StreamHub(
+            asyncio.get_running_loop(), self.control.trajectories, loop.safety
+        )
         loop.listeners.add_sink(hub)
         loop.listeners.add_restore_listener(lambda _tick, _state, _name: hub.restored())
         self.control.add_listener(self._count_accepted)

@@ -55,7 +55,7 @@ class FrameData:
     sim_time: np.ndarray | None = None
     target: np.ndarray | None = None
     faults: np.ndarray | None = None
-    extra: dict[str, Any] | None = None  # JSON's last fields (None: DEFAULT_EXTRA)
+    extra: dict[str, Any] | None = None  # JSON's last fields (None: json_extra)
     entities: EntityFrame | None = None  # read when a subscriber asked (JSON_ENTITIES)
 
     @property
@@ -144,8 +144,11 @@ def _array(values: np.ndarray, sliced: bool) -> bytes:
     return b"[" + b",".join(parts) + b"]"
 
 
-# What `wire.batch_frame` ends with when no trajectory has run in the frame's worlds.
-DEFAULT_EXTRA: dict[str, Any] = {"trajectories": {}}
+def json_extra(nworld: int) -> dict[str, Any]:
+    """What `wire.batch_frame` ends with for `nworld` worlds in their usual state: each world's
+    safety mode NORMAL, no trajectory running (the hub fills in what it knows)."""
+    return {"safety_mode": ["NORMAL"] * nworld, "trajectories": {}}
+
 
 _JSON_COLUMNS = (
     ("position", slice(1, 8)),
@@ -176,7 +179,7 @@ def json_bytes(
         values = target if cols is None else rows[:, cols]
         parts += [b',"', name.encode(), b'":', _array(values, sliced)]
     parts += [b',"faults":', _array(faults, sliced)]
-    for name, value in (DEFAULT_EXTRA if extra is None else extra).items():
+    for name, value in (json_extra(len(ids)) if extra is None else extra).items():
         parts += [b',"', name.encode(), b'":', wire.dumps(value)]
     return b"".join((*parts, b"}"))
 
@@ -193,7 +196,7 @@ def json_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
     """`wire.batch_frame(..., entities=True)`'s bytes: the JSON frame, then `entities`."""
     assert data.sim_time is not None and data.target is not None and data.faults is not None
     assert data.entities is not None
-    extra = {**(DEFAULT_EXTRA if data.extra is None else data.extra)}
+    extra = {**(json_extra(len(data.ids)) if data.extra is None else data.extra)}
     extra["entities"] = wire.entity_columns(data.entities)
     return json_bytes(
         data.tick, names, data.ids, data.sim_time, rows, data.target, data.faults, True, extra
@@ -261,7 +264,7 @@ class FrameSender:
                 continue
             extra = d.extra
             if f == JSON_ENTITIES and d.entities is not None:
-                extra = {**(DEFAULT_EXTRA if extra is None else extra)}
+                extra = {**(json_extra(len(d.ids)) if extra is None else extra)}
                 extra["entities"] = wire.entity_columns(d.entities)
             args = (d.tick, job.names, d.ids, d.sim_time, rows, d.target, d.faults, False, extra)
             self._json_in_flight += 1

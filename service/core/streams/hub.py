@@ -23,6 +23,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from service.core.sim import safety
 from service.core.sim.batch import Batch
 from service.core.sim.loop_types import SnapshotSink
 from service.core.sim.types import Snapshot
@@ -30,6 +31,12 @@ from service.core.streams import entity_frames, frames
 from service.core.streams.formats import WITH_ENTITIES, FrameFormat
 
 log = logging.getLogger("armfleet.hub")
+
+
+class SafetyModes(Protocol):
+    """Where packed JSON frames get the worlds' safety modes (the loop's safety table)."""
+
+    def modes(self) -> np.ndarray: ...
 
 
 class TrajectoryBriefs(Protocol):
@@ -159,9 +166,15 @@ class Subscription:
 class StreamHub(SnapshotSink):
     """The loop's snapshot sink: decides demand on the sim thread, delivers on the event loop."""
 
-    def __init__(self, aio_loop: asyncio.AbstractEventLoop, briefs: TrajectoryBriefs | None = None):
+    def __init__(
+        self,
+        aio_loop: asyncio.AbstractEventLoop,
+        briefs: TrajectoryBriefs | None = None,
+        safety: SafetyModes | None = None,
+    ):
         self._aio = aio_loop
         self._briefs = briefs  # what packed JSON frames say of the worlds' trajectories
+        self._safety = safety  # and of the worlds' safety modes (None: all NORMAL)
         self._subs: tuple[Subscription, ...] = ()  # replaced, never mutated: read from two threads
         self._lock = threading.Lock()
         self._incoming: Snapshot | None = None
@@ -221,8 +234,12 @@ class StreamHub(SnapshotSink):
             if data is None or self._sender is None:
                 self.frames_skipped += len(group)
                 continue
-            if json and self._briefs is not None and any(s.format.trajectories for s in group):
-                data.extra = {"trajectories": self._briefs.briefs(group[0].worlds)}
+            if json:
+                data.extra = frames.json_extra(len(group[0].worlds))
+                if self._safety is not None:  # as `wire.batch_frame` says them
+                    data.extra["safety_mode"] = safety.names(self._safety.modes()[group[0].worlds])
+                if self._briefs is not None and any(s.format.trajectories for s in group):
+                    data.extra["trajectories"] = self._briefs.briefs(group[0].worlds)
             asked = [f for f in formats if f in WITH_ENTITIES]
             if asked and not self._read_entities(batch, data):
                 formats = [f for f in formats if f not in asked]
