@@ -23,7 +23,9 @@ from functools import cached_property
 import numpy as np
 
 from service.core.errors import Unavailable
+from service.core.kinematics.pose import pose_to_matrix
 from service.core.kinematics.tools import ToolTable
+from service.core.kinematics.ur import URKinematics
 from service.core.sim.types import Snapshot
 from service.surfaces.ur.tcp_pose import ARM, ToolKinematics
 
@@ -51,16 +53,14 @@ class FrameValues:
     def __init__(
         self,
         frame: Frame,
-        tools: ToolTable | None,
+        kin: URKinematics | None,
+        offsets: tuple[int, np.ndarray | None],
         fallback: ToolKinematics,
     ) -> None:
-        self.frame = frame
-        self._fallback = fallback
-        self._kin = None if tools is None else tools.kin
-        if tools is None:
-            self.tcp_version, self.tcp = -1, None
-        else:
-            self.tcp_version, self.tcp = tools.all()
+        """kin None: the arm is not UR's DH chain (`fallback`: MuJoCo's kinematics, the flange);
+        offsets: (the tool table's version, every world's TCP offset as transforms (n, 4, 4))."""
+        self.frame, self._kin, self._fallback = frame, kin, fallback
+        self.tcp_version, self._tcp = offsets
         self.timestamp = (frame.snap.tick * frame.tick_dt,)
 
     @cached_property
@@ -102,7 +102,7 @@ class FrameValues:
         q = np.asarray(q[:, :ARM], dtype=np.float64)
         qd = np.asarray(qd[:, :ARM], dtype=np.float64)
         if self._kin is not None:
-            pose, speed = self._kin.tcp_state(q, qd, self.tcp)
+            pose, speed = self._kin.tcp_state(q, qd, self._tcp)
             return pose.tolist(), speed.tolist()
         rows = [self._fallback.tcp(q[w], qd[w], (0.0,) * 6) for w in range(len(q))]
         return [p.tolist() for p, _ in rows], [s.tolist() for _, s in rows]
@@ -116,6 +116,7 @@ class FrameValuesCache:
         self._tools: ToolTable | None = None
         self._resolved = False
         self._values: FrameValues | None = None
+        self._offsets: tuple[int, np.ndarray | None] = (-1, None)
 
     def get(self, frame: Frame | None) -> FrameValues | None:
         if frame is None:
@@ -124,7 +125,11 @@ class FrameValuesCache:
         version = -1 if tools is None else tools.version
         v = self._values
         if v is None or v.frame is not frame or v.tcp_version != version:
-            v = self._values = FrameValues(frame, tools, self._fallback)
+            if tools is not None and self._offsets[0] != version:
+                version, offsets = tools.all()
+                self._offsets = (version, pose_to_matrix(offsets))
+            kin = None if tools is None else tools.kin
+            v = self._values = FrameValues(frame, kin, self._offsets, self._fallback)
         return v
 
     def _table(self) -> ToolTable | None:
