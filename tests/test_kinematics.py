@@ -22,6 +22,8 @@ from service.core.kinematics.pose import (
 from service.core.kinematics.servo import ServoLag
 from service.core.kinematics.ur import NotDH, Singularity, Unsolved, URKinematics
 from service.core.sim.robot import FLANGE_SITE, load_robot
+from service.core.sim.types import Snapshot
+from service.surfaces.ur.rtde_frame import Frame, FrameValues
 from service.surfaces.ur.tcp_pose import ToolKinematics
 
 ROBOT = load_robot()
@@ -134,6 +136,25 @@ def test_tcp_state_of_many_worlds_is_fk_and_the_jacobian_and_mujocos_own() -> No
         want_pose, want_speed = mj.tcp(q[w], qd[w], tuple(tcp[w]))
         assert np.abs(pose[w] - want_pose).max() < 1e-9
         assert np.abs(speed[w] - want_speed).max() < 1e-9
+
+
+def test_rtde_frame_values_of_a_dh_arm_and_of_the_fallback_agree() -> None:
+    """RTDE's per-tick values (rtde_frame): the batch over the DH chain and MuJoCo's own
+    kinematics world by world (an arm that is not UR's chain) give the same TCP, and each
+    world's row is its own."""
+    n = 5
+    a = lambda: RNG.uniform(-2, 2, (n, 7))  # noqa: E731
+    snap = Snapshot(7, np.zeros(n), a(), a(), a(), a(), np.zeros(n), None, None)  # type: ignore[arg-type]
+    frame = Frame(snap, a(), a(), 0.002)
+    mj = ToolKinematics(ROBOT)
+    batch = FrameValues(frame, KIN, (0, pose_to_matrix(np.zeros((n, 6)))), mj)
+    alone = FrameValues(frame, None, (-1, None), mj)
+    for which in ("actual_tcp", "target_tcp"):
+        for got, want in zip(getattr(batch, which), getattr(alone, which), strict=True):
+            assert np.abs(np.array(got) - np.array(want)).max() < 1e-9
+    assert batch.q[3] == snap.position[3, :6].tolist()
+    assert batch.target_qd[4] == frame.target_qd[4, :6].tolist()
+    assert batch.timestamp == (7 * 0.002,)
 
 
 def test_pose_conversions_keep_the_axis_near_half_a_turn() -> None:
