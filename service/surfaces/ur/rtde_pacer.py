@@ -4,7 +4,9 @@ Why: 32 ur_rtde programs are 64 streams at 500 Hz; a timer of its own per stream
 timer callbacks a second, each a heap push and pop and a callback of the event loop. A pacer
 sends every stream of its frequency from one callback (in the order they started), keeping
 its schedule as each stream did before: the next send one period after the last one due,
-never earlier than now (a late loop skips, never bursts to catch up).
+never earlier than now (a late loop skips, never bursts to catch up). A stream that starts
+while its pacer runs gets its first package at the pacer's next send (at most one period
+later), as a controller sends on its own clock.
 """
 
 from __future__ import annotations
