@@ -22,6 +22,9 @@ from service.core.kinematics.pose import (
 from service.core.kinematics.servo import ServoLag
 from service.core.kinematics.ur import NotDH, Singularity, Unsolved, URKinematics
 from service.core.sim.robot import FLANGE_SITE, load_robot
+from service.core.sim.types import Snapshot
+from service.surfaces.ur.rtde_frame import Frame, FrameValues
+from service.surfaces.ur.tcp_pose import ToolKinematics
 
 ROBOT = load_robot()
 ARM = ROBOT.spec.names[:6]
@@ -116,6 +119,42 @@ def test_the_jacobian_is_the_derivative_of_the_tcp_pose() -> None:
         )
         assert np.abs(jac[:, :3, j] - v).max() < 1e-7
         assert np.abs(jac[:, 3:, j] - w[:, [2, 0, 1], [1, 2, 0]]).max() < 1e-7
+
+
+def test_tcp_state_of_many_worlds_is_fk_and_the_jacobian_and_mujocos_own() -> None:
+    """RTDE's batched TCP pose and speed (once a tick for every world) equal `fk` and J·q̇,
+    and MuJoCo's own site pose and Jacobian world by world (what RTDE read before)."""
+    n = 12
+    q, qd = RNG.uniform(-3, 3, (n, 6)), RNG.uniform(-2, 2, (n, 6))
+    tcp = np.c_[RNG.uniform(-0.2, 0.2, (n, 3)), RNG.uniform(-1, 1, (n, 3))]
+    tcp[0] = 0.0  # the flange itself
+    pose, speed = KIN.tcp_state(q, qd, tcp)
+    assert np.abs(pose - KIN.fk(q, tcp)).max() < 1e-12
+    assert np.abs(speed - np.einsum("nij,nj->ni", KIN.jacobian(q, tcp), qd)).max() < 1e-12
+    mj = ToolKinematics(ROBOT)
+    for w in range(n):
+        want_pose, want_speed = mj.tcp(q[w], qd[w], tuple(tcp[w]))
+        assert np.abs(pose[w] - want_pose).max() < 1e-9
+        assert np.abs(speed[w] - want_speed).max() < 1e-9
+
+
+def test_rtde_frame_values_of_a_dh_arm_and_of_the_fallback_agree() -> None:
+    """RTDE's per-tick values (rtde_frame): the batch over the DH chain and MuJoCo's own
+    kinematics world by world (an arm that is not UR's chain) give the same TCP, and each
+    world's row is its own."""
+    n = 5
+    a = lambda: RNG.uniform(-2, 2, (n, 7))  # noqa: E731
+    snap = Snapshot(7, np.zeros(n), a(), a(), a(), a(), np.zeros(n), None, None)  # type: ignore[arg-type]
+    frame = Frame(snap, a(), a(), 0.002)
+    mj = ToolKinematics(ROBOT)
+    batch = FrameValues(frame, KIN, (0, pose_to_matrix(np.zeros((n, 6)))), mj)
+    alone = FrameValues(frame, None, (-1, None), mj)
+    for which in ("actual_tcp", "target_tcp"):
+        for got, want in zip(getattr(batch, which), getattr(alone, which), strict=True):
+            assert np.abs(np.array(got) - np.array(want)).max() < 1e-9
+    assert batch.q[3] == snap.position[3, :6].tolist()
+    assert batch.target_qd[4] == frame.target_qd[4, :6].tolist()
+    assert batch.timestamp == (7 * 0.002,)
 
 
 def test_pose_conversions_keep_the_axis_near_half_a_turn() -> None:

@@ -33,6 +33,12 @@ class ToolTable:
         self.lag = lag  # the arm's servo lag, for moveL's acceleration feed-forward
         self._tcp = np.zeros((nworld, 6))
         self._lock = threading.Lock()
+        self.version = 0  # bumped by every `set`: a reader keeps a copy until it moves
+
+    def all(self) -> tuple[int, np.ndarray]:
+        """(version, every world's offsets (nworld, 6)) read together (RTDE: once per tick)."""
+        with self._lock:
+            return self.version, self._tcp.copy()
 
     def get(self, worlds: np.ndarray | list[int] | int) -> np.ndarray:
         """The offsets of `worlds` (k, 6), or (6,) for one world id."""
@@ -43,6 +49,7 @@ class ToolTable:
         """Give `worlds` (k,) the offsets (k, 6) (validated by the caller: `commands.tcp`)."""
         with self._lock:
             self._tcp[np.asarray(worlds, dtype=np.int64)] = offsets
+            self.version += 1
 
 
 _TABLES: weakref.WeakKeyDictionary[SimLoop, ToolTable] = weakref.WeakKeyDictionary()

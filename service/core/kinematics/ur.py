@@ -187,6 +187,27 @@ class URKinematics:
         jv = np.cross(z, p[:, None, :] - o)
         return np.concatenate([jv, z], axis=-1).transpose(0, 2, 1)
 
+    def tcp_state(
+        self, q: np.ndarray, qd: np.ndarray, tcp: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(TCP poses p[x, y, z, rx, ry, rz] (n, 6), TCP speeds vx vy vz wx wy wz (n, 6)) in the
+        base frame at q (n, 6) moving at qd (n, 6), as RTDE's actual_TCP_pose/_speed report
+        them: `fk` and `jacobian` @ qd from one pass over the DH frames (RTDE asks every tick
+        for every streaming world). tcp: offsets as poses (n, 6) or as transforms (n, 4, 4)
+        (a caller that keeps them between ticks converts them once)."""
+        q = np.asarray(q, dtype=np.float64)
+        qd = np.asarray(qd, dtype=np.float64)
+        frames = _frames(self.d, self.a, q)  # (n, 7, 4, 4)
+        t = frames[:, 6] @ self.flange_in_dh6
+        if tcp is not None:
+            tcp = np.asarray(tcp, dtype=np.float64)
+            t = t @ (tcp if tcp.shape[-2:] == (4, 4) else pose_to_matrix(tcp))
+        z = frames[:, :6, :3, 2]  # joint axes (n, 6, 3)
+        lever = t[:, None, :3, 3] - frames[:, :6, :3, 3]
+        v = np.einsum("nj,njk->nk", qd, np.cross(z, lever))
+        w = np.einsum("nj,njk->nk", qd, z)
+        return matrix_to_pose(t), np.concatenate([v, w], axis=-1)
+
     def singularity(self, q: np.ndarray) -> np.ndarray:
         """Singularity bits (n,) of q (n, 6): the factors of det J = a2 a3 s3 s5 (a2 c2 + a3 c23
         + d5 s234) near zero (lengths normalised by the arm's reach)."""

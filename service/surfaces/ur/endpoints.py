@@ -27,7 +27,8 @@ from typing import TYPE_CHECKING, Any
 from service.core.sim.safety import SafetyTable
 from service.surfaces.ur import addresses
 from service.surfaces.ur.dashboard import DashboardSession
-from service.surfaces.ur.rtde_outputs import Frame
+from service.surfaces.ur.rtde_frame import Frame, FrameValues, FrameValuesCache
+from service.surfaces.ur.rtde_pacer import Pacers
 from service.surfaces.ur.rtde_session import RtdeSession
 from service.surfaces.ur.script_ports import ScriptSession
 from service.surfaces.ur.tcp_pose import ToolKinematics
@@ -66,13 +67,16 @@ class Endpoints:
     ) -> None:
         self.safety = safety  # the loop's safety modes (every world's controller reads them)
         self.robots = {w: WorldRobot(w, a, self) for w, a in worlds.items()}
-        self.kin = kin
         self.motion: Motion | None = None  # set by the surface at start
+        self._values = FrameValuesCache(
+            kin, lambda: None if self.motion is None else self.motion.tools
+        )
         self._owner_of = owner_of  # None: leases off, every world always open
         self._read_payloads = read_payloads
         self.frame: Frame | None = None  # set by the sink (sim thread), read here
         self.payloads: dict[int, tuple[float, ...]] = {}
         self.streaming = 0  # started RTDE sessions (the sink asks for a snapshot per tick)
+        self.pacers = Pacers()  # one timer per RTDE frequency (UR thread)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._servers: list[asyncio.AbstractServer] = []
@@ -160,6 +164,10 @@ class Endpoints:
         worlds = list(self.robots)
         read = await asyncio.wrap_future(self._read_payloads(worlds))
         self.payloads = {row["world"]: tuple(row["params"]["payload"]) for row in read["worlds"]}
+
+    def values(self) -> FrameValues | None:
+        """Every world's RTDE values at the latest frame (UR thread; once per tick)."""
+        return self._values.get(self.frame)
 
     def begin_leases(self) -> None:
         """Leases on: every world starts closed until the first poll finds its lease."""

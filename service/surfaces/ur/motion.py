@@ -39,6 +39,7 @@ class Motion:
     def __init__(self, control: Control, frame: Callable[[], Frame | None]) -> None:
         self.control = control
         self._frame = frame
+        self._tools: ToolTable | None = None
         spec = control.spec
         self.names = tuple(spec.names[:ARM])
         self.speed_limits = np.array([j.velocity_limit for j in spec.joints[:ARM]])
@@ -47,7 +48,11 @@ class Motion:
 
     @property
     def tools(self) -> ToolTable:
-        return tools_of(self.control.loop)
+        """The loop's tool table (one per loop: kept once found; Unavailable on an arm with
+        no UR kinematics, asked again each time)."""
+        if self._tools is None:
+            self._tools = tools_of(self.control.loop)
+        return self._tools
 
     # -- reading the world ------------------------------------------------------------------
 

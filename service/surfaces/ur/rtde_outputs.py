@@ -11,8 +11,9 @@ started).
 Outputs a simulated arm has no source for (temperatures, voltages, analog inputs, the
 accelerometer, wrenches, euromap) are 0; the guide says so.
 
-Why values are computed lazily per (world, tick): a 500 Hz stream of a 60 Hz world sends the
-same tick several times, and most recipes ask for a few of these.
+Why values are computed once per tick for every world (`rtde_frame`), and a package packed
+once per (recipe, tick): a 500 Hz stream of a 60 Hz world sends the same tick several times,
+and 32 programs ask for the same values of 32 worlds.
 """
 
 from __future__ import annotations
@@ -21,101 +22,55 @@ import math
 import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
-import numpy as np
-
-from service.core.sim.types import Snapshot
 from service.surfaces.ur import rtde_variables as rv
 from service.surfaces.ur.controller import Controller
-from service.surfaces.ur.tcp_pose import ARM, ToolKinematics
-
-
-@dataclass(frozen=True)
-class Frame:
-    """What the sink hands RTDE after a tick (built on the sim thread): the snapshot, the
-    target's rate of change (nworld, 7), and the tick length [s]."""
-
-    snap: Snapshot
-    target_qd: np.ndarray
-    target_qdd: np.ndarray
-    tick_dt: float
+from service.surfaces.ur.rtde_frame import Frame, FrameValues
 
 
 class WorldTick:
-    """One world's values at one frame's tick, each computed when first read."""
+    """One world's values at one frame's tick: the frame's rows for every world
+    (`rtde_frame.FrameValues`, computed once per tick) and this world's controller."""
+
+    __slots__ = ("ctl", "payload", "values", "w")
 
     def __init__(
-        self,
-        frame: Frame,
-        world: int,
-        kin: ToolKinematics,
-        ctl: Controller,
-        payload: Sequence[float],
-        tcp_offset: Sequence[float] = (0.0,) * 6,
-    ):
-        self.frame, self.w, self.kin, self.ctl, self.payload = frame, world, kin, ctl, payload
-        self.tcp_offset = tuple(float(x) for x in tcp_offset)
+        self, values: FrameValues, world: int, ctl: Controller, payload: Sequence[float]
+    ) -> None:
+        self.values, self.w, self.ctl, self.payload = values, world, ctl, payload
 
-    def _row(self, a: np.ndarray) -> list[float]:
-        return [float(x) for x in a[self.w, :ARM]]
-
-    @cached_property
-    def q(self) -> list[float]:
-        return self._row(self.frame.snap.position)
-
-    @cached_property
-    def qd(self) -> list[float]:
-        return self._row(self.frame.snap.velocity)
-
-    @cached_property
-    def effort(self) -> list[float]:
-        return self._row(self.frame.snap.effort)
-
-    @cached_property
-    def target(self) -> list[float]:
-        return self._row(self.frame.snap.target)
-
-    @cached_property
-    def target_qd(self) -> list[float]:
-        return self._row(self.frame.target_qd)
-
-    @cached_property
-    def target_qdd(self) -> list[float]:
-        return self._row(self.frame.target_qdd)
-
-    @cached_property
-    def _actual_tcp(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.kin.tcp(np.array(self.q), np.array(self.qd), self.tcp_offset)
-
-    @cached_property
-    def _target_tcp(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.kin.tcp(np.array(self.target), np.array(self.target_qd), self.tcp_offset)
+    @property
+    def frame(self) -> Frame:
+        return self.values.frame
 
 
 _ZERO6, _ZERO3 = (0.0,) * 6, (0.0,) * 3
 Reader = Callable[[WorldTick], Sequence[Any]]
 
 
+def _row(name: str) -> Reader:
+    return lambda t: getattr(t.values, name)[t.w]
+
+
 def _tcp(which: str, part: int) -> Reader:
-    return lambda t: getattr(t, which)[part].tolist()
+    return lambda t: getattr(t.values, which)[part][t.w]
 
 
 READERS: dict[str, Reader] = {
-    "timestamp": lambda t: (t.frame.snap.tick * t.frame.tick_dt,),
-    "actual_q": lambda t: t.q,
-    "actual_qd": lambda t: t.qd,
-    "actual_current": lambda t: t.effort,
-    "target_current": lambda t: t.effort,
-    "target_moment": lambda t: t.effort,
-    "target_q": lambda t: t.target,
-    "target_qd": lambda t: t.target_qd,
-    "target_qdd": lambda t: t.target_qdd,
-    "actual_TCP_pose": _tcp("_actual_tcp", 0),
-    "actual_TCP_speed": _tcp("_actual_tcp", 1),
-    "target_TCP_pose": _tcp("_target_tcp", 0),
-    "target_TCP_speed": _tcp("_target_tcp", 1),
+    "timestamp": lambda t: t.values.timestamp,
+    "actual_q": _row("q"),
+    "actual_qd": _row("qd"),
+    "actual_current": _row("effort"),
+    "target_current": _row("effort"),
+    "target_moment": _row("effort"),
+    "target_q": _row("target"),
+    "target_qd": _row("target_qd"),
+    "target_qdd": _row("target_qdd"),
+    "actual_TCP_pose": _tcp("actual_tcp", 0),
+    "actual_TCP_speed": _tcp("actual_tcp", 1),
+    "target_TCP_pose": _tcp("target_tcp", 0),
+    "target_TCP_speed": _tcp("target_tcp", 1),
     "robot_mode": lambda t: (int(t.ctl.robot_mode),),
     "safety_mode": lambda t: (int(t.ctl.safety_mode),),
     "safety_status": lambda t: (int(t.ctl.safety_mode),),

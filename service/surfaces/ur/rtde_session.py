@@ -6,7 +6,8 @@ accepted"). An output recipe with a `NOT_FOUND` variable, or an input recipe wit
 is answered with recipe id 0 and its type list, as the robot fails a setup, and is not kept.
 Started output recipes are sent at their frequency (1..500 Hz), each package from the world's
 state at the latest tick (the same bytes again while neither the tick nor the controller
-moved); a client too slow to read has packages skipped, never queued without bound.
+moved), every stream of one frequency from one timer (rtde_pacer.py); a client too slow to
+read has packages skipped, never queued without bound.
 
 Malformed input never ends the service or reaches another world: a package too short for its
 fields or naming an unknown recipe gets a text message (level ERROR) and a log line; a header
@@ -45,7 +46,7 @@ class RtdeSession(asyncio.Protocol):
         self._outputs: dict[int, OutputRecipe] = {}
         self._inputs: dict[int, tuple[tuple[str, ...], struct.Struct]] = {}
         self._next_id = {"out": 1, "in": 1}  # outputs and inputs are numbered apart
-        self._timers: dict[int, asyncio.TimerHandle] = {}  # recipe id → its next send
+        self._streams: dict[int, _Stream] = {}  # recipe id → its stream, while started
         self.started = False
         self.sent = 0  # data packages sent
         self.skipped = 0  # data packages skipped for a slow reader
@@ -189,35 +190,19 @@ class RtdeSession(asyncio.Protocol):
             return
         self.started = True
         self.robot.streaming(+1)
-        loop = asyncio.get_running_loop()
+        pacers = self.robot.fleet.pacers
         for recipe in self._outputs.values():
-            self._timers[recipe.id] = loop.call_soon(self._tick, recipe, loop.time(), None)
+            stream = self._streams[recipe.id] = _Stream(self, recipe)
+            pacers.add(recipe.frequency, stream)
 
     def _stop_streaming(self) -> None:
-        for timer in self._timers.values():
-            timer.cancel()
-        self._timers.clear()
+        pacers = self.robot.fleet.pacers
+        for stream in self._streams.values():
+            pacers.remove(stream.recipe.frequency, stream)
+        self._streams.clear()
         if self.started:
             self.started = False
             self.robot.streaming(-1)
-
-    def _tick(self, recipe: OutputRecipe, due: float, last: tuple[object, bytes] | None) -> None:
-        transport = self.transport
-        if transport is None or transport.is_closing() or not self.started:
-            return
-        view = self.robot.view()
-        if view is not None:
-            # a view is renewed when its frame, controller or payload changes (world_robot.py)
-            if last is None or last[0] is not view:
-                last = (view, recipe.pack(view))
-            if transport.get_write_buffer_size() > _MAX_UNSENT:
-                self.skipped += 1
-            else:
-                transport.write(wire.frame(wire.DATA_PACKAGE, last[1]))
-                self.sent += 1
-        loop = asyncio.get_running_loop()
-        due = max(due + 1.0 / recipe.frequency, loop.time())
-        self._timers[recipe.id] = loop.call_at(due, self._tick, recipe, due, last)
 
     # -- replies ----------------------------------------------------------------------------
 
@@ -237,3 +222,34 @@ class RtdeSession(asyncio.Protocol):
         log.warning("world %d RTDE connection closed: %s", self.robot.world, why)
         if self.transport is not None:
             self.transport.abort()
+
+
+class _Stream:
+    """One started output recipe: its package of the latest view, packed and framed once per
+    view (a view is renewed when its frame, controller or payload changes: world_robot.py)
+    and sent by the pacer of its frequency (rtde_pacer.py)."""
+
+    __slots__ = ("_bytes", "_view", "recipe", "session")
+
+    def __init__(self, session: RtdeSession, recipe: OutputRecipe) -> None:
+        self.session, self.recipe = session, recipe
+        self._view: object = None
+        self._bytes = b""
+
+    def send_due(self) -> bool:
+        session = self.session
+        transport = session.transport
+        if transport is None or transport.is_closing() or not session.started:
+            return False
+        view = session.robot.view()
+        if view is None:
+            return True
+        if view is not self._view:
+            self._view = view
+            self._bytes = wire.frame(wire.DATA_PACKAGE, self.recipe.pack(view))
+        if transport.get_write_buffer_size() > _MAX_UNSENT:
+            session.skipped += 1
+        else:
+            transport.write(self._bytes)
+            session.sent += 1
+        return True

@@ -1,12 +1,13 @@
-"""The tool's pose and speed in the robot's base frame, as a UR controller reports them.
+"""The tool's pose and speed in the robot's base frame from MuJoCo's own kinematics, world by
+world: RTDE's fallback for a served arm that is not UR's DH chain (a cell that changed it; the
+TCP is then the flange). UR's arm is read in one batch for every world instead
+(`rtde_frame`, `URKinematics.tcp_state`); tests/test_kinematics.py holds the two equal.
 
-For now this reads MuJoCo's own body poses of the served model: a scratch MjData of the
-scene, the arm's six joints set from the world's state, `mj_kinematics` for the flange site's
-pose and `mj_jacSite` for its twist (J(q)·q̇), both expressed in the frame of the body
-`base` (the controller's base frame, UR's DH frame 0; a cell without one uses the root body of
-the flange's chain). Why a class with two calls: the kinematics of the served model are being
-written apart (FK/IK, the TCP offset) and will replace these two calls without the RTDE code
-noticing. UR poses are x, y, z [m] and a rotation vector rx, ry, rz [rad] (angle ≤ π).
+It reads MuJoCo's own body poses of the served model: a scratch MjData of the scene, the
+arm's six joints set from the world's state, `mj_kinematics` for the flange site's pose and
+`mj_jacSite` for its twist (J(q)·q̇), both expressed in the frame of the body `base` (the
+controller's base frame, UR's DH frame 0; a cell without one uses the root body of the
+flange's chain). UR poses are x, y, z [m] and a rotation vector rx, ry, rz [rad] (angle ≤ π).
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """One world's controller as its connections see it: address, state, clients, input owners.
 
 Why a module of its own: the connections (RTDE, Dashboard, script ports) and the listeners
-(endpoints.py) both hold it; it knows the listeners only as a `Fleet` (the latest frame, the
-kinematics, the payloads, the count of streaming connections), and the running control script
+(endpoints.py) both hold it; it knows the listeners only as a `Fleet` (the latest frame's values,
+the payloads, the count of streaming connections), and the running control script
 and the URScript lines' speed loop only as `Program` and `Loop`: script_runner.start_script
 and script_lines.line_speed make them, so no import runs in a circle (type-only ones too).
 """
@@ -12,19 +12,18 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING, Protocol
 
-from service.core.errors import Unavailable
 from service.core.sim.safety import SafetyTable
 from service.surfaces.ur.controller import Controller, ProgramState
 from service.surfaces.ur.robot_messages import robot_message
-from service.surfaces.ur.rtde_outputs import Frame, WorldTick
-from service.surfaces.ur.tcp_pose import ToolKinematics
+from service.surfaces.ur.rtde_frame import Frame, FrameValues
+from service.surfaces.ur.rtde_outputs import WorldTick
+from service.surfaces.ur.rtde_pacer import Pacers
 
 if TYPE_CHECKING:
     from service.surfaces.ur.motion import Motion
 
 log = logging.getLogger("armfleet.ur")
 NO_PAYLOAD = (0.0, 0.0, 0.0, 0.0)
-NO_TCP = (0.0,) * 6
 
 
 class Fleet(Protocol):
@@ -32,10 +31,12 @@ class Fleet(Protocol):
 
     frame: Frame | None
     safety: SafetyTable
-    kin: ToolKinematics
     motion: Motion | None
     payloads: dict[int, tuple[float, ...]]
     streaming: int
+    pacers: Pacers
+
+    def values(self) -> FrameValues | None: ...
 
 
 class Session(Protocol):
@@ -97,38 +98,24 @@ class WorldRobot:
         self.fleet.streaming += delta
 
     def view(self) -> WorldTick | None:
-        """This world at the latest frame (shared by its sessions until the frame or the
-        controller changes)."""
-        frame = self.fleet.frame
-        if frame is None:
+        """This world at the latest frame (shared by its sessions until the frame's values,
+        the controller or the payload change)."""
+        values = self.fleet.values()
+        if values is None:
             return None
         v = self._view
         payload = self.fleet.payloads.get(self.world, NO_PAYLOAD)
-        tcp = self._tcp_offset()
-        # the payload and the TCP offset are read apart from the frames: a paused world gets no
-        # new frame, so a change of either must renew the view by itself
+        # the payload is read apart from the frames: a paused world gets no new frame, so a
+        # change of it must renew the view by itself (the TCP offset renews the values)
         if (
             v is None
-            or v.frame is not frame
+            or v.values is not values
             or v.payload != payload
-            or v.tcp_offset != tcp
             or self._view_version != self.controller.version
         ):
-            kin, ctl = self.fleet.kin, self.controller
-            v = self._view = WorldTick(frame, self.world, kin, ctl, payload, tcp)
+            v = self._view = WorldTick(values, self.world, self.controller, payload)
             self._view_version = self.controller.version
         return v
-
-    def _tcp_offset(self) -> tuple[float, ...]:
-        """The world's TCP offset in the core's tool table (one for every surface); the flange
-        where the served arm has no UR kinematics (a cell that changed the arm)."""
-        motion = self.fleet.motion
-        if motion is None:
-            return NO_TCP
-        try:
-            return tuple(float(x) for x in motion.tcp(self.world))
-        except Unavailable:
-            return NO_TCP
 
     def close_all(self, why: str) -> None:
         self.end_script(why)
