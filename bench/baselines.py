@@ -142,9 +142,9 @@ class Rollout:
         )
         self.initial[:] = self.states[:, -1, :]
 
-    def block(self, seconds: float) -> float:
-        """World-steps/s over one block of about `seconds`."""
-        timing = common.time_calls(self.call, seconds)
+    def block(self, seconds: float, warm: bool = True) -> float:
+        """World-steps/s over one block of about `seconds` (`warm`: after one untimed call)."""
+        timing = common.time_calls(self.call, seconds, warmup_reps=int(warm))
         return timing.reps * self.nstep * self.nworld / timing.elapsed
 
     def finite(self) -> bool:
