@@ -5,16 +5,31 @@ what else runs there, so a figure measured on another machine does not answer it
 here, with the model as served:
 
 1. **The limit**: raw ``mujoco.rollout`` of the served model on every core (the native engine's
-   solver and step), as worlds at 60 Hz: world-steps/s over the steps one world needs a second.
-   The best of a few short blocks (bench.baselines.Rollout).
+   solver and step), as worlds at 60 Hz; read in a 0.5 s block at the start and again before
+   every server start, the best block being the limit (bench/rollout_limit.py says why).
 2. **Per engine** (native MuJoCo, MuJoCo Warp on the CPU, and MuJoCo Warp on CUDA where a GPU
-   is present): ``armfleet serve --mode fast`` at a first guess N0 with one 30 Hz subscriber
-   of every world measures the served tick rate; N = N0 x ticks/s / 60 (a little under) is the
-   prediction (probed once more at N when it is far from N0), and ``--mode realtime`` at N
-   with that subscriber for a short window verifies it (RTF >= 0.99,
-   bench.service_probe.measure_realtime); a miss steps N down (twice at most).
-3. ``--check``: each engine's answer run again right after, for a longer window: the answer
-   holds when RTF >= 0.99 there too.
+   is present): a server of N0 worlds (a share of the limit) in fast mode with one 30 Hz
+   subscriber of every world, 2 s: N0 x ticks/s / 60, a little under, is the prediction. The
+   same server then runs in realtime mode with that subscriber, 10 s (unless the prediction is
+   under N0: a new server of N starts instead); then new servers search
+   from there (`how_many_sizes.next_size`): a miss predicts from the rate it kept, a hold from
+   how busy the sim thread was, never above the prediction; three realtime runs at most (two
+   more while none has held), and
+   a run 5% short of real time after 4 s stops there.
+3. ``--check``: the server that held each answer, kept up paused meanwhile, runs it again for
+   10 s after every engine is measured.
+
+Servers start paused and are paused between runs, so one kept for the check takes nothing
+from the runs after it; a server start (about 2 s native, 8 s Warp on a quiet 2-core box)
+is what a run costs beside its window, so the probe's server runs the first realtime window
+too.
+
+Why 10 s windows (the old command ran 30 s checks): a size the machine cannot hold falls
+behind steadily, so its shortfall grows with the window while the reading's error does not
+(one tick in 600, and the milliseconds of the two /v1/info reads): 10 s tells RTF 0.99 from
+1.00. What a longer window adds is an average over the box's own hiccups (another process
+taking a core for a second), which are the box's and not the service's; the check, a second
+window a minute later, is what shows that the answer was not one lucky window.
 
 Printed as worlds and as a ratio to the limit; the JSON (machine, load, every run) goes to
 ``bench/results/capacity.json`` or ``--out``. Section 11 (bench/capacity.py) is the slow,
@@ -24,6 +39,7 @@ careful version of step 2 for native MuJoCo; this is the quick answer.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import sys
 import time
@@ -35,13 +51,13 @@ from typing import Any
 import httpx
 
 from bench import common
+from bench.how_many_report import _rows, report
+from bench.how_many_sizes import MAX_RUNS, RESOLUTION, UNDER, _floor8, capped, next_size
+from bench.rollout_limit import RolloutLimit
 from bench.service_bench import RTF_GOAL
 from bench.service_probe import FrameCounter, measure_realtime, timed_info
 
-LIMIT_WORLDS = 1024  # batch size at which raw rollout is timed (bench/capacity.py's)
-UNDER = 0.97  # the prediction from fast mode, a little under (realtime waits between ticks)
-STEP_DOWNS = 2  # a miss steps N down at most this often
-NEAR = 0.25  # a prediction within this share of the probe's size needs no second probe
+ABORT_BELOW = 0.95  # a run this far short of real time after `abort_after_s` is a miss
 
 
 @dataclass(frozen=True)
@@ -60,7 +76,7 @@ class Engine:
 
 CPU_ENGINES = (
     Engine("mujoco", "native MuJoCo (--engine mujoco)", "mujoco", "cpu", 0.9),
-    Engine("warp", "MuJoCo Warp on the CPU (--engine warp)", "warp", "cpu", 0.3),
+    Engine("warp", "MuJoCo Warp on the CPU (--engine warp)", "warp", "cpu", 0.2),
 )
 # A GPU holds tens of thousands: one JSON subscriber of every world would measure the client.
 CUDA_ENGINE = Engine(
@@ -72,12 +88,13 @@ CUDA_ENGINE = Engine(
 class Timing:
     """How long each step runs: full, or `--quick` (a test, a first look)."""
 
-    limit_block_s: float
-    limit_blocks: int
-    fast_window_s: float
-    warmup_s: float
-    window_s: float
-    check_window_s: float
+    limit_block_s: float  # one rollout block (one before every server start)
+    probe_warmup_s: float  # fast mode: from ready to the window
+    probe_window_s: float
+    warmup_s: float  # realtime: from ready to the window
+    window_s: float  # realtime: the window a size holds or misses in
+    check_window_s: float  # --check: the answer run again, on a server of its own
+    abort_after_s: float  # a realtime run clearly short of real time stops after this long
 
 
 @dataclass(frozen=True)
@@ -93,61 +110,30 @@ class Ask:
     max_worlds: int | None = None
 
 
-FULL = Timing(1.0, 3, 3.0, 2.0, 10.0, 30.0)
-QUICK = Timing(0.3, 2, 1.5, 1.0, 3.0, 5.0)
+FULL = Timing(0.5, 1.0, 2.0, 1.5, 10.0, 10.0, 4.0)
+QUICK = Timing(0.2, 0.5, 1.0, 1.0, 3.0, 3.0, 1.5)
 
 
-def _floor8(x: float) -> int:
-    """Worlds to try: whole multiples of 8 from 16 up (rounded down), else at least 1."""
-    return max(1, int(x)) if x < 16 else int(x // 8) * 8
-
-
-def _below(n: int, rtf: float) -> int:
-    """The next N after a miss at `n` with `rtf`: what that rate holds, a little under, and
-    always fewer than `n`."""
-    return max(1, min(_floor8(n * min(rtf, 1.0) * UNDER), n - (8 if n >= 24 else 1)))
-
-
-def rollout_limit(timing: Timing) -> dict[str, Any]:
-    """Raw rollout of the served model on every core: world-steps/s and worlds at 60 Hz."""
-    import mujoco
-
-    from bench.baselines import Rollout, physics_dt
-
-    _, dt = physics_dt()
-    steps_per_world_s = common.CONTROL_HZ * round(1 / (common.CONTROL_HZ * dt))
-    cores = common.usable_cores()
-    rollout = Rollout(LIMIT_WORLDS, cores, dt)
-    try:
-        rollout.block(timing.limit_block_s / 2)  # warm: the worlds settle from home
-        blocks = [rollout.block(timing.limit_block_s) for _ in range(timing.limit_blocks)]
-        solver = mujoco.mjtSolver(int(rollout.mjm.opt.solver)).name.removeprefix("mjSOL_")
-    finally:
-        rollout.close()
-    best = max(blocks)
-    return {
-        "threads": cores,
-        "batch": LIMIT_WORLDS,
-        "solver": solver.lower(),
-        "physics_dt": dt,
-        "world_steps_per_s": best,
-        "world_steps_per_s_blocks": blocks,
-        "worlds": best / steps_per_world_s,
-        "steps_per_world_s": steps_per_world_s,
-    }
+async def _switch(server: common.Served, mode: str) -> None:
+    async with httpx.AsyncClient(timeout=60) as client:
+        path = "/v1/sim/pause" if mode == "paused" else "/v1/sim/mode"
+        body = None if mode == "paused" else {"mode": mode}
+        (await client.post(f"{server.url}{path}", json=body)).raise_for_status()
 
 
 async def _fast(server: common.Served, window: float, warmup: float, fmt: str) -> dict[str, Any]:
-    """Fast mode with one 30 Hz subscriber of every world: served ticks/s over `window`."""
+    """Fast mode with one 30 Hz subscriber of every world: served ticks/s over `window`;
+    paused again after."""
     counter = FrameCounter()
-    url = f"{server.ws_url}/v1/ws?rate=30&format={fmt}"
-    reader = asyncio.create_task(counter.run(url))
+    reader = asyncio.create_task(counter.run(f"{server.ws_url}/v1/ws?rate=30&format={fmt}"))
     try:
+        await _switch(server, "fast")
         async with httpx.AsyncClient(timeout=60) as client:
             await asyncio.sleep(warmup)
             t0, info0 = await timed_info(client, server.url)
             await asyncio.sleep(window)
             t1, info1 = await timed_info(client, server.url)
+        await _switch(server, "paused")
     finally:
         reader.cancel()
         await asyncio.gather(reader, return_exceptions=True)
@@ -158,75 +144,124 @@ async def _fast(server: common.Served, window: float, warmup: float, fmt: str) -
         "world_steps_per_s": common.world_steps(ticks, server.nworld, info1["substeps"])
         / (t1 - t0),
         "wall_s": t1 - t0,
+        "ready_s": server.ready_s,
         "stream_error": counter.error,
     }
 
 
-def _serve(engine: Engine, n: int, mode: str):
-    return common.served(n, mode, engine.device, {"ARMFLEET_ENGINE": engine.engine})
+def realtime_on(server: common.Served, engine: Engine, window: float, timing: Timing) -> dict:
+    """`server` in realtime mode, one 30 Hz subscriber of every world: RTF over `window`
+    (stopped early on a clear miss); paused again after, so that a server kept for the
+    check takes no time from the runs after it."""
 
+    async def measured() -> dict[str, Any]:
+        await _switch(server, "realtime")
+        try:
+            return await measure_realtime(
+                server,
+                window,
+                timing.warmup_s,
+                check_every=1.0,
+                abort_below=ABORT_BELOW,
+                abort_after=timing.abort_after_s,
+                per_subscriber=server.nworld,
+                fmt=engine.fmt,
+            )
+        finally:
+            await _switch(server, "paused")
 
-def realtime_run(engine: Engine, n: int, window: float, warmup: float) -> dict[str, Any]:
-    """`n` worlds in realtime mode, one 30 Hz subscriber of every world: RTF over `window`."""
-    with _serve(engine, n, "realtime") as server:
-        res = asyncio.run(
-            measure_realtime(server, window, warmup, per_subscriber=n, fmt=engine.fmt)
-        )
-    res["held"] = res["realtime_factor"] >= RTF_GOAL
+    res = asyncio.run(measured())
+    res["held"] = res["realtime_factor"] >= RTF_GOAL and not res["aborted_early"]
     return res
+
+
+class _Servers:
+    """The servers of one command: each started paused; the one holding an engine's answer
+    stays up (paused) for `--check`, the others stop as soon as they are measured."""
+
+    def __init__(self) -> None:
+        self._stacks: dict[int, contextlib.ExitStack] = {}
+
+    def start(self, engine: Engine, n: int) -> common.Served:
+        stack = contextlib.ExitStack()
+        env = {"ARMFLEET_ENGINE": engine.engine}
+        server = stack.enter_context(common.served(n, "paused", engine.device, env))
+        self._stacks[id(server)] = stack
+        return server
+
+    def stop(self, server: common.Served | None) -> None:
+        if server is not None and id(server) in self._stacks:
+            self._stacks.pop(id(server)).close()
+
+    def close(self) -> None:
+        for stack in self._stacks.values():
+            stack.close()
+        self._stacks.clear()
 
 
 def engine_capacity(
     engine: Engine,
-    limit_worlds: float,
+    limit: RolloutLimit,
     timing: Timing,
     say: Callable[[str], None],
+    servers: _Servers,
     first: int | None = None,
     max_worlds: int | None = None,
-) -> dict[str, Any]:
-    """Fast mode at N0 predicts N; realtime at N verifies it, stepping down on a miss."""
-    n0 = first or max(engine.floor, _floor8(engine.first_share * limit_worlds))
-    if max_worlds:
-        n0 = min(n0, max_worlds)
-    probes: list[dict[str, Any]] = []
-    n = n0
-    # A tick has a part that does not grow with the worlds, so a rate measured far from N
-    # predicts it poorly: a second probe at the first prediction when that is far from N0.
-    for _ in range(2):
-        with _serve(engine, n, "fast") as server:
-            fast = asyncio.run(_fast(server, timing.fast_window_s, timing.warmup_s, engine.fmt))
-        probes.append(fast)
-        n = _floor8(fast["nworld"] * fast["ticks_per_s"] / common.CONTROL_HZ * UNDER)
-        if max_worlds:
-            n = min(n, max_worlds)
-        say(
-            f"  {engine.key}: fast mode at {fast['nworld']} worlds: "
-            f"{fast['ticks_per_s']:.1f} ticks/s -> {n} worlds predicted"
-        )
-        if abs(n - fast["nworld"]) <= NEAR * fast["nworld"]:
-            break
+) -> tuple[dict[str, Any], common.Served | None]:
+    """Fast mode at N0 predicts N; realtime on the same server at N0, then on new servers
+    from there, bisects towards the most held. Returns the result and the server that holds
+    the answer (kept up, paused, for the check)."""
+    n = n0 = min(
+        first or max(engine.floor, _floor8(engine.first_share * limit.worlds())),
+        max_worlds or 10**9,
+    )
+    beside = limit.worlds(limit.read(f"{engine.key} {n0}"))
+    server = servers.start(engine, n0)
+    probe = asyncio.run(_fast(server, timing.probe_window_s, timing.probe_warmup_s, engine.fmt))
+    predicted = _floor8(n0 * probe["ticks_per_s"] / common.CONTROL_HZ * UNDER)
+    say(
+        f"  {engine.key}: fast mode at {n0} worlds: {probe['ticks_per_s']:.1f} ticks/s "
+        f"-> {predicted} worlds predicted"
+    )
     runs: list[dict[str, Any]] = []
-    for attempt in range(STEP_DOWNS + 1):
-        res = realtime_run(engine, n, timing.window_s, timing.warmup_s)
+    lo = hi = kept = None
+    if predicted < n0 * (1 - RESOLUTION) and predicted >= 1:  # N0 would miss: start at N
+        servers.stop(server)
+        n = predicted
+        beside = limit.worlds(limit.read(f"{engine.key} {n}"))
+        server = servers.start(engine, n)
+    while True:
+        res = realtime_on(server, engine, timing.window_s, timing)
+        res["limit_worlds_beside"] = beside
         runs.append(res)
+        if res["held"]:  # the most held so far: its server stays for the check
+            servers.stop(kept)
+            lo, kept = n, server
+        else:
+            hi = min(hi or n, n)
+            servers.stop(server)
         say(
             f"  {engine.key}: realtime at {n} worlds: RTF {res['realtime_factor']:.3f} "
+            f"over {res['wall_s']:.0f} s, sim thread busy {res.get('tick_share') or 0:.2f} "
             f"({'held' if res['held'] else 'missed'})"
         )
-        if res["held"] or attempt == STEP_DOWNS or n <= 1:
+        nxt = capped(next_size(n, res, lo, hi), n, predicted, max_worlds)
+        if nxt is None or len(runs) >= MAX_RUNS + (2 if lo is None else 0):
             break
-        n = _below(n, res["realtime_factor"])
-    held = [r["nworld"] for r in runs if r["held"]]
-    return {
+        n = nxt
+        beside = limit.worlds(limit.read(f"{engine.key} {n}"))
+        server = servers.start(engine, n)
+    result = {
         "engine": engine.engine,
         "device": engine.device,
         "label": engine.label,
         "format": engine.fmt,
-        "fast": probes,
-        "predicted": runs[0]["nworld"],
+        "fast": [probe],
+        "predicted": predicted,
         "runs": runs,
-        "worlds": max(held) if held else None,
+        "worlds": lo,
     }
+    return result, kept
 
 
 def _has_cuda() -> bool:
@@ -257,30 +292,49 @@ def measure(ask: Ask = Ask(), say: Callable[[str], None] = print) -> dict[str, A
     started = common.now_iso()
     t0 = time.perf_counter()
     machine = common.machine_info("cuda" if CUDA_ENGINE in engines else "cpu")
-    limit = rollout_limit(timing)
-    say(
-        f"  limit: raw mujoco.rollout, {limit['threads']} threads, {limit['solver']}: "
-        f"{limit['world_steps_per_s']:,.0f} world-steps/s = {limit['worlds']:,.0f} worlds at 60 Hz"
-    )
-    results: dict[str, Any] = {}
-    for engine in engines:
-        try:
-            res = engine_capacity(engine, limit["worlds"], timing, say, ask.first, ask.max_worlds)
-        except Exception as exc:  # one engine failing (e.g. Warp's kernels) loses that one
-            res = {"label": engine.label, "worlds": None, "error": f"{type(exc).__name__}: {exc}"}
-            say(f"  {engine.key}: FAILED: {res['error']}")
-        res["ratio_to_limit"] = res["worlds"] / limit["worlds"] if res.get("worlds") else None
-        results[engine.key] = res
-    if ask.check:
-        for key, res in results.items():
-            engine = next(e for e in engines if e.key == key)
-            if res.get("worlds"):
-                c = realtime_run(engine, res["worlds"], timing.check_window_s, timing.warmup_s)
-                res["check"] = c
+    rollout = RolloutLimit(timing.limit_block_s)
+    servers = _Servers()
+    try:
+        rollout.read("start")
+        say(
+            f"  limit: raw mujoco.rollout, {rollout.threads} threads, {rollout.solver}: "
+            f"{rollout.best:,.0f} world-steps/s = {rollout.worlds():,.0f} worlds at 60 Hz "
+            "(read again before every run)"
+        )
+        results: dict[str, Any] = {}
+        kept: dict[str, common.Served | None] = {}
+        for engine in engines:
+            try:
+                res, kept[engine.key] = engine_capacity(
+                    engine, rollout, timing, say, servers, ask.first, ask.max_worlds
+                )
+            except Exception as exc:  # one engine failing (e.g. Warp's kernels) loses that one
+                res = {
+                    "label": engine.label,
+                    "worlds": None,
+                    "error": f"{type(exc).__name__}: {exc}",
+                }
+                say(f"  {engine.key}: FAILED: {res['error']}")
+            results[engine.key] = res
+        if ask.check:
+            for key, res in results.items():
+                server = kept.get(key)
+                if server is None:
+                    continue
+                engine = next(e for e in engines if e.key == key)
+                beside = rollout.worlds(rollout.read(f"check {key}"))
+                c = realtime_on(server, engine, timing.check_window_s, timing)
+                res["check"] = c | {"limit_worlds_beside": beside}
                 say(
-                    f"  check {key}: {res['worlds']} worlds for {c['wall_s']:.0f} s: RTF "
+                    f"  check {key}: {res['worlds']} worlds again for {c['wall_s']:.0f} s: RTF "
                     f"{c['realtime_factor']:.3f} ({'held' if c['held'] else 'MISSED'})"
                 )
+    finally:
+        servers.close()
+        rollout.close()
+    limit = rollout.summary()
+    for res in results.values():  # against the best block of the whole command
+        res["ratio_to_limit"] = res["worlds"] / limit["worlds"] if res.get("worlds") else None
     with_load = os.getloadavg() if hasattr(os, "getloadavg") else None
     return {
         # argv as the bench's result files keep it (bench.figures.command reads it back)
@@ -297,60 +351,6 @@ def measure(ask: Ask = Ask(), say: Callable[[str], None] = print) -> dict[str, A
         "engines": results,
         "rows": _rows(limit, results),
     }
-
-
-def _rows(limit: dict[str, Any], results: dict[str, Any]) -> list[dict[str, Any]]:
-    """The table of the answer (bench.figures.section_table shows result files by it)."""
-    rows: list[dict[str, Any]] = [
-        {"what": "rollout limit", "worlds": round(limit["worlds"]), "× the limit": 1.0}
-    ]
-    for res in results.values():
-        held = next((r for r in res.get("runs", []) if r["nworld"] == res.get("worlds")), None)
-        rows.append(
-            {
-                "what": res["label"],
-                "worlds": res.get("worlds"),
-                "× the limit": res.get("ratio_to_limit"),
-                "RTF": held["realtime_factor"] if held else None,
-                "check RTF": res["check"]["realtime_factor"] if res.get("check") else None,
-            }
-        )
-    return rows
-
-
-def report(result: dict[str, Any]) -> str:
-    """The answer in words: the limit, then each engine's worlds and ratio to it."""
-    m, limit = result["machine"], result["limit"]
-    load = m.get("loadavg_at_start")
-    lines = [
-        f"{m['cpu_model']}, {m['usable_cores']} cores"
-        + (f", {m['gpu']}" if m.get("gpu") else "")
-        + (f" (load {load[0]:.2f} {load[1]:.2f} {load[2]:.2f})" if load else ""),
-        f"  rollout limit: {limit['worlds']:,.0f} worlds at 60 Hz (raw mujoco.rollout of the "
-        f"served model, {limit['threads']} threads, {limit['solver']} solver)",
-    ]
-    for res in result["engines"].values():
-        if res.get("worlds"):
-            line = (
-                f"  {res['label']}: {res['worlds']:,} worlds in real time = "
-                f"{res['ratio_to_limit']:.2f}x the limit"
-            )
-        else:
-            line = f"  {res['label']}: none held" + (
-                f" ({res['error']})" if res.get("error") else ""
-            )
-        if res.get("check"):
-            c = res["check"]
-            line += (
-                f"; checked: RTF {c['realtime_factor']:.3f} over {c['wall_s']:.0f} s "
-                f"({'held' if c['held'] else 'MISSED'})"
-            )
-        lines.append(line)
-    lines.append(
-        f"  (real time: RTF >= {result['rtf_goal']} with one 30 Hz subscriber of every world; "
-        f"{result['seconds']:.0f} s)"
-    )
-    return "\n".join(lines)
 
 
 def run(

@@ -12,7 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from bench.how_many import UNDER, _below
+from bench.how_many_sizes import MAX_RUNS, UNDER, _below, capped, next_size
 
 
 def test_capacity_prints_and_writes_the_same_answer(tmp_path: Path) -> None:
@@ -72,3 +72,33 @@ def test_a_miss_always_steps_down() -> None:
         for rtf in (0.2, 0.98, 0.999, 1.2):
             nxt = _below(n, rtf)
             assert 1 <= nxt <= max(1, n - 1) and nxt <= max(1, n * min(rtf, 1.0) * UNDER + 1)
+
+
+def test_the_search_brackets_the_answer_and_ends() -> None:
+    """`next_size` from any run: a miss goes down, a hold with room goes up, never outside
+    the bracket of what held and what missed, and every search ends within MAX_RUNS."""
+    miss = {"held": False, "realtime_factor": 0.9}
+    assert next_size(400, miss, None, 400) == _below(400, 0.9) < 400
+    roomy = {"held": True, "realtime_factor": 1.0, "tick_share": 0.7}
+    assert 400 < next_size(400, roomy, 400, None) <= 400 / 0.7
+    assert next_size(400, roomy, 400, 424) is None  # the middle is within reach of 400
+    assert next_size(400, {"held": True, "tick_share": 0.95}, 400, None) is None  # no room
+    # a miss just above what held: the middle of the bracket, or done when that is close
+    assert next_size(480, {"held": False, "realtime_factor": 0.98}, 400, 480) == 456
+    assert next_size(480, {"held": False, "realtime_factor": 0.8}, 400, 480) == 440
+    assert next_size(416, {"held": False, "realtime_factor": 0.99}, 400, 416) is None
+    # a step up never passes what fast mode predicted, nor --max-worlds
+    assert capped(480, 400, 440, None) == 440 and capped(300, 400, 440, None) == 300
+    assert capped(410, 400, 440, None) is None and capped(480, 400, 500, 410) is None
+    for rtf in (0.3, 0.9, 0.985):
+        for share in (0.3, 0.8):
+            n, lo, hi, runs = 400, None, None, 1
+            while True:
+                held = n * 0.9 <= 400 * share / 0.8 * rtf  # a machine holding a fixed size
+                res = {"held": held, "realtime_factor": 1.0 if held else rtf, "tick_share": share}
+                lo, hi = (max(lo or 0, n), hi) if held else (lo, min(hi or n, n))
+                nxt = next_size(n, res, lo, hi)
+                if nxt is None or runs == MAX_RUNS:
+                    break
+                assert (lo is None or nxt > lo) and (hi is None or nxt < hi), (n, lo, hi, nxt)
+                n, runs = nxt, runs + 1
