@@ -305,7 +305,7 @@ def capacity(
     ] = None,
     quick: Annotated[bool, typer.Option(help="short windows: a first look in ~30 s")] = False,
     check: Annotated[
-        bool, typer.Option(help="then run each answer again for 30 s (RTF >= 0.99 = it holds)")
+        bool, typer.Option(help="then run each answer again for 10 s (RTF >= 0.99)")
     ] = False,
     out: Annotated[
         Path | None, typer.Option(help="JSON file (default bench/results/capacity.json)")
