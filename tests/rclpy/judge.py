@@ -311,6 +311,7 @@ def graph(counts: bool = False, expect: tuple[str, ...] = ()) -> None:
     spin_until(node, lambda: set(expect) <= seen(), 60)
     spin_until(node, lambda: False, 1.0)
     out(
+        missing=sorted(set(expect) - seen()),  # a name not seen in 60 s: the test says which
         nodes=node.get_node_names_and_namespaces(),
         topics=node.get_topic_names_and_types(),
         actions=get_action_names_and_types(node),
