@@ -155,7 +155,7 @@ class Runtime:
         )
         m.counter_level(
             "armfleet_late_ticks",
-            "real-time ticks that started over half a tick late",
+            "real-time ticks that started late (over pace.LATE_S behind: 50 ms)",
             lambda: share("late_ticks"),
         )
         m.counter_level(

@@ -45,15 +45,15 @@ def test_late_ticks_shrink_the_budget_to_the_floor_and_on_time_ticks_grow_it_bac
     assert share.budget_s == pytest.approx(DT)
     for _ in range(40):
         clock.now += DT
-        share.ticked(late_s=DT)  # a whole tick late
+        share.ticked(late=True)
     assert share.budget_s == pytest.approx(FLOOR_SHARE * DT)
     assert share.late_ticks == 40
     clock.now += DT
-    share.ticked(late_s=0.1 * DT)  # on time (jitter under half a tick)
+    share.ticked(late=False)
     assert share.budget_s > FLOOR_SHARE * DT and share.late_ticks == 40
     for _ in range(100):
         clock.now += DT
-        share.ticked(late_s=0.0)
+        share.ticked(late=False)
     assert share.budget_s == pytest.approx(DT)
 
 
@@ -62,7 +62,7 @@ def test_slow_ticks_leave_commands_a_share_of_the_wall_time(clock):
     share = CommandShare(DT)
     for _ in range(40):
         clock.now += 0.2  # a tick every 0.2 s instead of every 1/60 s
-        share.ticked(late_s=0.1)
+        share.ticked(late=True)
     assert share.budget_s == pytest.approx(FLOOR_SHARE * 0.2)
 
 
@@ -71,12 +71,12 @@ def test_a_spent_budget_waits_for_the_next_tick_only_in_real_time(clock):
     assert share.may_run()  # not real time yet: nothing waits
     share.set_active(True)
     clock.now += DT
-    share.ticked(late_s=DT)  # budget halved, a new tick
+    share.ticked(late=True)  # budget halved, a new tick
     assert share.may_run()
     share.spent(share.budget_s)
     assert not share.may_run()
     clock.now += DT
-    share.ticked(late_s=0.0)  # the next tick: a fresh budget
+    share.ticked(late=False)  # the next tick: a fresh budget
     assert share.may_run()
     share.spent(10 * DT)
     assert not share.may_run()
@@ -90,7 +90,7 @@ def test_a_spent_budget_waits_for_the_next_tick_only_in_real_time(clock):
 def _spent_share(max_wait_s: float) -> CommandShare:
     share = CommandShare(DT, max_wait_s=max_wait_s)
     share.set_active(True)
-    share.ticked(0.0)
+    share.ticked(False)
     share.may_run()
     share.spent(DT)  # this tick's budget used
     return share
@@ -103,7 +103,7 @@ def test_a_waiting_command_runs_at_the_next_tick():
         waiting = asyncio.ensure_future(turn(share))
         await asyncio.sleep(0)  # it waits on the tick's future
         assert not waiting.done()
-        threading.Thread(target=share.ticked, args=(0.0,)).start()  # the sim thread's tick
+        threading.Thread(target=share.ticked, args=(False,)).start()  # the sim thread's tick
         return await waiting
 
     assert asyncio.run(main()) is True

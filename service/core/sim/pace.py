@@ -17,9 +17,11 @@ from service.core.sim.types import Mode
 log = logging.getLogger("armfleet.loop")
 
 MAX_LAG_S = 0.1  # real time catches up after hiccups (a shared core paused) up to this far
-# Further behind than this, the loop is on its way to giving time up: work that can wait (the
-# cameras' stream pictures) waits until it has caught up. Half the catch-up reach: a loop that
-# only jitters by a tick or two is not held to be late.
+# Further behind than this, the loop is on its way to giving time up: the one measure of "the
+# ticks run late" (`Cadence.late`). Work that can wait gives way while it holds: the cameras'
+# stream pictures wait, the commands' budget shrinks (command_share.py). Half the catch-up
+# reach: a loop that only jitters by a tick or two is not held to be late, and a lag under it
+# is made up (no time is lost), so nothing need give way for it.
 LATE_S = MAX_LAG_S / 2
 STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
 
@@ -42,6 +44,14 @@ class Cadence:
     def delay(self) -> float:
         """Seconds until the next tick is due (<= 0: due now)."""
         return self._deadline - self._clock()
+
+    def lag(self) -> float:
+        """Seconds the schedule is behind the wall clock now (0 while on time)."""
+        return max(0.0, -self.delay())
+
+    def late(self) -> bool:
+        """Behind by more than `LATE_S`: on the way to giving time up (the one lateness rule)."""
+        return self.lag() > LATE_S
 
     def ticked(self) -> None:
         self._deadline += self.tick_dt
