@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import sys
 import threading
 
 import httpx
@@ -19,6 +20,11 @@ from websockets.sync.client import connect
 
 from service.core.sim import command_share
 from service.core.sim.command_share import FLOOR_SHARE, CommandShare, turn
+from service.core.sim.loop import SimLoop
+from service.core.sim.pace import SWITCH_INTERVAL_S
+from service.core.sim.settings import SimSettings
+from service.engines.choice import build_batch
+from service.engines.settings import EngineSettings
 
 DT = 1 / 60
 
@@ -117,6 +123,23 @@ def test_a_command_with_no_turn_within_the_longest_wait_is_refused_as_busy():
     assert "busy: no turn within 0.05 s beside the ticks (--command-wait-s)" in share.busy_detail
     assert asyncio.run(turn(share, wait=False)) is False  # right after: refused at once
     assert share.busy == 2 and share.waits == 1
+
+
+def test_a_running_loop_gets_the_gil_back_within_half_a_millisecond_of_asking():
+    """Python's default 5 ms is what a thread busy with Python (the event loop under commands)
+    may keep the GIL from the sim thread each time the sim thread let go of it (an engine call,
+    a pipe read, the wait for the next tick): several times a tick. A loop sets 0.5 ms."""
+    batch = build_batch(EngineSettings(kind="mujoco", shards=1), SimSettings(worlds=1))
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(0.005)  # Python's default; an earlier test may have lowered it
+    loop = SimLoop(batch)
+    try:
+        loop.start()
+        assert sys.getswitchinterval() == pytest.approx(SWITCH_INTERVAL_S)
+    finally:
+        loop.stop()
+        batch.close()
+        sys.setswitchinterval(min(before, sys.getswitchinterval()))
 
 
 # --------------------------------------------------------------------------- a real server
