@@ -24,8 +24,10 @@ from service.core.cameras.feed import CameraFeed
 from service.core.commands.control import Accepted, Control
 from service.core.errors import ArmfleetError, Conflict, NotFound
 from service.core.metrics import Metrics
+from service.core.process import priority
 from service.core.process.stopping import reclaim_stop_signals
 from service.core.sim.batch import Batch, Supervised
+from service.core.sim.command_share import REQUESTS_NICE
 from service.core.sim.loop import SimLoop
 from service.core.sim.physics import solver_name
 from service.core.sim.randomizations import Randomized
@@ -65,6 +67,7 @@ class Runtime:
         self._restored_randomized: dict[int, Randomized] = {}  # `--restore`'s randomisations
         self._register_levels()
         self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
+        self.requests_nice: int | None = None  # the event loop thread's nice under ticks first
         self.leases: LeaseBook | None = None  # worlds lent (service.core.access.leases); None: off
         self.metrics.registry.register(LeaseCollector(lambda: self.control and self.control.gate))
 
@@ -264,6 +267,8 @@ class Runtime:
             # `armfleet setup` to 0.08x of the next (16,384 worlds, two H200s, issue 39).
             await self.cameras.warmed()
         loop.start()
+        if s.sim.ticks_first:  # the ticks' threads (started above) keep the first claim on cores
+            self.requests_nice = priority.lower_this_thread(REQUESTS_NICE)
         self.loop = loop
         self._watchdog = asyncio.create_task(self._watch())
         ctx = SurfaceContext(

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import sys
 import threading
 
@@ -19,7 +20,7 @@ from conftest import running_server
 from websockets.sync.client import connect
 
 from service.core.sim import command_share
-from service.core.sim.command_share import FLOOR_SHARE, CommandShare, turn
+from service.core.sim.command_share import FLOOR_SHARE, REQUESTS_NICE, CommandShare, turn
 from service.core.sim.loop import SimLoop
 from service.core.sim.pace import SWITCH_INTERVAL_S
 from service.core.sim.settings import SimSettings
@@ -229,3 +230,17 @@ def test_an_http_connection_over_its_rate_gets_429_naming_the_limit(limited):
         assert r.json()["detail"] == LIMIT
         assert r.headers["retry-after"] == "1"
     assert _refused(limited.url, "http") - before == len(refused)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="priority is per thread on Linux")
+def test_the_event_loop_thread_gives_the_cores_to_the_ticks_first(limited):
+    """Under contention the scheduler favours the ticks' threads: the serving process's event
+    loop (its main thread) runs REQUESTS_NICE below the priority it started with, the sim
+    thread (started before it lowered itself) at that priority still."""
+    pid = limited.process.pid
+    base = os.getpriority(os.PRIO_PROCESS, os.getpid())  # the server started with ours
+    nice = {
+        int(t): os.getpriority(os.PRIO_PROCESS, int(t)) for t in os.listdir(f"/proc/{pid}/task")
+    }
+    assert nice.pop(pid) == min(19, base + REQUESTS_NICE)
+    assert base in nice.values()

@@ -21,7 +21,9 @@ budget never falls below `FLOOR_SHARE` of the wall time between two ticks: when 
 slow for reasons of their own (a slow engine, a box shared with others), commands still move.
 A command that finds no turn within `max_wait_s` is refused ("busy: ...", naming the limit)
 rather than run over the ticks' time. In fast or paused mode, or with `enabled` off, nothing
-waits.
+waits. Within the budget the operating system still shares the cores between the event loop and
+the engine; so with ticks first the event loop's thread runs at a lower priority
+(`REQUESTS_NICE`, set by the runtime once the ticks' threads have started).
 
 The sim thread writes (`ticked`, `set_active`), the event loop reads and counts its own
 spending; a stale read costs one command's worth of work or one tick's wait, never a wrong
@@ -39,6 +41,10 @@ FLOOR_SHARE = 0.1
 GROW_SHARE = 0.02  # an on-time tick adds this share of a tick to the budget
 SHRINK = 0.5  # a late tick multiplies the budget by this
 MAX_WAIT_S = 1.0  # default: a command that finds no turn within this is refused
+# The event loop's thread runs this many nice steps below the ticks' threads (core/process/
+# priority.py): under contention the scheduler gives an engine thread about 3x its share (CFS
+# weights 1024 vs 335), and the event loop still runs whenever a core is free.
+REQUESTS_NICE = 5
 
 
 class CommandShare:
