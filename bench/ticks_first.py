@@ -51,6 +51,28 @@ def metric(text: str, name: str, **labels: str) -> float:
     return total
 
 
+def tick_parts(first: str, last: str, wall: float) -> dict[str, float | None]:
+    """Where a tick's wall time went between two /metrics texts `wall` seconds apart: the
+    engine's step, the loop's own work around it (commands in, snapshot, frames; waiting for
+    the GIL included), and the period between two ticks (1000/60 ms when on time)."""
+    ticks = metric(last, "armfleet_tick_duration_seconds_count") - metric(
+        first, "armfleet_tick_duration_seconds_count"
+    )
+    if not ticks:
+        return {"step_ms": None, "loop_ms": None, "period_ms": None}
+    step = metric(last, "armfleet_engine_step_seconds_total") - metric(
+        first, "armfleet_engine_step_seconds_total"
+    )
+    tick = metric(last, "armfleet_tick_duration_seconds_sum") - metric(
+        first, "armfleet_tick_duration_seconds_sum"
+    )
+    return {
+        "step_ms": round(1e3 * step / ticks, 2),
+        "loop_ms": round(1e3 * (tick - step) / ticks, 2),
+        "period_ms": round(1e3 * wall / ticks, 2),
+    }
+
+
 def one_run(
     ticks_first: bool | None, duration: float, device: str, say: Any, cwd: Path | None = None
 ) -> dict[str, Any]:
@@ -69,10 +91,12 @@ def one_run(
         after, cpu1 = srv.get_info(), cpu_meter.read(pid)
         idle = common.rtf_between(before, after)
         idle_cpu = cpu_meter.between(cpu0, cpu1, after[1]["tick"] - before[1]["tick"])
+        first = httpx.get(f"{srv.url}/metrics", timeout=30).text
         result = asyncio.run(soak(srv.url, CLIENTS, WORLDS, RATE, duration, pid, warmup=3.0))
         end, cpu2 = srv.get_info(), cpu_meter.read(pid)  # the load window and its warm-up
         load_cpu = cpu_meter.between(cpu1, cpu2, end[1]["tick"] - after[1]["tick"])
         text = httpx.get(f"{srv.url}/metrics", timeout=30).text
+        load_cpu |= tick_parts(first, text, end[0] - after[0])
     idle_tick_ms = (idle_cpu["server_ms_per_tick"] or 0) + (idle_cpu["workers_ms_per_tick"] or 0)
     return {
         "shards": srv.info.get("shards"),
@@ -119,6 +143,9 @@ def _row(name: str, r: dict[str, Any]) -> dict[str, Any]:
         "waited": r["waits"],
         "ack p50/p99 ms": f"{r['ack_p50_ms']}/{r['ack_p99_ms']}",
         "tick CPU ms idle": r["tick_cpu_ms_idle"],
+        "tick ms: step/loop/period": "/".join(
+            str(r["cpu_load"][k]) for k in ("step_ms", "loop_ms", "period_ms")
+        ),
         "cores server/workers/clients/others/idle": "/".join(
             f"{r['cpu_load'][k]:.2f}" for k in CORES
         ),
@@ -176,7 +203,9 @@ def ticks_first_section(ctx: Context) -> Result:
         f"commands (a 60 Hz tick has 16.7 ms of each of the box's {os.cpu_count()} cores); "
         "cores: CPU seconds per second under load (warm-up and drain included) of the "
         "server's process, its engine workers, the clients (this process), the rest of the "
-        "box, and what was left idle",
+        "box, and what was left idle; tick ms under load: the engine's step (wall), the "
+        "loop's own work around it (GIL waits included), and the wall time from one tick to "
+        "the next",
     ]
     return Result(rows, data={"runs": runs, "errors": errors}, notes=notes)
 
