@@ -69,4 +69,24 @@ def between(a: Reading, b: Reading, ticks: int) -> dict[str, float | None]:
         "cores_idle": round(max(psutil.cpu_count() - (b.box - a.box) / wall, 0.0), 3),
         "server_ms_per_tick": round(1e3 * server / ticks, 2) if ticks else None,
         "workers_ms_per_tick": round(1e3 * workers / ticks, 2) if ticks else None,
+        "server_s": round(server, 3),
+        "workers_s": round(workers, 3),
+        "clients_s": round(clients, 3),
+        "ticks": ticks,
+    }
+
+
+def per_command(
+    idle: dict[str, float | None], load: dict[str, float | None], handled: int, sent: int
+) -> dict[str, float | None]:
+    """CPU ms per command of the server (what it spent under load beyond its ticks at their
+    idle cost; engine work a busy box's caches make dearer counts here too) over the commands
+    it answered (`handled`: acked or refused), and of the clients over the commands `sent`."""
+    tick_s = ((idle["server_ms_per_tick"] or 0.0) + (idle["workers_ms_per_tick"] or 0.0)) / 1e3
+    beyond = (load["server_s"] or 0.0) + (load["workers_s"] or 0.0) - tick_s * (load["ticks"] or 0)
+    return {
+        "server_ms_per_command": round(1e3 * beyond / handled, 3) if handled else None,
+        "clients_ms_per_command": round(1e3 * (load["clients_s"] or 0.0) / sent, 3)
+        if sent
+        else None,
     }

@@ -98,7 +98,16 @@ def one_run(
         text = httpx.get(f"{srv.url}/metrics", timeout=30).text
         load_cpu |= tick_parts(first, text, end[0] - after[0])
     idle_tick_ms = (idle_cpu["server_ms_per_tick"] or 0) + (idle_cpu["workers_ms_per_tick"] or 0)
+    costs = cpu_meter.per_command(
+        idle_cpu, load_cpu, result.acks + result.refused, result.commands_sent
+    )
+    need = None  # cores the target load needs: 60 ticks/s and 1,000 commands/s at these costs
+    if costs["server_ms_per_command"] is not None and costs["clients_ms_per_command"]:
+        per_s = CLIENTS * RATE * (costs["server_ms_per_command"] + costs["clients_ms_per_command"])
+        need = round((idle_tick_ms * srv.info["control_hz"] + per_s) / 1e3, 2)
     return {
+        **costs,
+        "cores_needed": need,
         "shards": srv.info.get("shards"),
         # what a tick costs the server and its engine workers with no commands (CPU ms)
         "tick_cpu_ms_idle": round(idle_tick_ms, 2),
@@ -143,6 +152,9 @@ def _row(name: str, r: dict[str, Any]) -> dict[str, Any]:
         "waited": r["waits"],
         "ack p50/p99 ms": f"{r['ack_p50_ms']}/{r['ack_p99_ms']}",
         "tick CPU ms idle": r["tick_cpu_ms_idle"],
+        "command CPU ms server/clients": f"{r['server_ms_per_command']}/"
+        f"{r['clients_ms_per_command']}",
+        "cores needed": r["cores_needed"],
         "tick ms: step/loop/period": "/".join(
             str(r["cpu_load"][k]) for k in ("step_ms", "loop_ms", "period_ms")
         ),
@@ -205,7 +217,10 @@ def ticks_first_section(ctx: Context) -> Result:
         "server's process, its engine workers, the clients (this process), the rest of the "
         "box, and what was left idle; tick ms under load: the engine's step (wall), the "
         "loop's own work around it (GIL waits included), and the wall time from one tick to "
-        "the next",
+        "the next; command CPU ms: the server's CPU under load beyond its ticks at their idle "
+        "cost per command answered, the clients' per command sent; cores needed: what 60 "
+        f"ticks/s and {CLIENTS * RATE:,.0f} commands/s take at those costs (the box has "
+        f"{os.cpu_count()})",
     ]
     return Result(rows, data={"runs": runs, "errors": errors}, notes=notes)
 
