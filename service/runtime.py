@@ -31,6 +31,7 @@ from service.core.sim.command_share import REQUESTS_NICE
 from service.core.sim.loop import SimLoop
 from service.core.sim.physics import solver_name
 from service.core.sim.randomizations import Randomized
+from service.core.sim.types import Mode
 from service.core.streams.hub import StreamHub
 from service.core.surface import Finishing, SurfaceContext, Watched
 from service.engines.cameras import camera_feed
@@ -267,7 +268,10 @@ class Runtime:
             # `armfleet setup` to 0.08x of the next (16,384 worlds, two H200s, issue 39).
             await self.cameras.warmed()
         loop.start()
-        if s.sim.ticks_first:  # the ticks' threads (started above) keep the first claim on cores
+        if s.sim.ticks_first and loop.mode is Mode.REALTIME:
+            # the ticks' threads (started above) keep the first claim on the cores; not in a
+            # service started fast or paused, whose engine may take every core (a nice value
+            # cannot be taken back without privileges, so it stays if the mode changes later)
             self.requests_nice = priority.lower_this_thread(REQUESTS_NICE)
         self.loop = loop
         self._watchdog = asyncio.create_task(self._watch())

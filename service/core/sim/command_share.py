@@ -22,8 +22,8 @@ slow for reasons of their own (a slow engine, a box shared with others), command
 A command that finds no turn within `max_wait_s` is refused ("busy: ...", naming the limit)
 rather than run over the ticks' time. In fast or paused mode, or with `enabled` off, nothing
 waits. Within the budget the operating system still shares the cores between the event loop and
-the engine; so with ticks first the event loop's thread runs at a lower priority
-(`REQUESTS_NICE`, set by the runtime once the ticks' threads have started).
+the engine; so with ticks first, in a service started in real time, the event loop's thread
+runs at a lower priority (`REQUESTS_NICE`, set by the runtime once the ticks' threads started).
 
 The sim thread writes (`ticked`, `set_active`), the event loop reads and counts its own
 spending; a stale read costs one command's worth of work or one tick's wait, never a wrong
