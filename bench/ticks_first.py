@@ -26,7 +26,7 @@ from typing import Any
 
 import httpx
 
-from bench import common
+from bench import common, cpu_meter
 from bench.code_vs import checkout
 from bench.registry import Context, Result, section
 
@@ -34,6 +34,7 @@ DURATION_ENV = "ARMFLEET_TICKS_FIRST_DURATION"
 AGAINST_ENV = "ARMFLEET_BENCH_AGAINST"  # a revision before ticks-first, served as a third run
 CLIENTS, WORLDS, RATE = 200, 64, 5.0  # 1,000 commands/s in all
 IDLE_S = 8.0  # the ticks' pace with no commands, measured first on the same service
+CORES = ("cores_server", "cores_workers", "cores_clients", "cores_others", "cores_idle")
 
 
 def metric(text: str, name: str, **labels: str) -> float:
@@ -50,6 +51,28 @@ def metric(text: str, name: str, **labels: str) -> float:
     return total
 
 
+def tick_parts(first: str, last: str, wall: float) -> dict[str, float | None]:
+    """Where a tick's wall time went between two /metrics texts `wall` seconds apart: the
+    engine's step, the loop's own work around it (commands in, snapshot, frames; waiting for
+    the GIL included), and the period between two ticks (1000/60 ms when on time)."""
+    ticks = metric(last, "armfleet_tick_duration_seconds_count") - metric(
+        first, "armfleet_tick_duration_seconds_count"
+    )
+    if not ticks:
+        return {"step_ms": None, "loop_ms": None, "period_ms": None}
+    step = metric(last, "armfleet_engine_step_seconds_total") - metric(
+        first, "armfleet_engine_step_seconds_total"
+    )
+    tick = metric(last, "armfleet_tick_duration_seconds_sum") - metric(
+        first, "armfleet_tick_duration_seconds_sum"
+    )
+    return {
+        "step_ms": round(1e3 * step / ticks, 2),
+        "loop_ms": round(1e3 * (tick - step) / ticks, 2),
+        "period_ms": round(1e3 * wall / ticks, 2),
+    }
+
+
 def one_run(
     ticks_first: bool | None, duration: float, device: str, say: Any, cwd: Path | None = None
 ) -> dict[str, Any]:
@@ -62,14 +85,34 @@ def one_run(
         load = os.getloadavg()[0]
         say(f"  ticks-first {ticks_first}: load {load:.2f}, {duration:g} s")
         # The same service with no commands first: what the box gives the ticks right now.
-        before = srv.get_info()
+        pid = srv.server.process.pid
+        before, cpu0 = srv.get_info(), cpu_meter.read(pid)
         time.sleep(IDLE_S)
-        idle = common.rtf_between(before, srv.get_info())
-        result = asyncio.run(
-            soak(srv.url, CLIENTS, WORLDS, RATE, duration, srv.server.process.pid, warmup=3.0)
-        )
+        after, cpu1 = srv.get_info(), cpu_meter.read(pid)
+        idle = common.rtf_between(before, after)
+        idle_cpu = cpu_meter.between(cpu0, cpu1, after[1]["tick"] - before[1]["tick"])
+        first = httpx.get(f"{srv.url}/metrics", timeout=30).text
+        result = asyncio.run(soak(srv.url, CLIENTS, WORLDS, RATE, duration, pid, warmup=3.0))
+        end, cpu2 = srv.get_info(), cpu_meter.read(pid)  # the load window and its warm-up
+        load_cpu = cpu_meter.between(cpu1, cpu2, end[1]["tick"] - after[1]["tick"])
         text = httpx.get(f"{srv.url}/metrics", timeout=30).text
+        load_cpu |= tick_parts(first, text, end[0] - after[0])
+    idle_tick_ms = (idle_cpu["server_ms_per_tick"] or 0) + (idle_cpu["workers_ms_per_tick"] or 0)
+    costs = cpu_meter.per_command(
+        idle_cpu, load_cpu, result.acks + result.refused, result.commands_sent
+    )
+    need = None  # cores the target load needs: 60 ticks/s and 1,000 commands/s at these costs
+    if costs["server_ms_per_command"] is not None and costs["clients_ms_per_command"]:
+        per_s = CLIENTS * RATE * (costs["server_ms_per_command"] + costs["clients_ms_per_command"])
+        need = round((idle_tick_ms * srv.info["control_hz"] + per_s) / 1e3, 2)
     return {
+        **costs,
+        "cores_needed": need,
+        "shards": srv.info.get("shards"),
+        # what a tick costs the server and its engine workers with no commands (CPU ms)
+        "tick_cpu_ms_idle": round(idle_tick_ms, 2),
+        "cpu_idle": idle_cpu,
+        "cpu_load": load_cpu,  # cores each party used under load, and CPU ms per tick
         "ticks_first": ticks_first,
         "load_1m_at_start": round(load, 2),
         "load_1m_at_end": round(os.getloadavg()[0], 2),
@@ -108,6 +151,16 @@ def _row(name: str, r: dict[str, Any]) -> dict[str, Any]:
         "lost/dup/reordered": f"{r['lost']}/{r['duplicates']}/{r['out_of_order']}",
         "waited": r["waits"],
         "ack p50/p99 ms": f"{r['ack_p50_ms']}/{r['ack_p99_ms']}",
+        "tick CPU ms idle": r["tick_cpu_ms_idle"],
+        "command CPU ms server/clients": f"{r['server_ms_per_command']}/"
+        f"{r['clients_ms_per_command']}",
+        "cores needed": r["cores_needed"],
+        "tick ms: step/loop/period": "/".join(
+            str(r["cpu_load"][k]) for k in ("step_ms", "loop_ms", "period_ms")
+        ),
+        "cores server/workers/clients/others/idle": "/".join(
+            f"{r['cpu_load'][k]:.2f}" for k in CORES
+        ),
     }
 
 
@@ -158,6 +211,16 @@ def ticks_first_section(ctx: Context) -> Result:
         "every accepted command acked in order (lost/dup/reordered 0/0/0). RTF idle: the same "
         f"service's first {IDLE_S:g} s with no commands; RTF/idle: what the commands cost the "
         "ticks, apart from what the box's other load costs them",
+        "tick CPU ms idle: CPU the server and its engine workers spent per tick with no "
+        f"commands (a 60 Hz tick has 16.7 ms of each of the box's {os.cpu_count()} cores); "
+        "cores: CPU seconds per second under load (warm-up and drain included) of the "
+        "server's process, its engine workers, the clients (this process), the rest of the "
+        "box, and what was left idle; tick ms under load: the engine's step (wall), the "
+        "loop's own work around it (GIL waits included), and the wall time from one tick to "
+        "the next; command CPU ms: the server's CPU under load beyond its ticks at their idle "
+        "cost per command answered, the clients' per command sent; cores needed: what 60 "
+        f"ticks/s and {CLIENTS * RATE:,.0f} commands/s take at those costs (the box has "
+        f"{os.cpu_count()})",
     ]
     return Result(rows, data={"runs": runs, "errors": errors}, notes=notes)
 

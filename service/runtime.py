@@ -24,11 +24,14 @@ from service.core.cameras.feed import CameraFeed
 from service.core.commands.control import Accepted, Control
 from service.core.errors import ArmfleetError, Conflict, NotFound
 from service.core.metrics import Metrics
+from service.core.process import priority
 from service.core.process.stopping import reclaim_stop_signals
 from service.core.sim.batch import Batch, Supervised
+from service.core.sim.command_share import REQUESTS_NICE
 from service.core.sim.loop import SimLoop
 from service.core.sim.physics import solver_name
 from service.core.sim.randomizations import Randomized
+from service.core.sim.types import Mode
 from service.core.streams.hub import StreamHub
 from service.core.surface import Finishing, SurfaceContext, Watched
 from service.engines.cameras import camera_feed
@@ -65,6 +68,7 @@ class Runtime:
         self._restored_randomized: dict[int, Randomized] = {}  # `--restore`'s randomisations
         self._register_levels()
         self.header: dict[str, object] = {}  # provenance.batch_header of the running batch
+        self.requests_nice: int | None = None  # the event loop thread's nice under ticks first
         self.leases: LeaseBook | None = None  # worlds lent (service.core.access.leases); None: off
         self.metrics.registry.register(LeaseCollector(lambda: self.control and self.control.gate))
 
@@ -155,7 +159,7 @@ class Runtime:
         )
         m.counter_level(
             "armfleet_late_ticks",
-            "real-time ticks that started over half a tick late",
+            "real-time ticks that started late (over pace.LATE_S behind: 50 ms)",
             lambda: share("late_ticks"),
         )
         m.counter_level(
@@ -264,6 +268,11 @@ class Runtime:
             # `armfleet setup` to 0.08x of the next (16,384 worlds, two H200s, issue 39).
             await self.cameras.warmed()
         loop.start()
+        if s.sim.ticks_first and loop.mode is Mode.REALTIME:
+            # the ticks' threads (started above) keep the first claim on the cores; not in a
+            # service started fast or paused, whose engine may take every core (a nice value
+            # cannot be taken back without privileges, so it stays if the mode changes later)
+            self.requests_nice = priority.lower_this_thread(REQUESTS_NICE)
         self.loop = loop
         self._watchdog = asyncio.create_task(self._watch())
         ctx = SurfaceContext(

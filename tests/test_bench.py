@@ -11,7 +11,7 @@ import math
 
 import pytest
 
-from bench import common, registry, runner, throughput
+from bench import common, cpu_meter, registry, runner, throughput
 from service.core.sim.physics import tick_timing
 
 
@@ -31,6 +31,21 @@ def test_every_section_is_registered_once_with_a_stable_file_name():
         registry.section(1, "another", "another")(lambda ctx: registry.Result([]))
     with pytest.raises(SystemExit, match="no section"):
         runner.choose(sections, [999], "cpu")
+
+
+def test_the_cpu_meter_says_who_used_the_cores_and_what_a_tick_and_a_command_cost():
+    """Section 31's arithmetic: a worker that exited or started within the window counts for
+    nothing (its CPU is not known on both sides), the rest of the box is what the three
+    parties did not use, and a command's cost is what the server spent beyond its ticks."""
+    a = cpu_meter.Reading(0.0, server=1.0, workers={7: 2.0, 9: 5.0}, clients=0.5, box=10.0)
+    b = cpu_meter.Reading(2.0, server=2.0, workers={7: 3.6, 8: 9.9}, clients=0.9, box=14.0)
+    used = cpu_meter.between(a, b, ticks=100)
+    assert used["cores_server"] == 0.5 and used["cores_workers"] == pytest.approx(0.8)
+    assert used["cores_clients"] == 0.2 and used["cores_others"] == pytest.approx(0.5)
+    assert used["server_ms_per_tick"] == 10.0 and used["workers_ms_per_tick"] == 16.0
+    idle = {"server_ms_per_tick": 5.0, "workers_ms_per_tick": 5.0}
+    costs = cpu_meter.per_command(idle, used, handled=100, sent=200)
+    assert costs == {"server_ms_per_command": 16.0, "clients_ms_per_command": 2.0}
 
 
 def test_throughput_section_through_the_runner(tmp_path):

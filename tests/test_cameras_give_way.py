@@ -2,7 +2,8 @@
 
 The loop says how far its realtime schedule is behind (`SimLoop.lag`), on a real engine held
 up by work on its own thread; a camera clock asks for no picture while the ticks are more than
-`pace.LATE_S` late (but one every `GIVE_WAY_S`), and counts the instants it gave way."""
+`pace.LATE_S` late (but one every `GIVE_WAY_S`), and counts the instants it gave way. The
+commands' budget (command_share.py) counts late ticks by the same rule."""
 
 from __future__ import annotations
 
@@ -29,11 +30,17 @@ def test_lag_says_how_far_realtime_is_behind_and_comes_back_to_zero() -> None:
         while loop.late() and time.monotonic() < deadline:  # a loaded box may hold it up
             time.sleep(0.01)
         assert not loop.late()  # on time: behind by at most the tick in progress
+        late_ticks = loop.share.late_ticks
         held = loop.call(lambda _batch: time.sleep(0.15))  # the sim thread held up 9 ticks
         time.sleep(0.1)
         lag, late = loop.lag(), loop.late()  # read while it is held
         held.result(timeout=10)
         assert lag > LATE_S and late, lag  # behind by the ticks it could not step
+        # the commands' budget goes by the same rule: the ticks made up started late
+        deadline = time.monotonic() + 5
+        while loop.share.late_ticks == late_ticks and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert loop.share.late_ticks > late_ticks
         deadline = time.monotonic() + 5
         while loop.late() and time.monotonic() < deadline:
             time.sleep(0.01)

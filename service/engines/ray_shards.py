@@ -30,7 +30,7 @@ from ray.exceptions import RayActorError
 from mjcf import SCENE_XML
 from service.core.errors import Unavailable
 from service.core.sim.batch import Batch, Restorable, StateWrite
-from service.core.sim.physics import configure
+from service.core.sim.physics import configure, warp_solver
 from service.core.sim.robot import load_robot
 from service.core.sim.types import BatchState, Snapshot
 from service.engines.mirror import HostMirror
@@ -95,7 +95,7 @@ class RayBatch(HostMirror, Batch, Restorable):
         self.substeps, self.physics_dt = info["substeps"], info["physics_dt"]
         # The model as the actors step it, for viewers (GET /v1/scene); nothing steps it here.
         self.robot = load_robot(kwargs.get("model_path", SCENE_XML))
-        configure(self.robot.mjm, self.physics_dt)
+        configure(self.robot.mjm, self.physics_dt, warp_solver(self.gpu))
         self.device_name = f"ray: {shards} × {info['device_name']}"
         self.nodes = len({i["node"] for i in infos})
         self.home_target = info["home_target"]

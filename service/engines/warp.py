@@ -22,7 +22,13 @@ import warp as wp
 
 from mjcf import SCENE_XML
 from service.core.sim.batch import Batch, ModelWrite, Renderable, Restorable, StateWrite
-from service.core.sim.physics import DEFAULT_PHYSICS_DT, configure, feedforward_gain, tick_timing
+from service.core.sim.physics import (
+    DEFAULT_PHYSICS_DT,
+    configure,
+    feedforward_gain,
+    tick_timing,
+    warp_solver,
+)
 from service.core.sim.robot import LoadedRobot, load_robot
 from service.core.sim.types import PHYSICS_FIELDS, BatchState
 from service.engines import warp_frames as frames
@@ -100,7 +106,7 @@ class WorldBatch(HostMirror, DeviceReads, Batch, Restorable, Renderable):
         self.device_turns = engine_streams(self.device)  # ticks go first (cuda_streams.py)
 
         mjm = self.robot.mjm
-        configure(mjm, self.physics_dt)
+        configure(mjm, self.physics_dt, warp_solver(self.device.is_cuda))  # physics.py: why
         home = mujoco.MjData(mjm)
         mujoco.mj_resetDataKeyframe(mjm, home, self.robot.home_key)
         mujoco.mj_forward(mjm, home)

@@ -7,9 +7,11 @@ their cores with command work, so the ticks fall behind (1,000 commands/s on 64 
 cores ran the worlds at 0.25-0.32 of real time). Nothing in the OS knows that the ticks come
 first; this does.
 
-How: in real time, each tick tells the share how late it started (`ticked`). Late by more than
-half a tick: the command budget of the next tick is halved; on time: it grows by a fiftieth of
-a tick, up to a whole tick (additive increase, multiplicative decrease). The surfaces measure
+How: in real time, each tick tells the share whether it started late (`ticked`), by the loop's
+one lateness rule (`pace.Cadence.late`: behind by more than `pace.LATE_S`, on the way to giving
+time up; the cameras' stream pictures give way by the same rule). Late: the command budget of
+the next tick is halved; on time: it grows by a fiftieth of a tick, up to a whole tick
+(additive increase, multiplicative decrease). The surfaces measure
 the work each command cost (`spent`) and, once this tick's budget is used, wait for the next
 tick (`turn`) before taking another command: the command waits, in order, on its own
 connection (the socket is not read meanwhile, so the client's sends wait in TCP), and the GIL and
@@ -19,7 +21,9 @@ budget never falls below `FLOOR_SHARE` of the wall time between two ticks: when 
 slow for reasons of their own (a slow engine, a box shared with others), commands still move.
 A command that finds no turn within `max_wait_s` is refused ("busy: ...", naming the limit)
 rather than run over the ticks' time. In fast or paused mode, or with `enabled` off, nothing
-waits.
+waits. Within the budget the operating system still shares the cores between the event loop and
+the engine; so with ticks first, in a service started in real time, the event loop's thread
+runs at a lower priority (`REQUESTS_NICE`, set by the runtime once the ticks' threads started).
 
 The sim thread writes (`ticked`, `set_active`), the event loop reads and counts its own
 spending; a stale read costs one command's worth of work or one tick's wait, never a wrong
@@ -36,8 +40,11 @@ from collections.abc import Callable
 FLOOR_SHARE = 0.1
 GROW_SHARE = 0.02  # an on-time tick adds this share of a tick to the budget
 SHRINK = 0.5  # a late tick multiplies the budget by this
-LATE_SHARE = 0.5  # a tick that starts later than this share of a tick is late
 MAX_WAIT_S = 1.0  # default: a command that finds no turn within this is refused
+# The event loop's thread runs this many nice steps below the ticks' threads (core/process/
+# priority.py): under contention the scheduler gives an engine thread about 3x its share (CFS
+# weights 1024 vs 335), and the event loop still runs whenever a core is free.
+REQUESTS_NICE = 5
 
 
 class CommandShare:
@@ -76,11 +83,11 @@ class CommandShare:
         if not active:
             self._release()
 
-    def ticked(self, late_s: float) -> None:
-        """A real-time tick ended that started `late_s` after its deadline."""
+    def ticked(self, late: bool) -> None:
+        """A real-time tick ended; `late`: it started late (`pace.Cadence.late`)."""
         dt, now = self.tick_dt, time.monotonic()
         floor = FLOOR_SHARE * max(dt, now - self.tick_end)  # the wall time since the last one
-        if late_s > LATE_SHARE * dt:
+        if late:
             self.late_ticks += 1
             self.budget_s = max(floor, self.budget_s * SHRINK)
         else:

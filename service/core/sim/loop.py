@@ -31,7 +31,7 @@ from service.core.sim.device_turns import DeviceTurns
 from service.core.sim.listeners import Listeners
 from service.core.sim.loop_state import LoopHooks, StateDoor
 from service.core.sim.loop_types import LoopStats, SnapshotSink, resolve, run_request
-from service.core.sim.pace import LATE_S, Cadence, FailureLog, RateWindow
+from service.core.sim.pace import Cadence, FailureLog, RateWindow, prompt_gil
 from service.core.sim.safety import SafetyTable
 from service.core.sim.snapshot_beside import BesideSnapshot
 from service.core.sim.staging import CommandTable, TrajectoryHook
@@ -108,6 +108,7 @@ class SimLoop:
     # -- life cycle -------------------------------------------------------------------------
 
     def start(self) -> None:
+        prompt_gil()  # the sim thread gets the GIL back within 0.5 ms of asking (pace.py)
         self._running = True
         self._thread = threading.Thread(target=self._run, name="armfleet-sim", daemon=True)
         self._thread.start()
@@ -181,12 +182,13 @@ class SimLoop:
         more, the loop is making up ticks, and past `pace.MAX_LAG_S` it gives time up."""
         if self._mode is not Mode.REALTIME or not self._running:
             return 0.0
-        return max(0.0, -self._cadence.delay())
+        return self._cadence.lag()
 
     def late(self) -> bool:
-        """Behind real time by more than `pace.LATE_S`: work that can wait (the cameras' stream
-        pictures, core/cameras/clock.py) waits, so that the ticks catch up before time is lost."""
-        return self.lag() > LATE_S
+        """Behind real time by more than `pace.LATE_S` (`Cadence.late`, the one lateness rule):
+        work that can wait (the cameras' stream pictures, core/cameras/clock.py) waits, so that
+        the ticks catch up before time is lost; the commands' budget shrinks by the same rule."""
+        return self._mode is Mode.REALTIME and self._running and self._cadence.late()
 
     @property
     def stats(self) -> LoopStats:
@@ -281,13 +283,13 @@ class SimLoop:
                     self._wake.wait()
                     cadence.restart()
                     continue
-                late = 0.0
+                late = False
                 if mode is Mode.REALTIME:
                     delay = cadence.delay()
                     if delay > 0:
                         self._wake.wait(delay)
                         continue
-                    late = -delay
+                    late = cadence.late()  # this tick starts late (pace: the one rule)
             if idle:  # paused: show where time stopped, once (a snapshot first if it took none)
                 with turns.loop_turn():
                     now = time.monotonic()

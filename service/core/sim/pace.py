@@ -8,6 +8,7 @@ last failure), read by the loop thread only; the loop says when, these say how m
 from __future__ import annotations
 
 import logging
+import sys
 import time
 from collections.abc import Callable
 
@@ -17,11 +18,25 @@ from service.core.sim.types import Mode
 log = logging.getLogger("armfleet.loop")
 
 MAX_LAG_S = 0.1  # real time catches up after hiccups (a shared core paused) up to this far
-# Further behind than this, the loop is on its way to giving time up: work that can wait (the
-# cameras' stream pictures) waits until it has caught up. Half the catch-up reach: a loop that
-# only jitters by a tick or two is not held to be late.
+# Further behind than this, the loop is on its way to giving time up: the one measure of "the
+# ticks run late" (`Cadence.late`). Work that can wait gives way while it holds: the cameras'
+# stream pictures wait, the commands' budget shrinks (command_share.py). Half the catch-up
+# reach: a loop that only jitters by a tick or two is not held to be late, and a lag under it
+# is made up (no time is lost), so nothing need give way for it.
 LATE_S = MAX_LAG_S / 2
+# The sim thread lets go of the GIL at every engine call, pipe read and lock wait of a tick; a
+# thread busy with Python (the event loop, under a load of commands) then keeps it until it is
+# asked to let go, which it is after this long (Python's default is 5 ms; the wait is one to two
+# of these). A real-time tick waits for the GIL 3-4 times (the wait for its deadline, the engine
+# call, the shard workers' replies, a snapshot): at 5 ms that is a 60 Hz tick's worth or more
+# per tick (issue 39: 200 WebSocket clients ran the worlds at 0.24 of real time).
+SWITCH_INTERVAL_S = 0.0005
 STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time factor are measured
+
+
+def prompt_gil() -> None:
+    """Ask for the GIL after `SWITCH_INTERVAL_S` in this process (never a longer wait than set)."""
+    sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
 
 
 class Cadence:
@@ -42,6 +57,14 @@ class Cadence:
     def delay(self) -> float:
         """Seconds until the next tick is due (<= 0: due now)."""
         return self._deadline - self._clock()
+
+    def lag(self) -> float:
+        """Seconds the schedule is behind the wall clock now (0 while on time)."""
+        return max(0.0, -self.delay())
+
+    def late(self) -> bool:
+        """Behind by more than `LATE_S`: on the way to giving time up (the one lateness rule)."""
+        return self.lag() > LATE_S
 
     def ticked(self) -> None:
         self._deadline += self.tick_dt

@@ -18,7 +18,6 @@ from __future__ import annotations
 import concurrent.futures
 import logging
 import multiprocessing
-import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -28,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from service.core.sim.batch import Batch, PacksFrames
+from service.core.sim.pace import prompt_gil
 from service.core.sim.packed_rows import PackedRows
 from service.core.sim.types import EntityFrame, Snapshot
 from service.core.streams import wire
@@ -40,9 +40,6 @@ log = logging.getLogger("armfleet.frames")
 BIG_JSON_ROWS = 4096
 JSON_PROCESSES = 2  # helpers, so that one frame is serialised while the next is
 JSON_SLICE = 2048  # rows serialised per GIL hold in a JSON frame (~3 ms of orjson on a GPU host)
-# While frames are serialised, a thread waiting for the GIL asks for it after this long (Python's
-# default is 5 ms): the sim thread gets it back between two slices instead of a few slices later.
-SWITCH_INTERVAL_S = 0.0005
 _NOOP: Callable[[], None] = lambda: None  # noqa: E731
 
 
@@ -236,7 +233,7 @@ class FrameSender:
 
     def __init__(self, deliver: Callable[[Job, dict[str, bytes]], None]) -> None:
         self._deliver = deliver
-        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
+        prompt_gil()  # the sim thread gets the GIL back between two slices (core/sim/pace.py)
         self._cv = threading.Condition()
         self._jobs: dict[bytes, Job] = {}
         self._running = True
