@@ -3,7 +3,7 @@
 
     python3 scripts/dev.py serve [armfleet serve options]   set up, warm the kernel cache, serve
     python3 scripts/dev.py test  [pytest options]           set up, warm the cache, lint + tests
-                                                            (one pytest worker a core)
+                                                            (a pytest worker a core, and one more)
 
 Set-up is idempotent and quick when nothing changed: a virtualenv in .venv, the project
 installed editable with its pinned dependencies (re-installed only when pyproject.toml
@@ -156,14 +156,18 @@ def main(argv: list[str]) -> int:
 
 
 def parallel(rest: list[str]) -> list[str]:
-    """pytest-xdist options: one worker a core, each test file on one worker (a module's
-    servers start once) and handed out in collection order (tests/conftest.py puts the longest
-    first), unless the options given choose (-n, --dist, -p no:xdist)."""
+    """pytest-xdist options: one worker a core and one more, each test file on one worker (a
+    module's servers start once) and handed out in collection order (tests/conftest.py puts the
+    longest first), unless the options given choose (-n, --dist, -p no:xdist).
+
+    The extra worker: about a third of a file's wall time is waiting, not computing (ROS
+    discovery, Ray starting its daemons, a server's subprocesses), and a worker a core leaves
+    the cores idle then."""
     chosen = any(a.startswith(("-n", "--numprocesses", "--dist")) or "no:xdist" in a for a in rest)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     if chosen or (cores or 1) < 2:
         return []
-    return ["-n", str(cores), "--dist", "loadfile", "--no-loadscope-reorder"]
+    return ["-n", str(cores + 1), "--dist", "loadfile", "--no-loadscope-reorder"]
 
 
 if __name__ == "__main__":
