@@ -9,7 +9,7 @@ import httpx
 import pytest
 from conftest import HOME, Server, serve, wait_for
 
-from tests.test_page import open_page, page  # noqa: F401 (fixtures; `browser` is conftest's)
+from tests.test_page import open_page, page, reconnected  # noqa: F401 (fixtures; `browser` is conftest's)
 
 try:
     from playwright.sync_api import expect
@@ -51,6 +51,7 @@ def test_the_page_drives_and_shows_its_lease_worlds_only(srv, page) -> None:  # 
     assert target(srv, 3) == pytest.approx(HOME)
     page.locator('.wlabel[data-world="2"]').click()
     expect(page.locator("#world")).to_have_value("2")
+    reconnected(page)
     page.locator('tr[data-joint="elbow_joint"]').get_by_role("button", name="Up (+0.1)").click()
     wait_for(lambda: target(srv, 2)[2] == pytest.approx(HOME[2] + 0.1), "world 2's elbow")
     httpx.delete(

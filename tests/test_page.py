@@ -205,6 +205,12 @@ def open_page(page, srv, query: str) -> None:
     )
 
 
+def reconnected(page) -> None:
+    """Until the socket of the view the page just switched to is open: a key pressed before
+    is not sent ("not connected: command not sent"; the page queues nothing)."""
+    page.wait_for_function("window.armfleet.connected", timeout=30_000)
+
+
 def wait_still(page, quiet_s: float = 1.0) -> None:
     """Until the page has drawn nothing new for `quiet_s` (the arm came to rest)."""
     last, since = -1, time.monotonic()
@@ -341,6 +347,7 @@ def test_gripper_buttons_keyboard_shortcuts_and_reset_drive_the_world(srv, http,
     wait_for(lambda: target(http, 1) == pytest.approx(HOME), "R to bring world 1 home")
     page.keyboard.press("]")
     page.wait_for_url(re.compile(r"world=2"))
+    reconnected(page)
     page.keyboard.press("3")
     page.keyboard.press("ArrowUp")
     wait_for(lambda: target(http, 2)[2] == pytest.approx(HOME[2] + 0.1), "] to drive world 2")
@@ -350,6 +357,7 @@ def test_gripper_buttons_keyboard_shortcuts_and_reset_drive_the_world(srv, http,
     page.wait_for_url(re.compile(r"view=fleet"))
     page.keyboard.press("f")
     page.wait_for_url(lambda url: "view=fleet" not in url)
+    reconnected(page)
     http.post("/v1/worlds/2/reset").raise_for_status()
     page.keyboard.press("ArrowUp")
     wait_for(lambda: target(http, 1)[2] == pytest.approx(HOME[2] + 0.1), "keys on world 1 again")

@@ -94,8 +94,8 @@ def isaac(rate: float, seconds: float) -> None:
     node = Node("judge_isaac")
     pub = node.create_publisher(JointState, "/isaac_joint_commands", 10)
     states: list = []
-    node.create_subscription(
-        JointState, "/isaac_joint_states", lambda m: states.append(time.perf_counter()), 10
+    node.create_subscription(  # a deep queue: a judge descheduled on a busy box drops nothing
+        JointState, "/isaac_joint_states", lambda m: states.append(time.perf_counter()), 200
     )
     spin_until(node, lambda: pub.get_subscription_count() and states, 30)
     n = int(rate * seconds)

@@ -175,6 +175,7 @@ function go() {
   hideBanner();
   const all = page.leased ? page.leased.join(',') : page.fleet || `0-${Math.min(n, FLEET_MAX) - 1}`;
   const worlds = page.view === 'fleet' ? all : String(w);
+  page.stats.connected = false; // until the new view's socket opens (a key meanwhile is not sent)
   conn.open({ worlds, focus: w, rate: page.rate, lease });
   cameraPane.show(page.view === 'world' ? w : null);
 }
