@@ -150,6 +150,7 @@ async def measure_fast(
         "nworld": n,
         "substeps": substeps,
         "ticks": ticks,
+        "tick_last": info1["tick"],  # the window is ticks [tick_last - ticks, tick_last)
         "wall_s": wall,
         "ticks_per_s": ticks / wall,
         "world_steps_per_s": common.world_steps(ticks, n, substeps) / wall,

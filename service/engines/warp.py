@@ -89,7 +89,10 @@ class WorldBatch(HostMirror, DeviceReads, Batch, Restorable, Renderable):
         nconmax: int = NCONMAX,
         njmax: int = NJMAX,
         robot: LoadedRobot | None = None,
+        solver: mujoco.mjtSolver | None = None,
     ) -> None:
+        """`solver`: the constraint solver; None is the engine's on this device
+        (physics.warp_solver). Another one is for measuring them (bench section 24)."""
         if nworld < 1:
             raise ValueError(f"nworld must be >= 1, got {nworld}")
         self.robot = robot or load_robot(model_path)
@@ -106,7 +109,9 @@ class WorldBatch(HostMirror, DeviceReads, Batch, Restorable, Renderable):
         self.device_turns = engine_streams(self.device)  # ticks go first (cuda_streams.py)
 
         mjm = self.robot.mjm
-        configure(mjm, self.physics_dt, warp_solver(self.device.is_cuda))  # physics.py: why
+        if solver is None:
+            solver = warp_solver(self.device.is_cuda)  # physics.py: why
+        configure(mjm, self.physics_dt, solver)
         home = mujoco.MjData(mjm)
         mujoco.mj_resetDataKeyframe(mjm, home, self.robot.home_key)
         mujoco.mj_forward(mjm, home)
