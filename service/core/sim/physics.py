@@ -32,13 +32,19 @@ DEFAULT_PHYSICS_DT = 1.0 / 120.0
 # 12.6 ms of CPU with 1 arm moving, 18.6 with 16 and 24.5 with 32, against 5.6-7.2 at rest;
 # Newton 7.0-7.3 ms in every case (2-core Xeon, issue 39 item 4: the 200-client soak moved the
 # arms, and the engine alone then needed more than the box's two cores). MuJoCo Warp on CUDA
-# keeps CG ("warp_cuda"): its figures were measured with it, Newton is not measured there yet.
+# ("warp_cuda"): Newton too, by bench section 24 on one H200 (bench/results/issue39/gpu4): the
+# engine's tick at rest 2.6x CG's world-steps/s at 16,384 worlds (9.86M vs 3.79M) and 2.9x at
+# 65,536 (12.3M vs 4.26M); with a press every 0.1 s in every world 7.9x and 7.6x (5.52M vs
+# 0.70M, 7.24M vs 0.96M): a step takes 1 iteration (the slowest world 14), where CG takes 3 at
+# rest (slowest 23-31) and 33 under presses with worlds at its 100-iteration limit, which the
+# whole batch waits for (and MuJoCo Warp prints a warning per world and step that hits it).
+# Against float64 mj_step over 2 s of presses Newton is off by 0.008 mrad, CG by 0.18.
 # Every fidelity test passes with these (tests/test_model.py, tests/test_engine.py warp vs
 # native, tests/test_native.py, tests/test_params.py, tests/test_batch_contract.py).
 ENGINE_SOLVER = {
     "mujoco": mujoco.mjtSolver.mjSOL_NEWTON,
     "warp": mujoco.mjtSolver.mjSOL_NEWTON,
-    "warp_cuda": mujoco.mjtSolver.mjSOL_CG,
+    "warp_cuda": mujoco.mjtSolver.mjSOL_NEWTON,
 }
 
 
