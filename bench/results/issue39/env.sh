@@ -1,6 +1,7 @@
-# Sourced from the repo root on the device: install the carried wheels into /tmp/site (once),
-# warp.so from part-00 (carried by call A into /tmp/parts) + part-01; this branch's tree to /tmp/new.
-B=$(pwd)/.whl/gpu2/b
+# Sourced from the repo root on the device by run.sh, with the call's carried folder ($1, e.g.
+# .whl/gpu2/b): install its wheels into /tmp/site (once), warp.so from part-00 (carried by an
+# earlier call into /tmp/parts) + the folder's part-01; the branch's tree (new.tar) to /tmp/new.
+B=$(pwd)/$1
 if [ ! -f /tmp/site/warp/bin/warp.so ]; then
   [ -f /tmp/parts/warp.so.zst.part-00 ] || { echo "NO PART-00: machine went cold"; return 3; }
   mkdir -p /tmp/site
