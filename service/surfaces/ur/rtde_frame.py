@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
+from operator import attrgetter
 
 import numpy as np
 
@@ -47,6 +48,18 @@ def _rows(a: np.ndarray) -> Rows:
     return np.asarray(a[:, :ARM], dtype=np.float64).tolist()
 
 
+def _joint_rows(source: str) -> cached_property[Rows]:
+    """A property of `FrameValues`: the frame's array at `source` (a dotted attribute path
+    of `Frame`) as one list of the arm's joints per world, computed once per frame. One
+    definition for the six joint outputs, which differ only in the array they read."""
+    array = attrgetter(source)
+
+    def rows(values: FrameValues) -> Rows:
+        return _rows(array(values.frame))
+
+    return cached_property(rows)
+
+
 class FrameValues:
     """One frame's values for every world (UR thread; each computed when first read)."""
 
@@ -63,29 +76,13 @@ class FrameValues:
         self.tcp_version, self._tcp = offsets
         self.timestamp = (frame.snap.tick * frame.tick_dt,)
 
-    @cached_property
-    def q(self) -> Rows:
-        return _rows(self.frame.snap.position)
-
-    @cached_property
-    def qd(self) -> Rows:
-        return _rows(self.frame.snap.velocity)
-
-    @cached_property
-    def effort(self) -> Rows:
-        return _rows(self.frame.snap.effort)
-
-    @cached_property
-    def target(self) -> Rows:
-        return _rows(self.frame.snap.target)
-
-    @cached_property
-    def target_qd(self) -> Rows:
-        return _rows(self.frame.target_qd)
-
-    @cached_property
-    def target_qdd(self) -> Rows:
-        return _rows(self.frame.target_qdd)
+    # What RTDE's joint outputs read, per world (rtde_outputs.READERS names these attributes).
+    q = _joint_rows("snap.position")
+    qd = _joint_rows("snap.velocity")
+    effort = _joint_rows("snap.effort")
+    target = _joint_rows("snap.target")
+    target_qd = _joint_rows("target_qd")
+    target_qdd = _joint_rows("target_qdd")
 
     @cached_property
     def actual_tcp(self) -> tuple[Rows, Rows]:
