@@ -219,22 +219,22 @@ def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[st
     }
 
 
-STOPPED = {
-    "rtde": (3, True),
-    "dashboard": ("Safetystatus: PROTECTIVE_STOP", "Safetymode: PROTECTIVE_STOP"),
-    "rest": "PROTECTIVE_STOP",
-    "ws": ("PROTECTIVE_STOP", "PROTECTIVE_STOP"),
-    "ur": "PROTECTIVE_STOP",
-    "client": "PROTECTIVE_STOP",
-}
-NORMAL = {
-    "rtde": (1, False),
-    "dashboard": ("Safetystatus: NORMAL", "Safetymode: NORMAL"),
-    "rest": "NORMAL",
-    "ws": ("NORMAL", "NORMAL"),
-    "ur": "NORMAL",
-    "client": "NORMAL",
-}
+def _reported_everywhere(mode: str, rtde_mode: int) -> dict[str, object]:
+    """What `_safety_on_every_surface` reads for a world in safety mode `mode`: the same name
+    on every surface, RTDE's number for it with the protective-stop status bit, the
+    Dashboard's two lines."""
+    return {
+        "rtde": (rtde_mode, mode == "PROTECTIVE_STOP"),
+        "dashboard": (f"Safetystatus: {mode}", f"Safetymode: {mode}"),
+        "rest": mode,
+        "ws": (mode, mode),
+        "ur": mode,
+        "client": mode,
+    }
+
+
+STOPPED = _reported_everywhere("PROTECTIVE_STOP", 3)
+NORMAL = _reported_everywhere("NORMAL", 1)
 PADS_OVER_TABLE = 0.215  # m between the gripper's pads and the table top at HOME
 
 
