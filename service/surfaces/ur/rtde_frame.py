@@ -19,7 +19,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
-from operator import attrgetter
 
 import numpy as np
 
@@ -48,11 +47,10 @@ def _rows(a: np.ndarray) -> Rows:
     return np.asarray(a[:, :ARM], dtype=np.float64).tolist()
 
 
-def _joint_rows(source: str) -> cached_property[Rows]:
-    """A property of `FrameValues`: the frame's array at `source` (a dotted attribute path
-    of `Frame`) as one list of the arm's joints per world, computed once per frame. One
-    definition for the six joint outputs, which differ only in the array they read."""
-    array = attrgetter(source)
+def _joint_rows(array: Callable[[Frame], np.ndarray]) -> cached_property[Rows]:
+    """A property of `FrameValues`: the frame's `array` as one list of the arm's joints per
+    world, computed once per frame. One definition for the six joint outputs, which differ
+    only in the array they read (a typed accessor, not a name, so a checker sees it)."""
 
     def rows(values: FrameValues) -> Rows:
         return _rows(array(values.frame))
@@ -77,12 +75,12 @@ class FrameValues:
         self.timestamp = (frame.snap.tick * frame.tick_dt,)
 
     # What RTDE's joint outputs read, per world (rtde_outputs.READERS names these attributes).
-    q = _joint_rows("snap.position")
-    qd = _joint_rows("snap.velocity")
-    effort = _joint_rows("snap.effort")
-    target = _joint_rows("snap.target")
-    target_qd = _joint_rows("target_qd")
-    target_qdd = _joint_rows("target_qdd")
+    q = _joint_rows(lambda f: f.snap.position)
+    qd = _joint_rows(lambda f: f.snap.velocity)
+    effort = _joint_rows(lambda f: f.snap.effort)
+    target = _joint_rows(lambda f: f.snap.target)
+    target_qd = _joint_rows(lambda f: f.target_qd)
+    target_qdd = _joint_rows(lambda f: f.target_qdd)
 
     @cached_property
     def actual_tcp(self) -> tuple[Rows, Rows]:
