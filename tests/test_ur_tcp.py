@@ -23,7 +23,7 @@ def _close(a: list[float], b: list[float], tol: float = 1e-4) -> bool:
 
 
 def test_a_tcp_offset_set_anywhere_shows_in_rtde_and_rest(armfleet_ur_world) -> None:
-    arm, w = armfleet_ur_world.leased.client, armfleet_ur_world.world
+    arm, w = armfleet_ur_world.client, armfleet_ur_world.world
     r = rtde_receive.RTDEReceiveInterface(armfleet_ur_world.address)
     try:
         flange = arm.tcp(w)["flange"]

@@ -15,9 +15,10 @@ depends on armfleet gets the fixtures without any conftest:
   server needs one to lend), else from a 4-world server of the module's own that lends
   (`--leases optional`). pytest-xdist workers each get their own world:
   `ARMFLEET_URL=http://ci-box:8000 pytest -n 4`.
-- `armfleet_ur_world`: the same, on a server with UR ports (`serve --ur`): a `UrWorld` with the
-  leased world and its UR controller's address (from `GET /v1/ur`), so that a ur_rtde program
-  under test connects to `ur.address`. Without ARMFLEET_URL, a 4-world server of the module's
+- `armfleet_ur_world`: the same, on a server with UR ports (`serve --ur`): a `UrWorld`, the
+  leased world (`client`, `world`, `lease`, as `armfleet_world`'s) with its UR controller's
+  `address` (from `GET /v1/ur`), so that a ur_rtde program under test connects to
+  `ur.address`. Without ARMFLEET_URL, a 4-world server of the module's
   own lends, with its UR ports on a random loopback block (tests at once never share one).
 
       def test_moves(armfleet_ur_world):
@@ -99,16 +100,11 @@ def armfleet_ur_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Ser
         yield s
 
 
-@dataclass(frozen=True)
-class UrWorld:
+@dataclass
+class UrWorld(LeasedWorld):
     """A leased world with UR ports: `address` is its controller's (RTDE, Dashboard, ...)."""
 
-    leased: LeasedWorld
     address: str
-
-    @property
-    def world(self) -> int:
-        return self.leased.world
 
 
 @pytest.fixture
@@ -116,7 +112,8 @@ def armfleet_ur_world(request: pytest.FixtureRequest) -> Iterator[UrWorld]:
     """A leased world and its UR address for this test (see the module docstring)."""
     with _leased(request, "armfleet_ur_server") as world:
         headers = {"Authorization": f"Bearer {world.lease.token}"} if world.lease.token else {}
-        yield UrWorld(world, _open_ur_address(world.url, world.world, headers))
+        address = _open_ur_address(world.url, world.world, headers)
+        yield UrWorld(world.url, world.world, world.lease, world.client, address)
 
 
 def _open_ur_address(url: str, world: int, headers: dict[str, str]) -> str:
