@@ -15,8 +15,8 @@ from fastapi import APIRouter
 from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
+from service.api.answers import command_ack, json_reply, read_fresh
 from service.api.deps import CommandWorld, Ctl, Loop, World
-from service.api.worlds import _json, _read
 from service.core.commands import cartesian, tcp
 from service.core.commands.base import HTTP
 from service.core.commands.fields import FiniteFloat, Strict, example_config
@@ -25,7 +25,6 @@ from service.core.contract.replies import CommandReply, errors
 from service.core.kinematics.pose import matrix_to_pose, matrix_to_quat
 from service.core.kinematics.tools import tools_of
 from service.core.kinematics.ur import Singularity
-from service.core.streams import wire
 
 router = APIRouter(prefix="/v1", tags=["cartesian"], responses=errors(404))
 
@@ -65,13 +64,13 @@ class IkRequest(Strict):
     "including every command accepted before",
 )
 async def get_tcp(loop: Loop, world: World) -> Response:
-    snap, pending = await _read(loop, [world])
+    snap, pending = await read_fresh(loop, [world])
     tools = tools_of(loop)
     kin, offset = tools.kin, tools.get(world)
     q = snap.position[world, :6][None].astype(np.float64)
     target = (snap.target[world] if pending is None else pending[0])[:6][None]
     base = kin.base_in_world
-    return _json(
+    return json_reply(
         {
             "world": world,
             "tick": snap.tick,
@@ -94,7 +93,7 @@ async def get_tcp(loop: Loop, world: World) -> Response:
 )
 async def put_tcp_offset(control: Ctl, world: CommandWorld, body: tcp.TcpOffset) -> Response:
     done = control.run(tcp.SetTcp.create(control, world, body.tcp), HTTP)
-    return _json({"world": done.world, "tick": done.tick, "tcp": done.tcp})
+    return json_reply({"world": done.world, "tick": done.tick, "tcp": done.tcp})
 
 
 @router.put(
@@ -106,7 +105,7 @@ async def put_tcp_offset(control: Ctl, world: CommandWorld, body: tcp.TcpOffset)
 )
 async def put_tcp_target(control: Ctl, world: CommandWorld, body: cartesian.TcpPose) -> Response:
     result = control.run(cartesian.MoveTcp.create(control, world, body.pose), HTTP)
-    return _json(wire.command_reply(result))
+    return command_ack(result)
 
 
 @router.post(
@@ -117,7 +116,7 @@ async def put_tcp_target(control: Ctl, world: CommandWorld, body: cartesian.TcpP
 )
 async def post_jog(control: Ctl, world: CommandWorld, body: cartesian.JogStep) -> Response:
     command = cartesian.Jog.create(control, world, body.axis, body.step, body.frame)
-    return _json(wire.command_reply(control.run(command, HTTP)))
+    return command_ack(control.run(command, HTTP))
 
 
 @router.post(
@@ -131,14 +130,14 @@ async def post_move_linear(
     control: Ctl, world: CommandWorld, body: cartesian.LinearMove
 ) -> Response:
     command = cartesian.MoveLinear.line(control, world, body.pose, body.speed, body.accel)
-    return _json(control.run(command, HTTP)[0].as_json())
+    return json_reply(control.run(command, HTTP)[0].as_json())
 
 
 @router.post("/worlds/{world}/fk", summary="The TCP pose of arm joint angles, with the world's TCP")
 async def post_fk(loop: Loop, world: World, body: JointAngles) -> Response:
     tools = tools_of(loop)
     t = tools.kin.tcp(np.array([body.q]), tools.get(world)[None])
-    return _json({"world": world, "pose": matrix_to_pose(t)[0].tolist()})
+    return json_reply({"world": world, "pose": matrix_to_pose(t)[0].tolist()})
 
 
 @router.post(
@@ -152,7 +151,7 @@ async def post_ik(loop: Loop, world: World, body: IkRequest) -> Response:
     near = body.q_near
     q_near = loop.commands.pending_targets(world)[:6] if near is None else np.array(near)
     got = tools.kin.ik(pose[None], q_near[None], tools.get(world)[None])
-    return _json(
+    return json_reply(
         {
             "world": world,
             "ok": bool(got.ok[0]),

@@ -14,6 +14,7 @@ import numpy as np
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
+from service.api.answers import json_reply
 from service.api.deps import CommandWorld, Ctl, World
 from service.core.commands.base import HTTP
 from service.core.commands.control import Control
@@ -28,15 +29,10 @@ from service.core.commands.trajectory.schemas import (
 from service.core.contract.replies import errors
 from service.core.errors import BadCommand, Conflict, NotFound
 from service.core.sim.worlds import parse_worlds
-from service.core.streams import wire
 
 # Every route here names worlds, so each can answer 404 for an unknown one.
 router = APIRouter(prefix="/v1", tags=["trajectories"], responses=errors(404))
 MAX_WAIT_S = 60.0
-
-
-def _json(payload: object) -> Response:
-    return Response(wire.dumps(payload), media_type="application/json")
 
 
 @router.post(
@@ -48,7 +44,7 @@ def _json(payload: object) -> Response:
 async def start(control: Ctl, world: CommandWorld, body: TrajectoryBody) -> Response:
     spec = parse(control.spec, body.as_json())
     started = control.start_trajectory([world], spec, HTTP)[0]
-    return _json(started.as_json())
+    return json_reply(started.as_json())
 
 
 Wait = Annotated[
@@ -88,7 +84,7 @@ async def _answer(
     """The status reply (after waiting up to `wait` for the outcome), or `missing` (404)."""
     if current is None:
         raise missing
-    return _json((await _outcome(control, current, wait)).as_json())
+    return json_reply((await _outcome(control, current, wait)).as_json())
 
 
 async def _outcome(control: Control, current: TrajectoryStatus, wait: float) -> TrajectoryStatus:
@@ -112,7 +108,7 @@ async def cancel(control: Ctl, world: CommandWorld) -> Response:
     stopped = control.cancel_trajectory([world], HTTP)
     if not stopped:
         raise Conflict(f"world {world} runs no trajectory", "world")
-    return _json(stopped[0].as_json())
+    return json_reply(stopped[0].as_json())
 
 
 @router.post(
@@ -125,7 +121,7 @@ async def start_many(control: Ctl, body: BatchTrajectoryBody) -> Response:
     worlds = _worlds(control, body.worlds)
     spec = parse(control.spec, body.trajectory.as_json())
     started = control.start_trajectory(worlds, spec, HTTP)
-    return _json(
+    return json_reply(
         {
             "start_tick": started[0].start_tick,
             "end_tick": started[0].end_tick,

@@ -15,6 +15,7 @@ import numpy as np
 from fastapi import APIRouter, Body, Query
 from fastapi.responses import Response
 
+from service.api.answers import command_ack, json_reply, read_fresh
 from service.api.deps import CommandWorld, Ctl, Loop, World
 from service.core.commands import entities, params, payload, randomize
 from service.core.commands.base import HTTP
@@ -31,50 +32,14 @@ from service.core.contract.replies import (
     errors,
 )
 from service.core.contract.snapshots import WorldRandomization
-from service.core.errors import NotFound, Unavailable
+from service.core.errors import NotFound
 from service.core.sim import entities as entity_table
 from service.core.sim.loop import SimLoop
-from service.core.sim.types import Mode, Snapshot
 from service.core.sim.worlds import WORLDS_PATTERN, parse_worlds
-from service.core.streams import entity_frames, wire
+from service.core.streams import wire
 
 # Every route here names worlds, so each can answer 404 for an unknown one.
 router = APIRouter(prefix="/v1", tags=["worlds"], responses=errors(404))
-
-
-def _json(payload: Any) -> Response:
-    """Serialised directly with orjson (the hot path of the Up/Down buttons)."""
-    return Response(wire.dumps(payload), media_type="application/json")
-
-
-# A read waits at most this long for the tick its worlds' commands take effect at (normally
-# one or two ticks); longer means the engine is not advancing (see /readyz).
-_READ_TIMEOUT = 5.0
-
-
-async def _read(
-    loop: SimLoop, worlds: np.ndarray | list[int], with_entities: bool = False
-) -> tuple[Snapshot, np.ndarray | None]:
-    """Read-your-writes: a snapshot including every accepted command for `worlds` and the
-    worlds' safety modes as of now, and while paused their pending targets (which the next
-    step puts in effect). `with_entities`: then one taken on the sim thread with the entities
-    of its own tick (entity_frames.py)."""
-    try:
-        snap = await asyncio.wait_for(
-            asyncio.wrap_future(loop.fresh_snapshot(worlds)), timeout=_READ_TIMEOUT
-        )
-        if with_entities:
-            fut = loop.call(lambda b: entity_frames.attach(b.snapshot(), b))
-            snap = await asyncio.wait_for(asyncio.wrap_future(fut), timeout=_READ_TIMEOUT)
-    except TimeoutError:
-        why = loop.failure or "no tick completed"
-        raise Unavailable(f"the engine is not advancing ({why}); see /readyz") from None
-    pending = (
-        loop.commands.pending_targets(np.asarray(worlds)) if loop.mode is Mode.PAUSED else None
-    )
-    # the safety mode as of now: a stop, an unlock or a reset between two ticks (paused: no
-    # tick comes) is read at once, like the pending targets
-    return dataclasses.replace(snap, safety=loop.safety.modes()), pending
 
 
 # `?entities=true` on a state read: each world's entities too, of the same tick.
@@ -104,8 +69,8 @@ async def get_states(
 ) -> Response:
     n = loop.batch.nworld
     ids = np.arange(n) if worlds is None else parse_worlds(worlds, n)
-    snap, pending = await _read(loop, ids, entities)
-    return _json(wire.states(snap, ids, loop.spec.names, pending, entities))
+    snap, pending = await read_fresh(loop, ids, entities)
+    return json_reply(wire.states(snap, ids, loop.spec.names, pending, entities))
 
 
 @router.get(
@@ -115,9 +80,9 @@ async def get_states(
     "before",
 )
 async def get_state(loop: Loop, world: World, entities: WithEntities = False) -> Response:
-    snap, pending = await _read(loop, [world], entities)
+    snap, pending = await read_fresh(loop, [world], entities)
     pending_row = None if pending is None else pending[0]
-    return _json(wire.world_state(snap, world, loop.spec.names, pending_row, entities))
+    return json_reply(wire.world_state(snap, world, loop.spec.names, pending_row, entities))
 
 
 @router.post(
@@ -129,7 +94,7 @@ async def get_state(loop: Loop, world: World, entities: WithEntities = False) ->
 async def increment(control: Ctl, world: CommandWorld, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
     result = control.increment(world, body.as_mapping(), HTTP, field)
-    return _json(wire.command_reply(result))
+    return command_ack(result)
 
 
 @router.put(
@@ -140,7 +105,7 @@ async def increment(control: Ctl, world: CommandWorld, body: IncrementRequest) -
 )
 async def put_targets(control: Ctl, world: CommandWorld, body: JointTargets) -> Response:
     result = control.command_targets(world, body.name, body.position, HTTP)
-    return _json(wire.command_reply(result))
+    return command_ack(result)
 
 
 @router.post(
@@ -151,7 +116,9 @@ async def put_targets(control: Ctl, world: CommandWorld, body: JointTargets) -> 
 )
 async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     results = control.set_many(body.worlds, body.position, HTTP)
-    return _json({"tick": results[0].tick, "results": [wire.command_reply(r) for r in results]})
+    return json_reply(
+        {"tick": results[0].tick, "results": [wire.command_reply(r) for r in results]}
+    )
 
 
 @router.post(
@@ -183,7 +150,7 @@ async def reset_many(
 async def _entities(loop: SimLoop, worlds: list[int]) -> dict[str, Any]:
     """Read-your-writes: wait for the tick every accepted write of `worlds` is in, then read
     the entities on the sim thread between two ticks."""
-    await _read(loop, worlds)
+    await read_fresh(loop, worlds)
     return await asyncio.wrap_future(loop.call(lambda batch: entity_table.read(batch, worlds)))
 
 
@@ -199,7 +166,7 @@ def _entity(loop: SimLoop, name: str) -> int:
 def _written(control: Control, command: type[ManyWrites[Any]], items: list[Any]) -> Response:
     """Run an entity or parameter write command; the reply is its result's fields (the tick
     the writes take effect at, the worlds written, and what the command adds)."""
-    return _json(dataclasses.asdict(control.run(command.create(control, items), HTTP)))
+    return json_reply(dataclasses.asdict(control.run(command.create(control, items), HTTP)))
 
 
 @router.get(
@@ -208,7 +175,7 @@ def _written(control: Control, command: type[ManyWrites[Any]], items: list[Any])
 )
 async def get_entities(loop: Loop, world: World) -> Response:
     got = await _entities(loop, [world])
-    return _json({"tick": got["tick"], **got["worlds"][0]})
+    return json_reply({"tick": got["tick"], **got["worlds"][0]})
 
 
 @router.get(
@@ -218,7 +185,7 @@ async def get_entities(loop: Loop, world: World) -> Response:
 async def get_entity(loop: Loop, world: World, name: str) -> Response:
     index = _entity(loop, name)
     got = await _entities(loop, [world])
-    return _json({"tick": got["tick"], "world": world, **got["worlds"][0]["entities"][index]})
+    return json_reply({"tick": got["tick"], "world": world, **got["worlds"][0]["entities"][index]})
 
 
 @router.put(
@@ -251,14 +218,14 @@ async def post_entities(control: Ctl, body: entities.EntityWrites) -> Response:
 @router.get("/params", summary="The parameters a world may have of its own: names, units, ranges")
 async def get_param_table(loop: Loop) -> Response:
     table = params.param_table(loop.batch.robot.mjm, loop.spec.names)
-    return _json({"params": [p.describe() for p in table.values()]})
+    return json_reply({"params": [p.describe() for p in table.values()]})
 
 
 @router.get("/worlds/{world}/params", summary="One world's physics parameters")
 async def get_params(loop: Loop, world: World) -> Response:
-    await _read(loop, [world])
+    await read_fresh(loop, [world])
     got = await asyncio.wrap_future(loop.call(lambda batch: params.read(batch, [world])))
-    return _json({"tick": got["tick"], **got["worlds"][0]})
+    return json_reply({"tick": got["tick"], **got["worlds"][0]})
 
 
 @router.put(
@@ -294,7 +261,7 @@ async def post_params(control: Ctl, body: params.ParamWrites) -> Response:
     summary="One world's last randomisation (seed and spec), as its state holds it now",
 )
 async def get_randomization(loop: Loop, world: World) -> WorldRandomization:
-    snap, _ = await _read(loop, [world])  # includes every randomisation accepted before
+    snap, _ = await read_fresh(loop, [world])  # includes every randomisation accepted before
     last = loop.randomizations.at(snap.tick).get(world)
     return WorldRandomization(
         world=world,
@@ -313,4 +280,6 @@ async def get_randomization(loop: Loop, world: World) -> WorldRandomization:
 async def post_randomize(control: Ctl, body: randomize.RandomizeRequest) -> Response:
     command = randomize.Randomize.create(control, body.worlds, body.seed, body.spec)
     done = control.run(command, HTTP)
-    return _json({"tick": done.tick, "worlds": done.worlds, "seed": body.seed, "spec": body.spec})
+    return json_reply(
+        {"tick": done.tick, "worlds": done.worlds, "seed": body.seed, "spec": body.spec}
+    )
