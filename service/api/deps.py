@@ -16,6 +16,7 @@ from service.core.contract.replies import ErrorReply
 from service.core.errors import Unavailable
 from service.core.sim import rules
 from service.core.sim.loop import SimLoop
+from service.persistence.snapshots import check_state_support
 from service.runtime import Runtime
 
 
@@ -43,6 +44,17 @@ async def get_control(
 
 Loop = Annotated[SimLoop, Depends(get_loop)]
 Ctl = Annotated[Control, Depends(get_control)]
+Rt = Annotated[Runtime, Depends(get_runtime)]
+
+
+async def get_state_loop(loop: Loop) -> SimLoop:
+    """The loop, for a route that saves or restores the full state (snapshots, recordings):
+    Conflict (409) naming the engine when it cannot, before the route does anything."""
+    check_state_support(loop.batch)
+    return loop
+
+
+StateLoop = Annotated[SimLoop, Depends(get_state_loop)]
 
 
 WorldPath = Annotated[int, Path(description="world index")]

@@ -3,21 +3,17 @@
 from __future__ import annotations
 
 import asyncio
-from typing import Annotated
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter
 
-from service.api.deps import CANNOT_WRITE, Loop, get_runtime
+from service.api.deps import CANNOT_WRITE, Rt, StateLoop
 from service.core.contract.replies import errors
 from service.core.contract.snapshots import RecordingRequest, RecordingStatus
 from service.core.errors import NotFound
 from service.core.sim.worlds import pick_worlds
 from service.persistence.recorder import Recorder
-from service.persistence.snapshots import check_state_support
-from service.runtime import Runtime
 
 router = APIRouter(prefix="/v1/recordings", tags=["recordings"])
-Rt = Annotated[Runtime, Depends(get_runtime)]
 
 
 def _status(recorder: Recorder) -> RecordingStatus:
@@ -35,8 +31,8 @@ def _status(recorder: Recorder) -> RecordingStatus:
         409: {"description": "a recording is already running"},
     },
 )
-async def start(runtime: Rt, loop: Loop, body: RecordingRequest) -> RecordingStatus:
-    check_state_support(loop.batch)  # a recording starts from the full state
+async def start(runtime: Rt, loop: StateLoop, body: RecordingRequest) -> RecordingStatus:
+    # StateLoop: a recording starts from the full state.
     # Unknown worlds are a 404 before the file is opened (opening truncates one of that name).
     worlds = pick_worlds(body.worlds, loop.batch.nworld)
     path = runtime.persistence.recordings_dir / f"{body.name}.mcap"

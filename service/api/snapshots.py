@@ -5,9 +5,9 @@ from __future__ import annotations
 import asyncio
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Path
+from fastapi import APIRouter, Path
 
-from service.api.deps import CANNOT_WRITE, Loop, get_runtime
+from service.api.deps import CANNOT_WRITE, Rt, StateLoop
 from service.core.contract.snapshots import (
     RestoreReply,
     SnapshotInfo,
@@ -15,11 +15,8 @@ from service.core.contract.snapshots import (
     SnapshotRequest,
 )
 from service.core.errors import Conflict
-from service.persistence.snapshots import check_state_support
-from service.runtime import Runtime
 
 router = APIRouter(prefix="/v1/snapshots", tags=["snapshots"])
-Rt = Annotated[Runtime, Depends(get_runtime)]
 
 
 @router.post(
@@ -32,8 +29,7 @@ Rt = Annotated[Runtime, Depends(get_runtime)]
         422: {"description": "bad name (separators, empty, over 64 characters)"},
     },
 )
-async def save(runtime: Rt, loop: Loop, body: SnapshotRequest) -> SnapshotInfo:
-    check_state_support(loop.batch)
+async def save(runtime: Rt, loop: StateLoop, body: SnapshotRequest) -> SnapshotInfo:
     state = await asyncio.wrap_future(loop.state_door.request_state())
     info = await asyncio.to_thread(
         runtime.persistence.snapshots.save, body.name, state, runtime.header
@@ -57,8 +53,9 @@ async def listing(runtime: Rt) -> list[SnapshotInfo]:
         422: {"description": "bad name"},
     },
 )
-async def restore(runtime: Rt, loop: Loop, name: Annotated[SnapshotName, Path()]) -> RestoreReply:
-    check_state_support(loop.batch)
+async def restore(
+    runtime: Rt, loop: StateLoop, name: Annotated[SnapshotName, Path()]
+) -> RestoreReply:
     # Read and check the whole file first: a bad one changes nothing.
     state = await asyncio.to_thread(runtime.persistence.snapshots.load, name, runtime.header)
     try:
