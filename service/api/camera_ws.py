@@ -31,7 +31,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, WebSocket
 
 from service.api import ws_bulk
-from service.api.ws import flag
+from service.api.ws import flag, refuse
 from service.api.ws_bulk import AsgiSocket, BulkSocket
 from service.core.access import policy as access
 from service.core.cameras import wire as camera_wire
@@ -43,8 +43,6 @@ from service.core.sim.worlds import parse_worlds
 router = APIRouter(prefix="/v1")
 
 MAX_RATE = 60.0  # images a second per socket
-_CLOSE_TRY_AGAIN = 1013
-_CLOSE_POLICY = 1008
 
 
 @router.websocket("/ws/cameras")
@@ -66,11 +64,10 @@ async def camera_socket(
     runtime = ws.app.state.runtime
     grant = access.check_websocket(runtime.settings.access, ws)
     feed: CameraFeed | None = runtime.cameras
-    await ws.accept(subprotocol=grant.subprotocol)
     if not grant.read:
-        return await ws.close(code=_CLOSE_POLICY, reason=grant.reason[:120])
+        return await refuse(ws, grant, access.CLOSE_POLICY, grant.reason)
     if feed is None:
-        return await ws.close(code=_CLOSE_TRY_AGAIN, reason="simulation is starting")
+        return await refuse(ws, grant, access.CLOSE_TRY_AGAIN, "simulation is starting")
     try:
         if not camera:
             raise BadCommand("query.camera", "give the camera's name (GET /v1/cameras lists them)")
@@ -81,8 +78,9 @@ async def camera_socket(
         feed.want(camera, image)
         ids = parse_worlds(worlds, feed.loop.batch.nworld)
     except ArmfleetError as exc:
-        return await ws.close(code=_CLOSE_POLICY, reason=str(exc)[:120])
-    link = ws_bulk.link(ws)
+        return await refuse(ws, grant, access.CLOSE_POLICY, str(exc))
+    await ws.accept(subprotocol=grant.subprotocol)
+    link = ws_bulk.link(ws)  # at once after the accept: what the client sends next is the link's
     feed.streams_direct += link.direct
     feed.streams.add(link)
     reader = Reader(ids, pull_)
@@ -133,7 +131,7 @@ async def _send(
             shot = await reader.take()
         except ArmfleetError as exc:  # warming up: the clock tries again at its next instant
             if exc.status != 503:
-                await link.close(_CLOSE_POLICY, str(exc)[:120])
+                await link.close(access.CLOSE_POLICY, str(exc)[:120])
                 return
             if reader.pull:
                 reader.ask()  # still wanted

@@ -40,8 +40,6 @@ router = APIRouter(prefix="/v1")
 
 MAX_RATE = 1000.0
 _MAX_QUEUED_ACKS = 256  # a client that never reads its acks stops being read (backpressure)
-_CLOSE_TRY_AGAIN = 1013
-_CLOSE_POLICY = 1008
 
 
 # `entities=true`: each frame carries the worlds' entities (service/core/streams/entity_frames.py).
@@ -219,8 +217,11 @@ class Stream:
     direct: bool = False
 
 
-async def _refuse(ws: WebSocket, code: int, reason: str) -> None:
-    await ws.accept(subprotocol=_grant(ws).subprotocol)
+async def refuse(ws: WebSocket, grant: access.Grant, code: int, reason: str) -> None:
+    """Turn a socket away that cannot be served (every WebSocket route here): accepted first,
+    with the subprotocol its token came in, so that the client reads `code` and `reason`
+    (clipped: a close frame holds 123 bytes) instead of a bare handshake failure."""
+    await ws.accept(subprotocol=grant.subprotocol)
     await ws.close(code=code, reason=reason[:120])
 
 
@@ -236,11 +237,11 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
     runtime = ws.app.state.runtime
     loop, control, hub = runtime.loop, runtime.control, runtime.hub
     if loop is None or control is None or hub is None:
-        return await _refuse(ws, _CLOSE_TRY_AGAIN, "simulation is starting")
+        return await refuse(ws, _grant(ws), access.CLOSE_TRY_AGAIN, "simulation is starting")
     try:
         stream = read(loop, control)
     except ArmfleetError as exc:
-        return await _refuse(ws, _CLOSE_POLICY, str(exc))
+        return await refuse(ws, _grant(ws), access.CLOSE_POLICY, str(exc))
     default_world, source = stream.default_world, stream.source
     grant = _grant(ws)
     limiter = rates.RateLimiter(
