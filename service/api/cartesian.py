@@ -16,7 +16,7 @@ from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
 from service.api.answers import command_ack, json_reply, read_fresh
-from service.api.deps import CommandWorld, Ctl, Loop, World
+from service.api.deps import MOVES_ARM, CommandWorld, Ctl, Loop, World
 from service.core.commands import cartesian, tcp
 from service.core.commands.base import HTTP
 from service.core.commands.fields import FiniteFloat, Strict, example_config
@@ -101,7 +101,7 @@ async def put_tcp_offset(control: Ctl, world: CommandWorld, body: tcp.TcpOffset)
     response_model=CommandReply,
     summary="Set the arm's targets so that the TCP reaches a pose (IK nearest the current "
     "targets); 422 when no configuration reaches it",
-    responses=errors(409),  # the arm of a protective-stopped world
+    responses=MOVES_ARM,
 )
 async def put_tcp_target(control: Ctl, world: CommandWorld, body: cartesian.TcpPose) -> Response:
     result = control.run(cartesian.MoveTcp.create(control, world, body.pose), HTTP)
@@ -112,7 +112,7 @@ async def put_tcp_target(control: Ctl, world: CommandWorld, body: cartesian.TcpP
     "/worlds/{world}/jog",
     response_model=CommandReply,
     summary="One pendant jog step: ±x/y/z [m] or ±rx/ry/rz [rad] in the base or tool frame",
-    responses=errors(409),  # the arm of a protective-stopped world
+    responses=MOVES_ARM,
 )
 async def post_jog(control: Ctl, world: CommandWorld, body: cartesian.JogStep) -> Response:
     command = cartesian.Jog.create(control, world, body.axis, body.step, body.frame)
@@ -124,7 +124,7 @@ async def post_jog(control: Ctl, world: CommandWorld, body: cartesian.JogStep) -
     response_model=StartedReply,
     summary="Move the TCP on a straight line (UR's moveL) as a trajectory: its id and ticks "
     "(GET /v1/worlds/{w}/trajectory watches it)",
-    responses=errors(409),  # the arm of a protective-stopped world
+    responses=MOVES_ARM,
 )
 async def post_move_linear(
     control: Ctl, world: CommandWorld, body: cartesian.LinearMove

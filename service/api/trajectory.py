@@ -15,7 +15,7 @@ from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
 from service.api.answers import json_reply
-from service.api.deps import CommandWorld, Ctl, World
+from service.api.deps import MOVES_ARM, CommandWorld, Ctl, World
 from service.core.commands.base import HTTP
 from service.core.commands.control import Control
 from service.core.commands.trajectory import TrajectoryStatus, parse
@@ -39,7 +39,7 @@ MAX_WAIT_S = 60.0
     "/worlds/{world}/trajectory",
     response_model=StartedReply,
     summary="Follow a JointTrajectory (replaces a running one); answers its id and ticks",
-    responses=errors(409),  # the arm of a protective-stopped world
+    responses=MOVES_ARM,
 )
 async def start(control: Ctl, world: CommandWorld, body: TrajectoryBody) -> Response:
     spec = parse(control.spec, body.as_json())
@@ -115,7 +115,7 @@ async def cancel(control: Ctl, world: CommandWorld) -> Response:
     "/trajectories",
     response_model=BatchStartedReply,
     summary="Start one trajectory on many worlds, all at the same tick",
-    responses=errors(409),  # the arm of a protective-stopped world
+    responses=MOVES_ARM,
 )
 async def start_many(control: Ctl, body: BatchTrajectoryBody) -> Response:
     worlds = _worlds(control, body.worlds)

@@ -16,7 +16,7 @@ from fastapi import APIRouter, Body, Query
 from fastapi.responses import Response
 
 from service.api.answers import command_ack, json_reply, read_fresh
-from service.api.deps import CommandWorld, Ctl, Loop, World
+from service.api.deps import MOVES_ARM, CommandWorld, Ctl, Loop, World
 from service.core.commands import entities, params, payload, randomize
 from service.core.commands.base import HTTP
 from service.core.commands.control import Control
@@ -89,7 +89,7 @@ async def get_state(loop: Loop, world: World, entities: WithEntities = False) ->
     "/worlds/{world}/increments",
     response_model=CommandReply,
     summary="Add to joint targets (the seed's Up/Down buttons); clamps to the joint range",
-    responses=errors(409),  # the arm of a protective-stopped world
+    responses=MOVES_ARM,
 )
 async def increment(control: Ctl, world: CommandWorld, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
@@ -101,7 +101,7 @@ async def increment(control: Ctl, world: CommandWorld, body: IncrementRequest) -
     "/worlds/{world}/targets",
     response_model=CommandReply,
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
-    responses=errors(409),  # the arm of a protective-stopped world
+    responses=MOVES_ARM,
 )
 async def put_targets(control: Ctl, world: CommandWorld, body: JointTargets) -> Response:
     result = control.command_targets(world, body.name, body.position, HTTP)
@@ -112,7 +112,7 @@ async def put_targets(control: Ctl, world: CommandWorld, body: JointTargets) -> 
     "/targets",
     response_model=BatchCommandReply,
     summary="Full 7-joint targets for many worlds, applied together at one tick boundary",
-    responses=errors(409),  # the arm of a protective-stopped world
+    responses=MOVES_ARM,
 )
 async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     results = control.set_many(body.worlds, body.position, HTTP)
