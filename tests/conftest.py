@@ -278,6 +278,14 @@ def tcp_moved(before: dict[str, Any], after: dict[str, Any], key: str = "tcp") -
     return np.subtract(after[key][:3], before[key][:3])
 
 
+def assert_tcp_went(before: dict[str, Any], after: dict[str, Any], by: Any) -> None:
+    """A jog's check, as every controller (Tk, terminal, page) is held to it: the targets' TCP
+    went `by` [m] in the base frame to a micrometre (IK and FK of one chain), and the arm's
+    TCP followed to half a millimetre (the servos settled)."""
+    assert tcp_moved(before, after, "target_tcp") == pytest.approx(by, abs=1e-6)
+    assert tcp_moved(before, after) == pytest.approx(by, abs=5e-4)
+
+
 @pytest.fixture(scope="module")
 def server(armfleet_server: Server) -> Iterator[Server]:
     """The 4-world realtime server shared by the tests of one module (`armfleet_server`)."""

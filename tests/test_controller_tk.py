@@ -29,13 +29,13 @@ from conftest import (
     JOINTS,
     ROOT,
     Server,
+    assert_tcp_went,
     free_port,
     jogged_tcp,
     rotvec_matrix,
     serve,
     settled_tcp,
     target_after,
-    tcp_moved,
     wait_for,
 )
 
@@ -286,8 +286,7 @@ def test_plus_z_click_raises_the_tcp_by_the_step(app: TkApp, client: ArmfleetCli
     before = settled_tcp(client, WORLD)
     app.click("jog:+z")
     after = jogged_tcp(client, WORLD, before)
-    assert tcp_moved(before, after, "target_tcp") == pytest.approx([0, 0, 0.01], abs=1e-6)
-    assert tcp_moved(before, after) == pytest.approx([0, 0, 0.01], abs=5e-4)
+    assert_tcp_went(before, after, [0, 0, 0.01])
     turned = rotvec_matrix(after["tcp"][3:]).T @ rotvec_matrix(before["tcp"][3:])
     assert turned == pytest.approx(np.eye(3), abs=1e-3)  # a translation: the tool kept its turn
     label_shows(app, "target:elbow_joint", f"{client.state(WORLD).target[ELBOW]:.2f}")
@@ -312,9 +311,7 @@ def test_tool_frame_and_a_finer_step_move_along_the_tools_z(
         # down: the same button in the base frame went up
         tool_z = rotvec_matrix(before["target_tcp"][3:])[:, 2]
         assert tool_z[2] < -0.9
-        moved = tcp_moved(before, after, "target_tcp")
-        assert moved == pytest.approx(0.001 * tool_z, abs=1e-6)
-        assert tcp_moved(before, after) == pytest.approx(0.001 * tool_z, abs=5e-4)
+        assert_tcp_went(before, after, 0.001 * tool_z)
     finally:
         app.click("frame:base")
         app.click("step", fx=0.95, fy=0.25)  # the up arrow: back to 10 mm / 0.05 rad

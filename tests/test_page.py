@@ -19,13 +19,13 @@ import pytest
 from conftest import (
     HOME,
     JOINTS,
+    assert_tcp_went,
     free_port,
     jogged_tcp,
     page_of,
     rotvec_matrix,
     serve,
     settled_tcp,
-    tcp_moved,
     wait_for,
 )
 from PIL import Image
@@ -410,8 +410,7 @@ def test_jog_buttons_move_the_tcp_by_the_step_in_the_base_then_the_tool_frame(sr
     before = settled_tcp(arm, 1)
     jog.get_by_role("button", name="+Z", exact=True).click()
     after = jogged_tcp(arm, 1, before)
-    assert tcp_moved(before, after, "target_tcp") == pytest.approx([0, 0, 0.01], abs=1e-6)
-    assert tcp_moved(before, after) == pytest.approx([0, 0, 0.01], abs=5e-4)
+    assert_tcp_went(before, after, [0, 0, 0.01])
     shown = page.locator('tr[data-joint="elbow_joint"] .target')
     expect(shown).to_have_text(f"{arm.state(1).target[2]:.2f}")  # the ack's targets
 
@@ -422,8 +421,7 @@ def test_jog_buttons_move_the_tcp_by_the_step_in_the_base_then_the_tool_frame(sr
     assert tool_z[2] < -0.9
     jog.get_by_role("button", name="+Z", exact=True).click()
     tooled = jogged_tcp(arm, 1, after)
-    assert tcp_moved(after, tooled, "target_tcp") == pytest.approx(0.001 * tool_z, abs=1e-6)
-    assert tcp_moved(after, tooled) == pytest.approx(0.001 * tool_z, abs=5e-4)
+    assert_tcp_went(after, tooled, 0.001 * tool_z)
     assert arm.state(0).target == pytest.approx(HOME)  # the other worlds saw nothing
 
 
