@@ -203,8 +203,7 @@ class AsyncArmfleetClient(_Closes, cartesian.AsyncCalls, calls.Endpoint):
     ) -> AsyncIterator[AsyncArmfleetClient]:
         """Async twin of `ArmfleetClient.lease` (`async with client.lease() as mine:`)."""
         held = await self.call(calls.lease_call(count, worlds, ttl_s, label, wait_s))
-        client = AsyncArmfleetClient(self.url, self.timeout, token=held.token)
-        client.leased = held
+        client = self.lent(held)
         try:
             yield client
         finally:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import httpx
 import numpy as np
@@ -29,6 +29,9 @@ from clients.models import (
     WorldSpec,
     WorldState,
 )
+
+if TYPE_CHECKING:  # typing has it from 3.11 on; the client also runs on 3.10
+    from typing_extensions import Self
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 DEFAULT_TIMEOUT = 10.0
@@ -235,6 +238,13 @@ class Endpoint:
     def http_options(self) -> dict[str, Any]:
         """The arguments of the httpx client (sync or async) that sends this client's calls."""
         return {"base_url": self.url, "timeout": self.timeout, "headers": auth_headers(self.token)}
+
+    def lent(self, held: Lease) -> Self:
+        """A client of the same kind and service holding the lease `held` (its token, and
+        `leased` saying which worlds): what `lease()` yields, blocking or asyncio."""
+        client = type(self)(self.url, self.timeout, held.token)
+        client.leased = held
+        return client
 
 
 def readyz_call() -> Call:

@@ -237,8 +237,7 @@ class ArmfleetClient(_Closes, cartesian.Calls, calls.Endpoint):
         back when the block ends. Conflict / NotReady (409 / 503) when none is free after
         `wait_s` seconds; `renew_lease` keeps a long block's lease alive."""
         held = self.call(calls.lease_call(count, worlds, ttl_s, label, wait_s))
-        client = ArmfleetClient(self.url, self.timeout, token=held.token)
-        client.leased = held
+        client = self.lent(held)
         try:
             yield client
         finally:
