@@ -18,6 +18,7 @@ import subprocess
 import sys
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -30,9 +31,16 @@ SEND = (
 )
 
 
-def _wheels() -> list[Path]:
+def wheels() -> list[Path]:
     folder = os.environ.get(WHEELS_ENV)
     return sorted(Path(folder).glob("ur_rtde-1.6.*-cp311-*.whl")) if folder else []
+
+
+def wheel_params() -> list[Any]:
+    """One parameter per wheel found, or one skipped parameter saying how to give them."""
+    why = f"{WHEELS_ENV} names no folder of ur-rtde 1.6.x wheels (see tests/test_ur_scripts.py)"
+    found = [pytest.param(w, id=w.name.split("-")[1]) for w in wheels()]
+    return found or [pytest.param(None, id="none", marks=pytest.mark.skip(reason=why))]
 
 
 def _sent(port_owner: socket.socket, env: dict[str, str]) -> str:
@@ -67,10 +75,8 @@ def test_the_installed_ur_rtde_script_is_recognised() -> None:
     _check(importlib.metadata.version("ur_rtde"), dict(os.environ))
 
 
-@pytest.mark.parametrize("wheel", _wheels() or [None], ids=lambda w: w.name if w else "none")
-def test_each_ur_rtde_1_6_release_script_is_recognised(wheel: Path | None, tmp_path) -> None:
-    if wheel is None:
-        pytest.skip(f"{WHEELS_ENV} names no folder of ur-rtde 1.6.x wheels (see the docstring)")
+@pytest.mark.parametrize("wheel", wheel_params())
+def test_each_ur_rtde_1_6_release_script_is_recognised(wheel: Path, tmp_path) -> None:
     release = wheel.name.split("-")[1]
     with zipfile.ZipFile(wheel) as z:
         z.extractall(tmp_path)
