@@ -102,6 +102,10 @@ def _ms(values: list[float], q: float) -> float | None:
     return None if p is None else round(p * 1e3, 4)
 
 
+def _gap_ms(gap_s: float | None) -> float | None:
+    return None if gap_s is None else round(gap_s * 1e3, 1)
+
+
 def _collect(out: Any, procs: list[Any], limit_s: float = 600.0) -> list[dict[str, Any]]:
     """Every program's result; one whose process died without one is left out."""
     import queue
@@ -138,6 +142,10 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
     ticks = sampler.stop()
     for p in procs:
         p.join(timeout=30)
+    gaps = {  # the longest each world's RTDE clients went without a package, server-side
+        w["world"]: w.get("rtde_longest_gap_s")
+        for w in httpx.get(f"{srv.url}/v1/ur", timeout=30).json()["worlds"]
+    }
     lost = sorted(set(range(n)) - {r["world"] for r in results})
     results += [{"world": w, "ok": False, "error": "the process died", "calls": {}} for w in lost]
     results.sort(key=lambda r: r["world"])
@@ -151,6 +159,7 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
             "run_s": round(r.get("run_s", 0.0), 3),
             "run_cpu_s": round(r.get("run_cpu_s", 0.0), 3),
             "moveL_error_mm": round(r["moveL_error_m"] * 1e3, 3) if "moveL_error_m" in r else None,
+            "server_gap_ms": _gap_ms(gaps.get(r["world"])),
             "moveJ_ms": [round(x * 1e3, 1) for x in r["calls"].get("moveJ", [])],
             "moveL_ms": [round(x * 1e3, 1) for x in r["calls"].get("moveL", [])],
             **{
@@ -175,6 +184,7 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
             for k, v in calls.items()
         },
         "connect_s_max": max((r.get("connect_s", 0.0) for r in results), default=None),
+        "server_gap_max_ms": _gap_ms(max((g for g in gaps.values() if g), default=None)),
         "per_program": per_program,
     }
 
@@ -317,7 +327,9 @@ def ur_programs(ctx: Context) -> Result:
         "(default 500 Hz each) per world, one process each; p50/p99 over all programs' calls: "
         "moveJ/moveL include the motion; command = a getForwardKinematics or isSteady round "
         "trip through the registers; read = a receive getter; connect = the slowest program's "
-        "two constructors",
+        "two constructors; server gap = the longest a world's RTDE clients went without a "
+        "package, as the service counts it (GET /v1/ur; ur_rtde drops a connection at 2.5 s: "
+        "a program that died with a short server gap had its own process starved)",
         "receivers: raw RTDE clients (ur_rtde has no package count), one 500 Hz output recipe "
         f"of {recv.get('package_bytes')} bytes each, all in the bench's process; Hz = packages "
         "delivered per second per client (min/median over clients); silence = the longest "

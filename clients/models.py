@@ -178,7 +178,8 @@ class BatchStates:
     flange_quaternion: np.ndarray  # (n, 4) w x y z
     faults: np.ndarray  # (n,) int
     pending_target: np.ndarray | None = None  # (n, 7), only while the service is paused
-    safety_mode: tuple[str, ...] | None = None  # (n,) names; None: not in the frame (binary)
+    safety_mode: tuple[str, ...] | None = None  # (n,) names; None: not in the frame (a
+    # binary frame of a server before its layout 2: clients/wire.py)
     entities: EntityStates | None = None  # (n, ne, ...) arrays, only when asked for
 
     def __len__(self) -> int:

@@ -32,7 +32,7 @@ from clients.models import (
     WorldState,
     WsError,
 )
-from clients.wire import BINARY_MAGIC
+from clients.wire import BINARY_MAGIC, safety_modes
 
 # WebSocket close codes the service uses.
 CLOSE_TRY_AGAIN = 1013  # still starting
@@ -94,15 +94,17 @@ def parse_binary_states(data: bytes) -> BatchStates:
     for name, w in header["columns"]:
         cols[name] = rows[:, col : col + w] if w > 1 else rows[:, col]
         col += w
+    at += 4 * n * (1 + width)
     if "entities" in header:  # asked with entities=True: float32[n, ne, 13] after the rows
-        at += 4 * n * (1 + width)
-        cols["entities"] = EntityStates.from_block(header["entities"], data, at, n)
+        cols["entities"] = entities = EntityStates.from_block(header["entities"], data, at, n)
+        at += 4 * n * len(entities.name) * sum(w for _, w in header["entities"]["columns"])
     return BatchStates(
         tick=int(header["tick"]),
         name=tuple(header["name"]),
         worlds=worlds,
         sim_time=cols.pop("sim_time").astype(np.float64),
         faults=cols.pop("faults").astype(np.int64),
+        safety_mode=safety_modes(header, data, at, n),  # None from a layout-1 server
         **cols,
     )
 

@@ -12,6 +12,7 @@ engine is also checked there.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import httpx
 import numpy as np
@@ -20,7 +21,9 @@ from conftest import HOME, JOINTS
 from websockets.sync.client import connect
 
 from clients import ArmfleetClient, point
+from clients.stream import parse_binary_states
 from clients.testing import serve
+from service.core.sim import safety
 from service.core.streams import frames, wire
 from service.engines.native import NativeBatch
 from service.engines.warp import WorldBatch
@@ -94,6 +97,43 @@ def test_large_json_frames_are_sliced_without_changing_a_byte(batch, monkeypatch
     _check_same_bytes(batch, np.arange(NWORLD))
 
 
+def test_binary_frames_end_with_each_worlds_safety_mode(batch):
+    """Layout 2: the safety block after the rows, the same bytes packed or cut from the
+    snapshot; the client names the modes, and reads a layout-1 frame (an older server's: no
+    `layout`, no block) to the same state with no safety mode."""
+    names = batch.spec.names
+    modes = np.full(NWORLD, safety.NORMAL, dtype=np.int8)
+    modes[3] = safety.PROTECTIVE_STOP
+    batch.step(1)
+    data = frames.pack(batch, IDS, json=False)
+    assert data is not None
+    data.safety = modes[IDS]  # as the hub sets it from the loop's safety table
+    rows = data.packed.wait()
+    try:
+        snap = replace(batch.snapshot(), safety=modes)
+        got = bytes(frames.binary(data, rows, names))
+        assert got == wire.batch_frame_binary(snap, IDS, names)
+    finally:
+        data.packed.release()
+    assert got[-len(IDS) :] == bytes([1, 3, 1])  # IDS 1, 3, 4: UR's numbers
+    hlen = int.from_bytes(got[4:8], "little")
+    header = json.loads(got[8 : 8 + hlen])
+    assert header["layout"] == wire.BINARY_LAYOUT == 2
+    assert len(got) == 8 + hlen + 4 * len(IDS) * (1 + 37) + len(IDS)
+    states = parse_binary_states(got)
+    assert states.safety_mode == ("NORMAL", "PROTECTIVE_STOP", "NORMAL")
+    assert states.world(3).safety_mode == "PROTECTIVE_STOP"
+    del header["layout"]
+    old_header = json.dumps(header).encode()
+    old = b"".join(
+        (got[:4], len(old_header).to_bytes(4, "little"), old_header, got[8 + hlen : -len(IDS)])
+    )
+    older = parse_binary_states(old)
+    assert older.safety_mode is None and older.world(3).safety_mode == "NORMAL"
+    np.testing.assert_array_equal(older.position, states.position)
+    assert older.tick == states.tick and older.worlds.tolist() == IDS.tolist()
+
+
 def _binary_rows(frame: bytes) -> tuple[dict, np.ndarray, np.ndarray]:
     hlen = int.from_bytes(frame[4:8], "little")
     header = json.loads(frame[8 : 8 + hlen])
@@ -142,7 +182,8 @@ def test_streamed_frames_carry_the_http_state_bit_for_bit(tmp_path, engine):
             first = _binary_rows(wb.recv(timeout=10))[0]["tick"]  # the current state at once
             wj.recv(timeout=10)
             http.post("/v1/sim/step", json={"ticks": 4}).raise_for_status()
-            header, ids, rows = _binary_rows(_frame_of(wb, first + 4))
+            as_binary = _frame_of(wb, first + 4)
+            header, ids, rows = _binary_rows(as_binary)
             as_json = json.loads(_frame_of(wj, first + 4))
             state = http.get("/v1/worlds/state", params={"worlds": spec}).json()
             status = arm.trajectory(1)
@@ -168,6 +209,8 @@ def test_streamed_frames_carry_the_http_state_bit_for_bit(tmp_path, engine):
         want = np.asarray(values, dtype=np.float64).reshape(len(values), -1).astype(np.float32)
         np.testing.assert_array_equal(got, want, err_msg=name)  # float32 of HTTP's numbers
         assert as_json[name] == values, name  # the same JSON numbers
+    modes = tuple(w["safety_mode"] for w in state["worlds"])  # HTTP's, by name
+    assert parse_binary_states(as_binary).safety_mode == modes == tuple(as_json["safety_mode"])
     assert as_json["target"][1][2] == pytest.approx(1.2)
     assert status.state == "running" and 0 < status.progress < 1
     assert as_json["trajectories"] == {

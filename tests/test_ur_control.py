@@ -11,11 +11,16 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import socket
 import struct
+import subprocess
+import sys
 import threading
 import time
+import zipfile
 from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
 import numpy as np
@@ -24,6 +29,7 @@ from websockets.sync.client import connect
 
 from clients import ArmfleetClient
 from tests.conftest import Server, wait_for
+from tests.test_ur_scripts import wheel_params
 from tests.ur_judge import ur_server
 
 rtde_control = pytest.importorskip("rtde_control")  # the `test` extra: ur-rtde==1.6.5
@@ -194,7 +200,7 @@ def test_servoj_streamed_at_500_hz_is_followed(arm) -> None:
 def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[str, object]:
     """The world's safety mode as RTDE, the Dashboard, REST, the WebSocket state frames (of
     a tick after the REST read: a frame is stamped when its tick is published), GET /v1/ur
-    and the Python client each report it."""
+    and the Python client (REST, and the binary batch frames it parses) each report it."""
     rest = httpx.get(f"{server.url}/v1/worlds/{world}/state").json()  # as of now
     with connect(f"{server.ws_url}/v1/ws/worlds/{world}") as ws:
         while (frame := json.loads(ws.recv(timeout=5)))["op"] != "state" or (
@@ -209,6 +215,9 @@ def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[st
     client = ArmfleetClient(server.url)
     rows = client.states([0, 1])
     assert client.state(world).safety_mode == rows.world(world).safety_mode  # the Python client
+    for binary in client.stream([0, 1], binary=True, reconnect=False):  # float32 frames
+        if binary.tick > rest["tick"]:
+            break
     return {
         "rtde": (r.getSafetyMode(), bool(r.getSafetyStatusBits() & (1 << 2))),
         "dashboard": (dash.safetystatus(), dash.safetymode()),
@@ -216,6 +225,7 @@ def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[st
         "ws": (frame["safety_mode"], batch["safety_mode"][batch["worlds"].index(world)]),
         "ur": httpx.get(f"{server.url}/v1/ur").json()["worlds"][world]["safety_mode"],
         "client": rows.world(world).safety_mode,
+        "binary": binary.world(world).safety_mode,
     }
 
 
@@ -230,6 +240,7 @@ def _reported_everywhere(mode: str, rtde_mode: int) -> dict[str, object]:
         "ws": (mode, mode),
         "ur": mode,
         "client": mode,
+        "binary": mode,
     }
 
 
@@ -372,3 +383,46 @@ def test_urscript_lines_move_the_arm_and_unknown_functions_are_refused(ur) -> No
         log_port.close()
         script.close()
         r.disconnect()
+
+
+# One short program, unchanged, as a user of each release writes it (run with that release's
+# modules first on the path): moveJ, moveL down, IK of the pose before it and a moveJ there,
+# FK of where the arm is, moveJ home.
+RELEASE_PROGRAM = """
+import sys, rtde_control, rtde_receive
+addr, home = sys.argv[1], [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+c = rtde_control.RTDEControlInterface(addr)
+r = rtde_receive.RTDEReceiveInterface(addr)
+q = [0.3, -1.4, 1.3, -1.5, -1.6, 0.2]
+assert c.moveJ(q, 1.0, 2.0)
+assert max(abs(a - b) for a, b in zip(r.getActualQ(), q)) < 1e-3, r.getActualQ()
+p = r.getActualTCPPose()
+down = list(p)
+down[2] -= 0.05
+assert c.moveL(down, 0.25, 1.2) and abs(r.getActualTCPPose()[2] - down[2]) < 1e-3
+assert c.getInverseKinematicsHasSolution(p)
+assert c.moveJ(c.getInverseKinematics(p, r.getActualQ()), 1.0, 2.0)
+assert max(abs(a - b) for a, b in zip(r.getActualTCPPose()[:3], p[:3])) < 1e-3
+assert max(abs(a - b) for a, b in zip(c.getForwardKinematics(), r.getActualTCPPose())) < 1e-3
+assert c.moveJ(home, 1.0, 2.0) and c.isProgramRunning()
+c.stopScript()
+c.disconnect()
+r.disconnect()
+"""
+
+
+@pytest.mark.parametrize("wheel", wheel_params())
+def test_each_ur_rtde_1_6_release_drives_a_world(ur, wheel: Path, tmp_path: Path) -> None:
+    """Each 1.6.x release's RTDEControlInterface + RTDEReceiveInterface, unchanged, moves a
+    world (the registry's wheels from ARMFLEET_UR_RTDE_WHEELS; test_ur_scripts.py's docstring
+    says how to fetch them): the guide's list of releases is what passed here."""
+    server, addrs = ur
+    with zipfile.ZipFile(wheel) as z:
+        z.extractall(tmp_path)
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}  # the release's modules first
+    cmd = [sys.executable, "-c", RELEASE_PROGRAM, addrs[0]]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    release = wheel.name.split("-")[1]
+    started = [line for line in server.log().splitlines() if "running natively" in line]
+    assert release in started[-1]  # the recogniser named the release that uploaded it

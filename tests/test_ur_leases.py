@@ -2,28 +2,45 @@
 a world that is not lent is closed at once; while lent, ur-rtde 1.6.5 receives from it; when
 the lease ends, its connections are closed and its controller is fresh for the next holder.
 RTDE and the Dashboard carry no token, so the lease is the only gate (the guide says so).
+
+And the `armfleet_ur_world` fixture against one shared lending server, as a CI suite uses it:
+`pytest -n 4` of a small test file, each worker's test on a world and UR address of its own,
+driven through ur-rtde 1.6.5 (receive, and a control-interface or URScript move).
+
+One 4-world realtime server (native MuJoCo) for the module, `--token` the administrator's.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import socket
+import subprocess
+import sys
+import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
+import numpy as np
 import pytest
 
-from tests.conftest import Server, wait_for
+from service.core.sim.command_share import REQUESTS_NICE
+from tests.conftest import HOME, ROOT, Server, wait_for
+from tests.test_leases import XDIST_CONFTEST
 from tests.ur_judge import DASHBOARD, RTDE, RawRtde, ur_server
 
 rtde_receive = pytest.importorskip("rtde_receive")  # the `test` extra: ur-rtde==1.6.5
 ADMIN = "admin-" + "u" * 26
 AUTH = {"Authorization": f"Bearer {ADMIN}"}
+NWORLD = 4
 
 
 @pytest.fixture(scope="module")
 def ur(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Server, list[str]]]:
     extra = ("--token", ADMIN, "--leases", "optional")
-    with ur_server(2, tmp_path_factory.mktemp("ur-leases"), extra) as pair:
+    log_dir = tmp_path_factory.mktemp("ur-leases")
+    with ur_server(NWORLD, log_dir, extra, mode="realtime") as pair:
         yield pair
 
 
@@ -63,3 +80,150 @@ def test_ports_open_only_while_the_world_is_lent(ur) -> None:
     finally:
         raw.close()
         rx.disconnect()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="priority is per thread on Linux")
+def test_the_ur_thread_keeps_the_process_priority_when_requests_give_way(ur) -> None:
+    """In real time the request thread gives the cores to the ticks (a nice step down); the
+    UR ports' thread does not: ur_rtde drops a connection 2.5 s after its last package."""
+    server, _ = ur
+    base = os.getpriority(os.PRIO_PROCESS, os.getpid())  # the server started with ours
+    assert os.getpriority(os.PRIO_PROCESS, server.process.pid) == min(19, base + REQUESTS_NICE)
+    assert httpx.get(f"{server.url}/v1/ur").json()["thread_nice"] == base
+
+
+def test_rtde_keeps_flowing_while_the_ticks_stop(ur) -> None:
+    """Paused for 3 s (longer than ur_rtde's 2.5 s without data), a lent world's RTDE stream
+    sends its last state again: ur-rtde 1.6.5 stays connected, its timestamp that tick's, and
+    moves on when the ticks do; GET /v1/ur says the longest its clients went without data."""
+    server, addrs = ur
+    r = httpx.post(f"{server.url}/v1/leases", json={"worlds": [2], "ttl_s": 60}, headers=AUTH)
+    assert r.status_code == 201, r.text
+    lease = r.json()["id"]
+    try:
+        wait_for(lambda: _open(server, 2), "the lent world's ports open")
+        rx = rtde_receive.RTDEReceiveInterface(addrs[2])
+        try:
+            httpx.post(f"{server.url}/v1/sim/pause", headers=AUTH).raise_for_status()
+
+            def settled() -> float | None:  # the packages of the paused tick have arrived
+                first = rx.getTimestamp()
+                time.sleep(0.1)
+                return first if rx.getTimestamp() == first else None
+
+            stopped = wait_for(settled, "the stream at the paused tick")
+            time.sleep(3.0)  # the subject: time passing with no tick
+            assert rx.isConnected() and rx.getTimestamp() == stopped
+            httpx.post(f"{server.url}/v1/sim/resume", headers=AUTH).raise_for_status()
+            wait_for(lambda: rx.getTimestamp() > stopped, "the stream follows the ticks again")
+            gap = httpx.get(f"{server.url}/v1/ur").json()["worlds"][2]["rtde_longest_gap_s"]
+            assert 0 < gap < 2.5
+        finally:
+            rx.disconnect()
+    finally:
+        httpx.post(f"{server.url}/v1/sim/resume", headers=AUTH)
+        httpx.delete(f"{server.url}/v1/leases/{lease}", headers=AUTH)
+
+
+# Test i moves a joint of its own, MOVES[i] (joint, step; each away from the table): at its end
+# no other world may hold that joint anywhere but home, whatever the other tests are doing to
+# theirs at that moment.
+MOVES = [(0, 0.2), (1, -0.2), (5, 0.2), (3, -0.2)]
+XDIST_UR_TESTS = """
+import json, os, socket, time
+import httpx
+import numpy as np
+import pytest
+
+rtde_control = pytest.importorskip("rtde_control")
+rtde_receive = pytest.importorskip("rtde_receive")
+HOME, MOVES = {home}, {moves}
+ADMIN = {{"Authorization": "Bearer " + os.environ["ARMFLEET_TOKEN"]}}
+
+
+def until(pred, what, timeout=30):
+    deadline = time.monotonic() + timeout
+    while not pred():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.02)
+
+
+@pytest.mark.parametrize("i", range(4))
+def test_own_ur_world(armfleet_ur_world, i):
+    ur, url = armfleet_ur_world, armfleet_ur_world.url
+    arm, w = ur.client, ur.world
+    started = time.time()
+    r = rtde_receive.RTDEReceiveInterface(ur.address)
+    try:
+        home = arm.state(w).position[:6]
+        assert np.abs(np.subtract(r.getActualQ(), home)).max() < 1e-3  # RTDE reads the world
+        joint, step = MOVES[i]
+        goal = list(HOME[:6])
+        goal[joint] += step
+        if i % 2 == 0:  # ur_rtde's control interface
+            c = rtde_control.RTDEControlInterface(ur.address)
+            try:
+                assert c.moveJ(goal, 1.0, 1.4)
+            finally:
+                c.stopScript()
+                c.disconnect()
+        else:  # a line of URScript to the secondary port
+            with socket.create_connection((ur.address, 30002), timeout=10) as s:
+                s.sendall(("movej(" + repr(goal) + ", a=1.4, v=1.0)\\n").encode())
+            until(lambda: abs(arm.state(w).target[joint] - goal[joint]) < 1e-9, "its target")
+        until(lambda: np.abs(arm.state(w).position[:6] - goal).max() < 2e-3, "at the goal")
+        until(lambda: np.abs(np.subtract(r.getActualQ(), arm.state(w).position[:6])).max()
+              < 1e-4, "RTDE's actual_q is the REST state")
+        rtde_q = r.getActualQ()
+        every = httpx.get(url + "/v1/worlds/state", headers=ADMIN).json()["worlds"]
+    finally:
+        r.disconnect()
+    with open(os.path.join({out!r}, str(i) + ".json"), "w") as f:
+        json.dump({{"joint": joint, "world": w, "address": ur.address, "lease": ur.lease.id,
+                   "worker": os.environ.get("PYTEST_XDIST_WORKER"), "goal": goal,
+                   "rtde_q": rtde_q, "start": started, "end": time.time(),
+                   "targets": {{s["world"]: s["target"] for s in every}}}}, f)
+"""
+
+
+def test_pytest_n4_each_worker_drives_its_own_ur_world_through_ur_rtde(ur, tmp_path: Path) -> None:
+    """Four xdist workers, one test each, against the one shared server: each got its own
+    world and address (the address /v1/ur gives that world), read it and moved one joint
+    of it through ur-rtde 1.6.5 or a URScript line, and no other world moved that joint;
+    afterwards every lease is back, every UR port closed, every world at home."""
+    server, addrs = ur
+    out = tmp_path / "runs"
+    out.mkdir()
+    tests = XDIST_UR_TESTS.format(home=HOME, moves=MOVES, out=str(out))
+    (tmp_path / "test_ur_shared.py").write_text(tests)
+    (tmp_path / "conftest.py").write_text(XDIST_CONFTEST)
+    env = {**os.environ, "ARMFLEET_URL": server.url, "ARMFLEET_TOKEN": ADMIN}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
+    # Five interpreters start (the controller and four workers): without this venv's plugins
+    # that the file does not use, each starts on a third of the CPU.
+    unused = ("-p", "no:schemathesis", "-p", "no:hypothesispytest", "-p", "no:anyio")
+    cmd = [sys.executable, "-m", "pytest", "-n", "4", "-q", "-p", "no:cacheprovider", *unused,
+           "test_ur_shared.py"]  # fmt: skip
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
+    runs = [json.loads(p.read_text()) for p in sorted(out.glob("*.json"))]
+    assert len(runs) == 4 and len({r["worker"] for r in runs}) == 4
+    assert len({r["world"] for r in runs}) == 4 and len({r["lease"] for r in runs}) == 4
+    for r in runs:
+        joint, w = r["joint"], r["world"]
+        assert r["address"] == addrs[w]  # the world's own address, as /v1/ur maps it
+        assert np.abs(np.subtract(r["rtde_q"], r["goal"])).max() < 2e-3, r
+        own = r["targets"][str(w)]
+        assert own[joint] == pytest.approx(r["goal"][joint], abs=1e-4), r
+        for other, target in r["targets"].items():
+            if int(other) != w:  # moved by its own test only, never on this test's joint
+                assert target[joint] == pytest.approx(HOME[joint], abs=1e-9), (r, other)
+    wait_for(lambda: httpx.get(f"{server.url}/v1/leases", headers=AUTH).json()["leases"] == [],
+             "every lease given back")  # fmt: skip
+    wait_for(lambda: not any(_open(server, w) for w in range(NWORLD)), "every UR port closed")
+
+    def all_home() -> bool:  # each world reset when its lease ended
+        state = httpx.get(f"{server.url}/v1/worlds/state", headers=AUTH).json()["worlds"]
+        return all(np.allclose(s["target"], HOME, atol=1e-9) for s in state)
+
+    wait_for(all_home, "every world back at home")

@@ -54,6 +54,7 @@ class FrameData:
     faults: np.ndarray | None = None
     extra: dict[str, Any] | None = None  # JSON's last fields (None: json_extra)
     entities: EntityFrame | None = None  # read when a subscriber asked (JSON_ENTITIES)
+    safety: np.ndarray | None = None  # the worlds' safety modes at the tick (None: NORMAL)
 
     @property
     def tick(self) -> int:
@@ -81,6 +82,7 @@ def pack(batch: Batch, ids: np.ndarray, json: bool) -> FrameData | None:
     if not isinstance(batch, PacksFrames):
         snap = batch.snapshot()
         data = FrameData(PackedRows(snap.tick, ids, rows_of(snap, ids)))
+        data.safety = None if snap.safety is None else snap.safety[ids]
         if json:
             data.sim_time, data.target, data.faults = (
                 snap.sim_time[ids],
@@ -105,18 +107,21 @@ def binary(data: FrameData, rows: np.ndarray, names: list[str]) -> bytes:
     header = wire.dumps(wire.binary_header(data.tick, len(data.ids), names))
     ids = data.ids.astype("<i4").tobytes()
     size = len(header).to_bytes(4, "little")
-    return _joined(b"".join((wire.BINARY_MAGIC, size, header, ids)), rows)
+    tail = wire.safety_block(data.safety, len(data.ids))
+    return _joined(b"".join((wire.BINARY_MAGIC, size, header, ids)), rows, tail)
 
 
-def _joined(head: bytes, rows: np.ndarray) -> bytes:
-    """`head` then the rows' float32 bytes, in one buffer (a bytearray, sent as bytes are).
-    numpy copies the rows and lets the GIL go meanwhile: a bytes join held it for the whole
-    copy (~1 ms for 65,536 worlds), on this thread just as the sim thread, whose tick this
-    frame was packed at, goes on to launch the next."""
+def _joined(head: bytes, rows: np.ndarray, tail: bytes) -> bytes:
+    """`head`, the rows' float32 bytes, then `tail`, in one buffer (a bytearray, sent as
+    bytes are). numpy copies the rows and lets the GIL go meanwhile: a bytes join held it for
+    the whole copy (~1 ms for 65,536 worlds), on this thread just as the sim thread, whose
+    tick this frame was packed at, goes on to launch the next."""
     rows = np.ascontiguousarray(rows, dtype="<f4")
-    out = bytearray(len(head) + rows.nbytes)
+    end = len(head) + rows.nbytes
+    out = bytearray(end + len(tail))
     out[: len(head)] = head
-    np.frombuffer(out, dtype=np.uint8, offset=len(head))[:] = rows.reshape(-1).view(np.uint8)
+    np.frombuffer(out, np.uint8, rows.nbytes, len(head))[:] = rows.reshape(-1).view(np.uint8)
+    out[end:] = tail
     return out  # type: ignore[return-value]  # bytes-like: every consumer takes a bytearray
 
 
@@ -127,7 +132,8 @@ def binary_entities(data: FrameData, rows: np.ndarray, names: list[str]) -> byte
     ids = data.ids.astype("<i4").tobytes()
     size = len(header).to_bytes(4, "little")
     block = wire.entity_block(data.entities)
-    return b"".join((wire.BINARY_MAGIC, size, header, ids, memoryview(rows), block))
+    tail = wire.safety_block(data.safety, len(data.ids))
+    return b"".join((wire.BINARY_MAGIC, size, header, ids, memoryview(rows), block, tail))
 
 
 def _array(values: np.ndarray, sliced: bool) -> bytes:

@@ -34,7 +34,7 @@ log = logging.getLogger("armfleet.hub")
 
 
 class SafetyModes(Protocol):
-    """Where packed JSON frames get the worlds' safety modes (the loop's safety table)."""
+    """Where packed frames get the worlds' safety modes (the loop's safety table)."""
 
     def modes(self) -> np.ndarray: ...
 
@@ -234,10 +234,12 @@ class StreamHub(SnapshotSink):
             if data is None or self._sender is None:
                 self.frames_skipped += len(group)
                 continue
+            if self._safety is not None:  # the binary frames' last block, as of this tick
+                data.safety = self._safety.modes()[group[0].worlds]
             if json:
                 data.extra = frames.json_extra(len(group[0].worlds))
-                if self._safety is not None:  # as `wire.batch_frame` says them
-                    data.extra["safety_mode"] = safety.names(self._safety.modes()[group[0].worlds])
+                if data.safety is not None:  # as `wire.batch_frame` names them
+                    data.extra["safety_mode"] = safety.names(data.safety)
                 if self._briefs is not None and any(s.format.trajectories for s in group):
                     data.extra["trajectories"] = self._briefs.briefs(group[0].worlds)
             asked = [f for f in formats if f in WITH_ENTITIES]

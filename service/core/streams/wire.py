@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import orjson
 
-from clients.wire import BINARY_COLUMNS, BINARY_MAGIC, ENTITY_COLUMNS, POSE_MAGIC
+from clients.wire import BINARY_COLUMNS, BINARY_LAYOUT, BINARY_MAGIC, ENTITY_COLUMNS, POSE_MAGIC
 from service.core.errors import ArmfleetError
 from service.core.sim import safety
 from service.core.sim.types import EntityFrame, Snapshot
@@ -86,6 +86,14 @@ def _safety_names(snap: Snapshot, worlds: np.ndarray) -> list[str]:
     if snap.safety is None:
         return ["NORMAL"] * len(worlds)
     return safety.names(snap.safety[worlds])
+
+
+def safety_block(modes: np.ndarray | None, n: int) -> bytes:
+    """A binary frame's last block: uint8[n], each world's safety mode as UR numbers it
+    (`modes`, those of the frame's worlds; None: all NORMAL, as for an engine's snapshot)."""
+    if modes is None:
+        return bytes((safety.NORMAL,)) * n
+    return np.asarray(modes, dtype=np.uint8).tobytes()
 
 
 def _entities_of(snap: Snapshot) -> EntityFrame:
@@ -206,6 +214,7 @@ def binary_header(
         "n": n,
         "name": names,
         "columns": BINARY_COLUMNS,
+        "layout": BINARY_LAYOUT,
     }
     if entities is not None:
         out["entities"] = {"name": list(entities.names), "columns": ENTITY_COLUMNS}
@@ -221,7 +230,8 @@ def batch_frame_binary(
     snap: Snapshot, worlds: np.ndarray, names: list[str], entities: bool = False
 ) -> bytes:
     """The batch frame as float32 rows: ~4x smaller than JSON and no per-number formatting;
-    `entities`: the worlds' entities follow the rows (layout above)."""
+    `entities`: the worlds' entities follow the rows; the safety block ends it (layout in
+    clients/wire.py)."""
     frame = _entities_of(snap).take(worlds) if entities else None
     header = dumps(binary_header(snap.tick, len(worlds), names, frame))
     rows = np.concatenate(
@@ -246,6 +256,7 @@ def batch_frame_binary(
             worlds.astype("<i4").tobytes(),
             rows.tobytes(),
             b"" if frame is None else entity_block(frame),
+            safety_block(None if snap.safety is None else snap.safety[worlds], len(worlds)),
         )
     )
 

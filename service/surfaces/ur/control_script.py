@@ -22,9 +22,20 @@ from dataclasses import dataclass
 from service.surfaces.ur import urscript
 
 HEADER = "def rtde_control():"
-# The banner of each known build → the ur_rtde releases that ship it (checked against the
-# registry's wheels' librtde.so: `strings -n 8 librtde.so.1.6.x | grep "Script Loaded"`).
-KNOWN_BANNERS = {"14.02.2024-12:23": "ur_rtde 1.6.x (1.6.0 ... 1.6.5)"}
+# The banner of each known build → the ur_rtde releases that ship it. Every 1.6.x wheel of the
+# registry for CPython 3.11 (1.6.0 ... 1.6.5) sends a script with this banner, as its own
+# `script_client.ScriptClient.sendScript()` builds it (tests/test_ur_scripts.py); their
+# command numbers and registers are the same, so one decoder serves them all.
+KNOWN_BANNERS = {"14.02.2024-12:23": "ur_rtde 1.6.x"}
+# Under one banner the scripts differ a little, enough to name the releases in the log: 1.6.2
+# added commands 66-71 (directTorque, getMassMatrix, ...: no-ops in the script, which its
+# client uses only from 1.6.2), and 1.6.3 dropped the text messages of
+# getActualToolFlangePose. (marker in the script, present?) → releases, first match wins.
+RELEASES = (
+    (("elif cmd == 66:", False), ("1.6.0", "1.6.1")),
+    (('textmsg("get_actual_tool_flange_pose")', True), ("1.6.2",)),
+    (("elif cmd == 66:", True), ("1.6.3", "1.6.4", "1.6.5")),
+)
 _BANNER = re.compile(r'textmsg\("RTDE Control Script Loaded \(([^)]*)\)"\)')
 _OFFSET = re.compile(r"reg_offset_int\s*=\s*(?:#[^\n]*\n)?\s*(\d+)")
 _PATH = re.compile(
@@ -38,14 +49,19 @@ class NotControlScript(ValueError):
 
 @dataclass(frozen=True)
 class ControlScript:
-    """A recognised control script: its banner (build), the ur_rtde versions it belongs to,
+    """A recognised control script: its banner (build), the ur_rtde releases that send it,
     the register offset, the moves injected into exec_move_path, and a digest of its text."""
 
     banner: str
-    versions: str
+    releases: tuple[str, ...]
     register_offset: int
     path: tuple[urscript.Call, ...]
     digest: str
+
+    @property
+    def versions(self) -> str:
+        """The releases as the log names them: "ur_rtde 1.6.x: 1.6.3, 1.6.4, 1.6.5"."""
+        return f"{KNOWN_BANNERS[self.banner]}: {', '.join(self.releases) or 'unknown'}"
 
 
 def is_control_script(program: str) -> bool:
@@ -80,4 +96,12 @@ def recognise(program: str) -> ControlScript:
                 continue
             path.append(urscript.parse_line(line))
     digest = hashlib.sha256(program.encode()).hexdigest()[:16]
-    return ControlScript(build, KNOWN_BANNERS[build], reg, tuple(path), digest)
+    return ControlScript(build, _releases(program), reg, tuple(path), digest)
+
+
+def _releases(program: str) -> tuple[str, ...]:
+    """Which ur_rtde releases send `program` (of a known banner): RELEASES' first match."""
+    for (marker, present), releases in RELEASES:
+        if (marker in program) == present:
+            return releases
+    return ()

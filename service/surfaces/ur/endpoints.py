@@ -6,6 +6,12 @@ for the cost of their descriptors (addresses.py). Why not the service's own even
 at 500 Hz to many clients is thousands of small writes a second, which the HTTP and WebSocket
 surfaces should not queue behind. The sim thread only hands over the latest frame (surface.py).
 
+Why the thread keeps the process's priority when the request thread gives the cores to the
+ticks (core/process/priority.py): ur_rtde drops its connection 2.5 s after the last RTDE
+package it got and then fails on a broken pipe. A thread a nice step below 32 client programs
+on two cores can go that long without a turn; a late tick costs a fraction of real time, a
+dropped connection costs the program.
+
 With leases on, a world's ports accept a connection only while the world is lent: a
 connection to a world that is not lent is closed at once, and when a lease ends (or the
 world passes to another lease) every connection of that world is closed and its controller
@@ -19,11 +25,13 @@ import asyncio
 import concurrent.futures
 import contextlib
 import logging
+import os
 import resource
 import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from service.core.process import priority
 from service.core.sim.safety import SafetyTable
 from service.surfaces.ur import addresses
 from service.surfaces.ur.dashboard import DashboardSession
@@ -89,7 +97,7 @@ class Endpoints:
         self._thread = threading.Thread(
             target=self._run, args=(ready,), name="armfleet-ur", daemon=True
         )
-        self._thread.start()
+        priority.start_at_process_priority(self._thread)  # see the module docstring
         try:
             ready.result(timeout=60)
         except Exception:
@@ -158,6 +166,7 @@ class Endpoints:
                 robot.close_all(f"the lease of world {robot.world} ended")
             robot.owner, robot.open = owner, owner is not None
             robot.controller.reset()
+            robot.longest_gap = 0.0
 
     async def _refresh_payloads(self) -> None:
         assert self._read_payloads is not None
@@ -198,8 +207,19 @@ class Endpoints:
         if self._thread is not None:
             self._thread.join(timeout=10)
 
+    def thread_nice(self) -> int | None:
+        """The nice value the UR thread runs at (None: not running, or not Linux)."""
+        tid = self._thread.native_id if self._thread is not None else None
+        if tid is None or not hasattr(os, "getpriority"):
+            return None
+        try:
+            return os.getpriority(os.PRIO_PROCESS, tid)
+        except OSError:
+            return None
+
     def status(self) -> list[dict[str, Any]]:
-        """Each world's address, whether it accepts connections, its controller's modes."""
+        """Each world's address, whether it accepts connections, its controller's modes, and
+        the longest its RTDE clients went without a package since it was lent (or started)."""
         return [
             {
                 "world": r.world,
@@ -209,6 +229,7 @@ class Endpoints:
                 "robot_mode": r.controller.robot_mode.name,
                 "safety_mode": r.controller.safety_mode.name,
                 "program_state": r.controller.program.name,
+                "rtde_longest_gap_s": round(r.longest_gap, 4),
             }
             for r in self.robots.values()
         ]

@@ -21,8 +21,9 @@ log = logging.getLogger("armfleet.ur")
 class Stream(Protocol):
     """One started output recipe of one connection."""
 
-    def send_due(self) -> bool:
-        """Send the stream's next package; False: the stream has ended (drop it)."""
+    def send_due(self, now: float) -> bool:
+        """Send the stream's next package (`now`: the event loop's time of this send); False:
+        the stream has ended (drop it)."""
         ...
 
 
@@ -49,9 +50,11 @@ class Pacer:
             self._timer = None
 
     def _fire(self) -> None:
+        loop = asyncio.get_running_loop()
+        now = loop.time()
         for stream in list(self.streams):
             try:
-                alive = stream.send_due()
+                alive = stream.send_due(now)
             except Exception:  # one stream's fault never stops the others
                 log.exception("RTDE stream failed; dropped")
                 alive = False
@@ -60,7 +63,6 @@ class Pacer:
         if not self.streams:
             self._timer = None
             return
-        loop = asyncio.get_running_loop()
         self._due = max(self._due + self.period, loop.time())
         self._timer = loop.call_at(self._due, self._fire)
 

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 from service.surfaces.ur import rtde_variables as rv
 from service.surfaces.ur import rtde_wire as wire
-from service.surfaces.ur.rtde_outputs import OutputRecipe, apply_inputs
+from service.surfaces.ur.rtde_outputs import OutputRecipe, WorldTick, apply_inputs
 
 if TYPE_CHECKING:
     from service.surfaces.ur.world_robot import WorldRobot
@@ -227,16 +227,27 @@ class RtdeSession(asyncio.Protocol):
 class _Stream:
     """One started output recipe: its package of the latest view, packed and framed once per
     view (a view is renewed when its frame, controller or payload changes: world_robot.py)
-    and sent by the pacer of its frequency (rtde_pacer.py)."""
+    and sent by the pacer of its frequency (rtde_pacer.py).
 
-    __slots__ = ("_bytes", "_view", "recipe", "session")
+    Why it never goes quiet on its own: ur_rtde drops the connection 2.5 s after the last
+    package it got. The views come from the latest frame whatever the ticks do (a late or
+    paused world's last state is sent again, its timestamp that tick's), and a view that
+    cannot be packed (a bug) is logged once and the last package goes on being sent; with no
+    package yet, the connection is closed at once rather than left silent. Every send's gap
+    to the last one is kept per world (`WorldRobot.rtde_gap`: GET /v1/ur, a log line from
+    1 s), so that a starved UR thread is told apart from a client that stopped reading."""
+
+    __slots__ = ("_bytes", "_failed", "_last", "_skipped", "_view", "recipe", "session")
 
     def __init__(self, session: RtdeSession, recipe: OutputRecipe) -> None:
         self.session, self.recipe = session, recipe
         self._view: object = None
         self._bytes = b""
+        self._failed = False  # a view could not be packed (logged once)
+        self._last: float | None = None  # event-loop time of the last package sent
+        self._skipped = 0  # packages skipped since then for a full socket
 
-    def send_due(self) -> bool:
+    def send_due(self, now: float) -> bool:
         session = self.session
         transport = session.transport
         if transport is None or transport.is_closing() or not session.started:
@@ -244,12 +255,34 @@ class _Stream:
         view = session.robot.view()
         if view is None:
             return True
-        if view is not self._view:
-            self._view = view
-            self._bytes = wire.frame(wire.DATA_PACKAGE, self.recipe.pack(view))
+        if view is not self._view and not self._pack(view):
+            return False
         if transport.get_write_buffer_size() > _MAX_UNSENT:
             session.skipped += 1
-        else:
-            transport.write(self._bytes)
-            session.sent += 1
+            self._skipped += 1
+            return True
+        transport.write(self._bytes)
+        session.sent += 1
+        if self._last is not None:
+            session.robot.rtde_gap(now - self._last, self._skipped)
+        self._last, self._skipped = now, 0
+        return True
+
+    def _pack(self, view: WorldTick) -> bool:
+        """The package of `view`; on failure the last one stays (False: there is none, and
+        the connection is closed)."""
+        try:
+            packed = wire.frame(wire.DATA_PACKAGE, self.recipe.pack(view))
+        except Exception:
+            if not self._failed:
+                self._failed = True
+                log.exception(
+                    "world %d RTDE recipe %d could not be packed; its last package is sent "
+                    "again", self.session.robot.world, self.recipe.id,
+                )  # fmt: skip
+            if not self._bytes:
+                self.session.refuse_connection("its RTDE outputs could not be packed")
+                return False
+            return True
+        self._view, self._bytes = view, packed
         return True

@@ -173,6 +173,7 @@ class UrSurface:
         return {
             "ports": {**addresses.PORTS, "rtde": addresses.RTDE_PORT},
             "leases": self._leases,
+            "thread_nice": None if ep is None else ep.thread_nice(),
             "worlds": ep.status()
             if ep is not None
             else [{"world": w, "address": a} for w, a in self.addresses.items()],

@@ -10,6 +10,7 @@ and script_lines.line_speed make them, so no import runs in a circle (type-only 
 from __future__ import annotations
 
 import logging
+import time
 from typing import TYPE_CHECKING, Protocol
 
 from service.core.sim.safety import SafetyTable
@@ -24,6 +25,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("armfleet.ur")
 NO_PAYLOAD = (0.0, 0.0, 0.0, 0.0)
+GAP_WARN_S = 1.0  # an RTDE client this long without a package is logged (ur_rtde quits at 2.5)
+GAP_WARN_EVERY_S = 5.0  # at most one such line per world this often (64 streams stall at once)
 
 
 class Fleet(Protocol):
@@ -75,6 +78,8 @@ class WorldRobot:
         self._view_version = -1
         self.runner: Program | None = None  # ur_rtde's control script, while it runs
         self.speed_loop: Loop | None = None  # script_lines.line_speed makes it
+        self.longest_gap = 0.0  # s: the longest a started RTDE stream went without a package
+        self._warned_at = -GAP_WARN_EVERY_S  # time.monotonic() of the last line saying so
 
     def opened(self, session: Session) -> None:
         if not self.open:
@@ -96,6 +101,24 @@ class WorldRobot:
 
     def streaming(self, delta: int) -> None:
         self.fleet.streaming += delta
+
+    def rtde_gap(self, gap: float, skipped: int) -> None:
+        """A started RTDE stream sent a package `gap` s after its last one, `skipped`
+        packages skipped meanwhile for a client socket that was full. Kept (GET /v1/ur) and,
+        from GAP_WARN_S, logged with the side that was slow."""
+        self.longest_gap = max(self.longest_gap, gap)
+        now = time.monotonic()
+        if gap >= GAP_WARN_S and now - self._warned_at >= GAP_WARN_EVERY_S:
+            self._warned_at = now
+            why = (
+                f"the client read nothing ({skipped} packages skipped for its full socket)"
+                if skipped
+                else "the UR thread had no turn for that long (cores, or a long call on it)"
+            )
+            log.warning(
+                "world %d: an RTDE client got no package for %.2f s (ur_rtde drops its "
+                "connection after 2.5 s): %s", self.world, gap, why,
+            )  # fmt: skip
 
     def view(self) -> WorldTick | None:
         """This world at the latest frame (shared by its sessions until the frame's values,
