@@ -124,3 +124,37 @@ def test_the_whole_batch_check_finds_exactly_the_worlds_the_per_world_check_find
     assert a.step(2).tolist() == []
     assert a.snapshot().faults.tolist() == [0, 1, 0, 1]
     a.close()
+
+
+def test_frames_and_snapshots_read_the_state_as_written_and_keep_their_own_tick():
+    """The engine copies every world's qpos|qvel once per state for the fault check, frames and
+    snapshots (`_rows_now`), and reads the effort once when asked: a write between two ticks
+    (a state slice, a reset, a restore) shows in the next snapshot, and a frame packed at one
+    tick but built on the frame thread after the next tick still carries its own tick's state."""
+    from service.core.sim.batch import StateWrite
+    from service.core.streams import frames
+
+    a, fresh = NativeBatch(3, nthread=2), NativeBatch(3, nthread=2)
+    names, ids, adr = a.spec.names, np.arange(3), a.robot.qpos_adr
+    a.apply_targets(ids, np.tile(a.home_target + 0.2, (3, 1)))  # the arms move: every tick differs
+    a.step(4)
+    snap, packed = a.snapshot(), a.pack_rows(ids)
+    saved = a.get_state()
+    a.step(2)  # the next ticks step before the frame thread builds the rows
+    data = frames.FrameData(packed)
+    assert frames.binary(data, packed.wait(), names) == wire.batch_frame_binary(snap, ids, names)
+    assert not np.array_equal(a.snapshot().position, snap.position)
+
+    a.write_state(StateWrite("qpos", 1, adr[2:3], np.array([-1.0])))  # between two ticks
+    assert a.snapshot().position[1, 2] == np.float32(-1.0)
+    assert a.pack_rows(ids).wait()[1, 1 + 2] == np.float32(-1.0)
+    a.reset(np.array([2]))  # home, with the effort the reset's forward pass computes
+    home = fresh.snapshot()
+    np.testing.assert_array_equal(a.snapshot().position[2], home.position[2])
+    np.testing.assert_array_equal(a.snapshot().effort[2], home.effort[2])
+    a.set_state(saved)  # the restored state's own effort, until the next step
+    np.testing.assert_array_equal(a.snapshot().position, snap.position)
+    np.testing.assert_array_equal(a.snapshot().effort, snap.effort)
+    a.reset(np.array([0]))  # a reset after a restore keeps the others' restored effort
+    np.testing.assert_array_equal(a.snapshot().effort[1:], snap.effort[1:])
+    np.testing.assert_array_equal(a.snapshot().effort[0], home.effort[0])

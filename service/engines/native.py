@@ -159,11 +159,13 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
 
         self._init_mirror(nworld)
         self._ff_gain = feedforward_gain(mjm, self.robot.actuator_ids)
-        self._effort = np.zeros((nworld, 7))
-        self._pv = _adjacent(self._qpos, self._qvel)  # qpos|qvel rows, for `_all_well`
-        self._pv_buf = None if self._pv is None else np.empty(self._pv.shape)
+        self._pv = _adjacent(self._qpos, self._qvel)  # qpos|qvel rows, read in one copy
+        self._nq = self._qpos.shape[1]
+        self._vel_cols = self._nq + self._dof  # the joints' qvel columns in those rows
+        self._now: np.ndarray | None = None  # the rows as they are now, copied (`_rows_now`)
+        self._effort: np.ndarray | None = None  # (nworld, 7) of the last step (`_effort_now`)
         self._warn_last = np.array(self._b.warning)  # every world's counters as last seen
-        self._warn_buf = np.empty_like(self._warn_last)
+        self._warn_seen = self._warn_last.tobytes()  # ... as bytes, for the quick test
         self.reset(np.arange(nworld))
         self.compile_s = time.perf_counter() - t0  # nothing compiles: this is the build time
 
@@ -183,33 +185,65 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         except mjbatch.SimulationError as exc:  # those worlds kept their pre-call state
             raised = np.asarray(exc.ids, dtype=np.int64)
             log.warning("MuJoCo raised in worlds %s: %s", raised, exc)
-        self._effort[:] = self._qfrc_actuator[:, self._dof]
-        if raised.size == 0 and self._all_well():
+        finally:  # the rows and the effort are this call's now (read when first needed)
+            self._now, self._effort = None, None
+        rows = self._rows_now()
+        if raised.size == 0 and self._all_well(rows):
             return raised
-        bad = ~np.isfinite(self._qpos).all(axis=1)
-        bad |= ~(np.abs(self._qvel) <= DIVERGED_QVEL).all(axis=1)  # NaN compares False: caught
+        nq = self._nq
+        bad = ~np.isfinite(rows[:, :nq]).all(axis=1)
+        bad |= ~(np.abs(rows[:, nq:]) <= DIVERGED_QVEL).all(axis=1)  # NaN compares False: caught
         bad |= self._warnings(self._b.warning) != self._warnings(self._warn_last)
         bad[raised] = True
-        self._warn_last[:] = self._b.warning  # the bad worlds' resets update it again
+        self._saw_warnings()  # the bad worlds' resets update it again
         return np.flatnonzero(bad)
 
-    def _all_well(self) -> bool:
+    def _all_well(self, rows: np.ndarray) -> bool:
         """True when no world can be bad: a sufficient test on whole arrays, cheaper than the
         per-world one that `_step_tick` runs when it fails.
 
-        The rows were just written by the pool's threads on other cores: reading them costs
-        cache transfers, so each is read once, into a contiguous copy, and tested flat (numpy
-        reduces short rows of a 2-D array slowly). Every |qpos| and |qvel| <= DIVERGED_QVEL
-        (NaN compares False) implies finite qpos and qvel in bounds; warning counters equal to
+        `rows` is the tick's contiguous copy of qpos|qvel (`_rows_now`), tested flat (numpy
+        reduces short rows of a 2-D array slowly) by its extremes, without writing anything:
+        every qpos and qvel within +-DIVERGED_QVEL (a NaN makes max and min NaN, which
+        compares False) implies finite qpos and qvel in bounds; warning counters equal to
         those last seen imply no new warning.
         """
-        if self._pv is None:  # qpos and qvel not adjacent in the row: the per-world test
+        if not (rows.max() <= DIVERGED_QVEL and rows.min() >= -DIVERGED_QVEL):
             return False
-        np.copyto(self._pv_buf, self._pv)
-        if not (np.abs(self._pv_buf, out=self._pv_buf) <= DIVERGED_QVEL).all():
-            return False
-        np.copyto(self._warn_buf, self._b.warning)
-        return bool(np.array_equal(self._warn_buf, self._warn_last))
+        return self._b.warning.tobytes() == self._warn_seen  # one copy and a memcmp
+
+    def _saw_warnings(self) -> None:
+        """Every world's warning counters as they are now are the ones seen."""
+        self._warn_last[:] = self._b.warning
+        self._warn_seen = self._warn_last.tobytes()
+
+    def _rows_now(self) -> np.ndarray:
+        """Every world's qpos|qvel row (nworld, nq + nv) as the state is now: one contiguous
+        copy per state, read-only, which the fault check, frames and snapshots all read.
+
+        The rows were just written by the pool's threads on other cores: reading them costs
+        cache transfers, so they are read once, here, instead of by every reader. Whatever
+        changes the state (a step, a reset, a write) drops it; a frame or snapshot that holds
+        it keeps its own, since a later state gets a new array.
+        """
+        if self._now is None:
+            if self._pv is not None:  # qpos and qvel adjacent in the row: one copy
+                self._now = np.array(self._pv)
+            else:
+                self._now = np.concatenate((self._qpos, self._qvel), axis=1)
+            self._now.flags.writeable = False
+        return self._now
+
+    def _effort_now(self) -> np.ndarray:
+        """Every world's effort (nworld, 7): the actuator force of the last step's last substep
+        (a reset world's: the reset's; a restored state's: the one it carried), read-only.
+        Read from the step's outputs when first asked for (a frame, a snapshot, a save), not
+        every tick: most ticks nobody asks. A reset refreshes only its worlds' outputs, so
+        until then the other rows still hold the step's; once read, later resets patch it."""
+        if self._effort is None:
+            self._effort = np.take(self._qfrc_actuator, self._dof, axis=1)
+            self._effort.flags.writeable = False
+        return self._effort
 
     def step(self, ticks: int = 1) -> np.ndarray:
         """Advance every world by `ticks` control ticks; returns the worlds reset for faults."""
@@ -236,8 +270,13 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         # mj_resetDataKeyframe + mj_forward per world: ctrl = home, outputs current.
         self._b.reset(worlds, keyframe=self._key)
         self._home(worlds)
-        self._warn_last[:] = self._b.warning  # only the reset worlds' counters can have moved
-        self._effort[worlds] = self._qfrc_actuator[worlds][:, self._dof]
+        self._saw_warnings()  # only the reset worlds' counters can have moved
+        self._now = None
+        if self._effort is not None:  # read already (or restored): these worlds' are reset's
+            effort = self._effort.copy()
+            effort[worlds] = self._qfrc_actuator[worlds][:, self._dof]
+            effort.flags.writeable = False
+            self._effort = effort
 
     # -- reading ----------------------------------------------------------------------------
 
@@ -275,16 +314,17 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         are computed when first read, from a copy of this tick's qpos: most snapshots are
         never asked for them.
         """
-        qpos = self._qpos.copy()
+        rows = self._rows_now()
+        qpos = rows[:, : self._nq]  # a view of this state's copy, which nothing writes
         f32 = np.float32
         return Snapshot(
             tick=self._tick,
             sim_time=self._world_ticks * self.tick_dt,
             # New C-ordered arrays (the wire serialises rows of them; fancy indexing alone
             # may hand back a column-major array).
-            position=np.ascontiguousarray(qpos[:, self._qpos_adr], dtype=f32),
-            velocity=np.ascontiguousarray(self._qvel[:, self._dof], dtype=f32),
-            effort=self._effort.astype(f32, order="C"),
+            position=np.ascontiguousarray(rows[:, self._qpos_adr], dtype=f32),
+            velocity=np.ascontiguousarray(rows[:, self._vel_cols], dtype=f32),
+            effort=self._effort_now().astype(f32, order="C"),
             target=self._targets.copy(),
             faults=self._faults.copy(),
             flange=Poses(compute=lambda: self._flange_f32(qpos)),
@@ -298,25 +338,32 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
 
     def pack_rows(self, ids: np.ndarray) -> PackedRows:
         """The frame rows (service.wire.BINARY_COLUMNS) of worlds `ids` at the last tick, as
-        `snapshot` reports them. Here (the sim thread, between ticks) only copies of those
-        worlds' state are taken; the flange pose and the packing run in `PackedRows.wait`, on
-        the frame thread, while the next tick steps: serial work here leaves a core idle."""
-        q = self._qpos[ids]
-        columns = (
-            (self._world_ticks[ids] * self.tick_dt)[:, None],
-            q[:, self._qpos_adr],
-            self._qvel[ids][:, self._dof],
-            self._effort[ids],
-            self._targets[ids],
-        )
-        faults = self._faults[ids, None]
+        `snapshot` reports them. Here (the sim thread, between ticks) only the host mirrors of
+        those worlds are copied: the state's rows and effort are this state's own read-only
+        copies (`_rows_now`, `_effort_now`), which no later tick writes. Picking the worlds'
+        columns, the flange pose and the packing run in `PackedRows.wait`, on the frame thread,
+        while the next tick steps: serial work here leaves a core idle."""
+        rows, effort = self._rows_now(), self._effort_now()
+        ticks, targets, faults = self._world_ticks[ids], self._targets[ids], self._faults[ids]
+        nq, pos_cols, vel_cols, dt = self._nq, self._qpos_adr, self._vel_cols, self.tick_dt
 
         def build() -> np.ndarray:
-            flange_pos, flange_quat = self._flange_pose(q)
-            cols = (*columns, flange_pos, flange_quat, faults)
+            q = rows[ids]
+            flange_pos, flange_quat = self._flange_pose(q[:, :nq])
+            cols = (
+                (ticks * dt)[:, None],
+                q[:, pos_cols],
+                q[:, vel_cols],
+                effort[ids],
+                targets,
+                flange_pos,
+                flange_quat,
+                faults[:, None],
+            )
             return np.concatenate(cols, axis=1, dtype="<f4")
 
-        return PackedRows(self._tick, ids, None, compute=build)
+        host = (ticks * dt, targets, faults)  # `host_columns` of the same copies
+        return PackedRows(self._tick, ids, None, compute=build, host=host)
 
     # -- state ------------------------------------------------------------------------------
 
@@ -331,8 +378,8 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         """Every world's full state (see `BatchState`); float64 rows, eq_active as bool."""
         physics = {f: np.array(self._state_field(f), copy=True) for f in PHYSICS_FIELDS}
         physics["eq_active"] = physics["eq_active"] != 0
-        # The effort the snapshot reports is the last tick's, kept in _effort: store it there.
-        physics["qfrc_actuator"][:, self._dof] = self._effort
+        # The effort the snapshot reports is the last tick's (`_effort_now`): store it there.
+        physics["qfrc_actuator"][:, self._dof] = self._effort_now()
         return self._mirror_state(physics)
 
     def set_state(self, state: BatchState) -> None:
@@ -344,8 +391,10 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
             if f != "qfrc_actuator" and state.physics[f].size:
                 self._state_field(f)[:] = state.physics[f]
         self._restore_mirror(state)
-        self._effort[:] = state.physics["qfrc_actuator"][:, self._dof]
-        self._warn_last[:] = self._b.warning
+        self._now = None
+        self._effort = np.array(state.physics["qfrc_actuator"][:, self._dof], dtype=np.float64)
+        self._effort.flags.writeable = False  # until the next step, which makes its own
+        self._saw_warnings()
 
     # -- test and diagnostics hooks ---------------------------------------------------------
 
@@ -363,11 +412,13 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
     def write_qpos(self, world: int, qpos: np.ndarray) -> None:
         """Overwrite one world's qpos (used to inject faults on purpose in tests)."""
         self._qpos[world] = qpos
+        self._now = None
 
     def write_state(self, write: StateWrite) -> None:
         """A qpos/qvel slice of one world, into its row of the live state."""
         rows = self._qpos if write.field == "qpos" else self._qvel
         rows[write.world, write.index] = write.values
+        self._now = None
 
     def push_model(self, field: str, worlds: np.ndarray) -> None:
         """Per-world values of an MjModel field (`mujoco.batch` expands it on first use)."""
@@ -375,6 +426,7 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
 
     def derive_model(self) -> None:
         """mj_setConst per world, as after editing an MjModel's masses or armature by hand."""
+        self._effort_now()  # read from the last step's outputs before another call may redo them
         self._b.set_const()
 
     def capacity_usage(self) -> tuple[int, int]:

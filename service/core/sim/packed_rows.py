@@ -22,7 +22,8 @@ class PackedRows:
     `wait()` returns them (k, 37), valid until `release()`; the engine reuses the buffer after.
     An engine may hand `compute` instead of rows: `wait()` builds them then, on the frame
     thread, from copies the engine took between ticks (the native engine's flange kinematics
-    then run beside the next tick instead of before it).
+    then run beside the next tick instead of before it). `host`: the JSON frame's host columns
+    of the same worlds (`PacksFrames.host_columns`), when the engine copied them anyway.
     """
 
     tick: int
@@ -31,6 +32,7 @@ class PackedRows:
     done: Any = None  # a wp.Event marking the copy's end (None: already on the host)
     release: Callable[[], None] = _NOOP
     compute: Callable[[], np.ndarray] | None = None
+    host: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def wait(self) -> np.ndarray:
         if self.rows is None:

@@ -79,7 +79,7 @@ def pack(batch: Batch, ids: np.ndarray, json: bool) -> FrameData | None:
     snapshot. `json` adds the host columns. None when the engine has no buffer free for this
     selection (its frames are still being sent): the frame is skipped, the tick goes on.
     """
-    if not isinstance(batch, PacksFrames):
+    if not _packs_frames(batch):
         snap = batch.snapshot()
         data = FrameData(PackedRows(snap.tick, ids, rows_of(snap, ids)))
         data.safety = None if snap.safety is None else snap.safety[ids]
@@ -95,8 +95,22 @@ def pack(batch: Batch, ids: np.ndarray, json: bool) -> FrameData | None:
         return None
     data = FrameData(packed)
     if json:
-        data.sim_time, data.target, data.faults = batch.host_columns(ids)
+        host = packed.host if packed.host is not None else batch.host_columns(ids)
+        data.sim_time, data.target, data.faults = host
     return data
+
+
+_PACKS_FRAMES: dict[type, bool] = {}
+
+
+def _packs_frames(batch: Batch) -> bool:
+    """isinstance(batch, PacksFrames), once per engine class: a runtime protocol check looks
+    up every member each time (~10 us, each frame on the sim thread)."""
+    kind = type(batch)
+    known = _PACKS_FRAMES.get(kind)
+    if known is None:
+        known = _PACKS_FRAMES[kind] = isinstance(batch, PacksFrames)
+    return known
 
 
 # -- serialising -------------------------------------------------------------------------------

@@ -182,9 +182,9 @@ class TrajectoryManager:
     def briefs(self, worlds: np.ndarray) -> dict[str, dict[str, Any]]:
         """`brief` of the `worlds` that ran a trajectory, by world id (str), in one pass."""
         out: dict[str, dict[str, Any]] = {}
+        if not self._by_world:  # no trajectory has run: nothing to say, every frame, no lock
+            return out  # (a dict's truth is read whole; one starting now shows in the next)
         with self.loop.commands.staging() as _:
-            if not self._by_world:  # no trajectory has run: nothing to say, every frame
-                return out
             t = self.table
             elapsed = (max(self._last_tick, 0) - t.start_tick + 1) * t.tick_dt
             progress = np.clip(elapsed / np.maximum(t.duration, 1e-9), 0.0, 1.0)
