@@ -15,16 +15,21 @@ Nothing here is imported by the service; rtde_control is imported inside the chi
 from __future__ import annotations
 
 import contextlib
+import os
 import selectors
 import socket
 import struct
+import tempfile
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NoReturn
 
 RTDE_PORT = 30004
 CALLS = ("moveJ", "moveL", "command", "read")  # what a program times
+CLEANUP_S = 15.0  # stopScript and the disconnects, at most
+PRINTED_LINES = 8  # of what ur_rtde printed, kept for a failed program
 # What a receive program typically reads (ur_rtde's RTDEReceiveInterface asks for more): the
 # package the receivers get at 500 Hz, 337 bytes with its header.
 RECEIVE_RECIPE = (
@@ -39,10 +44,12 @@ RECEIVE_RECIPE = (
 def program(address: str, world: int, barrier: Any, out: Any) -> None:
     """A user's ur_rtde program on one world: connect, wait for the others (`barrier`), then
     moveJ, two moveL, command round trips (getForwardKinematics, isSteady), reads, moveJ
-    back; `out.put` gets what happened and how long each call took."""
+    back; `out.put` gets what happened and how long each call took, and what ur_rtde printed
+    when the program failed. The process then ends at once (see `_finish`)."""
     res: dict[str, Any] = {"world": world, "address": address, "ok": False, "error": None}
     calls: dict[str, list[float]] = {k: [] for k in CALLS}
     res["calls"] = calls
+    printed = _capture_output()
     c = r = None
     try:
         import rtde_control
@@ -59,8 +66,7 @@ def program(address: str, world: int, barrier: Any, out: Any) -> None:
     except Exception as exc:
         res["error"] = res["error"] or f"barrier: {type(exc).__name__}"
     if c is None or r is None or res["error"]:
-        out.put(res)
-        return
+        _finish(res, out, printed)
     started, cpu = time.perf_counter(), time.process_time()
     try:
         res["ok"] = _moves(c, r, calls, res)
@@ -68,11 +74,53 @@ def program(address: str, world: int, barrier: Any, out: Any) -> None:
         res["error"] = f"{type(exc).__name__}: {exc}"
     res["run_s"] = time.perf_counter() - started
     res["run_cpu_s"] = time.process_time() - cpu  # this process, all its threads
-    with contextlib.suppress(Exception):
-        c.stopScript()
-        c.disconnect()
-        r.disconnect()
+    res["cleanup"] = _cleanup(c, r)
+    _finish(res, out, printed)
+
+
+def _cleanup(c: Any, r: Any) -> str:
+    """stopScript and both disconnects, in a thread given CLEANUP_S: 'done', or what hung.
+
+    Why a thread: after a dropped connection ur_rtde 1.6.5's control interface may never
+    recover (its receive thread reconnects again and again), and stopScript then waits on a
+    program state that never comes; the bench records that and goes on."""
+    step = ["stopScript"]
+
+    def run() -> None:
+        with contextlib.suppress(Exception):
+            c.stopScript()
+        step[0] = "disconnect"
+        with contextlib.suppress(Exception):
+            c.disconnect()
+            r.disconnect()
+        step[0] = "done"
+
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    worker.join(CLEANUP_S)
+    return step[0] if step[0] == "done" else f"{step[0]} hung ({CLEANUP_S:g} s)"
+
+
+def _capture_output() -> Any:
+    """What ur_rtde prints (std::cout and std::cerr, this process's fds 1 and 2) goes to a
+    temporary file, read back for a failed program's result."""
+    f = tempfile.TemporaryFile(mode="w+b")  # noqa: SIM115 (open until the process ends)
+    for fd in (1, 2):
+        os.dup2(f.fileno(), fd)
+    return f
+
+
+def _finish(res: dict[str, Any], out: Any, printed: Any) -> NoReturn:
+    """Hand `res` over and end the process without its destructors: ur_rtde's join their
+    receive threads, which a program that lost its connection may never end."""
+    if not res["ok"]:
+        printed.seek(0)
+        lines = printed.read().decode(errors="replace").splitlines()
+        res["ur_rtde_printed"] = {"lines": len(lines), "last": lines[-PRINTED_LINES:]}
     out.put(res)
+    out.close()
+    out.join_thread()  # the queue's feeder thread has written `res`
+    os._exit(0)
 
 
 def _timed(calls: list[float], fn: Any, *args: Any) -> Any:

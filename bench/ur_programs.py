@@ -45,6 +45,9 @@ from bench.registry import Context, Result, section
 ENGINE_ENV = "ARMFLEET_UR_BENCH_ENGINE"
 SECONDS_ENV = "ARMFLEET_UR_BENCH_SECONDS"
 RECEIVE_HZ = 500.0
+# A program's deadline from the start: it takes seconds (20-40 s under others' load); a program
+# past it is ended and counted as failed, so that one stuck ur_rtde never holds the run.
+PROGRAM_DEADLINE_S = 180.0
 
 
 def _engine(device: str) -> str:
@@ -107,7 +110,9 @@ def _gap_ms(gap_s: float | None) -> float | None:
 
 
 def _collect(out: Any, procs: list[Any], limit_s: float = 600.0) -> list[dict[str, Any]]:
-    """Every program's result; one whose process died without one is left out."""
+    """Every program's result within `limit_s`; a program still running then is ended (its
+    process killed) and recorded as failed; one whose process died without a result is left
+    out (run_programs records it)."""
     import queue
 
     results: list[dict[str, Any]] = []
@@ -118,6 +123,14 @@ def _collect(out: Any, procs: list[Any], limit_s: float = 600.0) -> list[dict[st
         except queue.Empty:
             if not any(p.is_alive() for p in procs) and out.empty():
                 break
+    got = {r["world"] for r in results}
+    for world, p in enumerate(procs):
+        if world not in got and p.is_alive():
+            p.kill()
+            p.join(timeout=5)
+            results.append(
+                {"world": world, "ok": False, "calls": {}, "error": f"no result in {limit_s:g} s"}
+            )
     return results
 
 
@@ -134,11 +147,14 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
     for p in procs:
         p.start()
     load = _load()
-    barrier.wait(timeout=300)  # every program connected (or failed to)
+    try:
+        barrier.wait(timeout=300)  # every program connected (or failed to)
+    except threading.BrokenBarrierError:  # one hung connecting: _collect ends it
+        say("    not every program connected in 300 s; the others run")
     connected_s = time.perf_counter() - t_connect
     say(f"    {n} programs connected in {connected_s:.1f} s (load {load}); running")
     sampler = RtfSampler(srv)
-    results = _collect(out, procs)
+    results = _collect(out, procs, PROGRAM_DEADLINE_S)
     ticks = sampler.stop()
     for p in procs:
         p.join(timeout=30)
@@ -155,6 +171,8 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
             "world": r["world"],
             "ok": r["ok"],
             "error": r["error"] or ("; ".join(r.get("failed", [])) or None),
+            "cleanup": r.get("cleanup"),  # stopScript and disconnects: "done", or what hung
+            "ur_rtde_printed": r.get("ur_rtde_printed"),  # a failed program's last lines
             "connect_s": round(r.get("connect_s", 0.0), 3),
             "run_s": round(r.get("run_s", 0.0), 3),
             "run_cpu_s": round(r.get("run_cpu_s", 0.0), 3),
