@@ -5,7 +5,7 @@ world that is not lent refuses it, and input owners are released when it goes)."
 from __future__ import annotations
 
 import asyncio
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 if TYPE_CHECKING:
     from service.surfaces.ur.world_robot import WorldRobot
@@ -20,8 +20,8 @@ class RobotConnection(asyncio.Protocol):
         self._buffer = bytearray()
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
+        # a stream transport (uvloop's is not an asyncio.Transport subclass: endpoints.py)
+        self.transport = cast(asyncio.Transport, transport)
         self.robot.opened(self)
 
     def connection_lost(self, exc: Exception | None) -> None:
