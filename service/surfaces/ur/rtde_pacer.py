@@ -3,8 +3,10 @@
 Why: 32 ur_rtde programs are 64 streams at 500 Hz; a timer of its own per stream is 32,000
 timer callbacks a second, each a heap push and pop and a callback of the event loop. A pacer
 sends every stream of its frequency from one callback (in the order they started), keeping
-its schedule as each stream did before: the next send one period after the last one due,
-never earlier than now (a late loop skips, never bursts to catch up). A stream that starts
+its schedule on the controller's clock: the next send one period after the last one due, so a
+loop that wakes a little late (a fraction of a period, every time, on a busy box) sends the
+missed package at once and keeps 500 a second, where a schedule restarted from "now" made
+425-478; lateness beyond `CATCH_UP_S` is given up rather than sent as a burst. A stream that starts
 while its pacer runs gets its first package at the pacer's next send (at most one period
 later), as a controller sends on its own clock.
 """
@@ -16,6 +18,8 @@ import logging
 from typing import Protocol
 
 log = logging.getLogger("armfleet.ur")
+
+CATCH_UP_S = 0.01  # at most 5 packages at 500 Hz sent back to back after a late wake-up
 
 
 class Stream(Protocol):
@@ -63,7 +67,7 @@ class Pacer:
         if not self.streams:
             self._timer = None
             return
-        self._due = max(self._due + self.period, loop.time())
+        self._due = max(self._due + self.period, loop.time() - CATCH_UP_S)
         self._timer = loop.call_at(self._due, self._fire)
 
 
