@@ -117,14 +117,15 @@ async def _http_error(request: Request, exc: Exception) -> Response:
     """
     assert isinstance(exc, StarletteHTTPException)
     if exc.status_code == 405:
-        allowed = _methods_of(request.app, request.url.path)
+        allowed = await asyncio.to_thread(_methods_of, request.app, request.url.path)
         if allowed:
             exc.headers = {**(exc.headers or {}), "Allow": ", ".join(allowed)}
     return await http_exception_handler(request, exc)
 
 
 def _methods_of(app: FastAPI, path: str) -> list[str]:
-    """Every method the OpenAPI description lists for `path` (HEAD with GET)."""
+    """Every method the OpenAPI description lists for `path` (HEAD with GET). Run on a thread:
+    the first call may build the document (seconds of CPU)."""
     found: set[str] = set()
     for template, operations in app.openapi().get("paths", {}).items():
         if compile_path(template)[0].match(path):
@@ -158,13 +159,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         starting = asyncio.create_task(runtime.start())
-        # The OpenAPI document takes seconds to build on a busy CPU, and built by the first
-        # GET /openapi.json it held the event loop (every request) that long: built here, on a
-        # thread, while the engine compiles.
-        documenting = asyncio.create_task(asyncio.to_thread(app.openapi))
         yield
-        with contextlib.suppress(BaseException):
-            await documenting
         with contextlib.suppress(BaseException):
             await asyncio.wait_for(starting, timeout=120)
         runtime.stop()
@@ -220,7 +215,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         loop = runtime.loop
         return loop.batch.robot if loop is not None else load_robot(settings.sim.scene or SCENE_XML)
 
-    building = threading.Lock()  # the lifespan's thread builds it; a request waits for that
+    building = threading.Lock()  # one build: a second request waits for the first's
 
     def openapi() -> dict[str, Any]:
         with building:
@@ -231,4 +226,24 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
+    _document_off_the_loop(app)
     return app
+
+
+def _document_off_the_loop(app: FastAPI) -> None:
+    """GET /openapi.json builds (once) and renders the document on a thread.
+
+    It takes seconds of CPU on a busy box: FastAPI's own route builds it on the event loop, and
+    the first request for it held every other request that long (schemathesis timed out loading
+    it under a fuzz run's load). Built when first asked, not at start: most servers are never
+    asked, and each start paid for it.
+    """
+    url = app.openapi_url
+    routes = app.router.routes
+    (fastapis,) = [i for i, route in enumerate(routes) if getattr(route, "path", None) == url]
+    del routes[fastapis]  # (the docs pages stay FastAPI's; they read the document at `url`)
+
+    async def document(request: Request) -> Response:
+        return await asyncio.to_thread(lambda: JSONResponse(app.openapi()))
+
+    app.add_route(url, document, include_in_schema=False)
