@@ -112,6 +112,17 @@ def ensure_test_tools() -> None:
     run(*sudo, "apt-get", "install", "-y", "-qq", "--no-install-recommends", *missing, env=env)
 
 
+def compile_sources() -> None:
+    """Byte-compile the project's modules (quick when nothing changed: a stat per file).
+
+    Where PYTHONDONTWRITEBYTECODE is set (as in this project's shared work sessions), Python
+    reads cached bytecode but never writes it, so every process compiled the project from
+    source: about 0.3 s of CPU for each of the ~100 servers and other Python processes the
+    suite starts. compileall writes it regardless; `__pycache__/` is ignored by git."""
+    dirs = ["service", "clients", "mjcf", "bench", "scripts", "tests"]
+    run(BIN / "python", "-m", "compileall", "-q", "-x", "node_modules", *dirs)
+
+
 def build_ros2_judge() -> None:
     """The real ROS 2 (Jazzy rclpy + Fast DDS, ../shared/ros2_judge) the ROS 2 tests run on,
     built once per version of its sources under ~/.cache/armfleet (tests/ros2_judge.py)."""
@@ -145,6 +156,7 @@ def main(argv: list[str]) -> int:
         build_ros2_judge()
         ensure_js_tools()
     warm_kernel_cache()
+    compile_sources()
     if command == "serve":
         os.execv(BIN / "armfleet", [str(BIN / "armfleet"), "serve", *rest])
     say("ruff check + format check")
