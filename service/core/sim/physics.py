@@ -28,27 +28,28 @@ DEFAULT_PHYSICS_DT = 1.0 / 120.0
 # 240 steps from home: 42.2M vs 44.6M); raw rollout on both cores of a 2-core Xeon stepped 8-19%
 # more (best blocks, bench section 20), 10% on a 2-core AMD EPYC. MuJoCo Warp on the CPU: Newton
 # too. CG was ~20% cheaper with every arm at rest, but a batch iterates until its last world
-# converges, and while arms move CG hits its 100-iteration limit: one 32-world shard tick cost
-# 12.6 ms of CPU with 1 arm moving, 18.6 with 16 and 24.5 with 32, against 5.6-7.2 at rest;
-# Newton 7.0-7.3 ms in every case (2-core Xeon, issue 39 item 4: the 200-client soak moved the
-# arms, and the engine alone then needed more than the box's two cores). The price, at rest in
-# large shards: one 512-world shard (the service at 1,024 worlds on two cores) ticks in 99.6 ms
-# of CPU with Newton against 77.8 with CG (1.28x; captured ticks, best of 5 alternating blocks,
-# load 0.1-0.9), which is what section 19's MuJoCo Warp ratio against the CG tree f667f8e
-# (0.857) measures. Moving, a 32-world shard: Newton 8.5 ms, CG 36.6 (capped at 20 or 30
-# iterations still 15.2 or 20.7 ms). No MuJoCo Warp 4.0 option narrows the rest gap (512 worlds,
-# load 14-30): run_qacc_smooth=False 102.2 vs 101.8 ms, a sparse Jacobian 118.5,
+# converges, and while arms move CG hits its 100-iteration limit: one 32-world shard tick cost 12.6
+# ms of CPU with 1 arm moving, 18.6 with 16 and 24.5 with 32, against 5.6-7.2 at rest; Newton
+# 7.0-7.3 ms in every case (2-core Xeon, issue 39 item 4: the 200-client soak moved the arms, and
+# the engine alone then needed more than the box's two cores). The price, at rest in large shards:
+# one 512-world shard (the service at 1,024 worlds on two cores) ticks in 99.6 ms of CPU with Newton
+# against 77.8 with CG (1.28x; captured ticks, best of 5 alternating blocks, load 0.1-0.9), which is
+# what section 19's MuJoCo Warp ratio against the CG tree f667f8e (0.857) measures. Moving, a
+# 32-world shard: Newton 8.5 ms, CG 36.6 (capped at 20 or 30 iterations still 15.2 or 20.7 ms);
+# every arm of a 512-world shard retargeted every 0.5 s: Newton 158 ms, CG 834 (load 10-30), so no
+# shard size makes CG the better default. No MuJoCo Warp 4.0 option narrows the rest gap (512
+# worlds, load 14-30): run_qacc_smooth=False 102.2 vs 101.8 ms, a sparse Jacobian 118.5,
 # ls_iterations=10 with ls_tolerance=0.1 107.1 vs 107.0; nor does batching every writable Model
-# field per world (99.9 vs 99.6 ms, CG 77.7 vs 77.8). MuJoCo Warp on CUDA
-# ("warp_cuda"): Newton too, by bench section 24 on one H200 (bench/results/issue39/gpu4): the
-# engine's tick at rest 2.6x CG's world-steps/s at 16,384 worlds (9.86M vs 3.79M) and 2.9x at
-# 65,536 (12.3M vs 4.26M); with a press every 0.1 s in every world 7.9x and 7.6x (5.52M vs
-# 0.70M, 7.24M vs 0.96M): a step takes 1 iteration (the slowest world 14), where CG takes 3 at
-# rest (slowest 23-31) and 33 under presses with worlds at its 100-iteration limit, which the
-# whole batch waits for (and MuJoCo Warp prints a warning per world and step that hits it).
-# Against float64 mj_step over 2 s of presses Newton is off by 0.008 mrad, CG by 0.18.
-# Every fidelity test passes with these (tests/test_model.py, tests/test_engine.py warp vs
-# native, tests/test_native.py, tests/test_params.py, tests/test_batch_contract.py).
+# field per world (99.9 vs 99.6 ms, CG 77.7 vs 77.8). MuJoCo Warp on CUDA ("warp_cuda"): Newton too,
+# by bench section 24 on one H200 (bench/results/issue39/gpu4): the engine's tick at rest 2.6x CG's
+# world-steps/s at 16,384 worlds (9.86M vs 3.79M) and 2.9x at 65,536 (12.3M vs 4.26M); with a press
+# every 0.1 s in every world 7.9x and 7.6x (5.52M vs 0.70M, 7.24M vs 0.96M): a step takes 1
+# iteration (the slowest world 14), where CG takes 3 at rest (slowest 23-31) and 33 under presses
+# with worlds at its 100-iteration limit, which the whole batch waits for (and MuJoCo Warp prints a
+# warning per world and step that hits it). Against float64 mj_step over 2 s of presses Newton is
+# off by 0.008 mrad, CG by 0.18. Every fidelity test passes with these (tests/test_model.py,
+# tests/test_engine.py warp vs native, tests/test_native.py, tests/test_params.py,
+# tests/test_batch_contract.py).
 ENGINE_SOLVER = {
     "mujoco": mujoco.mjtSolver.mjSOL_NEWTON,
     "warp": mujoco.mjtSolver.mjSOL_NEWTON,
