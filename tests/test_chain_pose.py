@@ -90,10 +90,11 @@ def test_the_native_engine_falls_back_to_mujoco_kinematics_off_a_chain():
     rng = np.random.default_rng(9)
     qpos = batch.qpos()
     qpos[:, batch.robot.qpos_adr[:6]] = rng.uniform(-3, 3, (3, 6))
-    chain_pos, chain_quat = batch._flange_pose(qpos)
-    batch._chain = None  # as for a model ChainPose refuses
-    mj_pos, mj_quat = batch._flange_pose(qpos)
+    poses = batch._poses
+    chain_pos, chain_quat = poses.flange(qpos)
+    poses._chain = None  # as for a model ChainPose refuses
+    mj_pos, mj_quat = poses.flange(qpos)
     np.testing.assert_allclose(mj_pos, chain_pos, rtol=0, atol=1e-12)
     np.testing.assert_allclose(mj_quat, chain_quat, rtol=0, atol=1e-12)  # the same sign too
-    sub_pos, _ = batch._flange_pose(qpos[[2]])  # fewer rows than worlds
+    sub_pos, _ = poses.flange(qpos[[2]])  # fewer rows than worlds
     np.testing.assert_allclose(sub_pos[0], mj_pos[2], rtol=0, atol=0)

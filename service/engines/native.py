@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import copy
 import logging
-import threading
 import time
 from pathlib import Path
 
@@ -40,10 +39,9 @@ from service.core.sim.physics import (
 )
 from service.core.sim.robot import LoadedRobot, load_robot
 from service.core.sim.types import PHYSICS_FIELDS, BatchState, Poses, Snapshot
-from service.engines.chain_pose import ChainPose
 from service.engines.cores import usable_cores
 from service.engines.mirror import HostMirror
-from service.engines.native_kinematics import Kinematics
+from service.engines.native_kinematics import PoseReader
 
 log = logging.getLogger("armfleet.native")
 
@@ -79,21 +77,6 @@ def _with_sleep(mjm: mujoco.MjModel) -> mujoco.MjModel:
     model = copy.copy(mjm)
     model.opt.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
     return model
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions (w, x, y, z), row-wise: (n, 4) x (4,) -> (n, 4)."""
-    aw, ax, ay, az = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
-    bw, bx, by, bz = b
-    return np.stack(
-        (
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ),
-        axis=1,
-    )
 
 
 class NativeBatch(HostMirror, Batch, Restorable, Renderable):
@@ -136,9 +119,6 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         self._key = self.robot.home_key
         self._dof = self.robot.dof_adr
         self._qpos_adr = self.robot.qpos_adr
-        self._flange = self.robot.flange_site
-        self._flange_body = int(mjm.site_bodyid[self._flange])
-        self._flange_local_quat = np.array(mjm.site_quat[self._flange], dtype=np.float64)
 
         # The batch copies the model: options are set above, before it is built. A scene that
         # lets bodies at rest sleep sleeps here, with one MjData kept per world (persistent):
@@ -146,12 +126,7 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         sleep = self.robot.sleep
         model = _with_sleep(mjm) if sleep else mjm
         self._b = mjbatch.Batch(model, nworld, nthread=self.nthread, persistent=sleep)
-        self._kin = Kinematics(mjm, nworld, self.nthread)  # body poses, read on demand
-        self._kin_lock = threading.Lock()
-        try:  # the flange alone, for frames and snapshots: numpy on one core
-            self._chain: ChainPose | None = ChainPose(mjm, self._flange)
-        except ValueError:  # not a chain of hinges and slides: MuJoCo's kinematics
-            self._chain = None
+        self._poses = PoseReader(mjm, nworld, self.nthread, self.robot.flange_site)
         self._qpos = self._b.bind("qpos")  # live views of the state rows
         self._qvel = self._b.bind("qvel")
         self._ctrl = self._b.bind("ctrl")
@@ -280,31 +255,6 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
 
     # -- reading ----------------------------------------------------------------------------
 
-    def _flange_pose(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Flange position and quaternion (w x y z) at qpos rows (k, nq), float64.
-
-        The arm's chain in numpy (`ChainPose`) on the calling thread; a model whose flange is
-        not on a chain of hinges and slides falls back to MuJoCo's kinematics.
-        """
-        if self._chain is not None:
-            return self._chain.pose(qpos)
-        _, xquat, site_xpos = self._kinematics(qpos)
-        body_quat = xquat[:, self._flange_body]
-        return site_xpos[:, self._flange], _quat_mul(body_quat, self._flange_local_quat)
-
-    def _kinematics(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """MuJoCo's body positions, body quaternions and site positions at qpos rows (k, nq),
-        copied; from any thread (the kinematics batch is used under a lock)."""
-        ids = np.arange(len(qpos))  # the batch's first k rows take the k rows given
-        with self._kin_lock:
-            self._kin.update(qpos, None if len(qpos) == self.nworld else ids)
-            return self._kin.xpos[ids], self._kin.xquat[ids], self._kin.site_xpos[ids]
-
-    def _body_poses(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every body's pose at qpos (nworld, nq), float32: what a snapshot's poses read."""
-        xpos, xquat, _ = self._kinematics(qpos)
-        return xpos.astype(np.float32), xquat.astype(np.float32)
-
     def snapshot(self) -> Snapshot:
         """All worlds at the end of the last completed tick, copied.
 
@@ -327,14 +277,9 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
             effort=self._effort_now().astype(f32, order="C"),
             target=self._targets.copy(),
             faults=self._faults.copy(),
-            flange=Poses(compute=lambda: self._flange_f32(qpos)),
-            bodies=Poses(compute=lambda: self._body_poses(qpos)),
+            flange=Poses(compute=lambda: self._poses.flange_f32(qpos)),
+            bodies=Poses(compute=lambda: self._poses.bodies_f32(qpos)),
         )
-
-    def _flange_f32(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The flange pose at qpos rows as a snapshot reports it (float32, C order)."""
-        pos, quat = self._flange_pose(qpos)
-        return pos.astype(np.float32, order="C"), quat.astype(np.float32, order="C")
 
     def pack_rows(self, ids: np.ndarray) -> PackedRows:
         """The frame rows (service.wire.BINARY_COLUMNS) of worlds `ids` at the last tick, as
@@ -349,7 +294,7 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
 
         def build() -> np.ndarray:
             q = rows[ids]
-            flange_pos, flange_quat = self._flange_pose(q[:, :nq])
+            flange_pos, flange_quat = self._poses.flange(q[:, :nq])
             cols = (
                 (ticks * dt)[:, None],
                 q[:, pos_cols],
