@@ -13,6 +13,7 @@ import json
 import os
 import sys
 import threading
+import time
 
 import httpx
 import pytest
@@ -20,7 +21,13 @@ from conftest import running_server
 from websockets.sync.client import connect
 
 from service.core.sim import command_share
-from service.core.sim.command_share import FLOOR_SHARE, REQUESTS_NICE, CommandShare, turn
+from service.core.sim.command_share import (
+    FLOOR_SHARE,
+    REQUESTS_NICE,
+    CommandShare,
+    cpu_now,
+    turn,
+)
 from service.core.sim.loop import SimLoop
 from service.core.sim.pace import SWITCH_INTERVAL_S
 from service.core.sim.settings import SimSettings
@@ -92,6 +99,21 @@ def test_a_spent_budget_waits_for_the_next_tick_only_in_real_time(clock):
     share.set_active(True)
     share.enabled = False  # --no-ticks-first
     assert share.may_run()
+
+
+def test_a_command_is_charged_the_cpu_it_used_not_the_wall_time_others_took():
+    """What a command costs the ticks is the core and the GIL it held: time its thread spent
+    waiting (for the GIL, or for a core another process had) is not charged to it."""
+    t0 = cpu_now()
+    time.sleep(0.05)  # its thread waits: 50 ms of wall time, next to no CPU
+    waited = cpu_now() - t0
+    t0 = cpu_now()
+    end = time.perf_counter() + 0.02
+    while time.perf_counter() < end:  # its thread works: 20 ms of CPU (more, descheduled)
+        pass
+    worked = cpu_now() - t0
+    assert waited < 0.005
+    assert 0 < worked <= 0.025
 
 
 def _spent_share(max_wait_s: float) -> CommandShare:

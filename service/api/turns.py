@@ -1,8 +1,9 @@
 """Ticks first over HTTP: a command request takes its turn in the tick's command budget.
 
 Why a middleware: every command route runs on the event loop like a socket's commands do, so
-it takes the same turns (service/core/sim/command_share.py) before it runs, and is charged its
-time on the event loop after. One place covers the routes added later, as the access check does.
+it takes the same turns (service/core/sim/command_share.py) before it runs, and is charged the
+event loop's CPU meanwhile after. One place covers the routes added later, as the access check
+does.
 Reads never wait: they take no tick's budget (a read that waits for a tick waits for it anyway).
 A command that finds no turn within the longest wait is answered 503 naming that limit, with
 `Retry-After` (counted as refused in /metrics).
@@ -10,13 +11,11 @@ A command that finds no turn within the longest wait is answered 503 naming that
 
 from __future__ import annotations
 
-import time
-
 from starlette.responses import JSONResponse
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.core.access.policy import is_command
-from service.core.sim.command_share import turn
+from service.core.sim.command_share import cpu_now, turn
 
 
 class TakeTurns:
@@ -37,8 +36,8 @@ class TakeTurns:
                 {"detail": share.busy_detail}, status_code=503, headers={"Retry-After": "1"}
             )
             return await busy(scope, receive, send)
-        t0 = time.perf_counter()
+        t0 = cpu_now()
         try:
             await self.app(scope, receive, send)
-        finally:  # charged at most a tick: a reply that waits for a tick does not spend it
-            share.spent(min(time.perf_counter() - t0, share.tick_dt))
+        finally:  # the thread's CPU meanwhile (others' work between its awaits too): a tick at most
+            share.spent(min(cpu_now() - t0, share.tick_dt))

@@ -28,7 +28,7 @@ from service.core.access import rates
 from service.core.commands.base import BROWSER, WS
 from service.core.commands.control import Control
 from service.core.errors import ArmfleetError, BadCommand
-from service.core.sim.command_share import turn
+from service.core.sim.command_share import cpu_now, turn
 from service.core.sim.loop import SimLoop
 from service.core.sim.types import Snapshot
 from service.core.sim.worlds import parse_worlds
@@ -288,9 +288,9 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
                     reply = wire.error_frame(wire.read_id(text), share.busy_detail)
                     metrics.command_rejected(source, ws_ops.kind_of(text), "refused")
                 elif verdict == "ok":
-                    t0 = time.perf_counter()
+                    t0 = cpu_now()
                     reply, kind = ws_ops.handle_text(control, text, default_world, source)
-                    share.spent(time.perf_counter() - t0)
+                    share.spent(cpu_now() - t0)
                     if reply.get("op") == "error":
                         metrics.command_rejected(source, kind)
                     elif reply.get("op") == "ack" and isinstance(reply.get("tick"), int):

@@ -12,7 +12,8 @@ one lateness rule (`pace.Cadence.late`: behind by more than `pace.LATE_S`, on th
 time up; the cameras' stream pictures give way by the same rule). Late: the command budget of
 the next tick is halved; on time: it grows by a fiftieth of a tick, up to a whole tick
 (additive increase, multiplicative decrease). The surfaces measure
-the work each command cost (`spent`) and, once this tick's budget is used, wait for the next
+the work each command cost (`spent`, in the event loop thread's CPU seconds: `cpu_now`) and,
+once this tick's budget is used, wait for the next
 tick (`turn`) before taking another command: the command waits, in order, on its own
 connection (the socket is not read meanwhile, so the client's sends wait in TCP), and the GIL and
 the cores go to the tick. Waiters share one future per tick, resolved by the sim thread (or a
@@ -24,6 +25,16 @@ rather than run over the ticks' time. In fast or paused mode, or with `enabled` 
 waits. Within the budget the operating system still shares the cores between the event loop and
 the engine; so with ticks first, in a service started in real time, the event loop's thread
 runs at a lower priority (`REQUESTS_NICE`, set by the runtime once the ticks' threads started).
+
+What a command is charged is the CPU its thread used (`cpu_now`, the thread's CPU clock), not
+the wall time it took: what the ticks lose to a command is the core and the GIL it held, and
+its wall time also counts what others took from it, the ticks' own GIL turns (the sim thread's
+Python, asked for every `pace.SWITCH_INTERVAL_S`) and every other process on a shared box
+(the event loop runs `REQUESTS_NICE` below them). Charged by wall time, a box busy with others
+made commands look 12 times their cost (the ROS node's 1,000/s flood at 256 worlds, load 20
+on 2 cores: 1.66 ms of wall time per command for 0.135 ms of CPU), the budget ran out on
+time nobody spent on commands, and 1,250 of 3,000 commands were refused as busy while the
+event loop used 5% of a core for them.
 
 The sim thread writes (`ticked`, `set_active`), the event loop reads and counts its own
 spending; a stale read costs one command's worth of work or one tick's wait, never a wrong
@@ -123,8 +134,15 @@ class CommandShare:
         return fut
 
     def spent(self, seconds: float) -> None:
-        """A command took `seconds` of the event loop (its parse, check, staging and ack)."""
+        """A command took `seconds` of the event loop's CPU (its parse, check, staging and ack;
+        measured with `cpu_now`)."""
         self._spent_s += seconds
+
+
+def cpu_now() -> float:
+    """The calling thread's CPU seconds so far: a command is charged the difference over its
+    work (see the module docstring: the CPU it took, not the wall time others took from it)."""
+    return time.thread_time()
 
 
 def _resolve(fut: asyncio.Future[None]) -> None:

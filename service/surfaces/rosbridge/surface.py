@@ -20,7 +20,7 @@ from pydantic import BaseModel, Field, StrictBool
 
 from service.core.access import policy as access
 from service.core.commands.fields import example_config, json_int
-from service.core.sim.command_share import turn
+from service.core.sim.command_share import cpu_now, turn
 from service.core.sim.worlds import world_list
 from service.core.surface import ServiceFacts, SurfaceContext
 from service.surfaces.ros import description
@@ -163,9 +163,9 @@ class RosbridgeSurface:
                         server.bad.report("refused", "(socket)", busy)
                         session.status("error", busy)
                         continue
-                    t0 = time.perf_counter()
+                    t0 = cpu_now()
                     session.handle_text(text)
-                    ctx.loop.share.spent(time.perf_counter() - t0)
+                    ctx.loop.share.spent(cpu_now() - t0)
                     if session.over_rate:
                         await asyncio.sleep(0.2)  # let the writer send the refusal first
                         await ws.close(code=access.CLOSE_POLICY, reason="over the command rate")
