@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import HOME, JOINTS
+from conftest import ELBOW, HOME, JOINTS
 from websockets.sync.client import connect
 
 
@@ -353,6 +353,32 @@ def test_batch_socket_carries_the_listed_worlds_at_the_asked_rate(server):
     assert np.array(frames[-1]["position"]).shape == (2, 7)
     gaps = np.diff([f["tick"] for f in frames[1:]])
     assert gaps.min() >= 5  # 10 Hz on a 60 Hz loop: about every 6th tick, never every tick
+
+
+def test_one_socket_commanding_many_worlds_at_a_rate_the_loop_takes_is_never_refused(server, http):
+    """The ROS node's way (a command lane carries many users' worlds on one socket): 150
+    set_targets a second over four worlds from one batch socket, under its command rate and a
+    small share of a core, are all acked in order, none refused as busy by ticks first, and
+    each world's target is the last one sent to it."""
+    n, rate, worlds = 150, 150.0, [0, 1, 2, 3]
+    last: dict[int, float] = {}
+    with connect(f"{server.ws_url}/v1/ws?worlds=0-3&rate=1", max_queue=None) as ws:
+        t0 = time.perf_counter()
+        for i in range(n):
+            w = worlds[i % len(worlds)]
+            last[w] = round(0.3 + 0.001 * i, 6)
+            body = {"name": ["elbow_joint"], "position": [last[w]]}
+            ws.send(json.dumps({"op": "set_targets", "world": w, "id": i, **body}))
+            time.sleep(max(0.0, t0 + (i + 1) / rate - time.perf_counter()))
+        replies = []
+        while len(replies) < n:
+            msg = json.loads(ws.recv(timeout=10))
+            if msg["op"] in ("ack", "error"):
+                replies.append(msg)
+    assert [r["op"] for r in replies] == ["ack"] * n, [r for r in replies if r["op"] != "ack"]
+    assert [r["id"] for r in replies] == list(range(n))
+    t = targets(http)
+    assert {w: t[w][ELBOW] for w in worlds} == pytest.approx(last, abs=1e-9)
 
 
 def test_two_clients_on_two_worlds_do_not_disturb_each_other(server, http):
