@@ -40,6 +40,7 @@ FLOOD_WORLDS = 16
 FLOOD_RATE = 1000.0
 ELBOW = 2
 BATCHES = 3  # of latency rounds, each path in turn
+ANSWER_WAIT_S = 30.0  # the longest wait for the node to answer the flood's every message
 GAP_S = 0.4  # between rounds: with 4 worlds each arm rests 1.6 s before it is commanded again
 
 
@@ -119,6 +120,21 @@ def _node(http: httpx.Client) -> dict[str, Any]:
     return http.get("/v1/ros").json()["node"]
 
 
+def _answered(http: httpx.Client, before: dict[str, Any], sent: int) -> dict[str, Any]:
+    """The node's report once it has answered every message sent since `before` (acked or
+    refused; a loaded box takes it seconds behind the flood), or after ANSWER_WAIT_S: the
+    figures then say what was still unanswered, instead of counting it as neither."""
+    t0 = time.perf_counter()
+    while True:
+        after = _node(http)["report"]
+        done = after["accepted"] - before["accepted"]
+        done += sum(after["rejected"].values()) - sum(before["rejected"].values())
+        waited = time.perf_counter() - t0
+        if done >= sent or waited > ANSWER_WAIT_S:
+            return after | {"answered_after_s": waited}
+        time.sleep(0.25)
+
+
 def _usage(pid: int, seconds: float) -> dict[str, float]:
     import psutil
 
@@ -184,14 +200,15 @@ def ros(ctx: Context) -> Result:
         data["direct_latency"] = _stats(direct_ms)
         before = _node(http)["report"]
         flood = _judge("flood", str(FLOOD_WORLDS), str(FLOOD_RATE), str(flood_s))
-        time.sleep(1.0)
-        after = _node(http)["report"]
+        after = _answered(http, before, flood["sent"])
         targets = {w: http.get(f"/v1/worlds/{w}/state").json()["target"][6] for w in flood["last"]}
         data["flood"] = {
             "sent": flood["sent"],
             "sent_per_s": flood["sent"] / flood["wall"],
             "accepted": after["accepted"] - before["accepted"],
             "rejected": sum(after["rejected"].values()) - sum(before["rejected"].values()),
+            "merged": after.get("merged", 0) - before.get("merged", 0),
+            "answered_after_s": after["answered_after_s"],
             "last_is_target": all(abs(targets[w] - v) < 1e-9 for w, v in flood["last"].items()),
         }
         data["busy"] = _usage(node["pid"], 0.5)
@@ -231,8 +248,12 @@ def ros(ctx: Context) -> Result:
             "value": _pair(lat_d),
         },
         {
-            "measure": "1000/s flood: sent / accepted / refused",
-            "value": "{sent} / {accepted} / {rejected}".format(**data["flood"]),
+            "measure": "1000/s flood: sent / accepted (merged) / refused",
+            "value": "{sent} / {accepted} ({merged}) / {rejected}".format(**data["flood"]),
+        },
+        {
+            "measure": "flood: every message answered (acked or refused) after its end",
+            "value": f"{data['flood']['answered_after_s']:.1f} s",
         },
     ]
     return Result(rows, data=data)
