@@ -9,6 +9,15 @@ out as one command as soon as budget returns; each message's future completes wi
 The control loop applies targets once per tick, so a merge within a tick changes nothing it
 would have done; it only happens past the budget (e.g. one world commanded at 500 Hz).
 
+A world has one command in flight at a time: the next waits (merging) for its ack. armfleet
+takes commands in ticks first's turns (service/core/sim/command_share.py), and a command that
+finds no turn within `--command-wait-s` is refused as busy, then the rest of its connection's
+backlog with it for as long: on a lane, the commands of every ROS user of 16 worlds. Sending a
+world's next command only once its last is answered keeps a lane's backlog at armfleet to one
+command per world, each waiting at most a tick or two for its turn, and what a late loop could
+not take in the meantime merges here instead of queueing there. When armfleet keeps up (an ack
+is a few ms; a ROS user at 60 Hz sends every 16 ms) nothing waits.
+
 A command's ack makes armfleet send that lane's worlds' next state frame at once, whatever the
 lane's 1 Hz cadence; the node publishes it, which keeps a command's round trip short.
 """
@@ -50,7 +59,8 @@ class Lane:
         self._last = time.monotonic()
         self._ws: Any = None
         self._ids = stream.CommandIds()
-        self._pending: dict[int, list[Future]] = {}
+        self._pending: dict[int, tuple[int, list[Future]]] = {}  # id: (world, futures)
+        self._in_flight: set[int] = set()  # worlds with a command sent and not yet answered
         self._queued: dict[int, tuple[dict[str, float], list[Future]]] = {}
         self._wake: asyncio.Event | None = None
         self.merged = 0  # messages that went out merged with a later one
@@ -66,7 +76,7 @@ class Lane:
             futs.append(fut)
             self.merged += 1
             return
-        if self._take():
+        if world not in self._in_flight and self._take():
             self._send(world, dict(targets), [fut])
         else:
             self._queued[world] = (dict(targets), [fut])
@@ -84,13 +94,23 @@ class Lane:
 
     def _send(self, world: int, targets: dict[str, float], futs: list[Future]) -> None:
         msg_id, text = self._ids.set_targets(targets, world)
-        self._pending[msg_id] = futs
+        self._pending[msg_id] = (world, futs)
+        self._in_flight.add(world)
         task = asyncio.ensure_future(self._ws.send(text))
         task.add_done_callback(lambda t: self._sent(t, msg_id))
 
     def _sent(self, task: asyncio.Task, msg_id: int) -> None:
         if task.cancelled() or task.exception() is not None:
-            self._fail(self._pending.pop(msg_id, []), "connection lost")
+            self._fail(self._answered(msg_id), "connection lost")
+
+    def _answered(self, msg_id: int | None) -> list[Future]:
+        """The futures of a command answered (or lost); its world's next command may go."""
+        world, futs = self._pending.pop(msg_id, (None, [])) if msg_id is not None else (None, [])
+        if world is not None:
+            self._in_flight.discard(world)
+            if world in self._queued and self._wake is not None:
+                self._wake.set()
+        return futs
 
     def _fail(self, futs: list[Future], why: str) -> None:
         for fut in futs:
@@ -98,21 +118,23 @@ class Lane:
                 fut.set_exception(Unreachable(None, f"{self.url}: {why}"))
 
     async def _flush(self) -> None:
-        """Send queued (merged) commands as budget returns."""
+        """Send queued (merged) commands as budget returns and their worlds' last are answered."""
         assert self._wake is not None
         while True:
             await self._wake.wait()
-            while self._queued:
+            self._wake.clear()  # before looking: an ack meanwhile sets it again
+            while True:
+                world = next((w for w in self._queued if w not in self._in_flight), None)
+                if world is None:
+                    break
                 if not self._take():
                     await asyncio.sleep(max(0.001, (1.0 - self._tokens) / self.rate))
                     continue
-                world = next(iter(self._queued))
                 values, futs = self._queued.pop(world)
                 if self._ws is None:
                     self._fail(futs, "not connected to armfleet")
                 else:
                     self._send(world, values, futs)
-            self._wake.clear()
 
     async def run(self, stopping: Callable[[], bool]) -> None:
         self._wake = asyncio.Event()
@@ -135,9 +157,11 @@ class Lane:
                 except stream.LOST as exc:
                     log.debug("command lane: %s", stream.reason_for(exc))
                 self._ws = None
-                for futs in self._pending.values():
+                for _, futs in self._pending.values():
                     self._fail(futs, "connection lost")
                 self._pending.clear()
+                self._in_flight.clear()
+                self._wake.set()  # what waited behind them: failed by the flusher
                 await asyncio.sleep(backoff.next())
         finally:
             flusher.cancel()
@@ -150,8 +174,7 @@ class Lane:
             except Exception:
                 log.exception("publishing a state frame failed")
         elif isinstance(msg, (CommandAck, WsError)):
-            futs = self._pending.pop(msg.id, []) if msg.id is not None else []
-            for fut in futs:
+            for fut in self._answered(msg.id):
                 if fut.done():
                     continue
                 if isinstance(msg, WsError):
