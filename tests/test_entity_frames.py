@@ -90,10 +90,12 @@ def test_batch_frames_carry_the_entities_of_their_tick_only_when_asked(paused):
         # binary frames of the same selection, packed together: the block only where asked
         header, block = _binary_at(binary_entities, tick)
         assert header["tick"] == tick and header["entities"]["name"] == ["cube"]
-        values = np.frombuffer(block, "<f4").reshape(4, 1, 13)
+        values = np.frombuffer(block[: 4 * 13 * 4], "<f4").reshape(4, 1, 13)
+        assert block[4 * 13 * 4 :] == bytes([1] * 4)  # layout 2: then each world's safety mode
         np.testing.assert_array_equal(values[row, 0, :3], np.float32(got["position"]))
         header, rest = _binary_at(binary_plain, tick)
-        assert header["tick"] == tick and "entities" not in header and rest == b""
+        assert header["tick"] == tick and "entities" not in header
+        assert rest == bytes([1] * 4)  # only the safety block (layout 2): every world NORMAL
 
         # the REST state read, asked likewise, reports the same tick's entities
         state = http.get("/v1/worlds/1/state", params={"entities": "true"}).json()
