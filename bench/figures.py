@@ -168,6 +168,7 @@ FIGURES: dict[str, Callable[[], str]] = {
     "ur.programs_ok": lambda: "{ok}/{programs}".format(**load("ur_programs.json")["programs"]),
     "ur.programs_rtf": _ur("programs", "rtf", "{:.2f}"),
     "ur.programs_service_cores": _ur("programs", "service_cpu", "{:.2f}"),
+    "ur.programs_client_cores": _ur("programs", "programs_cpu", "{:.2f}"),
     "ur.command_p50_ms": lambda: (
         f"{load('ur_programs.json')['programs']['latency_ms']['command']['p50']:.0f}"
     ),
