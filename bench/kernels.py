@@ -100,7 +100,7 @@ def kernels(ctx: Context) -> Result:
         "launch overhead (~tens of µs each, ~190 launches a tick) is inside each figure; the "
         "service replays a captured tick, which removes it"
     )
-    return Result(rows, {"results": results, "errors": errors}, [note])
+    return Result.per_size(rows, results, errors, notes=[note])
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ Adding a section is one decorated function in its own module under ``bench/``::
 
         results, errors = ctx.each(ctx.sizes((16, 64), quick=(16,)), one, lambda r: "...")
         rows = [{"worlds": int(n), "p50 ms": r["p50_ms"]} for n, r in results.items()]
-        return Result(rows, data={"results": results, "errors": errors})
+        return Result.per_size(rows, results, errors)
 
     if __name__ == "__main__":
         from bench.runner import main
@@ -52,6 +52,19 @@ class Result:
     rows: list[dict[str, Any]]  # the table, one dict a row (keys: column headings)
     data: dict[str, Any] = field(default_factory=dict)  # the JSON's detail
     notes: list[str] = field(default_factory=list)  # printed under the table
+
+    @classmethod
+    def per_size(
+        cls,
+        rows: list[dict[str, Any]],
+        results: Mapping[str, Any],
+        errors: Mapping[str, str],
+        detail: Mapping[str, Any] | None = None,
+        notes: Sequence[str] = (),
+    ) -> Result:
+        """A section measured size by size (`Context.each`): the JSON's detail is `detail`, then
+        every size's result and every size's failure (`errors`, which the runner reports)."""
+        return cls(rows, {**(detail or {}), "results": results, "errors": errors}, list(notes))
 
 
 @dataclass

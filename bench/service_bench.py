@@ -78,17 +78,19 @@ def fast(ctx: Context, fmt: str) -> Result:
             "frame KB": None if kb is None else kb / 1e3,
         }
         rows.append(row | {col: r[f"ratio_to_{key}"] for key, col in REFERENCES.items()})
-    data = {
-        "mode": "fast",
-        "stream": f"/v1/ws?rate=30&format={fmt} (all worlds, one client)",
-        "format": fmt,
-        "sizes": sizes,
-        "duration_s": duration,
-        "warmup_s": warmup,
-        "results": results,
-        "errors": errors,
-    }
-    return Result(rows, data)
+    return Result.per_size(
+        rows,
+        results,
+        errors,
+        {
+            "mode": "fast",
+            "stream": f"/v1/ws?rate=30&format={fmt} (all worlds, one client)",
+            "format": fmt,
+            "sizes": sizes,
+            "duration_s": duration,
+            "warmup_s": warmup,
+        },
+    )
 
 
 @section(

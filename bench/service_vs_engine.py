@@ -105,15 +105,17 @@ def service_vs_engine(ctx: Context) -> Result:
         }
         for n, r in results.items()
     ]
-    data = {
-        "stream": "/v1/ws?rate=30&format=binary (all worlds, one client)",
-        "pairs": pairs,
-        "duration_s": duration,
-        "warmup_s": warmup,
-        "results": results,
-        "errors": errors,
-    }
-    return Result(rows, data)
+    return Result.per_size(
+        rows,
+        results,
+        errors,
+        {
+            "stream": "/v1/ws?rate=30&format=binary (all worlds, one client)",
+            "pairs": pairs,
+            "duration_s": duration,
+            "warmup_s": warmup,
+        },
+    )
 
 
 if __name__ == "__main__":
