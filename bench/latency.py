@@ -134,9 +134,11 @@ def measure(server: common.Served, commands: int, controllers: int, budget: floa
     }
 
 
-@section(4, "latency", "WebSocket increment latency, realtime mode, ms")
+@section(4, "latency")
 def latency(ctx: Context) -> Result:
-    """A realtime server per size, `controllers_for(size)` sockets sending increments."""
+    """WebSocket increment latency, realtime mode, ms
+
+    A realtime server per size, `controllers_for(size)` sockets sending increments."""
     commands = ctx.pick(1000, 100)
     sizes = ctx.sizes(SIZES)
 

@@ -77,14 +77,9 @@ def pairs_at(ctx: Context, n: int, pairs: int, duration: float, warmup: float) -
     }
 
 
-@section(
-    25,
-    "service_vs_engine",
-    "Service over engine, fast mode, binary frames: alternating runs over the same ticks",
-    ("cpu", "cuda"),
-    default_on=(),
-)
+@section(25, "service_vs_engine", ("cpu", "cuda"), default_on=())
 def service_vs_engine(ctx: Context) -> Result:
+    """Service over engine, fast mode, binary frames: alternating runs over the same ticks"""
     sizes = ctx.sizes(
         (16384, 65536) if ctx.cuda else (256, 1024), quick=(16384,) if ctx.cuda else (64,)
     )

@@ -309,9 +309,11 @@ def rows(results: dict[str, Any], engines: Sequence[str], nthread: int) -> list[
     return out
 
 
-@section(1, "throughput", "Throughput, world-steps/s (mj = native MuJoCo rollout)", ("cpu", "cuda"))
+@section(1, "throughput", ("cpu", "cuda"))
 def throughput(ctx: Context) -> Result:
-    """Every engine at every size; a failing engine is recorded and the others still run."""
+    """Throughput, world-steps/s (mj = native MuJoCo rollout)
+
+    Every engine at every size; a failing engine is recorded and the others still run."""
     sizes = ctx.sizes(
         CUDA_SIZES if ctx.cuda else CPU_SIZES, CUDA_SIZES_QUICK if ctx.cuda else CPU_SIZES_QUICK
     )
