@@ -7,7 +7,7 @@ import asyncio
 from fastapi import APIRouter
 
 from service.api.deps import CANNOT_WRITE, Rt, StateLoop
-from service.core.contract.replies import errors
+from service.core.contract.replies import answers, errors
 from service.core.contract.snapshots import RecordingRequest, RecordingStatus
 from service.core.errors import NotFound
 from service.core.sim.worlds import pick_worlds
@@ -47,9 +47,8 @@ async def start(runtime: Rt, loop: StateLoop, body: RecordingRequest) -> Recordi
 
 @router.get(
     "/current",
-    response_model=RecordingStatus,
     summary="The running (or last) recording",
-    responses=errors(404),  # none started yet
+    **answers(RecordingStatus, 404),  # none started yet
 )
 async def current(runtime: Rt) -> RecordingStatus:
     recorder = runtime.persistence.current
