@@ -84,3 +84,10 @@ CANNOT_WRITE: dict[int | str, dict[str, Any]] = {
         "reads): the detail names the path and the cause; nothing was replaced",
     }
 }
+
+
+def writes_file(reply: Any, others: dict[int | str, dict[str, Any]]) -> dict[str, Any]:
+    """The answers of a route that creates a file (a snapshot, a recording), for its decorator
+    (`**writes_file(reply, others)`): 201 with `reply`, 507 when the file cannot be written,
+    and the `others` the route can answer."""
+    return {"response_model": reply, "status_code": 201, "responses": {**CANNOT_WRITE, **others}}

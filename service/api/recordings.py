@@ -6,7 +6,7 @@ import asyncio
 
 from fastapi import APIRouter
 
-from service.api.deps import CANNOT_WRITE, Rt, StateLoop
+from service.api.deps import Rt, StateLoop, writes_file
 from service.core.contract.replies import answers, errors
 from service.core.contract.snapshots import RecordingRequest, RecordingStatus
 from service.core.errors import NotFound
@@ -22,14 +22,14 @@ def _status(recorder: Recorder) -> RecordingStatus:
 
 @router.post(
     "",
-    response_model=RecordingStatus,
-    status_code=201,
     summary="Start recording to <data-dir>/recordings/<name>.mcap",
-    responses={
-        **CANNOT_WRITE,
-        **errors(404),  # a world that `worlds` names does not exist
-        409: {"description": "a recording is already running"},
-    },
+    **writes_file(
+        RecordingStatus,
+        {
+            **errors(404),  # a world that `worlds` names does not exist
+            409: {"description": "a recording is already running"},
+        },
+    ),
 )
 async def start(runtime: Rt, loop: StateLoop, body: RecordingRequest) -> RecordingStatus:
     # StateLoop: a recording starts from the full state.
