@@ -123,14 +123,9 @@ def _stream(ctx: Context, engine: str, window_s: float) -> dict[str, Any]:
     }
 
 
-@section(
-    29,
-    "cameras",
-    "Cameras: ms per image, 16 wrist cameras at 10 Hz beside real time",
-    devices=("cpu", "cuda"),
-    default_on=("cpu",),
-)
+@section(29, "cameras", devices=("cpu", "cuda"), default_on=("cpu",))
 def cameras(ctx: Context) -> Result:
+    """Cameras: ms per image, 16 wrist cameras at 10 Hz beside real time"""
     requests = ctx.pick(20, 5)
     window = ctx.pick(10.0, 5.0)
     per_image: list[dict[str, Any]] = []

@@ -239,14 +239,9 @@ def _rows(alone: dict, streams: list[dict], fits: list[dict], n: int) -> list[di
     return [{"measure": k, "value": v} for k, v in got]
 
 
-@section(
-    30,
-    "cameras_gpu",
-    "Cameras on the GPU: 16,384 wrist cameras streamed at 30 Hz vs the renderer alone",
-    devices=("cuda",),
-    default_on=("cuda",),
-)
+@section(30, "cameras_gpu", devices=("cuda",), default_on=("cuda",))
 def cameras_gpu(ctx: Context) -> Result:
+    """Cameras on the GPU: 16,384 wrist cameras streamed at 30 Hz vs the renderer alone"""
     n = ctx.sizes((16384,), quick=(1024,))[0]
     seconds, window = ctx.pick((5.0, 10.0), (2.0, 3.0))
     errors: dict[str, str] = {}

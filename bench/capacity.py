@@ -86,9 +86,11 @@ def ladder(
     return held, runs
 
 
-@section(11, "capacity_engines", "Real-time capacity per engine, one 30 Hz subscriber")
+@section(11, "capacity_engines")
 def capacity_engines(ctx: Context) -> Result:
-    """Per engine and frame format: the largest realtime batch, each candidate beside a limit."""
+    """Real-time capacity per engine, one 30 Hz subscriber
+
+    Per engine and frame format: the largest realtime batch, each candidate beside a limit."""
     window, warmup, block_s = ctx.pick((30.0, 3.0, 1.0), (10.0, 2.0, 0.5))
     _, dt = physics_dt()
     steps_per_world_s = common.CONTROL_HZ * round(1 / (common.CONTROL_HZ * dt))

@@ -214,8 +214,9 @@ def randomize_draw(n: int) -> dict[str, Any]:
     return {"nworld": n, "seconds": round(seconds, 3), "writes": writes}
 
 
-@section(23, "cells", "Cells: per-world parameters batched vs shared, writes to 1024 worlds")
+@section(23, "cells")
 def cells(ctx: Context) -> Result:
+    """Cells: per-world parameters batched vs shared, writes to 1024 worlds"""
     n = ctx.worlds[0] if ctx.worlds else ctx.pick(1024, 256)
     windows, ticks = ctx.pick((10, 4), (4, 3))
     rows, data = [], {"stepping": [], "errors": {}}

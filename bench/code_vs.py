@@ -91,8 +91,9 @@ async def _alternate(servers: dict[str, common.Served], rounds: int, window: flo
     return samples
 
 
-@section(19, "code_vs", "This tree vs another revision, served fast mode, one run", default_on=())
+@section(19, "code_vs", default_on=())
 def code_vs(ctx: Context) -> Result:
+    """This tree vs another revision, served fast mode, one run"""
     rev = os.environ.get("ARMFLEET_BENCH_AGAINST")
     if not rev:
         return Result([], {"errors": {"setup": "set ARMFLEET_BENCH_AGAINST=<git revision>"}})

@@ -118,9 +118,11 @@ async def _served_vs_rollout(
     }
 
 
-@section(10, "engines", "Native MuJoCo vs MuJoCo Warp vs raw rollout, world-steps/s, one run")
+@section(10, "engines")
 def engines(ctx: Context) -> Result:
-    """Each engine served in fast mode, rollout blocks between its windows; engines alone too.
+    """Native MuJoCo vs MuJoCo Warp vs raw rollout, world-steps/s, one run
+
+    Each engine served in fast mode, rollout blocks between its windows; engines alone too.
 
     Every figure is the best of its rounds (see `_engine_rate`): on a shared machine that is
     the least disturbed sample of each, so the ratios compare the code, not the neighbours.
@@ -203,9 +205,11 @@ def engines(ctx: Context) -> Result:
     return Result(rows, data, notes)
 
 
-@section(12, "physics_step", "Physics step: before (2.083 ms) vs today's default, engine alone")
+@section(12, "physics_step")
 def physics_step(ctx: Context) -> Result:
-    """Each engine alone at the old and the new step: ticks/s and 60 Hz worlds that rate holds."""
+    """Physics step: before (2.083 ms) vs today's default, engine alone
+
+    Each engine alone at the old and the new step: ticks/s and 60 Hz worlds that rate holds."""
     from service.core.sim.physics import tick_timing
 
     sizes = ctx.sizes((64, 1024), (64,))

@@ -83,8 +83,9 @@ def measure(engine: str, n: int, device: str, windows: int, frames_per: int) -> 
         batch.close()
 
 
-@section(27, "entity_frames", "Entities in state frames: one frame with them vs without")
+@section(27, "entity_frames")
 def entity_frames_section(ctx: Context) -> Result:
+    """Entities in state frames: one frame with them vs without"""
     sizes = ctx.sizes((256, 4096), (256, 1024))
     windows, frames_per = ctx.pick((8, 5), (4, 3))
     rows, data = [], {"runs": [], "errors": {}}

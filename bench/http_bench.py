@@ -156,9 +156,11 @@ def row(name: str, r: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-@section(5, "http", "HTTP increments, realtime mode")
+@section(5, "http")
 def http(ctx: Context) -> Result:
-    """Python clients (threads with httpx), then wrk when installed, against one realtime server."""
+    """HTTP increments, realtime mode
+
+    Python clients (threads with httpx), then wrk when installed, against one realtime server."""
     nworld = ctx.sizes((16,))[0]
     duration, warmup = ctx.pick((10.0, 1.0), (3.0, 0.5))
     results: dict[str, Any] = {}

@@ -75,9 +75,11 @@ def _kernel_profile(nworld: int, ticks: int) -> dict[str, Any]:
     }
 
 
-@section(13, "kernels", "MuJoCo Warp CPU tick: top kernels (uncaptured, each launch timed)")
+@section(13, "kernels")
 def kernels(ctx: Context) -> Result:
-    """The uncaptured warp tick at 64 and 1024 worlds, every launch timed; the top ten each."""
+    """MuJoCo Warp CPU tick: top kernels (uncaptured, each launch timed)
+
+    The uncaptured warp tick at 64 and 1024 worlds, every launch timed; the top ten each."""
     sizes = ctx.sizes((64, 1024), (64,))
     ticks = ctx.pick(15, 5)
     results, errors = ctx.each(
@@ -100,7 +102,7 @@ def kernels(ctx: Context) -> Result:
         "launch overhead (~tens of µs each, ~190 launches a tick) is inside each figure; the "
         "service replays a captured tick, which removes it"
     )
-    return Result(rows, {"results": results, "errors": errors}, [note])
+    return Result.per_size(rows, results, errors, notes=[note])
 
 
 if __name__ == "__main__":

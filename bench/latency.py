@@ -134,9 +134,11 @@ def measure(server: common.Served, commands: int, controllers: int, budget: floa
     }
 
 
-@section(4, "latency", "WebSocket increment latency, realtime mode, ms")
+@section(4, "latency")
 def latency(ctx: Context) -> Result:
-    """A realtime server per size, `controllers_for(size)` sockets sending increments."""
+    """WebSocket increment latency, realtime mode, ms
+
+    A realtime server per size, `controllers_for(size)` sockets sending increments."""
     commands = ctx.pick(1000, 100)
     sizes = ctx.sizes(SIZES)
 
@@ -158,15 +160,17 @@ def latency(ctx: Context) -> Result:
         for what in ("ack", "target", "moved"):
             row |= {f"{what} p50": r[what]["p50_ms"], f"{what} p99": r[what]["p99_ms"]}
         rows.append(row | {"RTF": r["realtime_factor"], "timeouts": r["timeouts"]})
-    data = {
-        "mode": "realtime",
-        "socket": f"/v1/ws/worlds/{{w}}?rate={RATE:g} (a frame every tick)",
-        "commands_per_size": commands,
-        "sizes": sizes,
-        "results": results,
-        "errors": errors,
-    }
-    return Result(rows, data)
+    return Result.per_size(
+        rows,
+        results,
+        errors,
+        {
+            "mode": "realtime",
+            "socket": f"/v1/ws/worlds/{{w}}?rate={RATE:g} (a frame every tick)",
+            "commands_per_size": commands,
+            "sizes": sizes,
+        },
+    )
 
 
 if __name__ == "__main__":

@@ -331,14 +331,9 @@ except ImportError:  # pragma: no cover
 
 if section is not None:
 
-    @section(
-        15,
-        "ray",
-        "Ray shards: one vs two in fast mode; the Ray round trip per tick at 60 Hz",
-        ("cpu", "cuda"),
-        default_on=("cuda",),
-    )
+    @section(15, "ray", ("cpu", "cuda"), default_on=("cuda",))
     def ray_shards(ctx: Context) -> Result:
+        """Ray shards: one vs two in fast mode; the Ray round trip per tick at 60 Hz"""
         payload = measure(ctx.quick, ctx.device, ctx.worlds[0] if ctx.worlds else None, ctx.say)
         notes = [
             f"two shards / one shard (Ray): {payload['scaling']}x with 30 Hz snapshots, "

@@ -322,13 +322,9 @@ def measure(nworld: int = 4, say: Any = print) -> dict[str, Any]:
         hosts.down()
 
 
-@section(
-    22,
-    "ray_hosts",
-    "Ray across two hosts (network namespaces): a lost host's worlds back",
-    default_on=(),
-)
+@section(22, "ray_hosts", default_on=())
 def ray_hosts(ctx: Context) -> Result:
+    """Ray across two hosts (network namespaces): a lost host's worlds back"""
     if why := why_not():
         return Result([], data={"skipped": why}, notes=[f"skipped: {why}"])
     payload = measure(say=ctx.say)

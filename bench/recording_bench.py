@@ -94,8 +94,9 @@ def _snapshots(ctx: Context, tmp: Path, repeats: int) -> dict[str, Any]:
     }
 
 
-@section(16, "recording", "Recording overhead at 64 worlds, replay speed, snapshots at 1024")
+@section(16, "recording")
 def recording(ctx: Context) -> Result:
+    """Recording overhead at 64 worlds, replay speed, snapshots at 1024"""
     from service.persistence.replay import replay
 
     window = ctx.pick(10.0, 4.0)

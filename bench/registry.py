@@ -4,15 +4,17 @@ Adding a section is one decorated function in its own module under ``bench/``::
 
     from bench.registry import Context, Result, section
 
-    @section(8, "ros_roundtrip", "ROS 2 command → state round trip")
+    @section(8, "ros_roundtrip")
     def ros_roundtrip(ctx: Context) -> Result:
+        '''ROS 2 command → state round trip'''
+
         def one(n: int) -> dict:
             with ctx.serve(n) as srv:               # clients.testing.serve, on ctx.device
                 return {"nworld": n, "p50_ms": ...}  # measure against srv.url / srv.ws_url
 
         results, errors = ctx.each(ctx.sizes((16, 64), quick=(16,)), one, lambda r: "...")
         rows = [{"worlds": int(n), "p50 ms": r["p50_ms"]} for n, r in results.items()]
-        return Result(rows, data={"results": results, "errors": errors})
+        return Result.per_size(rows, results, errors)
 
     if __name__ == "__main__":
         from bench.runner import main
@@ -23,6 +25,8 @@ Adding a section is one decorated function in its own module under ``bench/``::
   stem (``bench/results/<name>.json``, ``<name>_cuda.json`` for ``--device cuda``): keep both
   stable once results exist. ``armfleet bench --list`` shows the numbers taken; registering a
   number or name twice fails at import.
+* The title (``--list``, the printed report, the results file) is the first paragraph of the
+  function's docstring.
 * ``devices`` says where the section can run (``cpu``, ``cuda``); ``default_on`` where it runs
   when no ``--section`` is given (default: everywhere it can run).
 * ``rows`` become the printed table (one dict a row, keys are the column headings, values raw
@@ -36,6 +40,7 @@ Adding a section is one decorated function in its own module under ``bench/``::
 from __future__ import annotations
 
 import contextlib
+import inspect
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -52,6 +57,19 @@ class Result:
     rows: list[dict[str, Any]]  # the table, one dict a row (keys: column headings)
     data: dict[str, Any] = field(default_factory=dict)  # the JSON's detail
     notes: list[str] = field(default_factory=list)  # printed under the table
+
+    @classmethod
+    def per_size(
+        cls,
+        rows: list[dict[str, Any]],
+        results: Mapping[str, Any],
+        errors: Mapping[str, str],
+        detail: Mapping[str, Any] | None = None,
+        notes: Sequence[str] = (),
+    ) -> Result:
+        """A section measured size by size (`Context.each`): the JSON's detail is `detail`, then
+        every size's result and every size's failure (`errors`, which the runner reports)."""
+        return cls(rows, {**(detail or {}), "results": results, "errors": errors}, list(notes))
 
 
 @dataclass
@@ -141,11 +159,11 @@ def device_kind(device: str) -> str:
 def section(
     number: int,
     name: str,
-    title: str,
     devices: Sequence[str] = ("cpu",),
     default_on: Sequence[str] | None = None,
 ) -> Callable[[SectionFn], SectionFn]:
-    """Register `fn` as section `number`, written to bench/results/`name`[_cuda].json."""
+    """Register `fn` as section `number`, written to bench/results/`name`[_cuda].json; its
+    title is the first paragraph of its docstring."""
 
     def register(fn: SectionFn) -> SectionFn:
         # `python -m bench.x`: the runner imports it as bench.x; a process it spawns imports the
@@ -160,7 +178,7 @@ def section(
         SECTIONS[number] = Section(
             number,
             name,
-            title,
+            " ".join(inspect.getdoc(fn).split("\n\n")[0].split()) if fn.__doc__ else name,
             fn,
             tuple(devices),
             tuple(devices if default_on is None else default_on),

@@ -146,13 +146,10 @@ def _usage(pid: int, seconds: float) -> dict[str, float]:
     return {"cpu_percent": 100 * busy / (t1 - t0), "rss_mb": p.memory_info().rss / 2**20}
 
 
-@section(
-    8,
-    "ros",
-    "ROS 2 node (armfleet_ros, Fast DDS): start, graph, CPU/memory, JointState round trip "
-    "vs direct WebSocket, 1000 commands/s",
-)
+@section(8, "ros")
 def ros(ctx: Context) -> Result:
+    """ROS 2 node (armfleet_ros, Fast DDS): start, graph, CPU/memory, JointState round trip vs
+    direct WebSocket, 1000 commands/s"""
     from tests import ros2_judge
 
     reason = ros2_judge.skip_reason()

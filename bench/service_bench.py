@@ -78,37 +78,30 @@ def fast(ctx: Context, fmt: str) -> Result:
             "frame KB": None if kb is None else kb / 1e3,
         }
         rows.append(row | {col: r[f"ratio_to_{key}"] for key, col in REFERENCES.items()})
-    data = {
-        "mode": "fast",
-        "stream": f"/v1/ws?rate=30&format={fmt} (all worlds, one client)",
-        "format": fmt,
-        "sizes": sizes,
-        "duration_s": duration,
-        "warmup_s": warmup,
-        "results": results,
-        "errors": errors,
-    }
-    return Result(rows, data)
+    return Result.per_size(
+        rows,
+        results,
+        errors,
+        {
+            "mode": "fast",
+            "stream": f"/v1/ws?rate=30&format={fmt} (all worlds, one client)",
+            "format": fmt,
+            "sizes": sizes,
+            "duration_s": duration,
+            "warmup_s": warmup,
+        },
+    )
 
 
-@section(
-    2,
-    "service_fast",
-    "Service, fast mode, all worlds streamed at 30 Hz, JSON frames",
-    ("cpu", "cuda"),
-)
+@section(2, "service_fast", ("cpu", "cuda"))
 def service_fast(ctx: Context) -> Result:
+    """Service, fast mode, all worlds streamed at 30 Hz, JSON frames"""
     return fast(ctx, "json")
 
 
-@section(
-    7,
-    "service_fast_binary",
-    "Service, fast mode, all worlds streamed at 30 Hz, binary frames",
-    ("cpu", "cuda"),
-    default_on=("cuda",),
-)
+@section(7, "service_fast_binary", ("cpu", "cuda"), default_on=("cuda",))
 def service_fast_binary(ctx: Context) -> Result:
+    """Service, fast mode, all worlds streamed at 30 Hz, binary frames"""
     return fast(ctx, "binary")
 
 
@@ -192,9 +185,11 @@ def start_from_throughput(throughput: dict[str, Any] | None, control_hz: float =
     return 2 ** math.floor(math.log2(best / 2))
 
 
-@section(3, "realtime_capacity", "Real-time capacity (RTF >= 0.99)")
+@section(3, "realtime_capacity")
 def realtime_capacity(ctx: Context) -> Result:
-    """Doubling from what section 1 predicts, then bisection; every candidate is reported."""
+    """Real-time capacity (RTF >= 0.99)
+
+    Doubling from what section 1 predicts, then bisection; every candidate is reported."""
     window, warmup, refine = ctx.pick((60.0, 3.0, 2), (10.0, 2.0, 1))
     start = ctx.worlds[0] if ctx.worlds else start_from_throughput(ctx.earlier("throughput"))
     max_worlds = 4096

@@ -77,14 +77,9 @@ def pairs_at(ctx: Context, n: int, pairs: int, duration: float, warmup: float) -
     }
 
 
-@section(
-    25,
-    "service_vs_engine",
-    "Service over engine, fast mode, binary frames: alternating runs over the same ticks",
-    ("cpu", "cuda"),
-    default_on=(),
-)
+@section(25, "service_vs_engine", ("cpu", "cuda"), default_on=())
 def service_vs_engine(ctx: Context) -> Result:
+    """Service over engine, fast mode, binary frames: alternating runs over the same ticks"""
     sizes = ctx.sizes(
         (16384, 65536) if ctx.cuda else (256, 1024), quick=(16384,) if ctx.cuda else (64,)
     )
@@ -105,15 +100,17 @@ def service_vs_engine(ctx: Context) -> Result:
         }
         for n, r in results.items()
     ]
-    data = {
-        "stream": "/v1/ws?rate=30&format=binary (all worlds, one client)",
-        "pairs": pairs,
-        "duration_s": duration,
-        "warmup_s": warmup,
-        "results": results,
-        "errors": errors,
-    }
-    return Result(rows, data)
+    return Result.per_size(
+        rows,
+        results,
+        errors,
+        {
+            "stream": "/v1/ws?rate=30&format=binary (all worlds, one client)",
+            "pairs": pairs,
+            "duration_s": duration,
+            "warmup_s": warmup,
+        },
+    )
 
 
 if __name__ == "__main__":

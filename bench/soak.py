@@ -300,9 +300,11 @@ def _judge(
 DURATION_ENV = "ARMFLEET_SOAK_DURATION"  # seconds, for `armfleet bench --section 14`
 
 
-@section(14, "soak", "Load with nothing lost: 200 WebSocket clients on 64 worlds", default_on=())
+@section(14, "soak", default_on=())
 def soak_section(ctx: Context) -> Result:
-    """The soak as a bench section (not run by default: it takes 10 minutes).
+    """Load with nothing lost: 200 WebSocket clients on 64 worlds
+
+    The soak as a bench section (not run by default: it takes 10 minutes).
 
     ARMFLEET_SOAK_DURATION sets the seconds (default 600; 60 with --quick).
     """

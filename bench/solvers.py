@@ -33,10 +33,9 @@ def _iterations(mjm: Any, state: Any, steps: int = 120) -> float:
     return total / steps
 
 
-@section(
-    20, "solvers", "Native MuJoCo: Newton vs CG, raw rollout on every core, one run", default_on=()
-)
+@section(20, "solvers", default_on=())
 def solvers(ctx: Context) -> Result:
+    """Native MuJoCo: Newton vs CG, raw rollout on every core, one run"""
     import mujoco
 
     from bench.baselines import Rollout, physics_dt

@@ -25,9 +25,11 @@ from typing import Any
 from bench.registry import Context, Result, section
 
 
-@section(6, "startup", "Start → /readyz")
+@section(6, "startup")
 def startup(ctx: Context) -> Result:
-    """One start with an empty kernel cache, then `repeats` with the default one."""
+    """Start → /readyz
+
+    One start with an empty kernel cache, then `repeats` with the default one."""
     nworld = ctx.sizes((16,))[0]
     repeats = ctx.pick(3, 1)
     out: dict[str, Any] = {}

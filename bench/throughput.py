@@ -309,9 +309,11 @@ def rows(results: dict[str, Any], engines: Sequence[str], nthread: int) -> list[
     return out
 
 
-@section(1, "throughput", "Throughput, world-steps/s (mj = native MuJoCo rollout)", ("cpu", "cuda"))
+@section(1, "throughput", ("cpu", "cuda"))
 def throughput(ctx: Context) -> Result:
-    """Every engine at every size; a failing engine is recorded and the others still run."""
+    """Throughput, world-steps/s (mj = native MuJoCo rollout)
+
+    Every engine at every size; a failing engine is recorded and the others still run."""
     sizes = ctx.sizes(
         CUDA_SIZES if ctx.cuda else CPU_SIZES, CUDA_SIZES_QUICK if ctx.cuda else CPU_SIZES_QUICK
     )
@@ -326,20 +328,22 @@ def throughput(ctx: Context) -> Result:
         for n in sizes
     }
     engines = [e for e in ENGINES if e != ENGINE_CORES or not ctx.cuda]
-    data = {
-        "model": model_options(engine_model(ctx.device)[0]),
-        "rollout_device": "cpu",
-        "rollout_threads": nthread,
-        "substeps": substeps,
-        "physics_dt": dt,
-        "sizes": sizes,
-        "min_time_s": min_time,
-        "warmup_time_s": warmup_time,
-        "engines": {e: DESCRIPTIONS[e] for e in engines},
-        "results": results,
-        "errors": errors,
-    }
-    return Result(rows(results, engines, nthread), data)
+    return Result.per_size(
+        rows(results, engines, nthread),
+        results,
+        errors,
+        {
+            "model": model_options(engine_model(ctx.device)[0]),
+            "rollout_device": "cpu",
+            "rollout_threads": nthread,
+            "substeps": substeps,
+            "physics_dt": dt,
+            "sizes": sizes,
+            "min_time_s": min_time,
+            "warmup_time_s": warmup_time,
+            "engines": {e: DESCRIPTIONS[e] for e in engines},
+        },
+    )
 
 
 if __name__ == "__main__":

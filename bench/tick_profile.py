@@ -208,15 +208,11 @@ def profile(
     }
 
 
-@section(
-    18,
-    "tick_profile",
-    "Where a served tick goes: device vs host stages",
-    ("cpu", "cuda"),
-    default_on=("cuda",),
-)
+@section(18, "tick_profile", ("cpu", "cuda"), default_on=("cuda",))
 def tick_profile(ctx: Context) -> Result:
-    """Both frame paths, both formats, at each size: the profile before and after issue 20."""
+    """Where a served tick goes: device vs host stages
+
+    Both frame paths, both formats, at each size: the profile before and after issue 20."""
     sizes = ctx.sizes((16384, 65536) if ctx.cuda else (256, 1024), (1024,))
     window = ctx.pick(WINDOW_S, 2.0)
     out: dict[str, Any] = {}

@@ -168,14 +168,11 @@ def _ratio(on: Any, off: Any) -> str:
     return "—" if not on or not off else f"{on / off:.2f}×"
 
 
-@section(
-    31,
-    "ticks_first",
-    "Ticks first under load: 200 WebSocket clients, 1,000 commands/s, 64 worlds, off vs on",
-    default_on=(),
-)
+@section(31, "ticks_first", default_on=())
 def ticks_first_section(ctx: Context) -> Result:
-    """Both runs, side by side, and their ratios (on / off)."""
+    """Ticks first under load: 200 WebSocket clients, 1,000 commands/s, 64 worlds, off vs on
+
+    Both runs, side by side, and their ratios (on / off)."""
     duration = float(os.environ.get(DURATION_ENV) or ctx.pick(30.0, 20.0))
     runs: dict[str, dict[str, Any]] = {}
     errors: dict[str, str] = {}

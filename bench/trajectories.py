@@ -213,8 +213,9 @@ def batch_start(ctx: Context) -> dict[str, Any]:
         }
 
 
-@section(21, "trajectories", "Trajectories: tracking, 1024 worlds in fast mode, 10k batch start")
+@section(21, "trajectories")
 def trajectories(ctx: Context) -> Result:
+    """Trajectories: tracking, 1024 worlds in fast mode, 10k batch start"""
     rows: list[dict[str, Any]] = []
     data: dict[str, Any] = {"errors": {}}
 

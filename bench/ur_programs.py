@@ -291,15 +291,11 @@ def _rows(n: int, prog: dict[str, Any], recv: dict[str, Any]) -> list[dict[str, 
     return rows
 
 
-@section(
-    32,
-    "ur_programs",
-    "UR programs: 32 ur_rtde programs at once, RTDE at 500 Hz to 32 clients",
-    devices=("cpu", "cuda"),
-    default_on=(),
-)
+@section(32, "ur_programs", devices=("cpu", "cuda"), default_on=())
 def ur_programs(ctx: Context) -> Result:
-    """Both runs on one `--ur` service of `--worlds` worlds (default 32)."""
+    """UR programs: 32 ur_rtde programs at once, RTDE at 500 Hz to 32 clients
+
+    Both runs on one `--ur` service of `--worlds` worlds (default 32)."""
     n = ctx.sizes((32,))[0]
     engine = _engine(ctx.device)
     window = float(os.environ.get(SECONDS_ENV) or ctx.pick(20.0, 8.0))

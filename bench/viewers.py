@@ -253,9 +253,11 @@ def rows(r: dict[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-@section(9, "viewers", "Many viewers: headless Chromium pages on a realtime service")
+@section(9, "viewers")
 def viewers(ctx: Context) -> Result:
-    """Twenty pages (four with --quick) watching every world of a 64-world realtime service."""
+    """Many viewers: headless Chromium pages on a realtime service
+
+    Twenty pages (four with --quick) watching every world of a 64-world realtime service."""
     from clients.testing import headless
 
     reason = headless.why_unavailable()

@@ -185,8 +185,9 @@ def largest(device_name: str, n: int, ticks: int = 5) -> dict[str, Any]:
     return out
 
 
-@section(17, "warp_baseline", "Engine vs raw captured MuJoCo Warp: what differs", ("cuda",))
+@section(17, "warp_baseline", ("cuda",))
 def warp_baseline(ctx: Context) -> Result:
+    """Engine vs raw captured MuJoCo Warp: what differs"""
     sizes = ctx.sizes((16384, 65536), (4096,))
     ticks = ctx.pick(240, 60)
     results, errors = ctx.each(

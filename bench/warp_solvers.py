@@ -167,14 +167,9 @@ def fidelity(device: str, name: str) -> dict[str, Any]:
     }
 
 
-@section(
-    24,
-    "warp_solvers",
-    "MuJoCo Warp: Newton vs CG, the engine's tick and its fidelity, one run",
-    ("cpu", "cuda"),
-    default_on=(),
-)
+@section(24, "warp_solvers", ("cpu", "cuda"), default_on=())
 def warp_solvers(ctx: Context) -> Result:
+    """MuJoCo Warp: Newton vs CG, the engine's tick and its fidelity, one run"""
     sizes = ctx.sizes(
         (16384, 65536) if ctx.cuda else (64, 256), quick=(16384,) if ctx.cuda else (64,)
     )

@@ -22,7 +22,7 @@ from websockets.asyncio.client import connect as ws_connect
 
 from clients import calls, cartesian, cell, models, stream
 from clients import trajectory as tj
-from clients.calls import DEFAULT_TIMEOUT, DEFAULT_URL, Call
+from clients.calls import DEFAULT_TIMEOUT, Call
 from clients.errors import ArmfleetError, Unreachable, unreachable
 from clients.models import JointRef, WorldSpec
 
@@ -46,15 +46,9 @@ class _Closes:
 class AsyncArmfleetClient(_Closes, cartesian.AsyncCalls, calls.Endpoint):
     """REST + WebSocket client for one armfleet service, for asyncio."""
 
-    def __init__(
-        self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
-    ) -> None:
-        super().__init__(url, timeout, token)
-        self._http = httpx.AsyncClient(**self.http_options())
+    HTTP = httpx.AsyncClient
 
     async def call(self, call: Call) -> Any:
-        """Run one `Call` (clients.calls): its parsed result, or the `ArmfleetError` the reply
-        means. Every method below is one of these; an endpoint without a method is one too."""
         kwargs = call.request_kwargs(self.timeout)
         try:
             reply = await self._http.request(call.method, call.path, **kwargs)
@@ -192,25 +186,6 @@ class AsyncArmfleetClient(_Closes, cartesian.AsyncCalls, calls.Endpoint):
                 wait.failed(exc)
             await asyncio.sleep(poll)
 
-    @contextlib.asynccontextmanager
-    async def lease(
-        self,
-        count: int = 1,
-        worlds: Iterable[int] | None = None,
-        ttl_s: float = 600.0,
-        label: str = "",
-        wait_s: float = 0.0,
-    ) -> AsyncIterator[AsyncArmfleetClient]:
-        """Async twin of `ArmfleetClient.lease` (`async with client.lease() as mine:`)."""
-        held = await self.call(calls.lease_call(count, worlds, ttl_s, label, wait_s))
-        client = self.lent(held)
-        try:
-            yield client
-        finally:
-            with contextlib.suppress(ArmfleetError):
-                await client.call(calls.release_call(held.id))
-            await client.close()
-
     async def leases(self) -> list[models.Lease]:
         return await self.call(calls.leases_call())
 
@@ -257,7 +232,7 @@ async def _open(url: str, timeout: float, token: str | None = None) -> ClientCon
         return await ws_connect(url, **stream.connect_options(timeout, token))
 
 
-class AsyncWorldSession(_Closes, cartesian.AsyncWorldOps):
+class AsyncWorldSession(_Closes, stream.WorldLink, cartesian.AsyncWorldOps):
     """One world over one WebSocket. A reader task routes acks to their commands (by id), so
     several tasks may send commands at once; state frames queue up for iteration (the oldest
     are dropped past 256)."""
@@ -265,12 +240,7 @@ class AsyncWorldSession(_Closes, cartesian.AsyncWorldOps):
     def __init__(
         self, url: str, world: int, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
     ) -> None:
-        self.url = url
-        self.world = world
-        self.timeout = timeout
-        self._token = token
-        self.latest: models.WorldState | None = None
-        self._ids = stream.CommandIds()
+        super().__init__(url, world, timeout, token)
         self._pending: dict[int, asyncio.Future[models.CommandAck]] = {}
         self._states: asyncio.Queue[models.WorldState | None] = asyncio.Queue(maxsize=256)
         self._ws: ClientConnection | None = None
@@ -279,7 +249,7 @@ class AsyncWorldSession(_Closes, cartesian.AsyncWorldOps):
 
     async def open(self) -> None:
         try:
-            self._ws = await _open(self.url, self.timeout, self._token)
+            self._ws = await _open(self.url, self.timeout, self.token)
         except stream.DROPPED as exc:
             raise stream.lost(self.url, exc) from exc
         self._reader = asyncio.create_task(self._read())

@@ -7,10 +7,11 @@ reply or a transport failure into a result or an `ArmfleetError`) is here, once.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 import httpx
 import numpy as np
@@ -33,6 +34,7 @@ from clients.models import (
 if TYPE_CHECKING:  # typing has it from 3.11 on; the client also runs on 3.10
     from typing_extensions import Self
 
+E = TypeVar("E", bound="Endpoint")
 DEFAULT_URL = "http://127.0.0.1:8000"
 DEFAULT_TIMEOUT = 10.0
 MODES = ("realtime", "fast", "paused")
@@ -226,18 +228,25 @@ def auth_headers(token: str | None) -> dict[str, str]:
 
 class Endpoint:
     """What a client of one service holds, blocking or asyncio: where the service is, how
-    long a request may take, the token it sends, the lease it holds. Both clients start so;
-    each then opens its own kind of HTTP client with `http_options`."""
+    long a request may take, the token it sends, the lease it holds, and an httpx client of
+    the kind the subclass names (`HTTP`) that its `call` sends requests with."""
 
-    def __init__(self, url: str, timeout: float, token: str | None) -> None:
+    HTTP: type[httpx.Client] | type[httpx.AsyncClient]
+
+    def __init__(
+        self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
+    ) -> None:
         self.url = url.rstrip("/")
         self.timeout = timeout
         self.token = token  # the administrator's or a lease's; sent with every request
         self.leased: Lease | None = None  # what the client `lease()` yields holds
+        self._http = self.HTTP(base_url=self.url, timeout=timeout, headers=auth_headers(token))
 
-    def http_options(self) -> dict[str, Any]:
-        """The arguments of the httpx client (sync or async) that sends this client's calls."""
-        return {"base_url": self.url, "timeout": self.timeout, "headers": auth_headers(self.token)}
+    def call(self, call: Call) -> Any:
+        """Run one `Call`: its parsed result, or the `ArmfleetError` the reply means (the
+        asyncio client's is awaited). Every method of the clients is one of these; an endpoint
+        without a method is one too."""
+        raise NotImplementedError
 
     def lent(self, held: Lease) -> Self:
         """A client of the same kind and service holding the lease `held` (its token, and
@@ -245,6 +254,52 @@ class Endpoint:
         client = type(self)(self.url, self.timeout, held.token)
         client.leased = held
         return client
+
+    def lease(
+        self,
+        count: int = 1,
+        worlds: Iterable[int] | None = None,
+        ttl_s: float = 600.0,
+        label: str = "",
+        wait_s: float = 0.0,
+    ) -> Lending[Self]:
+        """Borrow `count` free worlds (or the named `worlds`) for a block, `with` (blocking
+        client) or `async with` (asyncio): it yields a client holding the lease's token (its
+        `.leased` says which worlds), reset to home, and gives them back when the block ends.
+        Conflict / NotReady (409 / 503) when none is free after `wait_s` seconds;
+        `renew_lease` keeps a long block's lease alive."""
+        return Lending(self, lease_call(count, worlds, ttl_s, label, wait_s))
+
+
+class Lending(Generic[E]):
+    """The block `Endpoint.lease` returns, for both clients: entering takes the lease and
+    yields a client of the lender's kind holding it; leaving gives the worlds back (a lease
+    that already ended, expired, is fine) and closes that client."""
+
+    def __init__(self, lender: E, request: Call) -> None:
+        self._lender = lender
+        self._request = request
+        self._client: Any = None
+
+    def _held(self, held: Lease) -> E:
+        self._client = self._lender.lent(held)
+        return self._client
+
+    def __enter__(self) -> E:
+        return self._held(self._lender.call(self._request))
+
+    def __exit__(self, *exc: object) -> None:
+        with contextlib.suppress(ArmfleetError):
+            self._client.call(release_call(self._client.leased.id))
+        self._client.close()
+
+    async def __aenter__(self) -> E:
+        return self._held(await self._lender.call(self._request))
+
+    async def __aexit__(self, *exc: object) -> None:
+        with contextlib.suppress(ArmfleetError):
+            await self._client.call(release_call(self._client.leased.id))
+        await self._client.close()
 
 
 def readyz_call() -> Call:

@@ -18,7 +18,6 @@ frames and the reconnect policy in `clients.stream`.
 
 from __future__ import annotations
 
-import contextlib
 import threading
 import time
 from collections import deque
@@ -31,8 +30,8 @@ from websockets.sync.client import connect as ws_connect
 
 from clients import calls, cartesian, cell, models, stream
 from clients import trajectory as tj
-from clients.calls import DEFAULT_TIMEOUT, DEFAULT_URL, Call
-from clients.errors import ArmfleetError, Unreachable
+from clients.calls import DEFAULT_TIMEOUT, Call
+from clients.errors import Unreachable
 from clients.models import JointRef, WorldSpec
 
 if TYPE_CHECKING:  # typing has both from 3.11 on; the client also runs on 3.10
@@ -55,15 +54,9 @@ class _Closes:
 class ArmfleetClient(_Closes, cartesian.Calls, calls.Endpoint):
     """REST + WebSocket client for one armfleet service. Thread-safe for HTTP calls."""
 
-    def __init__(
-        self, url: str = DEFAULT_URL, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
-    ) -> None:
-        super().__init__(url, timeout, token)
-        self._http = httpx.Client(**self.http_options())
+    HTTP = httpx.Client
 
     def call(self, call: Call) -> Any:
-        """Run one `Call` (clients.calls): its parsed result, or the `ArmfleetError` the reply
-        means. Every method below is one of these; an endpoint without a method is one too."""
         try:
             reply = self._http.request(call.method, call.path, **call.request_kwargs(self.timeout))
         except httpx.TransportError as exc:
@@ -223,28 +216,6 @@ class ArmfleetClient(_Closes, cartesian.Calls, calls.Endpoint):
                 wait.failed(exc)
             time.sleep(poll)
 
-    @contextlib.contextmanager
-    def lease(
-        self,
-        count: int = 1,
-        worlds: Iterable[int] | None = None,
-        ttl_s: float = 600.0,
-        label: str = "",
-        wait_s: float = 0.0,
-    ) -> Iterator[ArmfleetClient]:
-        """Borrow `count` free worlds (or the named `worlds`) for the block: yields a client
-        holding the lease's token (its `.leased` says which worlds), reset to home; gives them
-        back when the block ends. Conflict / NotReady (409 / 503) when none is free after
-        `wait_s` seconds; `renew_lease` keeps a long block's lease alive."""
-        held = self.call(calls.lease_call(count, worlds, ttl_s, label, wait_s))
-        client = self.lent(held)
-        try:
-            yield client
-        finally:
-            with contextlib.suppress(ArmfleetError):  # already ended (expired) is fine
-                client.call(calls.release_call(held.id))
-            client.close()
-
     def leases(self) -> list[models.Lease]:
         """Every lease (the administrator's token), or this lease token's own."""
         return self.call(calls.leases_call())
@@ -300,7 +271,7 @@ def _open(url: str, timeout: float, token: str | None = None) -> ClientConnectio
         return ws_connect(url, **stream.connect_options(timeout, token))
 
 
-class WorldSession(_Closes, cartesian.WorldOps):
+class WorldSession(_Closes, stream.WorldLink, cartesian.WorldOps):
     """One world over one WebSocket: commands get their acks back (matched by id) and state
     frames that arrive meanwhile are kept for iteration. Does not reconnect: a command on a
     dropped socket raises Unreachable. Use from one thread at a time (a lock enforces it).
@@ -313,17 +284,13 @@ class WorldSession(_Closes, cartesian.WorldOps):
     def __init__(
         self, url: str, world: int, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
     ) -> None:
-        self.url = url
-        self.world = world
-        self.timeout = timeout
-        self._ids = stream.CommandIds()
+        super().__init__(url, world, timeout, token)
         self._states: deque[models.WorldState] = deque(maxlen=256)
         self._lock = threading.Lock()
         try:
             self._ws = _open(url, timeout, token).__enter__()  # closed by close()
         except stream.DROPPED as exc:
             raise stream.lost(url, exc) from exc
-        self.latest: models.WorldState | None = None
 
     def _recv(self, timeout: float | None) -> Any:
         try:

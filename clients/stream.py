@@ -20,7 +20,13 @@ import numpy as np
 import orjson
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
-from clients.calls import auth_headers, increment_body, targets_body, worlds_param
+from clients.calls import (
+    DEFAULT_TIMEOUT,
+    auth_headers,
+    increment_body,
+    targets_body,
+    worlds_param,
+)
 from clients.entity_states import EntityStates
 from clients.errors import ArmfleetError, CommandRejected, NotFound, Unreachable, unreachable
 from clients.models import (
@@ -160,6 +166,22 @@ class CommandIds:
     def op(self, op: str, body: dict[str, Any], world: int | None = None):
         """Any other op with its body (clients.cartesian's jog and tcp_target)."""
         return self._msg(op, body, world)
+
+
+class WorldLink:
+    """What a session with one world's socket holds, blocking or asyncio: the socket's URL,
+    the world, how long a command waits for its ack, the token of the handshake, the ids its
+    commands go out with and the newest state it has read."""
+
+    def __init__(
+        self, url: str, world: int, timeout: float = DEFAULT_TIMEOUT, token: str | None = None
+    ) -> None:
+        self.url = url
+        self.world = world
+        self.timeout = timeout
+        self.token = token
+        self.latest: WorldState | None = None
+        self._ids = CommandIds()
 
 
 # -- drops --------------------------------------------------------------------------------------

@@ -28,7 +28,7 @@ def test_every_section_is_registered_once_with_a_stable_file_name():
         7: "service_fast_binary",
     } | {k: v for k, v in names.items() if k > 7}  # sections added later keep these
     with pytest.raises(ValueError, match="section 1 is taken"):
-        registry.section(1, "another", "another")(lambda ctx: registry.Result([]))
+        registry.section(1, "another")(lambda ctx: registry.Result([]))
     with pytest.raises(SystemExit, match="no section"):
         runner.choose(sections, [999], "cpu")
 

@@ -13,7 +13,7 @@ import time
 import httpx
 import numpy as np
 import pytest
-from conftest import rotvec_matrix
+from jog_checks import rotvec_matrix
 from websockets.sync.client import connect
 
 from clients import ArmfleetClient, AsyncArmfleetClient

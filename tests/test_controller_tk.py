@@ -29,15 +29,12 @@ from conftest import (
     JOINTS,
     ROOT,
     Server,
-    assert_tcp_went,
     free_port,
-    jogged_tcp,
-    rotvec_matrix,
     serve,
-    settled_tcp,
     target_after,
     wait_for,
 )
+from jog_checks import assert_tcp_went, jogged_tcp, rotvec_matrix, settled_tcp
 
 from clients import ArmfleetClient
 

@@ -19,21 +19,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import (
-    ELBOW,
-    FINGER,
-    HOME,
-    JOINTS,
-    ROOT,
-    Server,
-    assert_tcp_went,
-    jogged_tcp,
-    rotvec_matrix,
-    settled_tcp,
-    target_after,
-    tcp_moved,
-    wait_for,
-)
+from conftest import ELBOW, FINGER, HOME, JOINTS, ROOT, Server, target_after, wait_for
+from jog_checks import assert_tcp_went, jogged_tcp, rotvec_matrix, settled_tcp, tcp_moved
 
 from clients import ArmfleetClient
 

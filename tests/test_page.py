@@ -16,18 +16,8 @@ import time
 import httpx
 import numpy as np
 import pytest
-from conftest import (
-    HOME,
-    JOINTS,
-    assert_tcp_went,
-    free_port,
-    jogged_tcp,
-    page_of,
-    rotvec_matrix,
-    serve,
-    settled_tcp,
-    wait_for,
-)
+from conftest import HOME, JOINTS, free_port, page_of, serve, wait_for
+from jog_checks import assert_tcp_went, jogged_tcp, rotvec_matrix, settled_tcp
 from PIL import Image
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect

@@ -83,34 +83,9 @@ SERVE_OPTIONS = [
     "--ws-compression",
 ]
 
-# (field, ARMFLEET_<FIELD> text, what it sets, `--<field>` text, what the option sets);
-# {SCENE}: the default scene's path, {ROOT}: the checkout's.
-VALUES: list[tuple[str, str, Any, str, Any]] = [
-    ("worlds", "3", 3, "5", 5),
-    ("engine", "mujoco", "mujoco", "warp", "warp"),
-    ("device", "cuda:1", "cuda:1", "cuda", "cuda"),
-    ("host", "10.0.0.1", "10.0.0.1", "0.0.0.0", "0.0.0.0"),
-    ("port", "9001", 9001, "9002", 9002),
-    ("shards", "2", 2, "3", 3),
-    ("engine_worker", "true", True, "false", False),
-    ("ray", "local", "local", "auto", "auto"),
-    ("ray_checkpoint_s", "2.5", 2.5, "4", 4.0),
-    (
-        "scene",
-        "{SCENE}",
-        "{SCENE}",
-        "{ROOT}/mjcf/../mjcf/scene.xml",
-        "{ROOT}/mjcf/../mjcf/scene.xml",
-    ),
-    ("mode", "fast", "fast", "paused", "paused"),
-    ("control_hz", "50", 50.0, "125.5", 125.5),
-    ("physics_dt", "0.004", 0.004, "0.001", 0.001),
-    ("max_body_bytes", "2048", 2048, "4096", 4096),
-    ("ws_compression", "true", True, "false", False),
-    ("log_level", "debug", "debug", "error", "error"),
-    ("token", "secret-a", "secret-a", "secret-b", "secret-b"),
-    ("insecure", "true", True, "false", False),
-    ("token_reads", "true", True, "false", False),
+# (field, ARMFLEET_<FIELD> text, what it sets, `--<field>` text, what the option sets), for
+# the fields whose value is neither a number, on/off, nor the text itself.
+PARSED: list[tuple[str, str, Any, str, Any]] = [
     (
         "allow_origins",
         '["https://a.example"]',
@@ -118,39 +93,74 @@ VALUES: list[tuple[str, str, Any, str, Any]] = [
         "https://b.example",
         ["https://b.example"],
     ),
-    ("max_clients", "5", 5, "7", 7),
-    ("command_rate", "20", 20.0, "30", 30.0),
-    ("command_burst", "4", 4, "6", 6),
-    ("leases", "optional", "optional", "off", "off"),
-    ("lease_reset", "start", "start", "end", "end"),
-    ("lease_max_ttl_s", "60", 60.0, "120", 120.0),
-    ("data_dir", "/tmp/af-a", "/tmp/af-a", "/tmp/af-b", "/tmp/af-b"),
-    ("restore", "latest", "latest", "snap1", "snap1"),
-    ("save_on_exit", "false", False, "true", True),
-    ("record", "/tmp/a.mcap", "/tmp/a.mcap", "/tmp/b.mcap", "/tmp/b.mcap"),
-    ("record_worlds", "0-3", "0-3", "1,2", "1,2"),
-    ("record_rate", "10", 10.0, "20", 20.0),
-    ("record_queue", "64", 64, "128", 128),
-    ("foxglove", "true", True, "false", False),
-    ("foxglove_port", "9765", 9765, "9766", 9766),
-    ("foxglove_worlds", "0-1", "0-1", "2", "2"),
-    ("foxglove_rate", "15", 15.0, "20", 20.0),
-    ("ros2", "true", True, "false", False),
-    ("ros2_rate", "30", 30.0, "40", 40.0),
-    ("ros2_worlds", "0-1", "0-1", "1", "1"),
-    ("ros2_python", "/usr/bin/python3", "/usr/bin/python3", "/opt/py", "/opt/py"),
-    ("camera_size", "64x48", "64x48", "32x24", "32x24"),
-    ("camera_outputs", "rgb", "rgb", "depth,seg", "depth,seg"),
-    ("cameras", "wrist=off", "wrist=off", "overview=32x24:rgb", "overview=32x24:rgb"),
-    ("camera_batch", "4", 4, "8", 8),
-    ("camera_device", "cpu", "cpu", "", ""),
-    ("camera_rate", "5", 5.0, "2.5", 2.5),
-    ("foxglove_cameras", "wrist", "wrist", "overview", "overview"),
-    ("camera_record", "/tmp/c.mcap", "/tmp/c.mcap", "/tmp/d.mcap", "/tmp/d.mcap"),
-    ("ros2_cameras", "wrist", "wrist", "overview", "overview"),
-    ("camera_record_cameras", "overview", "overview", "wrist,overview", "wrist,overview"),
-    ("camera_record_worlds", "1", "1", "0-1", "0-1"),
 ]
+# (field, ARMFLEET_<FIELD> text, `--<field>` text, the number type both set the field to).
+NUMBERS: list[tuple[str, str, str, type]] = [
+    ("worlds", "3", "5", int),
+    ("port", "9001", "9002", int),
+    ("shards", "2", "3", int),
+    ("ray_checkpoint_s", "2.5", "4", float),
+    ("control_hz", "50", "125.5", float),
+    ("physics_dt", "0.004", "0.001", float),
+    ("max_body_bytes", "2048", "4096", int),
+    ("max_clients", "5", "7", int),
+    ("command_rate", "20", "30", float),
+    ("command_burst", "4", "6", int),
+    ("lease_max_ttl_s", "60", "120", float),
+    ("record_rate", "10", "20", float),
+    ("record_queue", "64", "128", int),
+    ("foxglove_port", "9765", "9766", int),
+    ("foxglove_rate", "15", "20", float),
+    ("ros2_rate", "30", "40", float),
+    ("camera_batch", "4", "8", int),
+    ("camera_rate", "5", "2.5", float),
+]
+# On/off fields: what ARMFLEET_<FIELD> sets ("true" or "false"); the option then sets the other.
+FLAGS: dict[str, bool] = {
+    "engine_worker": True,
+    "ws_compression": True,
+    "insecure": True,
+    "token_reads": True,
+    "save_on_exit": False,
+    "foxglove": True,
+    "ros2": True,
+}
+# (field, ARMFLEET_<FIELD> text, `--<field>` text), for the fields that keep the text as written;
+# {SCENE}: the default scene's path, {ROOT}: the checkout's.
+AS_WRITTEN: list[tuple[str, str, str]] = [
+    ("engine", "mujoco", "warp"),
+    ("device", "cuda:1", "cuda"),
+    ("host", "10.0.0.1", "0.0.0.0"),
+    ("ray", "local", "auto"),
+    ("scene", "{SCENE}", "{ROOT}/mjcf/../mjcf/scene.xml"),
+    ("mode", "fast", "paused"),
+    ("log_level", "debug", "error"),
+    ("token", "secret-a", "secret-b"),
+    ("leases", "optional", "off"),
+    ("lease_reset", "start", "end"),
+    ("data_dir", "/tmp/af-a", "/tmp/af-b"),
+    ("restore", "latest", "snap1"),
+    ("record", "/tmp/a.mcap", "/tmp/b.mcap"),
+    ("record_worlds", "0-3", "1,2"),
+    ("foxglove_worlds", "0-1", "2"),
+    ("ros2_worlds", "0-1", "1"),
+    ("ros2_python", "/usr/bin/python3", "/opt/py"),
+    ("camera_size", "64x48", "32x24"),
+    ("camera_outputs", "rgb", "depth,seg"),
+    ("cameras", "wrist=off", "overview=32x24:rgb"),
+    ("camera_device", "cpu", ""),
+    ("foxglove_cameras", "wrist", "overview"),
+    ("camera_record", "/tmp/c.mcap", "/tmp/d.mcap"),
+    ("ros2_cameras", "wrist", "overview"),
+    ("camera_record_cameras", "overview", "wrist,overview"),
+    ("camera_record_worlds", "1", "0-1"),
+]
+VALUES = (
+    PARSED
+    + [(name, env, kind(env), cli, kind(cli)) for name, env, cli, kind in NUMBERS]
+    + [(name, str(on).lower(), on, str(not on).lower(), not on) for name, on in FLAGS.items()]
+    + [(name, env, env, cli, cli) for name, env, cli in AS_WRITTEN]
+)
 DEFAULTS: dict[str, Any] = {
     "worlds": 16,
     "engine": "warp",
@@ -206,7 +216,7 @@ DEFAULTS: dict[str, Any] = {
     "camera_record_worlds": "0",
 }
 NEEDS = {"leases": {"token": "t"}, "camera_record_worlds": {"camera_record": "/tmp/c.mcap"}}
-BOOLS = {name for name, _, env, _, _ in VALUES if isinstance(env, bool)}
+BOOLS = set(FLAGS)
 
 
 def _here(value: Any) -> Any:

@@ -16,7 +16,7 @@ from fastapi.responses import Response
 from pydantic import BaseModel, Field
 
 from service.api.answers import command_ack, json_reply, read_fresh
-from service.api.deps import MOVES_ARM, CommandWorld, Ctl, Loop, World
+from service.api.deps import CommandWorld, Ctl, Loop, World, moves_arm
 from service.core.commands import cartesian, tcp
 from service.core.commands.base import HTTP
 from service.core.commands.fields import FiniteFloat, Strict, example_config
@@ -98,10 +98,9 @@ async def put_tcp_offset(control: Ctl, world: CommandWorld, body: tcp.TcpOffset)
 
 @router.put(
     "/worlds/{world}/tcp_target",
-    response_model=CommandReply,
     summary="Set the arm's targets so that the TCP reaches a pose (IK nearest the current "
     "targets); 422 when no configuration reaches it",
-    responses=MOVES_ARM,
+    **moves_arm(CommandReply),
 )
 async def put_tcp_target(control: Ctl, world: CommandWorld, body: cartesian.TcpPose) -> Response:
     result = control.run(cartesian.MoveTcp.create(control, world, body.pose), HTTP)
@@ -110,9 +109,8 @@ async def put_tcp_target(control: Ctl, world: CommandWorld, body: cartesian.TcpP
 
 @router.post(
     "/worlds/{world}/jog",
-    response_model=CommandReply,
     summary="One pendant jog step: ±x/y/z [m] or ±rx/ry/rz [rad] in the base or tool frame",
-    responses=MOVES_ARM,
+    **moves_arm(CommandReply),
 )
 async def post_jog(control: Ctl, world: CommandWorld, body: cartesian.JogStep) -> Response:
     command = cartesian.Jog.create(control, world, body.axis, body.step, body.frame)
@@ -121,10 +119,9 @@ async def post_jog(control: Ctl, world: CommandWorld, body: cartesian.JogStep) -
 
 @router.post(
     "/worlds/{world}/move_linear",
-    response_model=StartedReply,
     summary="Move the TCP on a straight line (UR's moveL) as a trajectory: its id and ticks "
     "(GET /v1/worlds/{w}/trajectory watches it)",
-    responses=MOVES_ARM,
+    **moves_arm(StartedReply),
 )
 async def post_move_linear(
     control: Ctl, world: CommandWorld, body: cartesian.LinearMove

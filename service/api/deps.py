@@ -12,7 +12,7 @@ from typing import Annotated, Any
 from fastapi import Depends, Path, Request
 
 from service.core.commands.control import Control
-from service.core.contract.replies import ErrorReply, errors
+from service.core.contract.replies import ErrorReply, answers
 from service.core.errors import Unavailable
 from service.core.sim import rules
 from service.core.sim.loop import SimLoop
@@ -68,9 +68,13 @@ World = Annotated[int, Depends(world_id)]  # routes that read a world
 # Routes that run a command take the id as it came: the command checks it, once.
 CommandWorld = WorldPath
 
-# `responses=` of routes that move the arm (targets, jogs, trajectories): 409 while the world is
-# protective-stopped (core/sim/safety.py), until the stop is unlocked or the world reset.
-MOVES_ARM = errors(409)
+
+def moves_arm(reply: Any) -> dict[str, Any]:
+    """The answers of a route that moves the arm (targets, jogs, trajectories), for its
+    decorator (`**moves_arm(reply)`): `reply`, or 409 while the world is protective-stopped
+    (core/sim/safety.py), until the stop is unlocked or the world reset."""
+    return answers(reply, 409)
+
 
 # `responses=` of routes that write a file (snapshots, recordings): the domain error CannotWrite.
 CANNOT_WRITE: dict[int | str, dict[str, Any]] = {
@@ -80,3 +84,10 @@ CANNOT_WRITE: dict[int | str, dict[str, Any]] = {
         "reads): the detail names the path and the cause; nothing was replaced",
     }
 }
+
+
+def writes_file(reply: Any, others: dict[int | str, dict[str, Any]]) -> dict[str, Any]:
+    """The answers of a route that creates a file (a snapshot, a recording), for its decorator
+    (`**writes_file(reply, others)`): 201 with `reply`, 507 when the file cannot be written,
+    and the `others` the route can answer."""
+    return {"response_model": reply, "status_code": 201, "responses": {**CANNOT_WRITE, **others}}

@@ -17,7 +17,7 @@ from service.api.deps import get_runtime
 from service.core.access.callers import Caller
 from service.core.access.leases import LeaseBook
 from service.core.contract.leases import LeaseList, LeaseReply, LeaseRequest, RenewRequest
-from service.core.contract.replies import errors
+from service.core.contract.replies import answers, errors
 from service.core.errors import Conflict, Forbidden, NotFound, Unavailable
 from service.runtime import Runtime
 
@@ -52,10 +52,9 @@ def _may_manage(request: Request, lease_id: str) -> None:
 
 @router.post(
     "/leases",
-    response_model=LeaseReply,
     status_code=201,
     summary="Lend free worlds (`count`) or named ones (`worlds`); the reply holds the token",
-    responses=errors(409),
+    **answers(LeaseReply, 409),
 )
 async def grant(book: Book, body: LeaseRequest) -> LeaseReply:
     # Waiting polls on the event loop: a worker thread per waiting request would let a few
@@ -92,9 +91,8 @@ async def list_leases(book: Book, request: Request) -> LeaseList:
 
 @router.post(
     "/leases/{lease_id}/renew",
-    response_model=LeaseReply,
     summary="Live `ttl_s` more seconds from now",
-    responses=errors(404),
+    **answers(LeaseReply, 404),
 )
 async def renew(book: Book, request: Request, lease_id: LeaseId, body: RenewRequest) -> LeaseReply:
     _may_manage(request, lease_id)
@@ -107,9 +105,8 @@ async def renew(book: Book, request: Request, lease_id: LeaseId, body: RenewRequ
 
 @router.delete(
     "/leases/{lease_id}",
-    response_model=LeaseReply,
     summary="Give the worlds back now (reset to home, then free)",
-    responses=errors(404),
+    **answers(LeaseReply, 404),
 )
 async def release(book: Book, request: Request, lease_id: LeaseId) -> LeaseReply:
     _may_manage(request, lease_id)

@@ -6,8 +6,8 @@ import asyncio
 
 from fastapi import APIRouter
 
-from service.api.deps import CANNOT_WRITE, Rt, StateLoop
-from service.core.contract.replies import errors
+from service.api.deps import Rt, StateLoop, writes_file
+from service.core.contract.replies import answers, errors
 from service.core.contract.snapshots import RecordingRequest, RecordingStatus
 from service.core.errors import NotFound
 from service.core.sim.worlds import pick_worlds
@@ -22,14 +22,14 @@ def _status(recorder: Recorder) -> RecordingStatus:
 
 @router.post(
     "",
-    response_model=RecordingStatus,
-    status_code=201,
     summary="Start recording to <data-dir>/recordings/<name>.mcap",
-    responses={
-        **CANNOT_WRITE,
-        **errors(404),  # a world that `worlds` names does not exist
-        409: {"description": "a recording is already running"},
-    },
+    **writes_file(
+        RecordingStatus,
+        {
+            **errors(404),  # a world that `worlds` names does not exist
+            409: {"description": "a recording is already running"},
+        },
+    ),
 )
 async def start(runtime: Rt, loop: StateLoop, body: RecordingRequest) -> RecordingStatus:
     # StateLoop: a recording starts from the full state.
@@ -47,9 +47,8 @@ async def start(runtime: Rt, loop: StateLoop, body: RecordingRequest) -> Recordi
 
 @router.get(
     "/current",
-    response_model=RecordingStatus,
     summary="The running (or last) recording",
-    responses=errors(404),  # none started yet
+    **answers(RecordingStatus, 404),  # none started yet
 )
 async def current(runtime: Rt) -> RecordingStatus:
     recorder = runtime.persistence.current

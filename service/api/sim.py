@@ -9,7 +9,7 @@ from fastapi import APIRouter
 from service.api.deps import Ctl
 from service.core.commands.base import HTTP
 from service.core.commands.world import ModeRequest, Step, StepRequest
-from service.core.contract.replies import SimReply, errors
+from service.core.contract.replies import SimReply, answers
 from service.core.sim.types import Mode
 
 router = APIRouter(prefix="/v1/sim", tags=["sim"])
@@ -32,9 +32,8 @@ async def set_mode(control: Ctl, body: ModeRequest) -> SimReply:
 
 @router.post(
     "/step",
-    response_model=SimReply,
     summary="Paused only: advance exactly `ticks` control ticks; replies once they are done",
-    responses=errors(409),
+    **answers(SimReply, 409),
 )
 async def step(control: Ctl, body: StepRequest) -> SimReply:
     done = control.run(Step(body.ticks), HTTP)  # NotPaused → 409 (app handler)

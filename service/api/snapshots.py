@@ -7,7 +7,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Path
 
-from service.api.deps import CANNOT_WRITE, Rt, StateLoop
+from service.api.deps import Rt, StateLoop, writes_file
 from service.core.contract.snapshots import (
     RestoreReply,
     SnapshotInfo,
@@ -21,13 +21,10 @@ router = APIRouter(prefix="/v1/snapshots", tags=["snapshots"])
 
 @router.post(
     "",
-    response_model=SnapshotInfo,
-    status_code=201,
     summary="Save the full state of every world as snapshot `name` (replaces one of that name)",
-    responses={
-        **CANNOT_WRITE,
-        422: {"description": "bad name (separators, empty, over 64 characters)"},
-    },
+    **writes_file(
+        SnapshotInfo, {422: {"description": "bad name (separators, empty, over 64 characters)"}}
+    ),
 )
 async def save(runtime: Rt, loop: StateLoop, body: SnapshotRequest) -> SnapshotInfo:
     state = await asyncio.wrap_future(loop.state_door.request_state())

@@ -15,7 +15,7 @@ from fastapi import APIRouter, Query
 from fastapi.responses import Response
 
 from service.api.answers import json_reply
-from service.api.deps import MOVES_ARM, CommandWorld, Ctl, World
+from service.api.deps import CommandWorld, Ctl, World, moves_arm
 from service.core.commands.base import HTTP
 from service.core.commands.control import Control
 from service.core.commands.trajectory import TrajectoryStatus, parse
@@ -26,7 +26,7 @@ from service.core.commands.trajectory.schemas import (
     TrajectoryBody,
     TrajectoryStatusReply,
 )
-from service.core.contract.replies import errors
+from service.core.contract.replies import answers, errors
 from service.core.errors import BadCommand, Conflict, NotFound
 from service.core.sim.worlds import parse_worlds
 
@@ -37,9 +37,8 @@ MAX_WAIT_S = 60.0
 
 @router.post(
     "/worlds/{world}/trajectory",
-    response_model=StartedReply,
     summary="Follow a JointTrajectory (replaces a running one); answers its id and ticks",
-    responses=MOVES_ARM,
+    **moves_arm(StartedReply),
 )
 async def start(control: Ctl, world: CommandWorld, body: TrajectoryBody) -> Response:
     spec = parse(control.spec, body.as_json())
@@ -100,9 +99,8 @@ async def _outcome(control: Control, current: TrajectoryStatus, wait: float) -> 
 
 @router.delete(
     "/worlds/{world}/trajectory",
-    response_model=TrajectoryStatusReply,
     summary="Cancel the world's running trajectory; the world holds where it was",
-    responses=errors(409),
+    **answers(TrajectoryStatusReply, 409),
 )
 async def cancel(control: Ctl, world: CommandWorld) -> Response:
     stopped = control.cancel_trajectory([world], HTTP)
@@ -113,9 +111,8 @@ async def cancel(control: Ctl, world: CommandWorld) -> Response:
 
 @router.post(
     "/trajectories",
-    response_model=BatchStartedReply,
     summary="Start one trajectory on many worlds, all at the same tick",
-    responses=MOVES_ARM,
+    **moves_arm(BatchStartedReply),
 )
 async def start_many(control: Ctl, body: BatchTrajectoryBody) -> Response:
     worlds = _worlds(control, body.worlds)

@@ -16,7 +16,7 @@ from fastapi import APIRouter, Body, Query
 from fastapi.responses import Response
 
 from service.api.answers import command_ack, json_reply, read_fresh
-from service.api.deps import MOVES_ARM, CommandWorld, Ctl, Loop, World
+from service.api.deps import CommandWorld, Ctl, Loop, World, moves_arm
 from service.core.commands import entities, params, payload, randomize
 from service.core.commands.base import HTTP
 from service.core.commands.control import Control
@@ -87,9 +87,8 @@ async def get_state(loop: Loop, world: World, entities: WithEntities = False) ->
 
 @router.post(
     "/worlds/{world}/increments",
-    response_model=CommandReply,
     summary="Add to joint targets (the seed's Up/Down buttons); clamps to the joint range",
-    responses=MOVES_ARM,
+    **moves_arm(CommandReply),
 )
 async def increment(control: Ctl, world: CommandWorld, body: IncrementRequest) -> Response:
     field = "deltas" if body.deltas is not None else "joint"
@@ -99,9 +98,8 @@ async def increment(control: Ctl, world: CommandWorld, body: IncrementRequest) -
 
 @router.put(
     "/worlds/{world}/targets",
-    response_model=CommandReply,
     summary="Set targets, JointState-shaped; a subset of names keeps the others' targets",
-    responses=MOVES_ARM,
+    **moves_arm(CommandReply),
 )
 async def put_targets(control: Ctl, world: CommandWorld, body: JointTargets) -> Response:
     result = control.command_targets(world, body.name, body.position, HTTP)
@@ -110,9 +108,8 @@ async def put_targets(control: Ctl, world: CommandWorld, body: JointTargets) -> 
 
 @router.post(
     "/targets",
-    response_model=BatchCommandReply,
     summary="Full 7-joint targets for many worlds, applied together at one tick boundary",
-    responses=MOVES_ARM,
+    **moves_arm(BatchCommandReply),
 )
 async def post_targets(control: Ctl, body: BatchTargets) -> Response:
     results = control.set_many(body.worlds, body.position, HTTP)

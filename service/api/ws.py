@@ -42,6 +42,11 @@ MAX_RATE = 1000.0
 _MAX_QUEUED_ACKS = 256  # a client that never reads its acks stops being read (backpressure)
 
 
+# The query values the state sockets share, declared once. `rate`: frames a second at most
+# (default: one a tick); `worlds`: ids and inclusive ranges (parse_worlds); the default is the
+# socket's own (all worlds; the focus world for /ws/view).
+Rate = Annotated[float | None, Query(gt=0, le=MAX_RATE)]
+Worlds = Annotated[str | None, Query(description="ids and ranges, e.g. 0-63 or 0,3,7")]
 # `entities=true`: each frame carries the worlds' entities (service/core/streams/entity_frames.py).
 Entities = Annotated[
     str | None,
@@ -66,7 +71,7 @@ def flag(value: str | None, field: str) -> bool:
 async def world_socket(
     ws: WebSocket,
     world: int,
-    rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
+    rate: Rate = None,
     entities: Entities = None,
 ) -> None:
     """One world's state frames (`{"op": "state", ...}`); commands need no `world` field."""
@@ -87,8 +92,8 @@ async def world_socket(
 @router.websocket("/ws")
 async def batch_socket(
     ws: WebSocket,
-    worlds: Annotated[str | None, Query(description="e.g. 0-63 or 0,3,7 (default all)")] = None,
-    rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
+    worlds: Worlds = None,
+    rate: Rate = None,
     format: Annotated[
         Literal["json", "binary"],
         Query(description="binary: float32 rows, see service/core/streams/wire.py"),
@@ -159,17 +164,15 @@ MAX_VIEW_WORLDS = 256  # what the page's fleet view draws; ~136 KB per pose fram
 @router.websocket("/ws/view")
 async def view_socket(
     ws: WebSocket,
-    worlds: Annotated[
-        str | None, Query(description="worlds whose body poses to send, e.g. 0-63 (default: focus)")
-    ] = None,
+    worlds: Worlds = None,
     focus: Annotated[int | None, Query(description="world whose joint state rides along")] = None,
-    rate: Annotated[float | None, Query(gt=0, le=MAX_RATE)] = None,
+    rate: Rate = None,
 ) -> None:
     """The browser page's socket: binary pose frames (`core/wire.py`), commands name `world`.
 
-    Each frame carries every body's pose for `worlds` and the `focus` world's joint state in
-    its header, so one socket feeds both the 3D view and the panel. Its commands are the
-    control layer's with source `browser`.
+    Each frame carries every body's pose for `worlds` (default: the focus world) and the `focus`
+    world's joint state in its header, so one socket feeds both the 3D view and the panel. Its
+    commands are the control layer's with source `browser`.
     """
 
     def stream(loop: SimLoop, control: Control) -> Stream:

@@ -128,6 +128,13 @@ def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
     return {code: {"model": ErrorReply, "description": _ERROR_MEANING[code]} for code in codes}
 
 
+def answers(reply: Any, *codes: int) -> dict[str, Any]:
+    """A route's answers as one declaration, spread into its decorator (`**answers(...)`): the
+    model of its reply (`response_model=`) and the error statuses it can answer besides its
+    router's (`responses=`, as `errors`)."""
+    return {"response_model": reply, "responses": errors(*codes)}
+
+
 # Statuses every /v1 route can answer (engine not ready, client cap, token and origin checks).
 ANY = (401, 403, 429, 503)
 WITH_BODY = (*ANY, 400, 413)
