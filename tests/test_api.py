@@ -352,7 +352,10 @@ def test_batch_socket_carries_the_listed_worlds_at_the_asked_rate(server):
     assert all(f["op"] == "states" and f["worlds"] == [1, 2] for f in frames)
     assert np.array(frames[-1]["position"]).shape == (2, 7)
     gaps = np.diff([f["tick"] for f in frames[1:]])
-    assert gaps.min() >= 5  # 10 Hz on a 60 Hz loop: about every 6th tick, never every tick
+    # 10 Hz on a 60 Hz loop: about every 6th tick, never every tick. The rate is kept on the
+    # wall clock, so one late frame on a loaded box makes a short gap then a long one ([4, 9]
+    # seen at load 21): the mean says the rate, the minimum that it is never every tick.
+    assert gaps.min() >= 2 and gaps.mean() >= 4, gaps
 
 
 def test_one_socket_commanding_many_worlds_at_a_rate_the_loop_takes_is_never_refused(server, http):
