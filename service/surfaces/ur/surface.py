@@ -174,6 +174,8 @@ class UrSurface:
             "ports": {**addresses.PORTS, "rtde": addresses.RTDE_PORT},
             "leases": self._leases,
             "thread_nice": None if ep is None else ep.thread_nice(),
+            # what the threads that step the worlds run at (core/process/engine_priority.py)
+            "engine_priority": None if self._ctx is None else self._ctx.loop.priority.status(),
             "worlds": ep.status()
             if ep is not None
             else [{"world": w, "address": a} for w, a in self.addresses.items()],
