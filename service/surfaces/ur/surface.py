@@ -135,6 +135,8 @@ class UrSurface:
             ep.begin_leases()
         self.endpoints = ep
         ep.start()
+        if ep.thread_id is not None:  # raised with the engine, below it (engine_priority.py)
+            loop.priority.add_companion(ep.thread_id)
         limits = [j.effort_limit for j in loop.spec.joints]
         watch = SafetyWatch(self.worlds, np.array(limits), loop.batch.tick_dt)
         table = _table_watch(self.worlds, ctx.control)
