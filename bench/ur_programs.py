@@ -249,11 +249,15 @@ def _addresses(srv: common.Served) -> list[str]:
 
 
 def _engine_priority(srv: common.Served) -> str:
-    """What the threads that step the worlds ran at (GET /v1/ur; `--engine-priority`, which
-    ARMFLEET_ENGINE_PRIORITY sets for the bench's service too): "nice 0 (process 10)"."""
-    p = httpx.get(f"{srv.url}/v1/ur", timeout=30).json().get("engine_priority") or {}
+    """What the threads that step the worlds and the UR thread ran at (GET /v1/ur;
+    `--engine-priority`, which ARMFLEET_ENGINE_PRIORITY sets for the bench's service too)."""
+    ur = httpx.get(f"{srv.url}/v1/ur", timeout=30).json()
+    p = ur.get("engine_priority") or {}
     nice = [t["nice"] for t in p.get("threads", [])]
-    return f"{p.get('setting')}: nice {nice} (process {p.get('process_nice')})"
+    return (
+        f"{p.get('setting')}: nice {nice}, UR thread {ur.get('thread_nice')} "
+        f"(process {p.get('process_nice')})"
+    )
 
 
 def _rows(n: int, prog: dict[str, Any], recv: dict[str, Any]) -> list[dict[str, Any]]:
