@@ -248,6 +248,18 @@ def _addresses(srv: common.Served) -> list[str]:
     return [w["address"] for w in sorted(ur["worlds"], key=lambda w: w["world"])]
 
 
+def _engine_priority(srv: common.Served) -> str:
+    """What the threads that step the worlds and the UR thread ran at (GET /v1/ur;
+    `--engine-priority`, which ARMFLEET_ENGINE_PRIORITY sets for the bench's service too)."""
+    ur = httpx.get(f"{srv.url}/v1/ur", timeout=30).json()
+    p = ur.get("engine_priority") or {}
+    nice = [t["nice"] for t in p.get("threads", [])]
+    return (
+        f"{p.get('setting')}: nice {nice}, UR thread {ur.get('thread_nice')} "
+        f"(process {p.get('process_nice')})"
+    )
+
+
 def _rows(n: int, prog: dict[str, Any], recv: dict[str, Any]) -> list[dict[str, Any]]:
     """One row a run; latencies as p50/p99."""
     lat = prog.get("latency_ms", {})
@@ -313,7 +325,11 @@ def ur_programs(ctx: Context) -> Result:
         idle = RtfSampler(srv)
         time.sleep(3.0)
         idle_ticks = idle.stop()
-        ctx.say(f"  {n} worlds ({engine}), idle RTF {idle_ticks['rtf']} (load {_load()})")
+        priority = _engine_priority(srv)
+        ctx.say(
+            f"  {n} worlds ({engine}), idle RTF {idle_ticks['rtf']} (load {_load()}); "
+            f"engine priority {priority}"
+        )
         try:
             prog = run_programs(srv, addresses, ctx.say)
             ctx.say(f"  programs: {prog['ok']}/{n} ok, RTF {prog['rtf']}")
@@ -335,7 +351,8 @@ def ur_programs(ctx: Context) -> Result:
             )
     notes = [
         f"{n} worlds, engine {engine} on {ctx.device}, 60 Hz ticks, realtime; idle (3 s before "
-        f"the runs): RTF {idle_ticks['rtf']}, service CPU {idle_ticks['service_cpu']}; load 1m: "
+        f"the runs): RTF {idle_ticks['rtf']}, service CPU {idle_ticks['service_cpu']}; engine "
+        f"priority {priority} (the sim thread first); load 1m: "
         "the box's load average at the run's start→end (a shared box: read each figure beside it)",
         "programs: the registry's ur-rtde 1.6.5, RTDEControlInterface + RTDEReceiveInterface "
         "(default 500 Hz each) per world, one process each; p50/p99 over all programs' calls: "
@@ -352,6 +369,7 @@ def ur_programs(ctx: Context) -> Result:
     data = {
         "worlds": n,
         "engine": engine,
+        "engine_priority": priority,
         "idle": idle_ticks,
         "programs": prog,
         "receive": recv,

@@ -246,7 +246,7 @@ class Runtime:
         if restore and not await asyncio.to_thread(self._restore_at_start, batch, restore):
             batch.close()
             return
-        loop = SimLoop(batch, s.sim.mode)
+        loop = SimLoop(batch, s.sim.mode, priority=s.sim.engine_priority)
         loop.share.enabled, loop.share.max_wait_s = s.sim.ticks_first, s.sim.command_wait_s
         loop.randomizations.replace(self._restored_randomized)
         self.control = Control(loop)

@@ -25,8 +25,10 @@ import httpx
 import numpy as np
 import pytest
 
+from service.core.process.engine_priority import COMPANION_STEPS
 from service.core.sim.command_share import REQUESTS_NICE
 from tests.conftest import HOME, ROOT, Server, wait_for
+from tests.test_engine_priority import RAISED_LINE, REFUSED_LINE, may_raise_to, task_nices
 from tests.test_leases import XDIST_CONFTEST
 from tests.ur_judge import DASHBOARD, RTDE, RawRtde, ur_server
 
@@ -85,11 +87,39 @@ def test_ports_open_only_while_the_world_is_lent(ur) -> None:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="priority is per thread on Linux")
 def test_the_ur_thread_keeps_the_process_priority_when_requests_give_way(ur) -> None:
     """In real time the request thread gives the cores to the ticks (a nice step down); the
-    UR ports' thread does not: ur_rtde drops a connection 2.5 s after its last package."""
+    UR ports' thread does not: ur_rtde drops a connection 2.5 s after its last package. Where
+    the engine is raised (below), the UR thread is raised with it, COMPANION_STEPS, no more."""
     server, _ = ur
     base = os.getpriority(os.PRIO_PROCESS, os.getpid())  # the server started with ours
+    to = may_raise_to(base)
     assert os.getpriority(os.PRIO_PROCESS, server.process.pid) == min(19, base + REQUESTS_NICE)
-    assert httpx.get(f"{server.url}/v1/ur").json()["thread_nice"] == base
+    ur_nice = base if to is None else max(to, base - COMPANION_STEPS)
+    assert httpx.get(f"{server.url}/v1/ur").json()["thread_nice"] == ur_nice
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="priority is per thread on Linux")
+def test_the_engine_thread_runs_raised_in_real_time_when_permitted(ur) -> None:
+    """`--engine-priority auto` (the default): where the kernel lets this process raise a thread
+    (root, CAP_SYS_NICE, RLIMIT_NICE), the server's threads above the process's priority are
+    exactly the engine's (the sim thread: 4 native worlds step on it alone), at the raised nice
+    GET /v1/ur reports and the log names, and the UR ports' thread, below it; where it does
+    not, none is and the log says why."""
+    server, _ = ur
+    base = os.getpriority(os.PRIO_PROCESS, os.getpid())
+    to = may_raise_to(base)
+    status = httpx.get(f"{server.url}/v1/ur").json()
+    engine = status["engine_priority"]
+    kernel = task_nices(server.process.pid)
+    above = {tid: nice for tid, nice in kernel.items() if nice < base}
+    if to is None:
+        assert engine["permitted"] is False and not above and REFUSED_LINE in server.log()
+        return
+    assert engine["setting"] == "auto" and engine["raised"] and engine["raised_nice"] == to
+    assert len(engine["threads"]) == 1 and len(engine["companions"]) == 1
+    ur_thread = engine["companions"][0]["id"]
+    assert above == {engine["threads"][0]["id"]: to, ur_thread: max(to, base - COMPANION_STEPS)}
+    assert status["thread_nice"] == above[ur_thread]
+    assert f"{RAISED_LINE} {to} in real time" in server.log()
 
 
 def test_rtde_keeps_flowing_while_the_ticks_stop(ur) -> None:

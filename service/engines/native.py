@@ -28,6 +28,7 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from mjcf import SCENE_XML
+from service.core.process.engine_priority import threads_started_by
 from service.core.sim.batch import Batch, Renderable, Restorable, StateWrite
 from service.core.sim.packed_rows import PackedRows
 from service.core.sim.physics import (
@@ -125,7 +126,10 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         # MuJoCo keeps who sleeps there, not in the rows; writing a row wakes its body.
         sleep = self.robot.sleep
         model = _with_sleep(mjm) if sleep else mjm
-        self._b = mjbatch.Batch(model, nworld, nthread=self.nthread, persistent=sleep)
+        # its pool's threads (nthread - 1 beside the caller's) step with the loop's thread
+        self._b, self._pool = threads_started_by(
+            lambda: mjbatch.Batch(model, nworld, nthread=self.nthread, persistent=sleep)
+        )
         self._poses = PoseReader(mjm, nworld, self.nthread, self.robot.flange_site)
         self._qpos = self._b.bind("qpos")  # live views of the state rows
         self._qvel = self._b.bind("qvel")
@@ -380,6 +384,10 @@ class NativeBatch(HostMirror, Batch, Restorable, Renderable):
         The first call binds the fields and reads zeros."""
         ncon, nefc = self._b.bind("ncon"), self._b.bind("nefc")
         return int(ncon.sum()), int(nefc.max())
+
+    def stepping_ids(self) -> tuple[int, ...]:
+        """The pool's threads (the batch's SteppedBeside): they step beside the loop's thread."""
+        return self._pool
 
     def close(self) -> None:
         """Nothing to release: the pool's threads go with the object."""

@@ -254,5 +254,10 @@ class ShardedBatch(HostMirror, WorkerRecovery, Batch, Restorable, Supervised, Re
             shipment = self._staged.ship(shard, self._targets, self._velocity, self._starts[shard])
             self._conn(shard).send(("write_qpos", shipment, local, qpos))
 
+    def stepping_ids(self) -> tuple[int, ...]:
+        """The worker processes stepping shards now (SteppedBeside), rebuilt ones once swapped
+        in; a process's first thread, whose id is its pid, is the one that steps."""
+        return tuple(p.pid for p in self._procs if p.pid is not None)
+
     def close(self) -> None:
         self._stop_workers()

@@ -5,7 +5,9 @@ the same cores as the engine (the sim thread, the shard workers). Under a load o
 operating system shares the cores fairly between them, so each tick's engine work is cut into
 by command work and the tick ends late. Nothing but the scheduler can give the engine the first
 claim on a core; lowering the priority of the request-handling thread (a higher nice value) does
-that without privileges, where raising the engine's would need them (CAP_SYS_NICE, root).
+that without privileges, where raising the engine's needs them (CAP_SYS_NICE, root): where the
+process has them, engine_priority.py raises the engine too (against other processes, which a
+lower request thread cannot help with).
 
 Linux sets priority per thread (`setpriority` on the thread's id), and a thread starts with the
 priority of the thread that started it: the event loop's thread lowers itself after the sim

@@ -241,6 +241,17 @@ class SnapshotsBeside(Protocol):
 
 
 @runtime_checkable
+class SteppedBeside(Protocol):
+    """An engine that steps on threads or processes of its own beside the loop's thread (a
+    pool, shard workers): the loop raises their priority with its own in real time
+    (service/core/process/engine_priority.py)."""
+
+    def stepping_ids(self) -> tuple[int, ...]:
+        """The thread ids (this process) and process ids (workers) that step worlds now."""
+        ...
+
+
+@runtime_checkable
 class Renderable(Protocol):
     """An engine whose worlds cameras can see: between two ticks (on the loop's thread) it hands
     over the positions of the asked worlds, and the batch renderer draws them on a thread of

@@ -24,7 +24,8 @@ from typing import TypeVar
 import numpy as np
 
 from service.core.errors import NotPaused
-from service.core.sim.batch import Batch, TickWrites
+from service.core.process.engine_priority import EnginePriority, Setting
+from service.core.sim.batch import Batch, SteppedBeside, TickWrites
 from service.core.sim.command_desk import CommandDesk
 from service.core.sim.command_share import CommandShare
 from service.core.sim.device_turns import DeviceTurns
@@ -54,6 +55,7 @@ class SimLoop:
         batch: Batch,
         mode: Mode = Mode.REALTIME,
         sinks: tuple[SnapshotSink, ...] = (),
+        priority: Setting = "off",
     ):
         self.batch = batch
         self.spec = batch.spec
@@ -104,6 +106,9 @@ class SimLoop:
         )
         self.state_door = StateDoor(self._wake, self.commands, self._waiters, self.listeners, hooks)
         self.share = CommandShare(batch.tick_dt)  # ticks first: the commands' budget per tick
+        # In real time the threads that step run at a raised priority when permitted (`auto`).
+        beside = batch.stepping_ids if isinstance(batch, SteppedBeside) else tuple
+        self.priority = EnginePriority(priority, beside)
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -269,6 +274,7 @@ class SimLoop:
         cadence.restart()
         turns = self._turns
         while True:
+            self.priority.follow(self._mode is Mode.REALTIME)  # a call only when it changes
             with turns.loop_turn():  # the device's launches (service/core/sim/device_turns.py)
                 self._serve_requests()
             with self._wake:

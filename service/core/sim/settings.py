@@ -9,6 +9,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from service.core.process.engine_priority import Setting
 from service.core.sim.physics import DEFAULT_PHYSICS_DT
 from service.core.sim.scene_check import check_scene
 from service.core.sim.types import Mode
@@ -16,7 +17,7 @@ from service.core.sim.types import Mode
 
 class SimSettings(BaseModel):
     """The simulation (`--worlds`, `--scene`, `--mode`, `--control-hz`, `--physics-dt`,
-    `--ticks-first`, `--command-wait-s`)."""
+    `--ticks-first`, `--command-wait-s`, `--engine-priority`)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -42,6 +43,13 @@ class SimSettings(BaseModel):
         le=60,
         description="ticks first: a command that finds no turn beside the ticks within this "
         "many seconds is refused as busy (WebSocket error, HTTP 503), not run over their time",
+    )
+
+    engine_priority: Setting = Field(
+        "auto",
+        description="in real time, the threads that step the worlds run 10 nice steps above "
+        "the process when it may (root, CAP_SYS_NICE or RLIMIT_NICE): auto (the log says "
+        "which it was) or off",
     )
 
     @model_validator(mode="after")

@@ -224,6 +224,11 @@ class Endpoints:
         if self._thread is not None:
             self._thread.join(timeout=10)
 
+    @property
+    def thread_id(self) -> int | None:
+        """The UR thread's id (the kernel's), once it runs."""
+        return None if self._thread is None else self._thread.native_id
+
     def thread_nice(self) -> int | None:
         """The nice value the UR thread runs at (None: not running, or not Linux)."""
         tid = self._thread.native_id if self._thread is not None else None

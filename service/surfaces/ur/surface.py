@@ -135,6 +135,8 @@ class UrSurface:
             ep.begin_leases()
         self.endpoints = ep
         ep.start()
+        if ep.thread_id is not None:  # raised with the engine, below it (engine_priority.py)
+            loop.priority.add_companion(ep.thread_id)
         limits = [j.effort_limit for j in loop.spec.joints]
         watch = SafetyWatch(self.worlds, np.array(limits), loop.batch.tick_dt)
         table = _table_watch(self.worlds, ctx.control)
@@ -174,6 +176,8 @@ class UrSurface:
             "ports": {**addresses.PORTS, "rtde": addresses.RTDE_PORT},
             "leases": self._leases,
             "thread_nice": None if ep is None else ep.thread_nice(),
+            # what the threads that step the worlds run at (core/process/engine_priority.py)
+            "engine_priority": None if self._ctx is None else self._ctx.loop.priority.status(),
             "worlds": ep.status()
             if ep is not None
             else [{"world": w, "address": a} for w, a in self.addresses.items()],
