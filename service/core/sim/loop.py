@@ -251,13 +251,6 @@ class SimLoop:
                 self._wake.notify_all()  # a paused loop wakes to publish the tick it stopped at
         return fut
 
-    def _release_step_waiters(self) -> None:
-        """Resolve the `step` futures whose goal tick has been reached (sim thread)."""
-        with self._lock:
-            done = self._waiters.steps.reached(self._tick)
-        for fut in done:
-            fut.set_result(self._tick)
-
     def _resting(self) -> bool:
         """Paused with no tick under way or due (lock held, or the sim thread)."""
         return self._mode is Mode.PAUSED and not self._stepping and self._tick >= self._step_goal
@@ -340,7 +333,10 @@ class SimLoop:
         self.listeners.ticked(self.batch, now)
         if mode is Mode.PAUSED and self._tick >= self._step_goal:  # a step burst's last tick
             self._at_rest(now)
-        self._release_step_waiters()
+        with self._lock:
+            stepped = self._waiters.steps.reached(self._tick)
+        for fut in stepped:  # the `step` calls whose goal tick this is
+            fut.set_result(self._tick)
         self._rate.update(now, self._tick, self._mode)
         seconds = time.perf_counter() - t0
         if self._traj is not None:
