@@ -1,5 +1,5 @@
-"""Camera streams and binary (and big JSON) state streams on a taken-over socket
-(service/api/ws_bulk.py), against a real server.
+"""Camera streams and binary state streams on a taken-over socket (service/api/ws_bulk.py),
+against a real server.
 
 The websockets library's own client judges the protocol: whole messages, pings answered,
 permessage-deflate negotiated, pull requests read, a client's protocol error closed with the
@@ -160,56 +160,3 @@ def test_binary_state_stream_is_written_directly_with_its_acks_in_order(server: 
     assert [r["id"] for r in replies] == [0, 1, 2, 3, 4, None, 5]
     assert "text" in replies[5]["detail"] and "world" in json.dumps(replies[6])
     assert ticks == sorted(ticks) and ticks[-1] > ticks[0]
-
-
-def test_big_json_state_streams_are_written_directly_unless_compressed(tmp_path) -> None:
-    """A JSON /v1/ws socket of DIRECT_JSON_WORLDS worlds is taken over (its frames and acks,
-    in order, through the socket's own writer), a smaller one is not, and one whose client
-    negotiated permessage-deflate keeps the server's compressing path: all three read the
-    same frame of the same tick."""
-    from service.api.ws import DIRECT_JSON_WORLDS as N
-
-    args = ("--engine", "mujoco", "--ws-compression")
-    with serve(worlds=N, mode="paused", extra_args=args, log_dir=tmp_path) as srv:
-        before = _metric(srv, "armfleet_streams_direct_total")
-        every, fewer = (
-            f"{srv.ws_url}/v1/ws?worlds=0-{N - 1}",
-            f"{srv.ws_url}/v1/ws?worlds=1-{N - 1}",
-        )
-        with (
-            connect(every, compression=None, max_size=None) as direct,
-            connect(every, compression="deflate", max_size=None) as deflated,
-            connect(fewer, compression=None, max_size=None) as small,
-        ):
-            assert "permessage-deflate" in deflated.response.headers["Sec-WebSocket-Extensions"]
-            for i in range(3):
-                direct.send(json.dumps({"op": "increment", "world": 2, "joint": "elbow_joint",
-                                        "delta": 0.01, "id": i}))  # fmt: skip
-            direct.send(
-                json.dumps({"op": "increment", "world": N, "joint": "elbow_joint", "id": 3})
-            )
-            replies, first = [], None
-            while len(replies) < 4 or first is None:
-                msg = json.loads(direct.recv(timeout=10))
-                if msg["op"] == "states":
-                    first = first or msg
-                else:
-                    replies.append(msg)
-            assert direct.ping().wait(10)  # answered by the taken-over socket
-            httpx.post(f"{srv.url}/v1/sim/step", json={"ticks": 2}, timeout=30).raise_for_status()
-            tick = first["tick"] + 2
-            frames = [_states_of(ws, tick) for ws in (direct, deflated, small)]
-        assert _metric(srv, "armfleet_streams_direct_total") == before + 1
-    assert [r["op"] for r in replies] == ["ack"] * 3 + ["error"]
-    assert [r["id"] for r in replies] == [0, 1, 2, 3] and "world" in replies[3]["detail"]
-    assert frames[0] == frames[1]  # taken over or deflated: the same text
-    assert frames[0]["worlds"] == list(range(N)) and frames[2]["worlds"] == list(range(1, N))
-    assert frames[2]["position"] == frames[0]["position"][1:]
-
-
-def _states_of(ws, tick: int) -> dict:
-    """The first state frame of `tick` or later on `ws`."""
-    while True:
-        msg = json.loads(ws.recv(timeout=10))
-        if msg.get("op") == "states" and msg["tick"] >= tick:
-            return msg

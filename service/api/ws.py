@@ -7,10 +7,7 @@ the newest state frame (older undelivered frames are replaced, so memory stays b
 Binary /v1/ws sockets (10 MB a frame at 65,536 worlds) are taken over once accepted, as the
 camera streams are (service/api/ws_bulk.py): a thread of the socket's own writes each frame
 straight from the frame thread's buffer, where the ASGI send copied it twice on the event
-loop, holding the interpreter that the simulation loop needs. JSON /v1/ws sockets of
-`DIRECT_JSON_WORLDS` worlds or more are taken over too (a 500-world frame is 200 KB: the ASGI
-send decoded it to text and encoded, framed and buffered it again, about as much CPU on the
-event loop as serialising it), unless the client negotiated compression: it keeps it.
+loop, holding the interpreter that the simulation loop needs.
 """
 
 from __future__ import annotations
@@ -42,9 +39,6 @@ from service.core.streams.hub import StreamHub, Subscription
 router = APIRouter(prefix="/v1")
 
 MAX_RATE = 1000.0
-# JSON batch sockets of this many worlds or more (frames of ~25 KB and up) are written by a
-# thread of their own; smaller ones, many of them perhaps, share the event loop's writes.
-DIRECT_JSON_WORLDS = 64
 _MAX_QUEUED_ACKS = 256  # a client that never reads its acks stops being read (backpressure)
 
 
@@ -126,9 +120,7 @@ async def batch_socket(
         def render_json(s: Snapshot) -> bytes:
             return wire.batch_frame(s, ids, names, briefs(ids), with_entities)
 
-        fmt = FrameFormat.batch(tuple(names), with_entities)
-        big = len(ids) >= DIRECT_JSON_WORLDS
-        return Stream(ids, rate, fmt, render_json, direct=big, keep_compression=True)
+        return Stream(ids, rate, FrameFormat.batch(tuple(names), with_entities), render_json)
 
     await _serve(ws, stream)
 
@@ -225,8 +217,7 @@ class Stream:
     skip: Callable[[Snapshot], bool] | None = None
     default_world: int | None = None
     source: str = WS
-    direct: bool = False  # taken over (ws_bulk) where the server allows
-    keep_compression: bool = False  # ... but not where the client negotiated compression
+    direct: bool = False
 
 
 async def refuse(ws: WebSocket, grant: access.Grant, code: int, reason: str) -> None:
@@ -263,11 +254,7 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
     control = control.acting_for(grant.caller)  # each command checked for its worlds
     await ws.accept(subprotocol=grant.subprotocol)
     # At once after the accept (no await between): what the client sends next is the link's.
-    link = (
-        ws_bulk.link(ws, max_incoming=None, keep_compression=stream.keep_compression)
-        if stream.direct
-        else ws_bulk.AsgiSocket(ws)
-    )
+    link = ws_bulk.link(ws, max_incoming=None) if stream.direct else ws_bulk.AsgiSocket(ws)
     hub.streams_direct += link.direct
 
     async def close(code: int, reason: str) -> None:

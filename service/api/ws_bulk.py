@@ -71,14 +71,10 @@ class RememberOwner:
         await self.app(scope, receive, send)
 
 
-def take_over(
-    scope: Scope, max_incoming: int | None = MAX_INCOMING, keep_compression: bool = False
-) -> BulkSocket | None:
+def take_over(scope: Scope, max_incoming: int | None = MAX_INCOMING) -> BulkSocket | None:
     """The accepted WebSocket of `scope` as a BulkSocket, or None where the server is not
     uvicorn's websockets sans-io protocol (or the connection is already closing).
     `max_incoming`: the longest message the client may send (None: the server's own limit).
-    `keep_compression`: None too where the client negotiated an extension (permessage-deflate,
-    `--ws-compression`), whose frames the server's own path compresses and ours would not.
     Call it right after the accept, with no await between: what the client sends after that
     reaches the BulkSocket alone."""
     owner = scope.get(SCOPE_KEY)
@@ -92,18 +88,14 @@ def take_over(
     raw = transport.get_extra_info("socket")
     if raw is None or transport.is_closing() or owner.close_sent:
         return None
-    if keep_compression and owner.conn.extensions:
-        return None
     limit = owner.conn.max_message_size if max_incoming is None else max_incoming
     return BulkSocket(owner, raw.fileno(), limit)
 
 
-def link(
-    ws: WebSocket, max_incoming: int | None = MAX_INCOMING, keep_compression: bool = False
-) -> BulkSocket | AsgiSocket:
+def link(ws: WebSocket, max_incoming: int | None = MAX_INCOMING) -> BulkSocket | AsgiSocket:
     """The accepted `ws` taken over where the server allows (`take_over`), else its ASGI
     stand-in; both make the same calls."""
-    return take_over(ws.scope, max_incoming, keep_compression) or AsgiSocket(ws)
+    return take_over(ws.scope, max_incoming) or AsgiSocket(ws)
 
 
 def frame_header(length: int, opcode: int = Opcode.BINARY.value) -> bytes:
