@@ -164,6 +164,7 @@ def _array(values: np.ndarray, sliced: bool) -> bytes:
 # The columns of a JSON frame that commands, faults or a new selection change, and ticks do not:
 # from one frame to the next they are usually the same numbers, whose text is kept here.
 _STEADY_TEXT: dict[tuple[str, str, tuple[int, ...]], tuple[bytes, bytes]] = {}
+_STEADY_KEYS = 48  # columns of 16 selection sizes at most; then it starts again
 
 
 def _steady_array(name: str, values: np.ndarray, sliced: bool) -> bytes:
@@ -177,6 +178,8 @@ def _steady_array(name: str, values: np.ndarray, sliced: bool) -> bytes:
     if last is not None and last[0] == raw:
         return last[1]
     text = _array(values, sliced)
+    if last is None and len(_STEADY_TEXT) >= _STEADY_KEYS:  # sockets of many sizes came and went
+        _STEADY_TEXT.clear()
     _STEADY_TEXT[key] = (raw, text)
     return text
 
