@@ -352,6 +352,8 @@ def measure(ask: Ask = Ask(), say: Callable[[str], None] = print) -> dict[str, A
         "machine": machine,
         "loadavg_at_end": [round(x, 2) for x in with_load] if with_load else None,
         "rtf_goal": RTF_GOAL,
+        # how its servers ran (this changed: they used to start paused, see _Servers)
+        "servers_start": "realtime, paused at once and between runs",
         "timing": timing.__dict__,
         "limit": limit,
         "engines": results,
