@@ -19,8 +19,12 @@ here, with the model as served:
 3. ``--check``: the server that held each answer, kept up paused meanwhile, runs it again for
    10 s after every engine is measured.
 
-Servers start paused and are paused between runs, so one kept for the check takes nothing
-from the runs after it; a server start (about 2 s native, 8 s Warp on a quiet 2-core box)
+Servers start as `armfleet serve` starts by default, in realtime mode, so that the event loop
+and the threads it starts (the frame thread, the sockets' writers) give the cores to the ticks
+first as a user's service does (core/process/priority.py: only a service started in realtime
+lowers them; one started paused, as this command's were, streamed at the ticks' priority), and
+are paused at once and between runs, so one kept for the check takes nothing from the runs
+after it; a server start (about 2 s native, 8 s Warp on a quiet 2-core box)
 is what a run costs beside its window, so the probe's server runs the first realtime window
 too.
 
@@ -176,8 +180,9 @@ def realtime_on(server: common.Served, engine: Engine, window: float, timing: Ti
 
 
 class _Servers:
-    """The servers of one command: each started paused; the one holding an engine's answer
-    stays up (paused) for `--check`, the others stop as soon as they are measured."""
+    """The servers of one command: each started in realtime mode (as users start it: see the
+    module docstring) and paused at once; the one holding an engine's answer stays up (paused)
+    for `--check`, the others stop as soon as they are measured."""
 
     def __init__(self) -> None:
         self._stacks: dict[int, contextlib.ExitStack] = {}
@@ -185,8 +190,9 @@ class _Servers:
     def start(self, engine: Engine, n: int) -> common.Served:
         stack = contextlib.ExitStack()
         env = {"ARMFLEET_ENGINE": engine.engine}
-        server = stack.enter_context(common.served(n, "paused", engine.device, env))
+        server = stack.enter_context(common.served(n, "realtime", engine.device, env))
         self._stacks[id(server)] = stack
+        asyncio.run(_switch(server, "paused"))
         return server
 
     def stop(self, server: common.Served | None) -> None:
@@ -346,6 +352,8 @@ def measure(ask: Ask = Ask(), say: Callable[[str], None] = print) -> dict[str, A
         "machine": machine,
         "loadavg_at_end": [round(x, 2) for x in with_load] if with_load else None,
         "rtf_goal": RTF_GOAL,
+        # how its servers ran (this changed: they used to start paused, see _Servers)
+        "servers_start": "realtime, paused at once and between runs",
         "timing": timing.__dict__,
         "limit": limit,
         "engines": results,

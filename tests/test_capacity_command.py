@@ -54,6 +54,7 @@ def test_capacity_prints_and_writes_the_same_answer(tmp_path: Path) -> None:
     # the table the docs show a result file by (bench.figures.section_table)
     assert [r["worlds"] for r in result["rows"]] == [round(limit["worlds"]), native["worlds"]]
     assert result["command"][1:3] == ["capacity", "--quick"]
+    assert result["servers_start"].startswith("realtime")  # as `armfleet serve` starts
 
 
 def test_an_unknown_engine_is_refused_by_name() -> None:

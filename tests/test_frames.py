@@ -97,6 +97,21 @@ def test_large_json_frames_are_sliced_without_changing_a_byte(batch, monkeypatch
     _check_same_bytes(batch, np.arange(NWORLD))
 
 
+def test_json_frames_reuse_steady_columns_only_while_bit_for_bit_the_same(batch):
+    """Targets, faults and world ids keep last frame's text while their bytes are unchanged
+    (frames._steady_array); a target moved by one ulp, or another selection, is written anew."""
+    batch.step(1)
+    _check_same_bytes(batch, IDS)
+    batch.step(1)
+    _check_same_bytes(batch, IDS)  # the same targets: last frame's text, the same bytes
+    targets = batch.snapshot().target[IDS]
+    targets[1, 2] = np.nextafter(targets[1, 2], np.inf)
+    batch.apply_targets(IDS, targets)
+    batch.step(1)
+    _check_same_bytes(batch, IDS)
+    _check_same_bytes(batch, IDS[:2])  # another selection of the same width
+
+
 def test_binary_frames_end_with_each_worlds_safety_mode(batch):
     """Layout 2: the safety block after the rows, the same bytes packed or cut from the
     snapshot; the client names the modes, and reads a layout-1 frame (an older server's: no

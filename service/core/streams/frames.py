@@ -161,6 +161,29 @@ def _array(values: np.ndarray, sliced: bool) -> bytes:
     return b"[" + b",".join(parts) + b"]"
 
 
+# The columns of a JSON frame that commands, faults or a new selection change, and ticks do not:
+# from one frame to the next they are usually the same numbers, whose text is kept here.
+_STEADY_TEXT: dict[tuple[str, str, tuple[int, ...]], tuple[bytes, bytes]] = {}
+_STEADY_KEYS = 48  # columns of 16 selection sizes at most; then it starts again
+
+
+def _steady_array(name: str, values: np.ndarray, sliced: bool) -> bytes:
+    """`_array`'s text of `values`, a column that seldom changes between frames: the text of
+    the last frame's when its bytes are the same (orjson writes the same array the same way;
+    ~80 us of orjson for 500 worlds' float64 targets against a 28 KB compare). The frame
+    thread and each helper process keep their own."""
+    key = (name, values.dtype.str, values.shape)
+    raw = values.tobytes()
+    last = _STEADY_TEXT.get(key)
+    if last is not None and last[0] == raw:
+        return last[1]
+    text = _array(values, sliced)
+    if last is None and len(_STEADY_TEXT) >= _STEADY_KEYS:  # sockets of many sizes came and went
+        _STEADY_TEXT.clear()
+    _STEADY_TEXT[key] = (raw, text)
+    return text
+
+
 def json_extra(nworld: int) -> dict[str, Any]:
     """What `wire.batch_frame` ends with for `nworld` worlds in their usual state: each world's
     safety mode NORMAL, no trajectory running (the hub fills in what it knows)."""
@@ -191,11 +214,15 @@ def json_bytes(
     """`wire.batch_frame`'s bytes from packed rows plus the host columns (a module function:
     the helper process runs it too)."""
     head = wire.dumps({"op": "states", "tick": tick, "name": names})[:-1]
-    parts = [head, b',"worlds":', _array(ids, sliced), b',"sim_time":', _array(sim_time, sliced)]
+    parts = [head, b',"worlds":', _steady_array("worlds", ids, sliced)]
+    parts += [b',"sim_time":', _array(sim_time, sliced)]
     for name, cols in _JSON_COLUMNS:
-        values = target if cols is None else rows[:, cols]
-        parts += [b',"', name.encode(), b'":', _array(values, sliced)]
-    parts += [b',"faults":', _array(faults, sliced)]
+        if cols is None:
+            text = _steady_array(name, target, sliced)
+        else:
+            text = _array(rows[:, cols], sliced)
+        parts += [b',"', name.encode(), b'":', text]
+    parts += [b',"faults":', _steady_array("faults", faults, sliced)]
     for name, value in (json_extra(len(ids)) if extra is None else extra).items():
         parts += [b',"', name.encode(), b'":', wire.dumps(value)]
     return b"".join((*parts, b"}"))
