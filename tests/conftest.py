@@ -135,6 +135,7 @@ LONGEST_FIRST = (
     "test_batch_contract.py",
     "test_ray_hosts.py",
     "test_ros_node.py",
+    "test_ros_node_supervision.py",
     "test_params.py",
     "test_contract.py",
     "test_ray_shards.py",
