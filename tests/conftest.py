@@ -13,6 +13,7 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -41,6 +42,13 @@ ROOT = Path(__file__).resolve().parents[1]
 # Tests that build `Settings` in this process read the environment without this
 # (`hermetic_settings`).
 os.environ.setdefault("ARMFLEET_ENGINE", "mujoco")
+
+# pytest caches each test module as it rewrote its asserts (tests/__pycache__/*-pytest-*.pyc,
+# ignored by git, written atomically so that xdist workers may race) unless Python is told not
+# to write bytecode, as PYTHONDONTWRITEBYTECODE does in this project's shared work sessions:
+# then every worker rewrote and compiled all ~110 test modules at each run, about 3 s of CPU a
+# worker. scripts/dev.py byte-compiles the sources regardless, for the same reason.
+sys.dont_write_bytecode = False
 
 SPEC = load_robot().spec
 JOINTS: list[str] = list(SPEC.names)
@@ -135,6 +143,7 @@ LONGEST_FIRST = (
     "test_batch_contract.py",
     "test_ray_hosts.py",
     "test_ros_node.py",
+    "test_ros_node_supervision.py",
     "test_params.py",
     "test_contract.py",
     "test_ray_shards.py",
