@@ -47,6 +47,7 @@ def test_the_tcp_pose_is_mujocos_flange_and_ik_round_trips(paused) -> None:
         state = http.get("/v1/worlds/1/state").json()
         tcp = http.get("/v1/worlds/1/tcp").json()
         assert tcp["tick"] == state["tick"] and tcp["tcp"] == tcp["flange"]  # no offset yet
+        assert tcp["safety_mode"] == state["safety_mode"] == "NORMAL"
         pos, rot = _in_world(tcp, tcp["flange"])
         assert np.abs(pos - state["flange"]["position"]).max() < 1e-6
         assert np.abs(rot - _rot(state["flange"]["quaternion"])).max() < 1e-6

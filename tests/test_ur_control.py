@@ -198,9 +198,10 @@ def test_servoj_streamed_at_500_hz_is_followed(arm) -> None:
 
 
 def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[str, object]:
-    """The world's safety mode as RTDE, the Dashboard, REST, the WebSocket state frames (of
-    a tick after the REST read: a frame is stamped when its tick is published), GET /v1/ur
-    and the Python client (REST, and the binary batch frames it parses) each report it."""
+    """The world's safety mode as RTDE, the Dashboard, REST (state and TCP), the WebSocket
+    state frames (of a tick after the REST read: a frame is stamped when its tick is
+    published), GET /v1/ur and the Python client (REST, and the binary batch frames it
+    parses) each report it."""
     rest = httpx.get(f"{server.url}/v1/worlds/{world}/state").json()  # as of now
     with connect(f"{server.ws_url}/v1/ws/worlds/{world}") as ws:
         while (frame := json.loads(ws.recv(timeout=5)))["op"] != "state" or (
@@ -222,6 +223,7 @@ def _safety_on_every_surface(server: Server, r, dash, world: int = 0) -> dict[st
         "rtde": (r.getSafetyMode(), bool(r.getSafetyStatusBits() & (1 << 2))),
         "dashboard": (dash.safetystatus(), dash.safetymode()),
         "rest": rest["safety_mode"],
+        "tcp": httpx.get(f"{server.url}/v1/worlds/{world}/tcp").json()["safety_mode"],
         "ws": (frame["safety_mode"], batch["safety_mode"][batch["worlds"].index(world)]),
         "ur": httpx.get(f"{server.url}/v1/ur").json()["worlds"][world]["safety_mode"],
         "client": rows.world(world).safety_mode,
@@ -237,6 +239,7 @@ def _reported_everywhere(mode: str, rtde_mode: int) -> dict[str, object]:
         "rtde": (rtde_mode, mode == "PROTECTIVE_STOP"),
         "dashboard": (f"Safetystatus: {mode}", f"Safetymode: {mode}"),
         "rest": mode,
+        "tcp": mode,
         "ws": (mode, mode),
         "ur": mode,
         "client": mode,
