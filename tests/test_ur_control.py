@@ -281,7 +281,7 @@ def test_driving_through_the_table_is_a_protective_stop_reported_everywhere_and_
             f"{server.url}/v1/worlds/0/targets", json={"name": ["elbow_joint"], "position": [1.0]}
         )
         assert bad.status_code == 409 and "protective" in bad.json()["detail"], bad.text
-        assert "into the table" in server.log()  # the service log says why
+        assert "into table_top" in server.log()  # the service log says why
         with pytest.raises(RuntimeError, match="5s after"):  # within 5 s: the robot's refusal
             dash.unlockProtectiveStop()
         assert np.abs(np.array(r.getActualTCPPose())[:3] - held[:3]).max() < 1e-3  # it holds

@@ -13,13 +13,17 @@ of the world (a new episode: the world is back at home).
 
 The modes are UR's numbers (RTDE safety_mode: 1 NORMAL, 3 PROTECTIVE_STOP) and names. The
 5 s are counted on the wall clock, as the robot's are: an operator's rule, not physics.
-Thread-safe: the UR event loop, command callers and the sim thread all read it.
+Thread-safe: the UR event loop, command callers and the sim thread all read it. Who must act
+on a stop besides the core's refusal (the UR surface ends the world's control script) listens
+with `on_stop`.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -28,6 +32,8 @@ from service.core.errors import ProtectiveStopped
 from service.core.sim.batch import Batch
 from service.core.sim.loop_types import SnapshotSink
 from service.core.sim.types import Snapshot
+
+log = logging.getLogger("armfleet.safety")
 
 __all__ = ["NORMAL", "PROTECTIVE_STOP", "UNLOCK_AFTER_S", "SafetyTable"]
 
@@ -46,6 +52,12 @@ class SafetyTable(SnapshotSink):
         self._why: dict[int, str] = {}
         self.versions = np.zeros(nworld, dtype=np.int64)  # bumped at every change of a world
         self._lock = threading.Lock()
+        self._on_stop: tuple[Callable[[int, str], None], ...] = ()
+
+    def on_stop(self, listener: Callable[[int, str], None]) -> None:
+        """Call `listener(world, why)` after every stop, on the stopping thread (quick: hand
+        real work to a thread or event loop of one's own)."""
+        self._on_stop = (*self._on_stop, listener)
 
     def modes(self) -> np.ndarray:
         """Every world's mode (nworld,) int8, a copy (a snapshot's `safety`)."""
@@ -63,7 +75,8 @@ class SafetyTable(SnapshotSink):
             return self._why.get(world)
 
     def stop(self, world: int, why: str) -> bool:
-        """Protective-stop `world`; False if it already was (the first cause is kept)."""
+        """Protective-stop `world`; False if it already was (the first cause is kept). Only
+        the safety commands call it (core/commands/safety_stop.py: the arm is held first)."""
         with self._lock:
             if self._mode[world] == PROTECTIVE_STOP:
                 return False
@@ -71,7 +84,16 @@ class SafetyTable(SnapshotSink):
             self._at[world] = time.monotonic()
             self._why[world] = why
             self.versions[world] += 1
-            return True
+        for listener in self._on_stop:
+            try:
+                listener(world, why)
+            except Exception:  # a listener must never cost the stop itself
+                log.exception("protective stop listener %r failed", listener)
+        return True
+
+    def age(self, world: int) -> float:
+        """Seconds since `world`'s last stop (wall clock, as the unlock rule counts)."""
+        return time.monotonic() - float(self._at[world])
 
     def unlock(self, world: int) -> bool:
         """Back to NORMAL; False (nothing changed) while the stop is younger than
