@@ -123,20 +123,31 @@ def _flange_in_base(st: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_forward_kinematics_equals_mujocos_flange_and_ik_round_trips(arm) -> None:
-    """getForwardKinematics(q, tcp) with a non-zero TCP: ur_rtde 1.6.5 sends an all-zero TCP's
-    twelve values under its six-value recipe (a package the server refuses, see the guide), so
-    the flange is read through a TCP that only turns about z."""
+    """getForwardKinematics() of the current pose, (q, tcp) and (q, zero TCP) against MuJoCo's
+    flange. ur-rtde 1.6.5 sends an all-zero TCP as q's command with the six zeros past its
+    recipe's fields: armfleet reads the package by its recipe, as a controller does, and the
+    script's get_forward_kin(q, tcp) takes the TCP from input registers 6..11 as last written
+    (the guide says so): zero after a call that wrote a zero TCP there, the last TCP sent
+    otherwise."""
     c, _r, _, server = arm
     assert c.moveJ([0.5, -1.2, 1.0, -1.3, -1.4, 0.4], 1.0, 2.0)
     wait_for(lambda: c.isSteady(), "steady")
     st = httpx.get(f"{server.url}/v1/worlds/0/state").json()
     q = np.asarray(st["position"][:6], np.float32).astype(np.float64)
     pos, rot = _flange_in_base(st)
-    flange = np.array(c.getForwardKinematics(q.tolist(), [0.0] * 5 + [0.3]))
+    # the current pose, the active TCP (zero): a later tick than the state's, the servos
+    # settling by micrometres
+    np.testing.assert_allclose(c.getForwardKinematics()[:3], pos, atol=1e-4)
+    flange = np.array(c.getForwardKinematics(q.tolist(), [1e-300] + [0.0] * 5))
     np.testing.assert_allclose(flange[:3], pos, atol=1e-6)
+    zero = np.array(c.getForwardKinematics(q.tolist(), [0.0] * 6))  # 12 values, 6-value recipe
+    np.testing.assert_allclose(zero, flange, atol=1e-12)
     tcp = [0.01, -0.02, 0.15, 0.0, 0.0, 0.3]
     fk = np.array(c.getForwardKinematics(q.tolist(), tcp))
     np.testing.assert_allclose(fk[:3], pos + rot @ tcp[:3], atol=1e-6)
+    stale = np.array(c.getForwardKinematics(q.tolist(), [0.0] * 6))  # registers 6..11: tcp
+    np.testing.assert_allclose(stale, fk, atol=1e-12)
+    assert "the rest ignored" in server.log()
     assert c.setTcp(tcp)  # IK is of the active TCP, as the script's get_inverse_kin
     try:
         q_ik = np.array(c.getInverseKinematics(fk.tolist(), q.tolist()))
