@@ -9,7 +9,12 @@ commanded target and not the contact force); this module decides *when* and *who
 When: after every tick, on the sim thread, on the targets as of every accepted command
 (`pending_targets`: what the next tick will be handed, the running trajectories' latest samples
 included), for the worlds whose arm targets changed since the last check; all of them batched
-in one call of `Clearance.depth`. A world whose new target reaches deeper than `ALLOWED_DEPTH`
+in one call of `Clearance.depth`, but for those it cannot have brought that near: a point of
+the arm moves at most `REACH` per radian of a joint (`FINGER_REACH` of the gripper), so a
+world last checked `d` clear of everything is measured again only once its targets (and its
+gripper) moved enough to close that gap (a world stepping along a trajectory far from the
+table is measured every few ticks, one next to it every tick; exact, never a miss). A world
+whose new target reaches deeper than `ALLOWED_DEPTH`
 into an obstacle *and* deeper than its last checked target is protective-stopped: the
 `ProtectiveStop` command holds the arm where it is (its actual angles at the latest snapshot)
 and stops its trajectory in the same step as the mode changes, before the next tick takes the
@@ -37,6 +42,8 @@ __all__ = ["SOURCE", "ClearanceWatch", "watch_clearance"]
 log = logging.getLogger("armfleet.safety")
 SOURCE = "safety"  # the source label of the stops it raises (metrics, recordings)
 ARM = 6  # the arm's joints come first; the gripper's finger_joint is next
+REACH = 2.0  # m: no point of the arm or gripper is farther than this from an arm joint's axis
+FINGER_REACH = 0.2  # m: nor from the gripper's driving joint, its linkage included
 
 
 class ClearanceWatch(SnapshotSink):
@@ -49,23 +56,32 @@ class ClearanceWatch(SnapshotSink):
         self._all = np.arange(nworld)
         self._last = np.full((nworld, ARM), np.nan)  # arm targets at the last check
         self._depth = np.full(nworld, -np.inf)  # their depth [m]
-        self.checked = 0  # world checks so far (the bench reads the cost per check)
+        self._opening = np.zeros(nworld)  # the gripper's opening then [rad]
+        self.checked = 0  # worlds measured so far
+        self.spared = 0  # worlds whose targets changed but could not have come near enough
 
     def on_tick(self, batch: Batch, now: float) -> None:
         loop = self.control.loop
         arm = loop.commands.pending_targets(self._all)[:, :ARM]
-        moved = np.flatnonzero((arm != self._last).any(axis=1))
-        if moved.size == 0:
+        changed = (arm != self._last).any(axis=1)
+        if not changed.any():
             return
         latest = loop.latest
-        opening = None
-        if latest.position.shape[1] > ARM:  # the gripper, as it is (clearance.py says why)
-            opening = np.asarray(latest.position[moved, ARM], np.float64)
-        depth, geom, obstacle = self.clearance.depth(arm[moved], opening)
+        gripper = latest.position.shape[1] > ARM  # as it is (clearance.py says why)
+        opening = np.asarray(latest.position[:, ARM], np.float64) if gripper else self._opening
+        came = REACH * np.abs(arm - self._last).sum(axis=1)
+        came += FINGER_REACH * np.abs(opening - self._opening)
+        near = ~(came < ALLOWED_DEPTH - self._depth)  # never checked: nan, near
+        moved = np.flatnonzero(changed & near)
+        self.spared += int(changed.sum()) - int(moved.size)
+        if moved.size == 0:
+            return
+        depth, geom, obstacle = self.clearance.depth(arm[moved], opening[moved])
         self.checked += int(moved.size)
         deeper = (depth > ALLOWED_DEPTH) & (depth > self._depth[moved])
         self._last[moved] = arm[moved]
         self._depth[moved] = depth
+        self._opening[moved] = opening[moved]
         if not deeper.any():
             return
         safety = loop.safety

@@ -1,15 +1,18 @@
 """Each world's safety mode: NORMAL, or PROTECTIVE_STOP until it is unlocked.
 
-Why in the core and not in the UR surface that raises it: a protective stop is a state of the
-world, not of one connection. Every surface reports it (the world's state over REST and the
-WebSocket, RTDE's safety_mode and status bits, the Dashboard's safetystatus, `GET /v1/ur`),
-and every surface's commands that would move the arm are refused while it holds (`Control.run`,
-409), so a REST client cannot drive an arm that a UR program just had stopped. What raises a
-stop is the robot's own safety system, watched by the UR surface (surfaces/ur/safety.py: a
-joint at its torque limit, a commanded target through the table); what clears it is the
-Dashboard's `unlock protective stop`, 5 s after the stop at the earliest (the robot's rule:
-the Dashboard answers "Cannot unlock protective stop until 5s after occurrence"), or a reset
-of the world (a new episode: the world is back at home).
+Why in the core: a protective stop is a state of the world, not of one connection. Every
+surface reports it (the world's state and TCP over REST, the WebSocket, RTDE's safety_mode and
+status bits, the Dashboard's safetystatus, `GET /v1/ur`), and every surface's commands that
+would move the arm are refused while it holds (`Control.run`, 409), so a REST client cannot
+drive an arm that a UR program just had stopped. What raises a stop is the robot's safety
+system: the core's clearance watch on every world (core/commands/clearance_watch.py: a
+commanded target into a fixed obstacle), and on worlds with UR ports the UR surface
+(surfaces/ur/safety.py: a joint at its torque limit; triggerProtectiveStop), each through the
+`protective_stop` command (core/commands/safety_stop.py: the arm held in the same step). What
+clears it is an unlock 5 s after the stop at the earliest (the Dashboard's `unlock protective
+stop`, or `unlock_protective_stop` over REST and the WebSocket; the robot's rule: "Cannot
+unlock protective stop until 5s after occurrence"), or a reset of the world (a new episode:
+the world is back at home).
 
 The modes are UR's numbers (RTDE safety_mode: 1 NORMAL, 3 PROTECTIVE_STOP) and names. The
 5 s are counted on the wall clock, as the robot's are: an operator's rule, not physics.
