@@ -316,3 +316,23 @@ def test_each_capsule_against_each_fixed_obstacle_is_mujocos_own_contact_depth()
                     assert depth >= full.radius[c0] - 1e-9, (obstacle, name, q)
     print(f"{compared} capsule contacts, {same} of MuJoCo's very depth")
     assert compared > 100 and same > 0.6 * compared  # the rest: under a top (the column)
+
+
+def test_the_depth_changes_no_faster_than_the_reach_the_watch_skips_by() -> None:
+    """The clearance watch measures a world again only once its joints moved enough to close
+    its last clearance (`reach` · |dq| + `finger_reach` · |d opening|): at random poses and
+    steps, the depth never changes by more than that bound, and somewhere it comes within a
+    few times of it (a bound far too loose would have the watch measure for nothing)."""
+    clearance = Clearance.of_model(ROBOT.mjm, ARM, KIN, ROBOT.spec.names[6])
+    assert clearance is not None
+    rng = np.random.default_rng(3)
+    q = np.array(ROBOT.spec.home[:6]) + rng.uniform(-1.5, 1.5, (3000, 6))
+    dq = rng.normal(0.0, 0.03, (3000, 6)) * (rng.random((3000, 1)) < 0.5)  # some steps: fingers
+    opening = rng.uniform(0.0, 0.7, 3000)
+    step = rng.normal(0.0, 0.05, 3000)
+    after = np.clip(opening + step, 0.0, 0.7)
+    before = clearance.depth(q, opening)[0]
+    moved = clearance.depth(q + dq, after)[0]
+    bound = np.abs(dq) @ clearance.reach + clearance.finger_reach * np.abs(after - opening)
+    assert (np.abs(moved - before) <= bound + 1e-12).all()
+    assert (np.abs(moved - before) / bound).max() > 0.3  # met within a few times somewhere

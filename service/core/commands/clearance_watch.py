@@ -10,8 +10,9 @@ When: after every tick, on the sim thread, on the targets as of every accepted c
 (`pending_targets`: what the next tick will be handed, the running trajectories' latest samples
 included), for the worlds whose arm targets changed since the last check; all of them batched
 in one call of `Clearance.depth`, but for those it cannot have brought that near: a point of
-the arm moves at most `REACH` per radian of a joint (`FINGER_REACH` of the gripper), so a
-world last checked `d` clear of everything is measured again only once its targets (and its
+the arm moves at most `Clearance.reach[j]` per radian of joint j (`finger_reach` of the
+gripper), and a distance to a convex obstacle changes by no more than the point moved, so a
+world last measured `d` clear of everything is measured again only once its targets (and its
 gripper) moved enough to close that gap (a world stepping along a trajectory far from the
 table is measured every few ticks, one next to it every tick; exact, never a miss). A world
 whose new target reaches deeper than `ALLOWED_DEPTH`
@@ -37,13 +38,11 @@ from service.core.sim.batch import Batch
 from service.core.sim.loop_types import SnapshotSink
 from service.core.sim.safety import NORMAL
 
-__all__ = ["SOURCE", "ClearanceWatch", "watch_clearance"]
+__all__ = ["SOURCE", "ClearanceWatch", "due", "watch_clearance"]
 
 log = logging.getLogger("armfleet.safety")
 SOURCE = "safety"  # the source label of the stops it raises (metrics, recordings)
 ARM = 6  # the arm's joints come first; the gripper's finger_joint is next
-REACH = 2.0  # m: no point of the arm or gripper is farther than this from an arm joint's axis
-FINGER_REACH = 0.2  # m: nor from the gripper's driving joint, its linkage included
 
 
 class ClearanceWatch(SnapshotSink):
@@ -69,10 +68,9 @@ class ClearanceWatch(SnapshotSink):
         latest = loop.latest
         gripper = latest.position.shape[1] > ARM  # as it is (clearance.py says why)
         opening = np.asarray(latest.position[:, ARM], np.float64) if gripper else self._opening
-        came = REACH * np.abs(arm - self._last).sum(axis=1)
-        came += FINGER_REACH * np.abs(opening - self._opening)
-        near = ~(came < ALLOWED_DEPTH - self._depth)  # never checked: nan, near
-        moved = np.flatnonzero(changed & near)
+        c = self.clearance
+        since = (self._last, self._opening, self._depth)
+        moved = np.flatnonzero(changed & due(c, arm, opening, *since))
         self.spared += int(changed.sum()) - int(moved.size)
         if moved.size == 0:
             return
@@ -100,6 +98,23 @@ class ClearanceWatch(SnapshotSink):
                 self.control.run(ProtectiveStop.create(self.control, world, held, why), SOURCE)
             except ArmfleetError:  # never lose the watch over one world's stop
                 log.exception("world %d: the protective stop failed", world)
+
+
+def due(
+    clearance: Clearance,
+    arm: np.ndarray,
+    opening: np.ndarray,
+    last: np.ndarray,
+    last_opening: np.ndarray,
+    depth: np.ndarray,
+) -> np.ndarray:
+    """Which worlds (n,) bool may have come within ALLOWED_DEPTH of an obstacle since they were
+    last measured `depth` (n,) clear at arm targets `last` (n, 6) and gripper `last_opening`
+    (n,): all whose joints moved enough to close that gap (module docstring); a world never
+    measured (nan) is due."""
+    came = np.abs(arm - last) @ clearance.reach
+    came += clearance.finger_reach * np.abs(opening - last_opening)
+    return ~(came < ALLOWED_DEPTH - depth)
 
 
 def watch_clearance(control: Control) -> ClearanceWatch | None:

@@ -75,6 +75,10 @@ class Clearance:
     to_obstacle (k, 3, 4): from the base frame to each obstacle's own (its box's centre)
     half (k, 3): each obstacle's half sizes (a plane: inf, inf, 0)
     obstacle_names (k,): the obstacles' geom names
+    reach (6,): how far [m] any point (a sphere's centre) may be from each arm joint's axis,
+        and finger_reach [m/rad]: how fast the gripper's points move with its opening; so no
+        point moves by more than reach · |dq| + finger_reach · |d opening| (a watch that
+        measures again only what may have come near, clearance_watch.py)
     """
 
     kin: URKinematics
@@ -88,6 +92,8 @@ class Clearance:
     to_obstacle: np.ndarray
     half: np.ndarray
     obstacle_names: tuple[str, ...]
+    reach: np.ndarray
+    finger_reach: float
 
     @classmethod
     def of_model(
@@ -147,6 +153,7 @@ class Clearance:
             np.stack([invert(to_base @ t)[:3] for t, _ in boxes]),
             np.stack([h for _, h in boxes]),
             tuple(_name(mjm, o) for o in obstacles),
+            *_reach(dh_world, np.stack(per_opening), openings, [link for _, link in geoms], count),
         )
 
     def depth(
@@ -248,6 +255,33 @@ def _least_along(a: np.ndarray, b: np.ndarray, half: np.ndarray) -> np.ndarray:
     t = np.concatenate([t, stationary], axis=1)  # (p, 13)
     at = [a[:, None, i] + t * d[:, None, i] for i in range(3)]  # (p, 13) each
     return _signed(*at, *(half[:, None, i] for i in range(3))).min(axis=1)
+
+
+def _reach(
+    dh_world: np.ndarray,
+    points: np.ndarray,
+    openings: np.ndarray,
+    links: list[int],
+    count: list[int],
+) -> tuple[np.ndarray, float]:
+    """(reach (6,), finger_reach) of `Clearance`. Joint k turns about the z axis of DH frame k,
+    through its origin: a point carried by frame f > k is no farther from that axis than the
+    chain of link lengths from frame k to frame f (constant, whatever q) plus its own distance
+    from frame f's origin and radius. The gripper's points move linearly between the openings
+    they were read at: their fastest step over the step's width bounds them."""
+    hops = np.linalg.norm(np.diff(dh_world[:, :3, 3], axis=0), axis=1)  # frame i → i + 1
+    frame = np.repeat(np.array(links) + 1, count)
+    own = np.linalg.norm(points[..., :3], axis=-1).max(axis=0)  # (m,) farthest opening
+    reach = np.array(
+        [
+            max((hops[k:f].sum() + d for f, d in zip(frame, own, strict=True) if f > k), default=0)
+            for k in range(6)
+        ]
+    )
+    if len(openings) < 2:
+        return reach, 0.0
+    moved = np.linalg.norm(np.diff(points[..., :3], axis=0), axis=-1).max(axis=1)
+    return reach, float((moved / np.diff(openings)).max())
 
 
 def _fixed(mjm: mujoco.MjModel, g: int) -> bool:
