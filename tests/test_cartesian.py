@@ -13,6 +13,7 @@ import time
 import httpx
 import numpy as np
 import pytest
+from conftest import wait_for
 from jog_checks import rotvec_matrix
 from websockets.sync.client import connect
 
@@ -47,6 +48,7 @@ def test_the_tcp_pose_is_mujocos_flange_and_ik_round_trips(paused) -> None:
         state = http.get("/v1/worlds/1/state").json()
         tcp = http.get("/v1/worlds/1/tcp").json()
         assert tcp["tick"] == state["tick"] and tcp["tcp"] == tcp["flange"]  # no offset yet
+        assert tcp["safety_mode"] == state["safety_mode"] == "NORMAL"
         pos, rot = _in_world(tcp, tcp["flange"])
         assert np.abs(pos - state["flange"]["position"]).max() < 1e-6
         assert np.abs(rot - _rot(state["flange"]["quaternion"])).max() < 1e-6
@@ -195,3 +197,70 @@ def test_the_async_client_and_the_websocket_op_start_a_line(realtime) -> None:
     assert status.succeeded
     time.sleep(1.0)  # the servos settle on the goal
     assert arm.tcp(1)["tcp"][:3] == pytest.approx(goal[:3], abs=1e-3)
+
+
+HOME = [0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0]
+INTO_TABLE = [0.0, -1.17, 1.57, -1.57, -1.57, 0.0]  # home, shoulder 0.4 rad down: pads 8 cm in
+INTO_FLOOR = [3.14, 0.2, 1.57, -1.57, -1.57, 0.0]  # turned away from the table, wrist 20 cm in
+
+
+def _stepped_mode(http: httpx.Client, world: int) -> str:
+    """The world's safety mode after one tick of the paused server (the watch runs per tick)."""
+    assert http.post("/v1/sim/step", json={"ticks": 1}).status_code == 200
+    state = http.get(f"/v1/worlds/{world}/state").json()
+    assert http.get(f"/v1/worlds/{world}/tcp").json()["safety_mode"] == state["safety_mode"]
+    return state["safety_mode"]
+
+
+def test_a_target_into_any_fixed_obstacle_is_a_protective_stop_on_a_world_without_ur_ports(
+    paused,
+) -> None:
+    """A REST target through the table (world 3) or the floor (world 0) of a server with no
+    UR ports: the world is protective-stopped before the next tick takes the target, its
+    state, /tcp and WebSocket frame say so, every command that moves it is refused (409),
+    unlocking is refused within 5 s (REST and the WebSocket op) and done after, a reset
+    clears it at once; the arm may then be driven back out; world 1 never notices."""
+    arm = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint"] + [
+        f"wrist_{i}_joint" for i in (1, 2, 3)
+    ]
+    with httpx.Client(base_url=paused.url, timeout=10) as http:
+        other = http.get("/v1/worlds/1/state").json()["target"]
+        for world, q in ((3, INTO_TABLE), (0, INTO_FLOOR)):
+            held = http.get(f"/v1/worlds/{world}/state").json()["position"][:6]
+            put = http.put(f"/v1/worlds/{world}/targets", json={"name": arm, "position": q})
+            assert put.status_code == 200, put.text  # accepted: the watch judges it at the tick
+            assert _stepped_mode(http, world) == "PROTECTIVE_STOP"
+            if world == 3:  # at once: the 5 s count from the stop (REST, then the WebSocket)
+                early = http.post("/v1/worlds/3/unlock_protective_stop")
+                assert early.status_code == 409 and "5 s" in early.json()["detail"], early.text
+            else:
+                with connect(f"{paused.ws_url}/v1/ws/worlds/0") as ws:
+                    ws.send(json.dumps({"op": "unlock_protective_stop", "id": 1}))
+                    while (msg := json.loads(ws.recv(timeout=5)))["op"] not in ("ack", "error"):
+                        if msg["op"] == "state":
+                            assert msg["safety_mode"] == "PROTECTIVE_STOP"
+                    assert msg["op"] == "error" and "5 s" in msg["detail"], msg
+            state = http.get(f"/v1/worlds/{world}/state").json()
+            # held where the arm was after one tick of motion, far from the target
+            assert np.abs(np.array(state["target"][:6]) - held).max() < 0.05
+            again = http.post(f"/v1/worlds/{world}/jog", json={"axis": "z", "step": 0.01})
+            assert again.status_code == 409 and "protective" in again.json()["detail"]
+        assert http.get("/v1/worlds/1/state").json()["safety_mode"] == "NORMAL"
+        log = paused.log()
+        assert "into table_top" in log and "into floor" in log, log[-2000:]
+        assert http.post("/v1/worlds/0/reset").status_code == 200  # at once
+        assert _stepped_mode(http, 0) == "NORMAL"
+
+        def unlocked() -> bool:
+            if http.post("/v1/worlds/3/unlock_protective_stop").status_code == 200:
+                return True
+            time.sleep(0.2)
+            return False
+
+        wait_for(unlocked, "the unlock 5 s after the stop", timeout=20)
+        assert _stepped_mode(http, 3) == "NORMAL"
+        back = http.put("/v1/worlds/3/targets", json={"name": arm, "position": HOME})
+        assert back.status_code == 200, back.text  # out of the table: allowed
+        assert _stepped_mode(http, 3) == "NORMAL"
+        assert http.get("/v1/worlds/1/state").json()["target"] == other  # never noticed
+        assert http.post("/v1/worlds/3/reset").status_code == 200

@@ -320,9 +320,10 @@ def test_tool_frame_and_a_finer_step_move_along_the_tools_z(
 
 
 def test_a_jog_out_of_reach_shows_the_servers_reason(app: TkApp, client: ArmfleetClient) -> None:
-    # The arm stretched out flat (shoulder lift and elbow at 0): one more step outwards is
-    # beyond its reach. Jogs start from the targets, so the arm need not get there first.
-    client.set_targets(WORLD, {"shoulder_lift_joint": 0.0, "elbow_joint": 0.0})
+    # The arm stretched out flat away from the table (shoulder lift -pi, elbow 0; towards the
+    # table it would go through it, a protective stop): one more step outwards is beyond its
+    # reach. Jogs start from the targets, so the arm need not get there first.
+    client.set_targets(WORLD, {"shoulder_lift_joint": -3.1416, "elbow_joint": 0.0})
     try:
         stretched = client.state(WORLD).target
         outward = "-x" if client.tcp(WORLD)["target_tcp"][0] < 0 else "+x"

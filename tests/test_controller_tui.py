@@ -263,7 +263,8 @@ def test_t_key_turns_jogs_into_the_tool_frame(term: Terminal, client: ArmfleetCl
 def test_a_jog_out_of_reach_shows_the_servers_reason_on_the_status_line(
     term: Terminal, client: ArmfleetClient
 ) -> None:
-    client.set_targets(WORLD, {"shoulder_lift_joint": 0.0, "elbow_joint": 0.0})  # stretched
+    # stretched out flat away from the table (towards it: through it, a protective stop)
+    client.set_targets(WORLD, {"shoulder_lift_joint": -3.1416, "elbow_joint": 0.0})
     stretched = client.state(WORLD).target
     outward = "-" if client.tcp(WORLD)["target_tcp"][0] < 0 else "+"
     term.select(len(JOINTS) + AXES.index("X"))

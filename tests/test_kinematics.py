@@ -4,13 +4,15 @@ closed-form IK round-trips, and what it cannot reach it says so, for many worlds
 
 from __future__ import annotations
 
+import dataclasses
+
 import mujoco
 import numpy as np
 import pytest
 
 from mjcf import SCENE_XML
 from service.core.errors import BadCommand
-from service.core.kinematics.clearance import TableClearance
+from service.core.kinematics.clearance import Clearance
 from service.core.kinematics.line import MAX_SAMPLES, plan_line, sample_times
 from service.core.kinematics.pose import (
     matrix_to_pose,
@@ -221,8 +223,11 @@ def test_the_table_clearance_of_a_configuration_is_mujocos_own_contact_depth() -
     the penetration MuJoCo's collision finds for the same q, geom for geom, the gripper open
     and closed, while the arm is clear of it and as it goes in; through the slab it keeps
     counting from the top, where MuJoCo's depth turns to the nearer bottom face."""
-    clearance = TableClearance.of_model(ROBOT.mjm, ARM, KIN, ROBOT.spec.names[6])
+    clearance = Clearance.of_model(ROBOT.mjm, ARM, KIN, ROBOT.spec.names[6])
     assert clearance is not None and "left_pad" in clearance.geom_names
+    # every fixed geom the arm can touch, nothing that moves (the cube)
+    assert clearance.obstacle_names == ("floor", "table_top", "pedestal_geom")
+    slab = clearance.half[clearance.obstacle_names.index("table_top"), 2]
     m, d = ROBOT.mjm, mujoco.MjData(ROBOT.mjm)
     table = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "table_top")
     qs = np.array(
@@ -232,8 +237,8 @@ def test_the_table_clearance_of_a_configuration_is_mujocos_own_contact_depth() -
     compared = 0
     for hand in (m.qpos0, closed):
         opening = np.full(len(qs), hand[ROBOT.qpos_adr[6]])
-        depth, geom = clearance.depth(qs, opening)
-        for q, ours, g in zip(qs, depth, geom, strict=True):
+        depth, geom, obstacle = clearance.depth(qs, opening)
+        for q, ours, g, o in zip(qs, depth, geom, obstacle, strict=True):
             d.qpos[:] = hand
             d.qpos[ROBOT.qpos_adr[:6]] = q
             mujoco.mj_forward(m, d)
@@ -246,16 +251,17 @@ def test_the_table_clearance_of_a_configuration_is_mujocos_own_contact_depth() -
                 assert ours < 0  # above the table
                 continue
             name = min(hits, key=hits.__getitem__)
-            if ours < 2 * clearance.half[2]:  # within the slab: MuJoCo's depth is the same
+            if ours < 2 * slab:  # within the slab: MuJoCo's depth is the same
                 assert ours == pytest.approx(-hits[name], abs=2e-4)  # 1e-6 open, 0.2 mm closed
                 assert clearance.geom_names[g] == name
+                assert clearance.obstacle_names[o] == "table_top"
                 compared += 1
         assert depth[0] < -0.15 and depth[-1] > 0.05  # home is clear; the last goes through
         assert np.all(np.diff(depth) > 0)
     assert compared >= 3
     # closing lowers the 2F-140's pads by 2.4 cm: the same arm pose reaches deeper closed
-    shut = clearance.depth(qs[:1], np.array([closed[ROBOT.qpos_adr[6]]]))[0][0]
-    assert shut - clearance.depth(qs[:1], np.zeros(1))[0][0] > 0.02
+    shut = clearance.depth(qs[-1:], np.array([closed[ROBOT.qpos_adr[6]]]))[0][0]
+    assert shut - clearance.depth(qs[-1:], np.zeros(1))[0][0] > 0.02
 
 
 def test_a_model_that_is_not_the_dh_chain_is_refused() -> None:
@@ -263,3 +269,70 @@ def test_a_model_that_is_not_the_dh_chain_is_refused() -> None:
     spec.body("forearm_link").quat = [0.9999, 0.01, 0, 0]  # an elbow axis not parallel
     with pytest.raises(NotDH, match="DH chain"):
         URKinematics.from_model(spec.compile(), ARM)
+
+
+def test_each_capsule_against_each_fixed_obstacle_is_mujocos_own_contact_depth() -> None:
+    """Every arm capsule against the floor, the table and the pedestal at random commanded
+    configurations: wherever MuJoCo's collision finds them touching and the capsule's axis
+    stays outside, the clearance is never short of MuJoCo's penetration, measured along the
+    whole axis (a forearm across the table's edge, not only its ends), and is the very same
+    to 1e-9 m but where the space under a table top counts as table (clearance.py says why);
+    once the axis is in, it reads at least the capsule's radius (4.5 cm or more: a stop)."""
+    full = Clearance.of_model(ROBOT.mjm, ARM, KIN, ROBOT.spec.names[6])
+    assert full is not None
+    m, d = ROBOT.mjm, mujoco.MjData(ROBOT.mjm)
+    qs = np.array(ROBOT.spec.home[:6]) + np.random.default_rng(2).uniform(-1.8, 1.8, (600, 6))
+    compared = same = 0
+    for o, obstacle in enumerate(full.obstacle_names):
+        oid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, obstacle)
+        for c0, c1 in full.segments:
+            name = full.geom_names[full.geom[c0]]
+            one = dataclasses.replace(
+                full,
+                points=full.points[:, [c0, c1]],
+                frame=full.frame[[c0, c1]],
+                radius=full.radius[[c0, c1]],
+                geom=full.geom[[c0, c1]],
+                segments=np.array([[0, 1]]),
+                to_obstacle=full.to_obstacle[o : o + 1],
+                half=full.half[o : o + 1],
+                obstacle_names=(obstacle,),
+            )
+            ours = one.depth(qs)[0]
+            gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, name)
+            for q, depth in zip(qs[ours > -0.01], ours[ours > -0.01], strict=True):
+                d.qpos[:] = m.qpos0
+                d.qpos[ROBOT.qpos_adr[:6]] = q
+                mujoco.mj_kinematics(m, d)
+                mujoco.mj_collision(m, d)
+                dist = [c.dist for c in d.contact[: d.ncon] if set(c.geom) == {gid, oid}]
+                if not dist:
+                    continue
+                if -min(dist) < full.radius[c0]:  # the axis outside: never short of MuJoCo
+                    assert depth >= -min(dist) - 1e-9, (obstacle, name, q)
+                    same += abs(depth + min(dist)) < 1e-9
+                    compared += 1
+                else:
+                    assert depth >= full.radius[c0] - 1e-9, (obstacle, name, q)
+    print(f"{compared} capsule contacts, {same} of MuJoCo's very depth")
+    assert compared > 100 and same > 0.6 * compared  # the rest: under a top (the column)
+
+
+def test_the_depth_changes_no_faster_than_the_reach_the_watch_skips_by() -> None:
+    """The clearance watch measures a world again only once its joints moved enough to close
+    its last clearance (`reach` · |dq| + `finger_reach` · |d opening|): at random poses and
+    steps, the depth never changes by more than that bound, and somewhere it comes within a
+    few times of it (a bound far too loose would have the watch measure for nothing)."""
+    clearance = Clearance.of_model(ROBOT.mjm, ARM, KIN, ROBOT.spec.names[6])
+    assert clearance is not None
+    rng = np.random.default_rng(3)
+    q = np.array(ROBOT.spec.home[:6]) + rng.uniform(-1.5, 1.5, (3000, 6))
+    dq = rng.normal(0.0, 0.03, (3000, 6)) * (rng.random((3000, 1)) < 0.5)  # some steps: fingers
+    opening = rng.uniform(0.0, 0.7, 3000)
+    step = rng.normal(0.0, 0.05, 3000)
+    after = np.clip(opening + step, 0.0, 0.7)
+    before = clearance.depth(q, opening)[0]
+    moved = clearance.depth(q + dq, after)[0]
+    bound = np.abs(dq) @ clearance.reach + clearance.finger_reach * np.abs(after - opening)
+    assert (np.abs(moved - before) <= bound + 1e-12).all()
+    assert (np.abs(moved - before) / bound).max() > 0.3  # met within a few times somewhere

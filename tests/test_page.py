@@ -417,7 +417,8 @@ def test_jog_buttons_move_the_tcp_by_the_step_in_the_base_then_the_tool_frame(sr
 
 def test_a_jog_out_of_reach_shows_the_servers_reason(srv, arm, page):
     open_page(page, srv, "?world=3")
-    arm.set_targets(3, {"shoulder_lift_joint": 0.0, "elbow_joint": 0.0})  # stretched out flat
+    # stretched out flat away from the table (towards it: through it, a protective stop)
+    arm.set_targets(3, {"shoulder_lift_joint": -3.1416, "elbow_joint": 0.0})
     stretched = arm.state(3).target
     outward, inward = ("-X", "+X") if arm.tcp(3)["target_tcp"][0] < 0 else ("+X", "-X")
     page.locator("#jog").get_by_role("button", name=outward, exact=True).click()

@@ -112,7 +112,7 @@ def test_seed_controller_moves_the_arm(
     seen = judge("seed", ns, str(value))
     assert seen["reached"] and seen["name"] == JOINTS
     # what it sent is the target, exactly (a bad message sent right after changed nothing)
-    assert targets(http, world) == [0.0, -1.2, 1.5, -1.57, -1.57, 0.0, value]
+    assert targets(http, world) == [0.0, -1.4, 1.5, -1.57, -1.57, 0.0, value]
     assert seen["stamp"] > 0  # simulated time
     rejected_count(http, "unknown_joint")
 
@@ -202,7 +202,7 @@ def test_actions_goal_feedback_result_cancel_refusal(ros: tuple[Server, httpx.Cl
     scaled = seen["scaled"]
     assert scaled["status"] == 4 and scaled["error_code"] == 0  # SUCCEEDED
     assert scaled["feedback"] >= 5  # 20 Hz over one second
-    np.testing.assert_allclose(scaled["position"][:6], [0.3, -1.3, 1.6, -1.8, -1.4, 0.4], atol=0.02)
+    np.testing.assert_allclose(scaled["position"][:6], [0.3, -1.4, 1.6, -1.8, -1.4, 0.4], atol=0.02)
     assert seen["cancel"]["status"] == 5  # CANCELED
     assert seen["cancel"]["feedback"] >= 1
     assert not seen["refused_finger"] and not seen["refused_nan"] and not seen["refused_limits"]

@@ -48,7 +48,7 @@ def test_node_presents_the_token_and_commands_leased_worlds(tmp_path: Any) -> No
         for ns, world, value in (("", 0, 0.35), ("/world_1", 1, 0.4)):
             seen = judge("seed", ns, str(value), domain=GRAPH)
             assert seen["reached"] and seen["name"] == JOINTS
-            assert targets(http, world) == [0.0, -1.2, 1.5, -1.57, -1.57, 0.0, value]
+            assert targets(http, world) == [0.0, -1.4, 1.5, -1.57, -1.57, 0.0, value]
 
         def accepted() -> int | None:
             n = http.get("/v1/ros").json()["node"]["report"]["accepted"]

@@ -227,8 +227,12 @@ class Fuzz:
             values = b"".join(self._value(input_type(n), n) for n in names)
             if r.random() < 0.8:
                 return Case("U odd values", package(ord("U"), bytes([rid]) + values), SILENT)
-            cut = values[: r.randrange(len(values))] if r.random() < 0.5 else values + b"\0"
-            return Case("U wrong size", package(ord("U"), bytes([rid]) + cut), ERROR)
+            if r.random() < 0.5:  # short of its fields: refused
+                cut = values[: r.randrange(len(values))]
+                return Case("U wrong size", package(ord("U"), bytes([rid]) + cut), ERROR)
+            # past its fields: applied by them, the rest ignored (rtde_session.py says why)
+            extra = values + self._bytes(1, 48)
+            return Case("U longer", package(ord("U"), bytes([rid]) + extra), SILENT)
         rid = r.choice([i for i in range(256) if i not in c.inputs])
         body = bytes([rid]) + self._bytes(0, 40)
         return Case("U unknown recipe", package(ord("U"), body), ERROR)

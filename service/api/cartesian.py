@@ -8,7 +8,7 @@ other; a pose no configuration reaches is a 422 naming the field.
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 from fastapi import APIRouter
@@ -25,6 +25,7 @@ from service.core.contract.replies import CommandReply, errors
 from service.core.kinematics.pose import matrix_to_pose, matrix_to_quat
 from service.core.kinematics.tools import tools_of
 from service.core.kinematics.ur import Singularity
+from service.core.sim import safety
 
 router = APIRouter(prefix="/v1", tags=["cartesian"], responses=errors(404))
 
@@ -39,6 +40,10 @@ class TcpReply(BaseModel):
     tcp: list[float] = Field(description="the TCP pose in the base frame at the actual q")
     target_tcp: list[float] = Field(description="the TCP pose at the targets")
     singular: list[str] = Field(description="singularities of the actual q: wrist, elbow, shoulder")
+    safety_mode: Literal["NORMAL", "PROTECTIVE_STOP"] = Field(
+        description="the world's safety mode as of now, as in its state (PROTECTIVE_STOP: "
+        "commands that move the arm, TCP targets and jogs included, are refused with 409)"
+    )
     base_in_world: dict[str, list[float]] = Field(
         description="the robot's base frame in MuJoCo's world frame: position, quaternion w x y z"
     )
@@ -79,6 +84,9 @@ async def get_tcp(loop: Loop, world: World) -> Response:
             "tcp": kin.fk(q, offset[None])[0].tolist(),
             "target_tcp": kin.fk(target, offset[None])[0].tolist(),
             "singular": Singularity.names(int(kin.singularity(q)[0])),
+            "safety_mode": safety.names(snap.safety[[world]])[0]
+            if snap.safety is not None
+            else "NORMAL",
             "base_in_world": {
                 "position": base[:3, 3].tolist(),
                 "quaternion": matrix_to_quat(base[:3, :3]).tolist(),

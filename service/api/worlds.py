@@ -20,6 +20,7 @@ from service.api.deps import CommandWorld, Ctl, Loop, World, moves_arm
 from service.core.commands import entities, params, payload, randomize
 from service.core.commands.base import HTTP
 from service.core.commands.control import Control
+from service.core.commands.safety_stop import UnlockProtectiveStop
 from service.core.commands.targets import BatchTargets, IncrementRequest, JointTargets
 from service.core.commands.world import ResetRequest
 from service.core.commands.writes import ManyWrites
@@ -27,6 +28,7 @@ from service.core.contract.replies import (
     BatchCommandReply,
     CommandReply,
     ResetReply,
+    UnlockReply,
     WorldState,
     WorldStates,
     errors,
@@ -126,6 +128,18 @@ async def post_targets(control: Ctl, body: BatchTargets) -> Response:
 async def reset_world(control: Ctl, world: CommandWorld) -> ResetReply:
     done = control.reset([world], HTTP)
     return ResetReply(worlds=done.worlds, tick=done.tick)
+
+
+@router.post(
+    "/worlds/{world}/unlock_protective_stop",
+    response_model=UnlockReply,
+    responses=errors(409),
+    summary="Unlock the world's protective stop, as UR's Dashboard `unlock protective stop`: "
+    "409 within 5 s of the stop; the arm stays where the stop held it",
+)
+async def unlock_protective_stop(control: Ctl, world: CommandWorld) -> UnlockReply:
+    tick = control.run(UnlockProtectiveStop.create(control, world), HTTP)
+    return UnlockReply(world=world, tick=tick, safety_mode="NORMAL")
 
 
 @router.post(

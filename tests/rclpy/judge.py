@@ -28,7 +28,7 @@ def seed(ns: str, value: float) -> None:
     seen: list = []
     node.create_subscription(JointState, f"{ns}/joint_states", seen.append, 10)
     spin_until(node, lambda: pub.get_subscription_count() > 0 and seen, 60)
-    targets = [0.0, -1.2, 1.5, -1.57, -1.57, 0.0, value]
+    targets = [0.0, -1.4, 1.5, -1.57, -1.57, 0.0, value]
     msg = JointState()
     msg.name, msg.position = list(JOINTS), targets
     pub.publish(msg)
@@ -173,7 +173,7 @@ def actions(ns: str) -> None:
         g.trajectory.points = [p]
         return g
 
-    target = [0.3, -1.3, 1.6, -1.8, -1.4, 0.4]
+    target = [0.3, -1.4, 1.6, -1.8, -1.4, 0.4]
     r = run(fjt[names[0]], traj(target, 1.0))
     after = len(states)
     spin_until(node, lambda: len(states) >= after + 2, 10)  # states sent after the result

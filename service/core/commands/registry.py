@@ -14,6 +14,7 @@ from service.core.commands.entities import SetEntities
 from service.core.commands.params import SetParams
 from service.core.commands.payload import SetPayload
 from service.core.commands.randomize import Randomize
+from service.core.commands.safety_stop import ProtectiveStop, UnlockProtectiveStop
 from service.core.commands.targets import Increment, SetMany, SetTargets
 from service.core.commands.tcp import SetTcp
 from service.core.commands.trajectory.commands import (
@@ -41,6 +42,8 @@ COMMANDS: tuple[type[Command], ...] = (
     MoveTcp,
     Jog,
     MoveLinear,
+    ProtectiveStop,
+    UnlockProtectiveStop,
 )
 
 BY_KIND: dict[str, type[Command]] = {c.kind: c for c in COMMANDS}

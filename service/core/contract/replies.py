@@ -59,9 +59,11 @@ class WorldState(BaseModel):
     flange: Flange
     faults: int = Field(description="times this world was reset for NaN or capacity overflow")
     safety_mode: Literal["NORMAL", "PROTECTIVE_STOP"] = Field(
-        description="UR's safety mode: PROTECTIVE_STOP (raised on worlds served with UR ports: "
-        "a joint at its torque limit, a target through the table, triggerProtectiveStop) "
-        "until the Dashboard's `unlock protective stop` or a reset; commands that move the arm "
+        description="UR's safety mode: PROTECTIVE_STOP (raised on any world whose commanded "
+        "target goes into a fixed obstacle of the scene, and on worlds served with UR ports "
+        "when a joint is held at its torque limit or the program triggers it) until "
+        "`POST /v1/worlds/{w}/unlock_protective_stop` or the Dashboard's `unlock protective "
+        "stop` (5 s after the stop at the earliest), or a reset; commands that move the arm "
         "are refused (409) meanwhile"
     )
     pending_target: list[float] | None = Field(
@@ -92,6 +94,12 @@ class BatchCommandReply(BaseModel):
 class ResetReply(BaseModel):
     worlds: list[int]
     tick: int
+
+
+class UnlockReply(BaseModel):
+    world: int
+    tick: int = Field(description="the tick the world was unlocked at")
+    safety_mode: Literal["NORMAL"] = Field(description="the world's safety mode after it")
 
 
 class SimReply(BaseModel):

@@ -340,7 +340,7 @@ def _dh(theta: np.ndarray, d: float, a: float, alpha: float) -> np.ndarray:
 def _frames(d: np.ndarray, a: np.ndarray, q: np.ndarray) -> np.ndarray:
     """DH frames 0..6 in the base frame (n, 7, 4, 4): each link is Rz(θ) then a constant
     Tz(d) Tx(a) Rx(α), so the six turns are built in one pass and the constants multiplied in
-    one batched product (the per-tick table check runs this for every moving world)."""
+    one batched product (the per-tick clearance watch runs this for every moving world)."""
     n = len(q)
     c, s = np.cos(q), np.sin(q)
     turn = np.zeros((n, 6, 4, 4))

@@ -1,25 +1,32 @@
 """Each world's safety mode: NORMAL, or PROTECTIVE_STOP until it is unlocked.
 
-Why in the core and not in the UR surface that raises it: a protective stop is a state of the
-world, not of one connection. Every surface reports it (the world's state over REST and the
-WebSocket, RTDE's safety_mode and status bits, the Dashboard's safetystatus, `GET /v1/ur`),
-and every surface's commands that would move the arm are refused while it holds (`Control.run`,
-409), so a REST client cannot drive an arm that a UR program just had stopped. What raises a
-stop is the robot's own safety system, watched by the UR surface (surfaces/ur/safety.py: a
-joint at its torque limit, a commanded target through the table); what clears it is the
-Dashboard's `unlock protective stop`, 5 s after the stop at the earliest (the robot's rule:
-the Dashboard answers "Cannot unlock protective stop until 5s after occurrence"), or a reset
-of the world (a new episode: the world is back at home).
+Why in the core: a protective stop is a state of the world, not of one connection. Every
+surface reports it (the world's state and TCP over REST, the WebSocket, RTDE's safety_mode and
+status bits, the Dashboard's safetystatus, `GET /v1/ur`), and every surface's commands that
+would move the arm are refused while it holds (`Control.run`, 409), so a REST client cannot
+drive an arm that a UR program just had stopped. What raises a stop is the robot's safety
+system: the core's clearance watch on every world (core/commands/clearance_watch.py: a
+commanded target into a fixed obstacle), and on worlds with UR ports the UR surface
+(surfaces/ur/safety.py: a joint at its torque limit; triggerProtectiveStop), each through the
+`protective_stop` command (core/commands/safety_stop.py: the arm held in the same step). What
+clears it is an unlock 5 s after the stop at the earliest (the Dashboard's `unlock protective
+stop`, or `unlock_protective_stop` over REST and the WebSocket; the robot's rule: "Cannot
+unlock protective stop until 5s after occurrence"), or a reset of the world (a new episode:
+the world is back at home).
 
 The modes are UR's numbers (RTDE safety_mode: 1 NORMAL, 3 PROTECTIVE_STOP) and names. The
 5 s are counted on the wall clock, as the robot's are: an operator's rule, not physics.
-Thread-safe: the UR event loop, command callers and the sim thread all read it.
+Thread-safe: the UR event loop, command callers and the sim thread all read it. Who must act
+on a stop besides the core's refusal (the UR surface ends the world's control script) listens
+with `on_stop`.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -28,6 +35,8 @@ from service.core.errors import ProtectiveStopped
 from service.core.sim.batch import Batch
 from service.core.sim.loop_types import SnapshotSink
 from service.core.sim.types import Snapshot
+
+log = logging.getLogger("armfleet.safety")
 
 __all__ = ["NORMAL", "PROTECTIVE_STOP", "UNLOCK_AFTER_S", "SafetyTable"]
 
@@ -46,6 +55,12 @@ class SafetyTable(SnapshotSink):
         self._why: dict[int, str] = {}
         self.versions = np.zeros(nworld, dtype=np.int64)  # bumped at every change of a world
         self._lock = threading.Lock()
+        self._on_stop: tuple[Callable[[int, str], None], ...] = ()
+
+    def on_stop(self, listener: Callable[[int, str], None]) -> None:
+        """Call `listener(world, why)` after every stop, on the stopping thread (quick: hand
+        real work to a thread or event loop of one's own)."""
+        self._on_stop = (*self._on_stop, listener)
 
     def modes(self) -> np.ndarray:
         """Every world's mode (nworld,) int8, a copy (a snapshot's `safety`)."""
@@ -63,7 +78,8 @@ class SafetyTable(SnapshotSink):
             return self._why.get(world)
 
     def stop(self, world: int, why: str) -> bool:
-        """Protective-stop `world`; False if it already was (the first cause is kept)."""
+        """Protective-stop `world`; False if it already was (the first cause is kept). Only
+        the safety commands call it (core/commands/safety_stop.py: the arm is held first)."""
         with self._lock:
             if self._mode[world] == PROTECTIVE_STOP:
                 return False
@@ -71,7 +87,16 @@ class SafetyTable(SnapshotSink):
             self._at[world] = time.monotonic()
             self._why[world] = why
             self.versions[world] += 1
-            return True
+        for listener in self._on_stop:
+            try:
+                listener(world, why)
+            except Exception:  # a listener must never cost the stop itself
+                log.exception("protective stop listener %r failed", listener)
+        return True
+
+    def age(self, world: int) -> float:
+        """Seconds since `world`'s last stop (wall clock, as the unlock rule counts)."""
+        return time.monotonic() - float(self._at[world])
 
     def unlock(self, world: int) -> bool:
         """Back to NORMAL; False (nothing changed) while the stop is younger than

@@ -172,14 +172,11 @@ class Controller:
         self.changed()
         return True
 
-    def protective_stop(self, why: str) -> bool:
-        """The world's safety mode to PROTECTIVE_STOP, the program stopped; False if it
-        already was stopped."""
-        if not self.safety.stop(self.world, why):
-            return False
+    def stopped(self) -> None:
+        """The world was protective-stopped (its mode is the core's SafetyTable): the program
+        is STOPPED."""
         self.program = ProgramState.STOPPED
         self.changed()
-        return True
 
     def unlock_protective_stop(self) -> bool:
         """False while the stop is younger than safety.UNLOCK_AFTER_S (the robot's rule)."""

@@ -91,6 +91,7 @@ class Endpoints:
         read_payloads: Callable[[list[int]], concurrent.futures.Future[Any]] | None = None,
     ) -> None:
         self.safety = safety  # the loop's safety modes (every world's controller reads them)
+        safety.on_stop(self._stopped)  # whoever raised it: end the program, tell the clients
         self.robots = {w: WorldRobot(w, a, self) for w, a in worlds.items()}
         self.motion: Motion | None = None  # set by the surface at start
         self._values = FrameValuesCache(
@@ -216,6 +217,13 @@ class Endpoints:
         loop, robot = self._loop, self.robots.get(world)
         if loop is not None and robot is not None and loop.is_running():
             loop.call_soon_threadsafe(robot.protective_stop, why)
+
+    def _stopped(self, world: int, why: str) -> None:
+        """A world was protective-stopped (any thread, any cause): its controller answers
+        for it on the UR event loop (`WorldRobot.stopped`)."""
+        loop, robot = self._loop, self.robots.get(world)
+        if loop is not None and robot is not None and loop.is_running():
+            loop.call_soon_threadsafe(robot.stopped, why)
 
     def stop(self) -> None:
         loop = self._loop

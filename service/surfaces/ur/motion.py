@@ -22,11 +22,13 @@ import numpy as np
 from service.core.commands.cartesian import MoveLinear
 from service.core.commands.control import Control
 from service.core.commands.payload import SetPayload
+from service.core.commands.safety_stop import ProtectiveStop
 from service.core.commands.tcp import SetTcp
 from service.core.commands.trajectory import JointTrajectorySpec, TrajectoryPoint
 from service.core.commands.trajectory.status import Started, TrajectoryStatus
 from service.core.kinematics.joint_move import JointPlan, plan_joint_move, plan_stop
 from service.core.kinematics.tools import ToolTable, tools_of
+from service.core.sim.safety import NORMAL
 from service.surfaces.ur.rtde_outputs import Frame
 
 ARM = 6
@@ -126,10 +128,19 @@ class Motion:
         return self._run(world, plan_stop(q, qd, max(decel, 0.1), self.lower, self.upper))
 
     def halt(self, world: int) -> None:
-        """Hold the arm where it is now (a protective stop)."""
+        """Hold the arm where it is now (a program that ends while it moves). A protective-
+        stopped world is held already (by the stop itself) and takes no targets."""
+        if self.control.loop.safety.mode(world) != NORMAL:
+            return
         q, _ = self.actual(world)
         self.control.cancel_trajectory([world], SOURCE)
         self.servo(world, q)
+
+    def protective_stop(self, world: int, why: str) -> None:
+        """Hold the arm where it is now and protective-stop the world, in one step (the core's
+        `ProtectiveStop` command)."""
+        q, _ = self.actual(world)
+        self.control.run(ProtectiveStop.create(self.control, world, q, why), SOURCE)
 
     def set_tcp(self, world: int, pose: list[float]) -> None:
         self.control.run(SetTcp.create(self.control, world, pose), SOURCE)

@@ -12,6 +12,15 @@ read has packages skipped, never queued without bound.
 Malformed input never ends the service or reaches another world: a package too short for its
 fields or naming an unknown recipe gets a text message (level ERROR) and a log line; a header
 that cannot be framed closes this connection with a log line.
+
+A data package *longer* than its recipe's fields is applied by those fields and the rest is
+ignored (one log line per recipe of a connection). Why: ur-rtde 1.6.5 sends such packages, and
+on purpose. Its `getForwardKinematics(q, tcp_offset)` with an all-zero offset sends the command
+of `getForwardKinematics(q)` (44, recipe of six doubles) with the offset's six zeros appended
+(librtde.so.1.6.5, `RTDEControlInterface::getForwardKinematics`: an all-zero offset takes the
+q-only branch, then the offset is appended anyway): a call that returns on the controllers it
+was released against only if a controller reads a package by its recipe. Refusing it left that
+call waiting for an answer that never came.
 """
 
 from __future__ import annotations
@@ -46,6 +55,7 @@ class RtdeSession(asyncio.Protocol):
         self._outputs: dict[int, OutputRecipe] = {}
         self._inputs: dict[int, tuple[tuple[str, ...], struct.Struct]] = {}
         self._next_id = {"out": 1, "in": 1}  # outputs and inputs are numbered apart
+        self._overlong: set[int] = set()  # input recipes a package longer than them came for
         self._streams: dict[int, _Stream] = {}  # recipe id → its stream, while started
         self.started = False
         self.sent = 0  # data packages sent
@@ -170,11 +180,18 @@ class RtdeSession(asyncio.Protocol):
         if recipe is None:
             raise wire.Malformed(f"no input recipe {body[0]} on this connection")
         names, layout = recipe
-        if len(body) - 1 != layout.size:
+        if len(body) - 1 < layout.size:
             raise wire.Malformed(
                 f"recipe {body[0]} takes {layout.size} bytes of values, got {len(body) - 1}"
             )
-        values = layout.unpack(body[1:])
+        if len(body) - 1 > layout.size and body[0] not in self._overlong:
+            self._overlong.add(body[0])  # said once per recipe (ur_rtde sends it per call)
+            log.info(
+                "world %d RTDE: recipe %d takes %d bytes of values, a package brought %d: "
+                "its fields applied, the rest ignored, as a controller does (module docstring)",
+                self.robot.world, body[0], layout.size, len(body) - 1,
+            )  # fmt: skip
+        values = layout.unpack(body[1 : 1 + layout.size])
         grouped, i = [], 0
         for name in names:
             n = rv.COUNTS[rv.input_type(name)]

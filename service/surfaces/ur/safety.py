@@ -1,5 +1,5 @@
-"""When a world's arm is protective-stopped: a joint pushing at its torque limit, or a
-commanded target that takes the arm into the table (`TableWatch`, below).
+"""When a UR world's arm is protective-stopped for its torque: a joint pushing at its limit.
+(A commanded target into a fixed obstacle stops any world: core/commands/clearance_watch.py.)
 
 A UR stops (protective stop) when the force it needs departs from what its model expects: the
 arm hit something, or is driven into it. armfleet's arm is driven by position servos whose
@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from service.core.kinematics.clearance import ALLOWED_DEPTH, TableClearance
 from service.core.sim.types import Snapshot
 
 SATURATED = 0.98  # of the joint's torque limit
@@ -55,43 +54,4 @@ class SafetyWatch:
                         f"{self.limits[j]:.0f} N·m) for {HOLD_S:g} s: the arm is blocked",
                     )
                 )
-        return out
-
-
-class TableWatch:
-    """Stops a world whose commanded target would put the arm into the table
-    (core/kinematics/clearance.py says why the target and not the contact). Checked on the
-    sim thread after every tick, on the targets as of every accepted command, for the worlds
-    whose targets changed since the last check; a target that reaches deeper than
-    `ALLOWED_DEPTH` *and* deeper than the world's last one stops it, so that after an unlock
-    the arm may be moved back out of a pose the stop held it in, never further in."""
-
-    def __init__(self, worlds: list[int], clearance: TableClearance) -> None:
-        self.worlds = np.asarray(worlds, dtype=np.int64)
-        self.clearance = clearance
-        self._last = np.full((len(worlds), ARM), np.nan)  # targets at the last check
-        self._depth = np.full(len(worlds), -np.inf)  # their depth into the table [m]
-
-    def check(self, targets: np.ndarray, opening: np.ndarray) -> list[tuple[int, str]]:
-        """(world, why) of each world whose new arm target (rows of `targets` (k, 7), in the
-        order of `worlds`) goes through the table, its gripper as open as `opening` (k,)
-        [rad] (the latest state's finger_joint: clearance.py says why not its target)."""
-        arm = np.asarray(targets[:, :ARM], np.float64)
-        moved = np.flatnonzero((arm != self._last).any(axis=1))
-        if moved.size == 0:
-            return []
-        depth, geom = self.clearance.depth(arm[moved], np.asarray(opening, np.float64)[moved])
-        out: list[tuple[int, str]] = []
-        for i, d, g in zip(moved.tolist(), depth.tolist(), geom.tolist(), strict=True):
-            if d > ALLOWED_DEPTH and d > self._depth[i]:
-                name = self.clearance.geom_names[g]
-                out.append(
-                    (
-                        int(self.worlds[i]),
-                        f"the commanded pose takes {name} {d * 1e3:.1f} mm into the table "
-                        f"(more than {ALLOWED_DEPTH * 1e3:g} mm): the arm would go through it",
-                    )
-                )
-        self._last[moved] = arm[moved]
-        self._depth[moved] = depth
         return out

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from service.core.errors import BadCommand
+from service.core.errors import BadCommand, ProtectiveStopped
 from service.surfaces.ur import urscript
 from service.surfaces.ur.speed import SpeedLoop
 
@@ -72,7 +72,7 @@ class LineSpeed:
         self.left -= PERIOD_S
         try:
             self.loop.step(PERIOD_S)
-        except BadCommand:
+        except (BadCommand, ProtectiveStopped):
             return self.end()
         if self.left <= 0:
             self.end()
@@ -97,7 +97,7 @@ def run(robot: WorldRobot, call: urscript.Call) -> None:
     speed.end()
     try:
         _carry_out(robot, call.name, a, speed)
-    except BadCommand as exc:
+    except (BadCommand, ProtectiveStopped) as exc:
         raise Refused(f"{call.name}(): {exc}") from None
 
 

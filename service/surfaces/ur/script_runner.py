@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from service.core.errors import BadCommand
+from service.core.errors import BadCommand, ProtectiveStopped
 from service.surfaces.ur import script_commands as sc
 from service.surfaces.ur import urscript
 from service.surfaces.ur.control_script import ControlScript
@@ -120,7 +120,7 @@ class ScriptRunner:
             return self.end("the program was stopped (Dashboard)")
         try:
             self.speed.step(PERIOD_S)
-        except BadCommand as exc:
+        except (BadCommand, ProtectiveStopped) as exc:
             return self._fail(f"speed: {exc}")
         self._timer = asyncio.get_running_loop().call_later(PERIOD_S, self._tick)
 
@@ -168,7 +168,7 @@ class ScriptRunner:
         try:
             cmd = sc.decode(number, regs)
             pending = self._carry_out(cmd)
-        except (sc.BadRegister, BadCommand) as exc:
+        except (sc.BadRegister, BadCommand, ProtectiveStopped) as exc:
             return self._fail(str(exc))
         if not self.alive:
             return
@@ -182,7 +182,7 @@ class ScriptRunner:
         try:
             await pending
             await self._settle()
-        except (sc.BadRegister, BadCommand, urscript.ScriptError) as exc:
+        except (sc.BadRegister, BadCommand, ProtectiveStopped, urscript.ScriptError) as exc:
             return self._fail(f"{name}: {exc}")
         finally:
             self.busy = False
@@ -288,7 +288,7 @@ class ScriptRunner:
             self._async(0)
             try:
                 await move
-            except (sc.BadRegister, BadCommand, urscript.ScriptError) as exc:
+            except (sc.BadRegister, BadCommand, ProtectiveStopped, urscript.ScriptError) as exc:
                 self._fail(str(exc))
             finally:
                 if self.alive:

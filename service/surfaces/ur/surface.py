@@ -5,16 +5,15 @@ The sink runs on the sim thread: after every published snapshot it keeps it as t
 `Frame`, with the position target's rate of change since the last one (RTDE's target_qd and
 target_qdd), and it asks the loop for a snapshot at every tick while an RTDE client streams,
 so that a 500 Hz stream of a 500 Hz world carries every tick. The event loop of the UR
-thread reads that one reference. The sink is also the controllers' safety system (safety.py):
-the torque rule on every snapshot, and after every tick the table check on the targets as of
-every accepted command; a world either stops is handed to the UR thread
-(`Endpoints.protective_stop`), which halts the arm and sets the world's safety mode.
+thread reads that one reference. The sink is also the controllers' torque rule (safety.py) on
+every snapshot: a world it stops is handed to the UR thread (`Endpoints.protective_stop`),
+which ends the program, holds the arm and sets the world's safety mode. The targets of every
+world, UR or not, are watched by the core (core/commands/clearance_watch.py).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -23,11 +22,6 @@ from fastapi import APIRouter
 from service.core.access.callers import book_of
 from service.core.access.policy import is_loopback
 from service.core.commands import params
-from service.core.commands.control import Control
-from service.core.errors import Unavailable
-from service.core.kinematics.clearance import TableClearance
-from service.core.kinematics.tools import tools_of
-from service.core.sim.batch import Batch
 from service.core.sim.loop_types import SnapshotSink
 from service.core.sim.types import Snapshot
 from service.core.sim.worlds import world_list
@@ -36,12 +30,11 @@ from service.surfaces.ur import addresses
 from service.surfaces.ur.endpoints import Endpoints
 from service.surfaces.ur.motion import Motion
 from service.surfaces.ur.rtde_outputs import Frame
-from service.surfaces.ur.safety import SafetyWatch, TableWatch
+from service.surfaces.ur.safety import SafetyWatch
 from service.surfaces.ur.settings import UrSettings
 from service.surfaces.ur.tcp_pose import ToolKinematics
 
 log = logging.getLogger("armfleet.ur")
-ARM = 6  # the arm's joints come first; the gripper's finger_joint is next
 
 
 class UrSink(SnapshotSink):
@@ -53,11 +46,8 @@ class UrSink(SnapshotSink):
         tick_dt: float,
         first: Snapshot,
         watch: SafetyWatch,
-        table: TableWatch | None,
-        targets: Callable[[np.ndarray], np.ndarray],
     ) -> None:
         self._ep, self._dt, self._watch = endpoints, tick_dt, watch
-        self._table, self._targets = table, targets
         zero = np.zeros_like(first.target, dtype=np.float64)
         self._last = Frame(first, zero, zero, tick_dt)
         endpoints.frame = self._last
@@ -81,26 +71,6 @@ class UrSink(SnapshotSink):
         if ticks > 0:
             for world, why in self._watch.check(snap):
                 self._ep.protective_stop(world, why)
-
-    def on_tick(self, batch: Batch, now: float) -> None:
-        """Every tick: the targets as of every accepted command, through the table check."""
-        table = self._table
-        if table is not None:
-            opening = self._last.snap.position[table.worlds, ARM]  # the gripper, as it is
-            for world, why in table.check(self._targets(table.worlds), opening):
-                self._ep.protective_stop(world, why)
-
-
-def _table_watch(worlds: list[int], control: Control) -> TableWatch | None:
-    """The table check of the served cell; None when it has no table or no UR arm."""
-    try:
-        kin = tools_of(control.loop).kin
-    except Unavailable:
-        return None
-    mjm, names = control.loop.batch.robot.mjm, control.spec.names
-    finger = names[ARM] if len(names) > ARM else None
-    clearance = TableClearance.of_model(mjm, names[:ARM], kin, finger)
-    return None if clearance is None else TableWatch(worlds, clearance)
 
 
 class UrSurface:
@@ -139,9 +109,7 @@ class UrSurface:
             loop.priority.add_companion(ep.thread_id)
         limits = [j.effort_limit for j in loop.spec.joints]
         watch = SafetyWatch(self.worlds, np.array(limits), loop.batch.tick_dt)
-        table = _table_watch(self.worlds, ctx.control)
-        targets = loop.commands.pending_targets
-        self._sink = UrSink(ep, loop.batch.tick_dt, loop.latest, watch, table, targets)
+        self._sink = UrSink(ep, loop.batch.tick_dt, loop.latest, watch)
         loop.listeners.add_sink(self._sink)
         first, last = self.addresses[self.worlds[0]], self.addresses[self.worlds[-1]]
         log.info(

@@ -174,17 +174,24 @@ class WorldRobot:
             self.speed_loop.end()
 
     def protective_stop(self, why: str) -> None:
-        """The arm stops where it is, the program ends, the world's safety mode says so on
-        every surface until the Dashboard's `unlock protective stop` (5 s later at the
-        earliest) or a reset. The arm is halted before the mode is set: from then on the core
-        refuses every command that would move it (core/sim/safety.py)."""
+        """The robot's own causes (a joint at its torque limit, triggerProtectiveStop): the
+        program ends, then the core's `protective_stop` command holds the arm where it is and
+        sets the world's safety mode in one step; `stopped` follows, as for any other cause."""
         if self.controller.safety_mode.name == "PROTECTIVE_STOP":
             return
-        log.warning("world %d: protective stop: %s", self.world, why)
         self.end_script(f"protective stop: {why}")
         self.end_speed_loop()
-        self.motion.halt(self.world)
-        self.controller.protective_stop(why)
+        self.motion.protective_stop(self.world, why)
+
+    def stopped(self, why: str) -> None:
+        """The world was protective-stopped, by whatever cause (the core's clearance watch of
+        every world's targets, or `protective_stop` above): the program ends, the controller
+        says STOPPED, the primary and secondary clients get the robot's message. The arm is
+        held by then, and the core refuses every command that would move it until the
+        Dashboard's `unlock protective stop` (5 s later at the earliest) or a reset."""
+        self.end_script(f"protective stop: {why}")
+        self.end_speed_loop()
+        self.controller.stopped()
         self.log_message(f"Protective stop: {why}")
 
     def log_message(self, text: str) -> None:
