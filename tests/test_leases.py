@@ -164,7 +164,7 @@ def test_a_three_second_lease_frees_and_resets_its_world_within_a_second(
     r = admin.post(
         f"/v1/worlds/{world}/increments",
         headers=bearer(token),
-        json={"joint": "elbow_joint", "delta": 0.4},
+        json={"joint": "elbow_joint", "delta": -0.4},
     )
     assert r.status_code == 200
     assert not np.allclose(_state(admin, world)["target"], HOME)

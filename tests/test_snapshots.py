@@ -162,7 +162,7 @@ def test_a_flipped_array_byte_is_caught_by_the_file_checks():
 def test_stop_saves_latest_and_restore_latest_starts_from_it(paused, http):
     """Last in the module: it stops the module's server (SIGINT, as Ctrl-C) to see `latest`."""
     srv, data = paused
-    http.post("/v1/worlds/1/increments", json={"joint": ELBOW, "delta": 0.4})
+    http.post("/v1/worlds/1/increments", json={"joint": ELBOW, "delta": -0.4})
     http.post("/v1/sim/step", json={"ticks": 33}).raise_for_status()
     final = everything(http)
     latest = data / "snapshots" / "latest.npz"
