@@ -121,3 +121,29 @@ def test_a_failed_or_dead_build_leaves_nothing_under_the_name_and_the_next_use_b
     assert not (tmp_path / "ros-node-py3.11-dddd" / "stale").exists()
     assert not (tmp_path / ".ros-node-py3.11-eeee.tmp-x1").exists()
     assert builds(tmp_path) == ["ros-node-py3.11-dddd", "ros-node-py3.11-dddd"]
+
+
+def test_the_sources_hash_ignores_what_an_install_writes_beside_the_sources(tmp_path, monkeypatch):
+    from service.surfaces.ros import node_env
+
+    for folder, name in (("clients", "client.py"), ("node/armfleet_ros", "node.py")):
+        (tmp_path / folder).mkdir(parents=True)
+        (tmp_path / folder / name).write_text("one = 1\n")
+    (tmp_path / "dist").mkdir()
+    (tmp_path / "dist" / "pyproject.toml").write_text("[project]\n")
+    monkeypatch.setattr(node_env, "REPO", tmp_path)
+    monkeypatch.setattr(node_env, "CLIENTS", tmp_path / "clients")
+    monkeypatch.setattr(node_env, "NODE_DIST", tmp_path / "node")
+    monkeypatch.setattr(node_env, "CLIENT_DIST", tmp_path / "dist")
+    before = node_env.sources_hash()
+    for written in (  # what pip's in-tree build and Python leave there
+        "node/build/lib/armfleet_ros/node.py",
+        "node/armfleet_ros.egg-info/PKG-INFO",
+        "dist/armfleet_client.egg-info/PKG-INFO",
+        "clients/__pycache__/client.cpython-311.pyc",
+    ):
+        (tmp_path / written).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / written).write_text("built\n")
+    assert node_env.sources_hash() == before
+    (tmp_path / "node/armfleet_ros/node.py").write_text("one = 2\n")
+    assert node_env.sources_hash() != before

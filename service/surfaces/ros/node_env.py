@@ -90,12 +90,19 @@ def probe(python: str, env: dict[str, str]) -> tuple[int, int]:
     return int(major), int(minor)
 
 
+def _built(path: Path) -> bool:
+    """A file pip or Python wrote into the sources (build/, *.egg-info, __pycache__)."""
+    return any(p in ("build", "__pycache__") or p.endswith(".egg-info") for p in path.parts)
+
+
 def sources_hash() -> str:
-    """What the prepared folder is built from: the client library and the node's sources."""
+    """What the prepared folder is built from: the client library and the node's sources (not
+    what an install wrote beside them: that changed the hash, and the next start installed
+    again)."""
     digest = hashlib.sha256()
     for root in (CLIENTS, NODE_DIST, CLIENT_DIST):
         for path in sorted(root.rglob("*")):
-            if path.is_file() and "__pycache__" not in path.parts:
+            if path.is_file() and not _built(path.relative_to(root)):
                 digest.update(str(path.relative_to(REPO)).encode())
                 digest.update(path.read_bytes())
     return digest.hexdigest()[:12]
@@ -124,6 +131,8 @@ def prepare(python: str, version: tuple[int, int], env: dict[str, str]) -> Path:
 
 def _install(python: str, env: dict[str, str], target: Path) -> None:
     log.info("ROS 2 node: installing armfleet's client for %s (once)", python)
+    for dist in (CLIENT_DIST, NODE_DIST):  # an earlier build's files, maybe of other sources
+        shutil.rmtree(dist / "build", ignore_errors=True)
     pip = [sys.executable, "-m", "pip", "--python", python, "install", "--target", str(target)]
     steps = [[*pip, "--no-deps", str(CLIENT_DIST), str(NODE_DIST)]]
     has_deps = subprocess.run(
