@@ -97,59 +97,72 @@ def added(node_ms: list[float], direct_ms: list[float], draws: int = 2000) -> di
 
 
 class Direct:
-    """The direct path: one WebSocket per world (60 Hz states), rounds as the judge does them."""
+    """The direct path: one WebSocket per world (60 Hz states) with armfleet's async client, on
+    an event loop of its own whose readers take every frame as it comes, between rounds too
+    (as the judge's executor does; an unread socket misses its keepalive); rounds as the
+    judge does them."""
 
     def __init__(self, url: str, worlds: int) -> None:
-        import logging
+        import asyncio
+        import threading
 
-        from clients import ArmfleetClient
+        self.loop = asyncio.new_event_loop()
+        threading.Thread(target=self.loop.run_forever, name="direct", daemon=True).start()
+        self.arm: Any = None
+        self.sessions: list[Any] = []
+        self._call(self._open(url, worlds))
 
-        # sockets left unread during the judge's rounds may miss a keepalive: not a result
-        logging.getLogger("websockets").setLevel(logging.CRITICAL)
-        self.arm = ArmfleetClient(url)
-        self.sessions = [self.arm.connect(w, rate=STATE_HZ) for w in range(worlds)]
+    def _call(self, coro: Any) -> Any:
+        import asyncio
+
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result()
+
+    async def _open(self, url: str, worlds: int) -> None:
+        from clients import AsyncArmfleetClient
+
+        self.arm = AsyncArmfleetClient(url)
+        self.sessions = [await self.arm.connect(w, rate=STATE_HZ) for w in range(worlds)]
         for s in self.sessions:
-            s.recv_state(timeout=10)
-
-    @staticmethod
-    def _newest(s: Any) -> Any:
-        """The newest state frame: what came meanwhile read off (a read timeout says
-        Unreachable on some sockets), else the next one."""
-        from clients import Unreachable
-
-        got = None
-        while True:
-            try:
-                got = s.recv_state(timeout=0.0005 if got is not None else 5)
-            except (TimeoutError, Unreachable):
-                if got is None:
-                    raise
-                return got
+            await s.recv_state(timeout=10)
 
     def round(self, world: int, sign: float, delay: float) -> float | None:
         """As the judge's: at rest, the next frame, `delay` s, the command, the first frame
         showing it; ms, or None when none showed it within 5 s."""
-        s = self.sessions[world]
-        st = self._newest(s)
+        return self._call(self._round(self.sessions[world], sign, delay))
+
+    @staticmethod
+    async def _round(s: Any, sign: float, delay: float) -> float | None:
+        import asyncio
+
+        with contextlib.suppress(TimeoutError):
+            while True:  # what came meanwhile, read off: the newest is s.latest
+                await s.recv_state(timeout=0.001)
+        st = s.latest
         deadline = time.perf_counter() + 5
         while abs(st.velocity[ELBOW]) >= REST and time.perf_counter() < deadline:
-            st = s.recv_state(timeout=5)
-        st = s.recv_state(timeout=5)  # the next frame: the phase reference
+            st = await s.recv_state(timeout=5)
+        st = await s.recv_state(timeout=5)  # the next frame: the phase reference
         before = st.position[ELBOW]
-        time.sleep(delay)
+        await asyncio.sleep(delay)
         t0 = time.perf_counter()
-        s.set_targets({"elbow_joint": before + STEP * sign})
+        await s.set_targets({"elbow_joint": before + STEP * sign})
         while time.perf_counter() < t0 + 5:
-            st = s.recv_state(timeout=5)
+            st = await s.recv_state(timeout=5)
             if sign * (st.position[ELBOW] - before) >= 1e-4:
                 return (time.perf_counter() - t0) * 1e3
         return None
 
     def close(self) -> None:
-        for s in self.sessions:
-            with contextlib.suppress(Exception):  # unread sockets may have timed out
-                s.close()
-        self.arm.close()
+        async def closing() -> None:
+            for s in self.sessions:
+                with contextlib.suppress(Exception):
+                    await s.close()
+            if self.arm is not None:
+                await self.arm.close()
+
+        with contextlib.suppress(Exception):
+            self._call(closing())
+        self.loop.call_soon_threadsafe(self.loop.stop)
 
 
 def round_trips(url: str, tick_s: float, worlds: int, pairs: int) -> dict[str, Any]:
