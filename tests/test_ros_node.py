@@ -153,8 +153,9 @@ def test_command_lanes_send_from_many_threads_at_once(ros: tuple[Server, httpx.C
         lane.submit(3, {"finger_joint": before}, restore)
         with contextlib.suppress(Exception):
             restore.result(timeout=30)
-        lane.stop()
-        nowhere.stop()
+        for each in (lane, nowhere):
+            each.stop()
+            each.join(5)
 
 
 # -- the seed's controller ------------------------------------------------------------------------

@@ -87,6 +87,7 @@ class Lane:
         return self._ws is not None
 
     def stop(self) -> None:
+        """Tell the lane's thread to end (`join` waits for it)."""
         self._stop.set()
         with self._lock:
             ws, timer = self._ws, self._timer
@@ -94,7 +95,9 @@ class Lane:
             timer.cancel()
         if ws is not None:
             ws.close()  # the reading thread sees it closed and ends
-        self._thread.join(timeout=5)
+
+    def join(self, timeout: float) -> None:
+        self._thread.join(timeout=timeout)
 
     def submit(self, world: int, targets: Mapping[str, float], fut: Future) -> None:
         """Any thread: send now (from this thread), or queue (merging) until budget returns

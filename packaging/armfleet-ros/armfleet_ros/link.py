@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
+import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from typing import Any
@@ -90,6 +91,9 @@ class FleetLink:
         self._stopping = True
         for lane in self.lanes:
             lane.stop()
+        deadline = time.monotonic() + 5  # all told first: one that is connecting takes longest
+        for lane in self.lanes:
+            lane.join(max(0.0, deadline - time.monotonic()))
         for task in asyncio.all_tasks(self._loop) if self._loop.is_running() else ():
             self._loop.call_soon_threadsafe(task.cancel)
         self._thread.join(timeout=5)
