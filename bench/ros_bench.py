@@ -9,10 +9,13 @@ default) and, in the same run:
 - the first use of the latency worlds' namespaces: the judge's publishers and subscriptions
   made → matched and states flowing (each world's topics opened on the way);
 - JointState command → first `/world_N/joint_states` showing the joint move toward the new
-  target (>= 1e-4 rad; the arm at rest before each round),
-  through the node (a judge rclpy node publishes and subscribes), against the direct path (the
-  client's WebSocket: set_targets, then the first state frame showing it), same worlds, same
-  60 Hz state rate, the two paths in turns of a third of the rounds;
+  target (>= 1e-4 rad; the arm at rest before each round), through the node (a judge rclpy
+  node publishes and subscribes) and directly (the client's WebSocket: set_targets, then the
+  first state frame showing it), measured the same way: the same worlds at the same 60 Hz
+  state rate, the two paths interleaved round by round (a shared box's load changes within a
+  run), each round sent at a chosen phase after a state frame, the phases spread evenly over
+  a tick and the same for both paths (a command waits for the next tick: a phase kept the same
+  round after round would read as latency), 300 rounds a path (quick) or 600;
 - 1000 JointState commands/s over 16 worlds' `joint_commands`: what the node accepted, what it
   refused, and that each world's last command is its target.
 
@@ -35,13 +38,14 @@ from bench.registry import Context, Result, section
 
 WORLDS = 256
 STATE_HZ = 60
-LATENCY_WORLDS = 4
+LATENCY_WORLDS = 9  # odd: each world's rounds alternate between the paths
 FLOOD_WORLDS = 16
 FLOOD_RATE = 1000.0
 ELBOW = 2
-BATCHES = 3  # of latency rounds, each path in turn
+STEP = 0.05  # rad, a round's move of the elbow
+REST = 0.002  # rad/s: at rest (as the judge reads it, tests/rclpy/load_judge.py)
 ANSWER_WAIT_S = 30.0  # the longest wait for the node to answer the flood's every message
-GAP_S = 0.4  # between rounds: with 4 worlds each arm rests 1.6 s before it is commanded again
+GOLDEN = 0.6180339887498949  # phases k * GOLDEN mod 1: spread evenly over a tick, in any prefix
 
 
 def _judge(*args: str, timeout: float = 300) -> dict[str, Any]:
@@ -66,54 +70,169 @@ def _stats(ms: list[float]) -> dict[str, Any]:
         return {"n": 0}
     return {
         "n": int(a.size),
+        "mean_ms": float(a.mean()),
         "p50_ms": float(np.percentile(a, 50)),
+        "p90_ms": float(np.percentile(a, 90)),
         "p99_ms": float(np.percentile(a, 99)),
         "max_ms": float(a.max()),
     }
 
 
-def direct_round_trips(url: str, worlds: int, rounds: int) -> list[float]:
-    """The same measure over armfleet's WebSocket (one socket per world, 60 Hz states)."""
-    import logging
-
-    from clients import ArmfleetClient, Unreachable
-
-    # sockets left unread between rounds may miss a keepalive at the end: not a result
-    logging.getLogger("websockets").setLevel(logging.CRITICAL)
-    out: list[float] = []
-    with ArmfleetClient(url) as arm:
-        sessions = [arm.connect(w, rate=STATE_HZ) for w in range(worlds)]
-        try:
-            for s in sessions:
-                s.recv_state(timeout=10)
-            for i in range(rounds):
-                s = sessions[i % worlds]
-                while True:  # drain to the newest frame (a read timeout says Unreachable)
-                    try:
-                        s.recv_state(timeout=0.001)
-                    except (TimeoutError, Unreachable):
-                        break
-                before = s.latest.position[ELBOW]
-                sign = 1.0 if (i // worlds) % 2 == 0 else -1.0
-                t0 = time.perf_counter()
-                s.set_targets({"elbow_joint": before + 0.05 * sign})
-                deadline = t0 + 5
-                while time.perf_counter() < deadline:
-                    st = s.recv_state(timeout=5)
-                    if sign * (st.position[ELBOW] - before) >= 1e-4:
-                        out.append((time.perf_counter() - t0) * 1e3)
-                        break
-                time.sleep(GAP_S)
-        finally:
-            for s in sessions:
-                with contextlib.suppress(Exception):  # unread sockets may have timed out
-                    s.close()
+def added(node_ms: list[float], direct_ms: list[float], draws: int = 2000) -> dict[str, Any]:
+    """What the node adds at p50 and p99, with a 90% bootstrap interval for each (each path's
+    rounds resampled on their own): how far one run's figure can be trusted."""
+    a, b = np.asarray(node_ms, dtype=float), np.asarray(direct_ms, dtype=float)
+    if a.size < 10 or b.size < 10:
+        return {}
+    rng = np.random.default_rng(0)
+    out: dict[str, Any] = {}
+    for q in (50, 99):
+        diff = np.percentile(a, q) - np.percentile(b, q)
+        ra = np.percentile(rng.choice(a, (draws, a.size)), q, axis=1)
+        rb = np.percentile(rng.choice(b, (draws, b.size)), q, axis=1)
+        lo, hi = np.percentile(ra - rb, [5, 95])
+        out[f"p{q}_ms"] = float(diff)
+        out[f"p{q}_ci90_ms"] = [float(lo), float(hi)]
     return out
+
+
+class Direct:
+    """The direct path: one WebSocket per world (60 Hz states) with armfleet's async client, on
+    an event loop of its own whose readers take every frame as it comes, between rounds too
+    (as the judge's executor does; an unread socket misses its keepalive); rounds as the
+    judge does them."""
+
+    def __init__(self, url: str, worlds: int) -> None:
+        import asyncio
+        import threading
+
+        self.loop = asyncio.new_event_loop()
+        threading.Thread(target=self.loop.run_forever, name="direct", daemon=True).start()
+        self.arm: Any = None
+        self.sessions: list[Any] = []
+        self._call(self._open(url, worlds))
+
+    def _call(self, coro: Any) -> Any:
+        import asyncio
+
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result()
+
+    async def _open(self, url: str, worlds: int) -> None:
+        from clients import AsyncArmfleetClient
+
+        self.arm = AsyncArmfleetClient(url)
+        self.sessions = [await self.arm.connect(w, rate=STATE_HZ) for w in range(worlds)]
+        for s in self.sessions:
+            await s.recv_state(timeout=10)
+
+    def round(self, world: int, sign: float, delay: float) -> float | None:
+        """As the judge's: at rest, the next frame, `delay` s, the command, the first frame
+        showing it; ms, or None when none showed it within 5 s."""
+        return self._call(self._round(self.sessions[world], sign, delay))
+
+    @staticmethod
+    async def _round(s: Any, sign: float, delay: float) -> float | None:
+        import asyncio
+
+        with contextlib.suppress(TimeoutError):
+            while True:  # what came meanwhile, read off: the newest is s.latest
+                await s.recv_state(timeout=0.001)
+        st = s.latest
+        deadline = time.perf_counter() + 5
+        while abs(st.velocity[ELBOW]) >= REST and time.perf_counter() < deadline:
+            st = await s.recv_state(timeout=5)
+        st = await s.recv_state(timeout=5)  # the next frame: the phase reference
+        before = st.position[ELBOW]
+        await asyncio.sleep(delay)
+        t0 = time.perf_counter()
+        await s.set_targets({"elbow_joint": before + STEP * sign})
+        while time.perf_counter() < t0 + 5:
+            st = await s.recv_state(timeout=5)
+            if sign * (st.position[ELBOW] - before) >= 1e-4:
+                return (time.perf_counter() - t0) * 1e3
+        return None
+
+    def close(self) -> None:
+        async def closing() -> None:
+            for s in self.sessions:
+                with contextlib.suppress(Exception):
+                    await s.close()
+            if self.arm is not None:
+                await self.arm.close()
+
+        with contextlib.suppress(Exception):
+            self._call(closing())
+        self.loop.call_soon_threadsafe(self.loop.stop)
+
+
+def round_trips(url: str, tick_s: float, worlds: int, pairs: int) -> dict[str, Any]:
+    """`pairs` rounds a path, interleaved: pair k's two rounds (their order alternating) are
+    sent at the same phase, k * GOLDEN of a tick after a state frame; round r commands world
+    r mod `worlds`, which with an odd count takes each path in turn, and moves it +, +, -, -
+    over its visits (the arm stays near its start)."""
+    from tests import ros2_judge
+
+    judge = subprocess.Popen(
+        [ros2_judge.python(), str(ros2_judge.JUDGE_SCRIPT), "latency", str(worlds)],
+        env=ros2_judge.env(),
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert judge.stdin is not None and judge.stdout is not None
+    stdout = judge.stdout
+
+    def judged() -> dict[str, Any]:
+        line = ""
+        while not line.startswith("{"):
+            line = stdout.readline()
+            if not line:
+                raise RuntimeError("the latency judge stopped")
+        return json.loads(line)
+
+    direct = Direct(url, worlds)
+    seen: dict[str, Any] = {"node": [], "direct": [], "missed": []}
+    try:
+        seen["ready_s"] = judged()["ready_s"]
+        for r in range(2 * pairs):
+            k, world, visit = r // 2, r % worlds, r // worlds
+            sign = 1.0 if (visit // 2) % 2 == 0 else -1.0
+            delay = (k * GOLDEN % 1.0) * tick_s
+            path = ("node", "direct")[(r + k) % 2]
+            if path == "node":
+                judge.stdin.write(f"{world} {sign} {delay}\n")
+                judge.stdin.flush()
+                ms = judged()["ms"]
+            else:
+                ms = direct.round(world, sign, delay)
+            if ms is None:
+                seen["missed"].append(path)
+            else:
+                seen[path].append(ms)
+    finally:
+        direct.close()
+        judge.stdin.close()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            judge.wait(timeout=30)
+        if judge.poll() is None:
+            judge.kill()
+    return seen
 
 
 def _pair(stats: dict[str, Any]) -> str:
     nan = float("nan")
-    return f"{stats.get('p50_ms', nan):.1f} / {stats.get('p99_ms', nan):.1f} ms (n={stats['n']})"
+    return (
+        f"{stats.get('p50_ms', nan):.1f} / {stats.get('p99_ms', nan):.1f} ms "
+        f"(max {stats.get('max_ms', nan):.1f}, n={stats['n']})"
+    )
+
+
+def _added(a: dict[str, Any]) -> str:
+    if not a:
+        return "n/a"
+    p50, p99 = a["p50_ms"], a["p99_ms"]
+    (l50, h50), (l99, h99) = a["p50_ci90_ms"], a["p99_ci90_ms"]
+    return f"{p50:+.1f} [{l50:+.1f}, {h50:+.1f}] / {p99:+.1f} [{l99:+.1f}, {h99:+.1f}] ms"
 
 
 def _node(http: httpx.Client) -> dict[str, Any]:
@@ -156,7 +275,6 @@ def ros(ctx: Context) -> Result:
     if reason:
         return Result([], data={"errors": {"judge": reason}}, notes=[reason])
     worlds = (ctx.worlds or [ctx.pick(WORLDS, 64)])[0]
-    rounds = ctx.pick(100, 30)
     flood_s = ctx.pick(10.0, 3.0)
     env = dict(ros2_judge.env())
     env["PYTHONPATH"] = os.pathsep.join([str(ros2_judge.ROOT), env.get("PYTHONPATH", "")])
@@ -183,18 +301,14 @@ def ros(ctx: Context) -> Result:
         data["idle"] = _usage(node["pid"], ctx.pick(5.0, 3.0))
         ctx.say(f"  node up in {data['node_start_s']:.1f} s; graph {data['graph']}")
         n_lat = min(LATENCY_WORLDS, worlds)
-        # the two paths take turns, BATCHES times: a shared box's load changes within a run
-        node_ms: list[float] = []
-        direct_ms: list[float] = []
-        for b in range(BATCHES):
-            n = rounds // BATCHES
-            seen = _judge("latency", str(n_lat), str(n), str(GAP_S))
-            node_ms += seen["ms"]
-            if b == 0:  # the namespaces' first use: later batches find them open
-                data["first_use_s"] = seen.get("ready_s")
-            direct_ms += direct_round_trips(server.url, n_lat, n)
-        data["node_latency"] = _stats(node_ms)
-        data["direct_latency"] = _stats(direct_ms)
+        tick_s = 1.0 / http.get("/v1/info").json()["control_hz"]
+        seen = round_trips(server.url, tick_s, n_lat, ctx.pick(600, 300))
+        data["first_use_s"] = seen["ready_s"]
+        data["node_latency"] = _stats(seen["node"])
+        data["direct_latency"] = _stats(seen["direct"])
+        data["node_added"] = added(seen["node"], seen["direct"])
+        data["missed"] = seen["missed"]  # rounds whose move no state showed within 5 s
+        data["round_trips_ms"] = {"node": seen["node"], "direct": seen["direct"]}
         before = _node(http)["report"]
         flood = _judge("flood", str(FLOOD_WORLDS), str(FLOOD_RATE), str(flood_s))
         after = _answered(http, before, flood["sent"])
@@ -243,6 +357,10 @@ def ros(ctx: Context) -> Result:
         {
             "measure": "round trip direct WS p50 / p99",
             "value": _pair(lat_d),
+        },
+        {
+            "measure": "node adds at p50 / p99 [90% interval]",
+            "value": _added(data["node_added"]),
         },
         {
             "measure": "1000/s flood: sent / accepted (merged) / refused",

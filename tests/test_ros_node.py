@@ -11,6 +11,8 @@ import json
 import os
 import queue
 import subprocess
+import sys
+import threading
 from collections.abc import Iterator
 from typing import Any
 
@@ -24,7 +26,7 @@ from websockets.sync.client import connect
 
 from clients import ros_rules
 from tests import ros2_judge
-from tests.conftest import JOINTS, Server, serve, wait_for
+from tests.conftest import JOINTS, Server, free_port, serve, wait_for
 
 pytestmark = pytest.mark.skipif(
     ros2_judge.skip_reason() is not None, reason=str(ros2_judge.skip_reason())
@@ -98,6 +100,62 @@ def rejected_count(http: httpx.Client, kind: str, at_least: int = 1) -> int:
 
 def targets(http: httpx.Client, world: int) -> list[float]:
     return http.get(f"/v1/worlds/{world}/state").json()["target"]
+
+
+# -- the command lanes -------------------------------------------------------------------------
+
+
+def test_command_lanes_send_from_many_threads_at_once(ros: tuple[Server, httpx.Client]) -> None:
+    """The node's command lanes (armfleet_ros/lanes.py) send from whichever thread submits
+    (the executors' threads): 4 threads at once, 50 commands each on one world, every message
+    answered by an ack (merged ones share theirs), the last one sent after them the target;
+    a lane that cannot reach armfleet answers Unreachable at once."""
+    from concurrent.futures import Future
+
+    sys.path.insert(0, str(ros2_judge.NODE_SRC))
+    from armfleet_ros.lanes import lanes_for
+
+    from clients.errors import Unreachable
+    from clients.models import CommandAck
+
+    srv, http = ros
+    (lane,), _ = lanes_for(srv.url, [3], 180.0, lambda states: None)
+    (nowhere,), _ = lanes_for(f"http://127.0.0.1:{free_port()}", [3], 180.0, lambda s: None)
+    lane.start()
+    nowhere.start()
+    before = targets(http, 3)[6]
+    try:
+        wait_for(lambda: lane.connected or None, "the lane connected", 30)
+        futures: list[Future] = []
+
+        def send(t: int) -> None:
+            for i in range(50):
+                fut: Future = Future()
+                lane.submit(3, {"finger_joint": 0.001 * (t * 50 + i)}, fut)
+                futures.append(fut)
+
+        threads = [threading.Thread(target=send, args=(t,)) for t in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        last: Future = Future()
+        lane.submit(3, {"finger_joint": 0.3}, last)
+        acks = [f.result(timeout=60) for f in [*futures, last]]
+        assert all(isinstance(a, CommandAck) for a in acks)
+        assert len({id(a) for a in acks}) + lane.merged == 201
+        assert targets(http, 3)[6] == 0.3
+        lost: Future = Future()
+        nowhere.submit(3, {"finger_joint": 0.3}, lost)
+        assert isinstance(lost.exception(timeout=0), Unreachable)
+    finally:
+        restore: Future = Future()
+        lane.submit(3, {"finger_joint": before}, restore)
+        with contextlib.suppress(Exception):
+            restore.result(timeout=30)
+        for each in (lane, nowhere):
+            each.stop()
+            each.join(5)
 
 
 # -- the seed's controller ------------------------------------------------------------------------

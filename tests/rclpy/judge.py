@@ -351,7 +351,7 @@ def main() -> None:
         elif cmd == "latency":
             from load_judge import latency
 
-            latency(int(args[0]), int(args[1]), float(args[2]))
+            latency(int(args[0]))
         elif cmd == "flood":
             from load_judge import flood
 

@@ -2,60 +2,93 @@
 
 from __future__ import annotations
 
+import sys
+import threading
 import time
 
 import rclpy
 from common import JOINTS, out, spin_until
 from rclpy.node import Node
 
+REST = 0.002  # rad/s: the elbow moves less than 1e-4 rad in a tick, a round's threshold
 
-def latency(worlds: int, rounds: int, gap: float) -> None:
-    """publish → first /world_N/joint_states showing the joint move toward the new target
-    (>= 1e-4 rad), one world at a time, `gap` s between rounds (the arm at rest each time).
-    Also `ready_s`: from the judge's publishers and subscriptions made to every one of them
-    matched and publishing states (for a namespace not used before: its opening included)."""
+
+class _Latest:
+    """Each world's newest state (arrival, elbow position, elbow velocity), written by the
+    executor's thread as states arrive; the rounds wait on it."""
+
+    def __init__(self) -> None:
+        self.cond = threading.Condition()
+        self.of: dict = {}
+
+    def put(self, w: int, msg) -> None:
+        t = time.perf_counter()  # the arrival, as the callback sees it
+        with self.cond:
+            self.of[w] = (t, msg.position[2], msg.velocity[2])
+            self.cond.notify_all()
+
+    def until(self, pred, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        with self.cond:
+            while not pred():
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self.cond.wait(min(left, 0.05))  # also: counts that change unannounced
+        return True
+
+
+def latency(worlds: int) -> None:
+    """Round trips on demand: the bench writes rounds on stdin, `world sign delay_s` a line,
+    and gets one JSON line a round. A round: the world's arm at rest, then its next state (the
+    phase reference: states follow ticks), `delay_s` later a JointState on its
+    joint_commands moving the elbow 0.05 rad by `sign`, and the time from that publish to the
+    first /world_N/joint_states showing the elbow moved toward it (>= 1e-4 rad). The bench
+    measures its direct path the same way (bench/ros_bench.py). States are taken by an
+    executor spinning in a thread of its own, between rounds too (an unspun queue would hand
+    old states over as new). First line: `ready_s`, from the judge's publishers and
+    subscriptions made to all of them matched and publishing states (for a namespace not used
+    before: its opening included)."""
+    from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import JointState
 
     t_made = time.perf_counter()
     node = Node("judge_latency")
-    latest: dict = {}
+    latest = _Latest()
     pubs = {}
     for w in range(worlds):
         pubs[w] = node.create_publisher(JointState, f"/world_{w}/joint_commands", 10)
         node.create_subscription(
-            JointState,
-            f"/world_{w}/joint_states",
-            lambda m, w=w: latest.__setitem__(w, (time.perf_counter(), m.position[2])),
-            10,
+            JointState, f"/world_{w}/joint_states", lambda m, w=w: latest.put(w, m), 10
         )
-    spin_until(
-        node,
-        lambda: len(latest) == worlds and all(p.get_subscription_count() for p in pubs.values()),
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    threading.Thread(target=executor.spin, daemon=True).start()
+    of = latest.of
+    latest.until(
+        lambda: len(of) == worlds and all(p.get_subscription_count() for p in pubs.values()),
         60,
     )
-    ready_s = time.perf_counter() - t_made
-    spin_until(node, lambda: False, 1.0)
-    out_ms = []
-    for i in range(rounds):
-        w = i % worlds
-        before = latest[w][1]
-        target = before + (0.05 if (i // worlds) % 2 == 0 else -0.05)
-        sign = 1.0 if target > before else -1.0
+    out(ready_s=time.perf_counter() - t_made)
+    for line in sys.stdin:
+        w, sign, delay = int(line.split()[0]), float(line.split()[1]), float(line.split()[2])
+        latest.until(lambda w=w: abs(of[w][2]) < REST, 5)
+        seen = of[w][0]
+        latest.until(lambda w=w, seen=seen: of[w][0] > seen, 1)
+        before = of[w][1]
+        time.sleep(delay)
         msg = JointState()
-        msg.name, msg.position = ["elbow_joint"], [target]
+        msg.name, msg.position = ["elbow_joint"], [before + 0.05 * sign]
         t0 = time.perf_counter()
         pubs[w].publish(msg)
-        moved = spin_until(
-            node,
+        moved = latest.until(
             lambda w=w, t0=t0, before=before, sign=sign: (
-                latest[w][0] > t0 and sign * (latest[w][1] - before) >= 1e-4
+                of[w][0] > t0 and sign * (of[w][1] - before) >= 1e-4
             ),
             5,
         )
-        if moved:
-            out_ms.append((latest[w][0] - t0) * 1e3)
-        spin_until(node, lambda: False, gap)  # each world rests again before its next round
-    out(ms=out_ms, rounds=rounds, ready_s=ready_s)
+        out(ms=(of[w][0] - t0) * 1e3 if moved else None)
+    executor.shutdown()
 
 
 def flood(worlds: int, rate: float, seconds: float) -> None:

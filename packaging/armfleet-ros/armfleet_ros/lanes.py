@@ -23,20 +23,27 @@ tick anyway. When armfleet keeps up nothing waits.
 
 A command's ack makes armfleet send that lane's worlds' next state frame at once, whatever the
 lane's 1 Hz cadence; the node publishes it, which keeps a command's round trip short.
+
+A command goes out from the thread that submits it (the executor's, in the subscription's
+callback), on a socket made for that (line.py): through the link's event loop it waited for
+another thread's turn first. Each lane has a thread of its own reading its socket (acks, the
+frames it is owed: published from there at once); what waits for budget or for an ack goes
+out from the thread of the ack, or of a timer when budget returns.
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
+import threading
 import time
 from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from typing import Any
 
-from websockets.asyncio.client import connect
+from websockets.exceptions import InvalidHandshake
 
 from armfleet_ros import auth
+from armfleet_ros.line import LineClosed, ThreadSocket
 from clients import stream
 from clients.errors import CommandRejected, Unreachable
 from clients.models import BatchStates, CommandAck, WsError
@@ -61,31 +68,55 @@ class Lane:
         self.on_states = on_states
         self._tokens = self.burst
         self._last = time.monotonic()
-        self._ws: Any = None
+        self._ws: ThreadSocket | None = None
         self._ids = stream.CommandIds()
         self._pending: dict[int, tuple[int, list[Future]]] = {}  # id: (world, futures)
         self._in_flight: dict[int, int] = {}  # world: its commands sent, not yet answered
         self._queued: dict[int, tuple[dict[str, float], list[Future]]] = {}
-        self._wake: asyncio.Event | None = None
+        self._lock = threading.Lock()  # all of the above, from any thread
+        self._timer: threading.Timer | None = None  # a pump when budget returns
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="armfleet-lane", daemon=True)
         self.merged = 0  # messages that went out merged with a later one
 
+    def start(self) -> None:
+        self._thread.start()
+
+    @property
+    def connected(self) -> bool:
+        return self._ws is not None
+
+    def stop(self) -> None:
+        """Tell the lane's thread to end (`join` waits for it)."""
+        self._stop.set()
+        with self._lock:
+            ws, timer = self._ws, self._timer
+        if timer is not None:
+            timer.cancel()
+        if ws is not None:
+            ws.close()  # the reading thread sees it closed and ends
+
+    def join(self, timeout: float) -> None:
+        self._thread.join(timeout=timeout)
+
     def submit(self, world: int, targets: Mapping[str, float], fut: Future) -> None:
-        """On the link's event loop: send now, or queue (merging) until budget returns."""
-        if self._ws is None:
-            fut.set_exception(Unreachable(None, f"{self.url}: not connected to armfleet"))
-            return
-        if world in self._queued:
-            values, futs = self._queued[world]
-            values.update(targets)
-            futs.append(fut)
-            self.merged += 1
-            return
-        if self._in_flight.get(world, 0) < IN_FLIGHT and self._take():
-            self._send(world, dict(targets), [fut])
-        else:
-            self._queued[world] = (dict(targets), [fut])
-            assert self._wake is not None
-            self._wake.set()
+        """Any thread: send now (from this thread), or queue (merging) until budget returns
+        or the world's commands in flight are answered."""
+        failed: list[Future] = []
+        with self._lock:
+            if self._ws is None:
+                failed = [fut]
+            elif world in self._queued:
+                values, futs = self._queued[world]
+                values.update(targets)
+                futs.append(fut)
+                self.merged += 1
+            elif self._in_flight.get(world, 0) < IN_FLIGHT and self._take():
+                failed = self._send(world, dict(targets), [fut])
+            else:
+                self._queued[world] = (dict(targets), [fut])
+                failed = self._pump()
+        self._fail(failed, "not connected to armfleet")
 
     def _take(self) -> bool:
         now = time.monotonic()
@@ -96,83 +127,85 @@ class Lane:
             return True
         return False
 
-    def _send(self, world: int, targets: dict[str, float], futs: list[Future]) -> None:
+    def _send(self, world: int, targets: dict[str, float], futs: list[Future]) -> list[Future]:
+        """The lock held: write the command now; the futures to fail if it could not go."""
+        assert self._ws is not None
         msg_id, text = self._ids.set_targets(targets, world)
         self._pending[msg_id] = (world, futs)
         self._in_flight[world] = self._in_flight.get(world, 0) + 1
-        task = asyncio.ensure_future(self._ws.send(text))
-        task.add_done_callback(lambda t: self._sent(t, msg_id))
-
-    def _sent(self, task: asyncio.Task, msg_id: int) -> None:
-        if task.cancelled() or task.exception() is not None:
-            self._fail(self._answered(msg_id), "connection lost")
+        try:
+            self._ws.send(text)
+        except LineClosed:
+            return self._answered(msg_id)
+        return []
 
     def _answered(self, msg_id: int | None) -> list[Future]:
-        """The futures of a command answered (or lost); its world's next command may go."""
+        """The lock held: the futures of a command answered (or lost); its world's next may go."""
         world, futs = self._pending.pop(msg_id, (None, [])) if msg_id is not None else (None, [])
         if world is not None:
             left = self._in_flight.pop(world, 1) - 1
             if left > 0:
                 self._in_flight[world] = left
-            if world in self._queued and self._wake is not None:
-                self._wake.set()
         return futs
+
+    def _pump(self) -> list[Future]:
+        """The lock held: send what waits whose world may send, as budget allows; a timer for
+        the rest when budget returns. The futures of what could not go (no connection)."""
+        failed: list[Future] = []
+        while True:
+            world = next((w for w in self._queued if self._in_flight.get(w, 0) < IN_FLIGHT), None)
+            if world is None:
+                return failed
+            if self._ws is None:
+                failed += self._queued.pop(world)[1]
+                continue
+            if not self._take():
+                if self._timer is None:
+                    wait = max(0.001, (1.0 - self._tokens) / self.rate)
+                    self._timer = threading.Timer(wait, self._budget_back)
+                    self._timer.daemon = True
+                    self._timer.start()
+                return failed
+            values, futs = self._queued.pop(world)
+            failed += self._send(world, values, futs)
+
+    def _budget_back(self) -> None:
+        with self._lock:
+            self._timer = None
+            failed = self._pump()
+        self._fail(failed, "not connected to armfleet")
 
     def _fail(self, futs: list[Future], why: str) -> None:
         for fut in futs:
             if not fut.done():
                 fut.set_exception(Unreachable(None, f"{self.url}: {why}"))
 
-    async def _flush(self) -> None:
-        """Send queued (merged) commands as budget returns and their worlds' last are answered."""
-        assert self._wake is not None
-        while True:
-            await self._wake.wait()
-            self._wake.clear()  # before looking: an ack meanwhile sets it again
-            while True:
-                world = next(
-                    (w for w in self._queued if self._in_flight.get(w, 0) < IN_FLIGHT), None
-                )
-                if world is None:
-                    break
-                if not self._take():
-                    await asyncio.sleep(max(0.001, (1.0 - self._tokens) / self.rate))
-                    continue
-                values, futs = self._queued.pop(world)
-                if self._ws is None:
-                    self._fail(futs, "not connected to armfleet")
-                else:
-                    self._send(world, values, futs)
-
-    async def run(self, stopping: Callable[[], bool]) -> None:
-        self._wake = asyncio.Event()
-        flusher = asyncio.ensure_future(self._flush())
+    def _run(self) -> None:
+        """The lane's thread: connect (again, with backoff), read acks and owed frames."""
         url = stream.ws_url(self.url, self.worlds, LANE_STATE_HZ, binary=True)
         backoff = stream.Backoff(maximum=1.0)
-        try:
-            while not stopping():
-                try:
-                    async with connect(
-                        url,
-                        max_size=stream.MAX_SIZE,
-                        proxy=None,
-                        additional_headers=auth.headers(),
-                    ) as ws:
-                        self._ws = ws
-                        backoff.reset()
-                        async for data in ws:
-                            self._frame(data)
-                except stream.LOST as exc:
-                    log.debug("command lane: %s", stream.reason_for(exc))
-                self._ws = None
-                for _, futs in self._pending.values():
-                    self._fail(futs, "connection lost")
-                self._pending.clear()
-                self._in_flight.clear()
-                self._wake.set()  # what waited behind them: failed by the flusher
-                await asyncio.sleep(backoff.next())
-        finally:
-            flusher.cancel()
+        while not self._stop.is_set():
+            try:
+                ws = ThreadSocket(url, auth.headers(), stream.MAX_SIZE)
+            except (OSError, InvalidHandshake) as exc:
+                log.debug("command lane: %s", exc)
+            else:
+                with self._lock:
+                    self._ws = ws
+                if self._stop.is_set():
+                    ws.close()
+                backoff.reset()
+                while (data := ws.recv()) is not None:
+                    self._frame(data)
+                ws.close()
+                with self._lock:
+                    self._ws = None
+                    lost = [f for _, futs in self._pending.values() for f in futs]
+                    self._pending.clear()
+                    self._in_flight.clear()
+                    lost += self._pump()  # what waited behind them
+                self._fail(lost, "connection lost")
+            self._stop.wait(backoff.next())
 
     def _frame(self, data: Any) -> None:
         msg = stream.parse(data)
@@ -182,7 +215,11 @@ class Lane:
             except Exception:
                 log.exception("publishing a state frame failed")
         elif isinstance(msg, (CommandAck, WsError)):
-            for fut in self._answered(msg.id):
+            with self._lock:
+                futs = self._answered(msg.id)
+                failed = self._pump() if self._queued else []
+            self._fail(failed, "not connected to armfleet")
+            for fut in futs:
                 if fut.done():
                     continue
                 if isinstance(msg, WsError):

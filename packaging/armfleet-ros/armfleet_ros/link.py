@@ -4,7 +4,8 @@ Two sockets, both armfleet's public API read with armfleet's own client library 
 
 - the batch socket `WS /v1/ws?worlds=...&format=binary` for every served world: float32 state
   frames in (parsed by `clients.stream.parse`). One socket for 256 worlds costs one frame per
-  tick instead of 256 JSON frames. Commands go out on command lanes (lanes.py).
+  tick instead of 256 JSON frames. Commands go out on command lanes (lanes.py: threads and
+  sockets of their own, sending from the thread that took the ROS message).
 - the pose socket `WS /v1/ws/view` (every body's world pose), opened only for the worlds whose
   `/tf` somebody listens to, and reopened when that set changes.
 
@@ -18,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
+import time
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from typing import Any
@@ -82,9 +84,16 @@ class FleetLink:
 
     def start(self) -> None:
         self._thread.start()
+        for lane in self.lanes:
+            lane.start()
 
     def stop(self) -> None:
         self._stopping = True
+        for lane in self.lanes:
+            lane.stop()
+        deadline = time.monotonic() + 5  # all told first: one that is connecting takes longest
+        for lane in self.lanes:
+            lane.join(max(0.0, deadline - time.monotonic()))
         for task in asyncio.all_tasks(self._loop) if self._loop.is_running() else ():
             self._loop.call_soon_threadsafe(task.cancel)
         self._thread.join(timeout=5)
@@ -93,10 +102,7 @@ class FleetLink:
         asyncio.set_event_loop(self._loop)
         self._pose_changed = asyncio.Event()
         try:
-            lanes = [lane.run(lambda: self._stopping) for lane in self.lanes]
-            self._loop.run_until_complete(
-                asyncio.gather(self._states(), self._pose_stream(), *lanes)
-            )
+            self._loop.run_until_complete(asyncio.gather(self._states(), self._pose_stream()))
         except asyncio.CancelledError:
             pass
         except Exception:
@@ -105,7 +111,7 @@ class FleetLink:
             self._drain()
 
     def _drain(self) -> None:
-        """Let every task left (a lane still unwinding, its flusher) finish being cancelled
+        """Let every task left (a socket still unwinding) finish being cancelled
         while the loop can still run it: one dropped pending would run its `finally` when it
         is collected, on a closed loop ("Event loop is closed" in the log at every stop)."""
         left = asyncio.all_tasks(self._loop)
@@ -118,11 +124,11 @@ class FleetLink:
     # -- commands (any thread) -------------------------------------------------------------
 
     def set_targets(self, world: int, targets: Mapping[str, float]) -> Future:
-        """Send a target command on the world's lane; the future gets its CommandAck, or
-        CommandRejected with armfleet's reason, or Unreachable while armfleet is away."""
+        """Send a target command on the world's lane, from this thread (lanes.py); the future
+        gets its CommandAck, or CommandRejected with armfleet's reason, or Unreachable while
+        armfleet is away."""
         fut: Future = Future()
-        lane = self._lane_of[world]
-        self._loop.call_soon_threadsafe(lane.submit, world, dict(targets), fut)
+        self._lane_of[world].submit(world, dict(targets), fut)
         return fut
 
     def watch_poses(self, worlds: Sequence[int]) -> None:

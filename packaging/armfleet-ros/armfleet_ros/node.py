@@ -199,9 +199,13 @@ class ArmfleetNode:
             self.http.call(Call("PUT", "/v1/ros/node", lambda d: d, json=body))
 
     def _publish(self, batch: Any) -> None:
-        """A state frame arrived (the link's thread; a catch-up: an executor thread): `/clock`,
-        then each listened world the frame is news for. Never back in time (the state socket
-        and the command lanes deliver frames of the same ticks), unless armfleet restarted."""
+        """A state frame arrived (a socket's thread: the state socket's or a command lane's; a
+        catch-up: an executor thread): `/clock`, then each listened world the frame is news
+        for, the worlds a command just went to first. Never back in time (the state socket
+        and the command lanes deliver frames of the same ticks), unless armfleet restarted.
+        The frame's worlds are claimed under one lock, and published each under its own
+        (world.py): a lane's frame publishes the world it was owed for while the state
+        socket's thread publishes the others, instead of waiting for all of them."""
         with self._publish_lock:
             gen = self.link.generation
             if gen != self._last_generation:
@@ -219,18 +223,18 @@ class ArmfleetNode:
                 if tick > self._world_tick.get(w, -1):
                     self._world_tick[w] = tick
                     rows[w] = i
-            if not rows:
-                return
-            poses = self.link.poses
-            for space in self.spaces:
-                row = rows.get(space.world)
-                if row is None:
-                    continue
-                if space.listened_states:
-                    space.publish_state(batch, row, sec, nanosec)
-                if space.listened_tf and poses is not None and space.world in poses.row:
-                    world_poses = poses.poses[poses.row[space.world]]
-                    space.tf.publish(self.tree.moving_message(world_poses, sec, nanosec))
+        if not rows:
+            return
+        spaces = [s for s in self.spaces if s.world in rows]
+        owed = [s for s in spaces if s.owed_by(tick)]
+        if owed:
+            spaces = owed + [s for s in spaces if not s.owed_by(tick)]
+        poses = self.link.poses
+        for space in spaces:
+            world_poses = None
+            if space.listened_tf and poses is not None and space.world in poses.row:
+                world_poses = poses.poses[poses.row[space.world]]
+            space.publish(batch, rows[space.world], (gen, tick), sec, nanosec, world_poses)
 
     def catch_up(self) -> None:
         """Publish the states of now, read over HTTP: after a pause or steps through this node

@@ -10,6 +10,7 @@ the namespace opens (namespaces.py: the root at start, `/world_N` at its first u
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -74,6 +75,9 @@ class WorldTopics:
             )
         self.listened_states = False
         self.listened_tf = False
+        self.owed: int | None = None  # the tick of the last command acked, until published
+        self._published = (-1, -1)  # (connection, tick) of the last state published
+        self._lock = threading.Lock()
 
     def refresh(self) -> None:
         """Whether anyone subscribes to the state topics now (checked twice a second)."""
@@ -89,6 +93,7 @@ class WorldTopics:
     def _acked(self, fut: Any, topic: str) -> None:
         exc = fut.exception()
         if exc is None:
+            self.owed = fut.result().tick  # its frame goes out first (node.py)
             self.owner.accepted += 1
         else:
             self.owner.bad.report("rejected", topic, str(exc))
@@ -129,6 +134,27 @@ class WorldTopics:
         self.owner.accepted += 1
 
     # -- out -----------------------------------------------------------------------------------
+
+    def owed_by(self, tick: int) -> bool:
+        """Whether a frame of `tick` shows a command just acked."""
+        owed = self.owed
+        return owed is not None and tick >= owed
+
+    def publish(
+        self, batch: Any, row: int, stamp: tuple[int, int], sec: int, nanosec: int, poses: Any
+    ) -> None:
+        """The world's state and moving `/tf` of a frame (any socket's thread), unless a newer
+        frame's were published already: `stamp` is (connection, tick)."""
+        with self._lock:
+            if stamp <= self._published:
+                return
+            self._published = stamp
+            if self.owed_by(stamp[1]):
+                self.owed = None
+            if self.listened_states:
+                self.publish_state(batch, row, sec, nanosec)
+            if poses is not None:
+                self.tf.publish(self.owner.tree.moving_message(poses, sec, nanosec))
 
     def publish_state(self, batch: Any, row: int, sec: int, nanosec: int) -> None:
         msg = JointState()

@@ -5,12 +5,12 @@ installation sourced in the shell (or `--ros2-python`): that Python has rclpy, t
 the message packages; what it lacks is armfleet's client library and the node itself. Those are
 installed once, by pip run for that Python (`pip --python`), into a folder of their own under
 ~/.cache/armfleet (keyed by the Python's version and the sources' hash), never into the ROS
-installation; the Python's own numpy stays the one rclpy uses.
+installation; the Python's own numpy stays the one rclpy uses. Checkouts of other sources
+install beside each other, never over or instead of each other (install_cache.py).
 """
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import logging
 import os
@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from service.core.process.pythonpath import ORIGINAL
+from service.surfaces.ros import install_cache
 
 log = logging.getLogger("armfleet.ros")
 
@@ -89,12 +90,19 @@ def probe(python: str, env: dict[str, str]) -> tuple[int, int]:
     return int(major), int(minor)
 
 
+def _built(path: Path) -> bool:
+    """A file pip or Python wrote into the sources (build/, *.egg-info, __pycache__)."""
+    return any(p in ("build", "__pycache__") or p.endswith(".egg-info") for p in path.parts)
+
+
 def sources_hash() -> str:
-    """What the prepared folder is built from: the client library and the node's sources."""
+    """What the prepared folder is built from: the client library and the node's sources (not
+    what an install wrote beside them: that changed the hash, and the next start installed
+    again)."""
     digest = hashlib.sha256()
     for root in (CLIENTS, NODE_DIST, CLIENT_DIST):
         for path in sorted(root.rglob("*")):
-            if path.is_file() and "__pycache__" not in path.parts:
+            if path.is_file() and not _built(path.relative_to(root)):
                 digest.update(str(path.relative_to(REPO)).encode())
                 digest.update(path.read_bytes())
     return digest.hexdigest()[:12]
@@ -106,27 +114,25 @@ def cache_root() -> Path:
 
 
 def prepare(python: str, version: tuple[int, int], env: dict[str, str]) -> Path:
-    """Install the client and the node for `python` into their own folder, once."""
+    """Install the client and the node for `python` into their own folder, once per version of
+    their sources (install_cache.py: shared by every checkout, server and test process)."""
     if not NODE_DIST.is_dir():
         raise ValueError(
             f"--ros2: the node's sources are not at {NODE_DIST} (a checkout is needed)"
         )
-    target = cache_root() / f"ros-node-py{version[0]}.{version[1]}-{sources_hash()}"
-    if (target / ".complete").exists():
-        return target
-    # Servers (or test processes) started together install once: the others wait for it here.
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with open(target.parent / f"ros-node-py{version[0]}.{version[1]}.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (target / ".complete").exists():
-            _install(python, version, env, target)
-    return target
+    family = f"ros-node-py{version[0]}.{version[1]}-"
+    return install_cache.use(
+        cache_root(),
+        family + sources_hash(),
+        lambda folder: _install(python, env, folder),
+        family=family + "*",
+    )
 
 
-def _install(python: str, version: tuple[int, int], env: dict[str, str], target: Path) -> None:
-    log.info("ROS 2 node: installing armfleet's client for %s into %s (once)", python, target)
-    for old in target.parent.glob(f"ros-node-py{version[0]}.{version[1]}-*"):
-        shutil.rmtree(old, ignore_errors=True)  # earlier sources' folders (this one's too)
+def _install(python: str, env: dict[str, str], target: Path) -> None:
+    log.info("ROS 2 node: installing armfleet's client for %s (once)", python)
+    for dist in (CLIENT_DIST, NODE_DIST):  # an earlier build's files, maybe of other sources
+        shutil.rmtree(dist / "build", ignore_errors=True)
     pip = [sys.executable, "-m", "pip", "--python", python, "install", "--target", str(target)]
     steps = [[*pip, "--no-deps", str(CLIENT_DIST), str(NODE_DIST)]]
     has_deps = subprocess.run(
@@ -142,8 +148,7 @@ def _install(python: str, version: tuple[int, int], env: dict[str, str], target:
         if done.returncode != 0:
             tail = "\n".join(done.stderr.strip().splitlines()[-5:])
             raise ValueError(f"--ros2: installing armfleet's client for {python} failed:\n{tail}")
-    (target / ".complete").write_text(python + "\n")
-    log.info("ROS 2 node: ready in %s", target)
+    log.info("ROS 2 node: installed (%s)", python)
 
 
 def _pip_env() -> dict[str, str]:
