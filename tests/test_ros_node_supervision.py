@@ -95,6 +95,11 @@ def test_node_started_before_armfleet(tmp_path: Any) -> None:
     assert b"waiting for armfleet" in out
 
 
+def ticked(http: httpx.Client) -> int:
+    """The server's tick now (world 0's state)."""
+    return int(http.get("/v1/worlds/0/state").json()["tick"])
+
+
 def test_isaac_contract_by_remapping(tmp_path: Any) -> None:
     """ur_description's `sim_isaac` mode: topic_based_ros2_control publishes full JointState
     commands on /isaac_joint_commands at the controller rate and reads /isaac_joint_states.
@@ -113,7 +118,11 @@ def test_isaac_contract_by_remapping(tmp_path: Any) -> None:
         node = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
         try:
             node_report(http)
+            tick0, t0 = ticked(http), time.monotonic()
             seen = judge("isaac", "500", "3", domain=OWN_GRAPH)
+            # the server's own ticks a second over the judge's run (60 a second in real time;
+            # fewer where a loaded box slows it): states can come back no faster than that
+            ticks_per_s = (ticked(http) - tick0) / (time.monotonic() - t0)
 
             def handled() -> dict[str, Any] | None:  # the node's report comes every so often
                 report = node_report(http)["report"]
@@ -125,7 +134,8 @@ def test_isaac_contract_by_remapping(tmp_path: Any) -> None:
             report = node_report(http)["report"]
             assert report["accepted"] == seen["sent"] == 1500 and not report["rejected"], report
             assert targets(http, 0)[6] == pytest.approx(seen["last"], abs=1e-12)
-            assert seen["states_per_s"] > 50  # states back at the node's rate (100 Hz asked)
+            # states back at the node's rate (100 Hz asked), which the 60 Hz ticks bound
+            assert seen["states_per_s"] > 0.8 * min(100.0, ticks_per_s), (seen, ticks_per_s)
         finally:
             node.send_signal(signal.SIGINT)
             node.communicate(timeout=15)
