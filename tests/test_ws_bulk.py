@@ -32,7 +32,9 @@ RAW = "camera=wrist&worlds=0-3&rate=20&format=raw"
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
     with serve(worlds=4, log_dir=tmp_path_factory.mktemp("s")) as s:
-        wait_for(lambda: httpx.get(f"{s.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         yield s
 
 
@@ -113,7 +115,9 @@ def test_a_client_breaking_the_protocol_is_closed_and_others_go_on(server: Serve
 
 def test_stopping_the_service_closes_the_stream_with_1001(tmp_path) -> None:
     with serve(worlds=2, log_dir=tmp_path) as srv:
-        wait_for(lambda: httpx.get(f"{srv.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{srv.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         url = f"{srv.ws_url}/v1/ws/cameras?camera=wrist&worlds=0-1&rate=30&format=raw"
         with connect(url) as ws:
             ws.recv(timeout=30)
@@ -128,7 +132,9 @@ def test_stopping_the_service_closes_the_stream_with_1001(tmp_path) -> None:
 
 def test_a_paused_service_answers_every_pull_with_the_tick_it_stands_at(tmp_path) -> None:
     with serve(worlds=2, mode="paused", log_dir=tmp_path) as srv:
-        wait_for(lambda: httpx.get(f"{srv.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{srv.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         url = f"{srv.ws_url}/v1/ws/cameras?camera=wrist&worlds=0&rate=30&pull=true&format=png"
         with connect(url) as ws:
             ticks = _pulled_ticks(ws, 3)
