@@ -93,7 +93,15 @@ def test_pull_requests_are_read_from_the_taken_over_socket(server: Server) -> No
 def test_a_client_that_leaves_stops_the_drawing(server: Server) -> None:
     with connect(f"{server.ws_url}/v1/ws/cameras?{RAW}") as ws:
         ws.recv(timeout=30)
-    time.sleep(0.5)
+    # Pictures asked before it left may still be drawing (a loaded box draws slowly): wait for
+    # the count to hold still for 0.5 s (not a fixed 0.5 s sleep), then it must stay so.
+    last, since, deadline = -1.0, time.monotonic(), time.monotonic() + 60
+    while time.monotonic() - since < 0.5:
+        now = _metric(server, "armfleet_camera_renders_total")
+        if now != last:
+            last, since = now, time.monotonic()
+        assert time.monotonic() < deadline, "the drawing never stopped after the client left"
+        time.sleep(0.05)
     before = _metric(server, "armfleet_camera_renders_total")
     time.sleep(1.0)
     assert _metric(server, "armfleet_camera_renders_total") == before
