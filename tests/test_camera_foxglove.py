@@ -54,7 +54,9 @@ def test_camera_recording_is_an_mcap_of_images_and_calibrations(tmp_path) -> Non
     path = tmp_path / "cams.mcap"
     extra = ("--camera-record", str(path), "--camera-record-worlds", "0-1", "--camera-rate", "10")
     with serve(worlds=2, extra_args=extra, log_dir=tmp_path) as s:
-        wait_for(lambda: httpx.get(f"{s.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         time.sleep(2.0)
     with open(path, "rb") as f:
         reader = make_reader(f)
@@ -85,7 +87,9 @@ def test_foxglove_viewers_get_the_camera_topics(tmp_path) -> None:
     extra = ("--foxglove", "--foxglove-port", str(port), "--foxglove-worlds", "0-1")
     extra += ("--foxglove-cameras", "wrist", "--cameras", "wrist=160x120")
     with serve(worlds=2, extra_args=extra, log_dir=tmp_path) as s:
-        wait_for(lambda: httpx.get(f"{s.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         with connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], max_size=None) as ws:
             c = FoxgloveClient(ws)
             c.handshake()

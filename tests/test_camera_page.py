@@ -18,7 +18,9 @@ from tests.conftest import page_of, wait_for
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
     with serve(worlds=4, log_dir=tmp_path_factory.mktemp("p")) as s:
-        wait_for(lambda: httpx.get(f"{s.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         yield s
 
 

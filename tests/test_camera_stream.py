@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import time
+from typing import Any
 
 import httpx
 import numpy as np
@@ -15,30 +16,64 @@ from websockets.sync.client import connect
 
 from clients.testing import Server, serve
 from clients.wire import unpack_images as unpack
+from service.core.cameras.clock import AHEAD
 from tests.conftest import wait_for
 
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
     with serve(worlds=4, log_dir=tmp_path_factory.mktemp("s")) as s:
-        wait_for(lambda: httpx.get(f"{s.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         yield s
 
 
-def _renders(server: Server) -> float:
-    text = httpx.get(f"{server.url}/metrics").text
-    line = next(x for x in text.splitlines() if x.startswith("armfleet_camera_renders_total"))
+def _metric(server: Server, name: str) -> float:
+    text = httpx.get(f"{server.url}/metrics", timeout=30).text
+    line = next(x for x in text.splitlines() if x.startswith(name))
     return float(line.split()[1])
+
+
+def _renders(server: Server) -> float:
+    return _metric(server, "armfleet_camera_renders_total")
+
+
+def _render_seconds(server: Server) -> float:
+    """The wall time the service spent drawing pictures."""
+    return _metric(server, "armfleet_camera_render_seconds_total")
+
+
+def _gave_way(server: Server) -> float:
+    """Stream pictures not drawn because the ticks ran late (`CameraClock`: ticks first)."""
+    return _metric(server, "armfleet_camera_gave_way_total")
+
+
+def _caught_up(ws: Any, period: float) -> tuple[dict[str, Any], list[bytes]]:
+    """The next message that the socket had to wait for (half a period or more): read after a
+    wait, nothing was queued before it, so timing from it on is the service's pace and not a
+    backlog a descheduled test process left in the socket (read in a burst it looked fast)."""
+    deadline = time.monotonic() + 60
+    while True:
+        asked = time.monotonic()
+        got = unpack(ws.recv(timeout=30))
+        if time.monotonic() - asked >= period / 2:
+            return got
+        assert time.monotonic() < deadline, "the stream never caught up with its reader"
 
 
 def test_stream_sends_the_asked_worlds_at_the_asked_rate(server: Server) -> None:
     url = f"{server.ws_url}/v1/ws/cameras?camera=wrist&worlds=1-3&rate=5&format=jpeg"
     with connect(url) as ws:
-        got = [unpack(ws.recv(timeout=30)) for _ in range(6)]
+        got = [unpack(ws.recv(timeout=30)) for _ in range(5)]
+        got.append(_caught_up(ws, 1 / 5))
+        gave_way, drawing = _gave_way(server), _render_seconds(server)
         t0 = time.monotonic()
         for _ in range(5):
             ws.recv(timeout=30)
         took = time.monotonic() - t0
+        gave_way = _gave_way(server) - gave_way
+        drawing = _render_seconds(server) - drawing
     ticks = [h["tick"] for h, _ in got]
     assert ticks == sorted(ticks) and ticks[-1] > ticks[0]  # realtime: the pictures move on
     for header, images in got:
@@ -46,14 +81,19 @@ def test_stream_sends_the_asked_worlds_at_the_asked_rate(server: Server) -> None
         assert header["content_type"] == "image/jpeg" and len(images) == 3
         for data in images:
             assert Image.open(io.BytesIO(data)).size == (128, 96)
-    assert 0.6 < took < 2.0  # five messages at 5 a second (1 s), give or take a loaded box
+    # Five messages at 5 a second: 1 s, give or take a loaded box. Never much faster (the rate
+    # is a ceiling). Slower only by what the service says held them back: the instants that
+    # gave way to late ticks (the cameras guide: pictures wait for the ticks), a period each,
+    # and the wall time its drawing took (a starved box draws slowly; under two CPU hogs 5
+    # messages took 5.8 s with one instant given way).
+    assert 0.6 < took < 2.0 + gave_way / 5 + drawing, (took, gave_way, drawing)
 
 
 def test_a_stream_asked_for_a_camera_alone_gets_the_documented_defaults(server: Server) -> None:
     # the guide's query table: worlds 0, rate 10, image rgb, format png
     with connect(f"{server.ws_url}/v1/ws/cameras?camera=wrist") as ws:
-        for _ in range(2):
-            header, images = unpack(ws.recv(timeout=30))
+        header, images = unpack(ws.recv(timeout=30))
+        _caught_up(ws, 1 / 10)
         t0 = time.monotonic()
         for _ in range(10):
             ws.recv(timeout=30)
@@ -69,19 +109,27 @@ def test_a_slow_reader_holds_drawing_back(server: Server) -> None:
     # Big messages (raw float32 depth, 4 worlds) and a client that queues one message: while it
     # does not read, the socket's buffers fill and no further picture is drawn.
     url = f"{server.ws_url}/v1/ws/cameras?camera=overview&worlds=0-3&rate=30&image=depth&format=raw"
+    drawn = _renders(server)  # before the stream: every picture it is sent is drawn after this
     with connect(url, max_queue=1, max_size=None) as ws:
         first, _ = unpack(ws.recv(timeout=30))
         before = _renders(server)
         time.sleep(3.0)
         during = _renders(server) - before
-        newest = first
-        for _ in range(int(during) + 2):  # what was in flight, then a fresh one
+        # Fresh again: past what was drawn while it did not read (at most every picture drawn
+        # since the stream began, and AHEAD more being drawn), the next is of a tick at or after
+        # the one the service was at when reading resumed. Counted in pictures and ticks, not
+        # in wall time: a loaded box may take long to read the backlog.
+        resumed = httpx.get(f"{server.url}/v1/info", timeout=30).json()["tick"]
+        in_flight = _renders(server) - drawn + AHEAD
+        newest, read = first, 0
+        while newest["tick"] < resumed:
+            assert read <= in_flight + 1, (read, in_flight, newest["tick"], resumed)
             newest, images = unpack(ws.recv(timeout=30))
+            read += 1
         depth = np.frombuffer(images[0], "<f4")
         assert depth.size == 128 * 96 and depth.max() > 0
     assert during < 45, f"{during} pictures drawn in 3 s at 30/s for a reader that read none"
-    tick = httpx.get(f"{server.url}/v1/info").json()["tick"]
-    assert newest["tick"] > first["tick"] and tick - newest["tick"] < 60  # fresh again
+    assert newest["tick"] > first["tick"]
 
 
 @pytest.mark.parametrize(
@@ -119,10 +167,13 @@ def test_pull_sends_one_fresh_picture_per_request_and_nothing_else(server: Serve
         assert _renders(server) == before  # nobody asked: nothing drawn
         with pytest.raises(TimeoutError):
             ws.recv(timeout=0.2)
+        asked = httpx.get(f"{server.url}/v1/info", timeout=30).json()["tick"]  # read before asking
         ws.send("next")
         second, images = unpack(ws.recv(timeout=30))
         assert Image.open(io.BytesIO(images[0])).size == (128, 96)
-    assert second["tick"] - first["tick"] >= 40  # about a second of 60 Hz ticks later: fresh
+    # fresh: drawn at the service's tick when asked or later (in ticks, not in wall time: a
+    # second of a loaded box's realtime can be fewer than 60 ticks)
+    assert second["tick"] >= asked > first["tick"], (first["tick"], asked, second["tick"])
 
 
 def test_readers_of_one_camera_at_one_rate_share_renders(server: Server) -> None:

@@ -43,7 +43,9 @@ def warp_server(tmp_path_factory: pytest.TempPathFactory) -> Server:
 
 def _cameras_ready(url: str) -> None:
     """Cameras warm up beside a ready service (503 + Retry-After meanwhile): wait for them."""
-    wait_for(lambda: httpx.get(f"{url}/v1/cameras").json()["ready"], "cameras ready", 300)
+    wait_for(
+        lambda: httpx.get(f"{url}/v1/cameras", timeout=60).json()["ready"], "cameras ready", 300
+    )
 
 
 @pytest.fixture(scope="module")
@@ -154,7 +156,7 @@ def test_native_engine_draws_the_same_pixels_for_the_same_state(
         url = f"{s.url}/v1/worlds/0/cameras/wrist"
         first = httpx.get(url, params={"format": "raw"}, timeout=300)
         assert first.status_code == 200 and first.headers["x-armfleet-tick"] == "0", first.text
-        assert httpx.get(f"{s.url}/v1/cameras").json()["ready"] is True
+        assert httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"] is True
         native = first.content
         overview = httpx.get(f"{s.url}/v1/worlds/1/cameras/overview", params={"format": "raw"})
     warp_reply = http.get("/v1/worlds/0/cameras/wrist", params={"format": "raw"})

@@ -52,9 +52,11 @@ def test_a_killed_shard_worker_is_noticed_rebuilt_and_its_worlds_restored(tmp_pa
 
         watcher = threading.Thread(target=watch, daemon=True)
         watcher.start()
-        watching.wait(10)
+        assert watching.wait(60), "the status watcher never connected"
         # Long enough for a state copy of the worker's shard (taken every couple of seconds).
-        wait_for(lambda: http.get("/v1/worlds/3/state").json()["sim_time"] > 4.0, "4 s simulated")
+        wait_for(
+            lambda: http.get("/v1/worlds/3/state").json()["sim_time"] > 4.0, "4 s simulated", 120
+        )
         (worker,) = _shard_workers(srv.process.pid)
         t0 = time.monotonic()
         os.kill(worker.pid, signal.SIGKILL)

@@ -94,8 +94,10 @@ def test_refusals_say_why_and_nothing_is_half_granted() -> None:
 def test_a_waiting_request_is_served_when_a_lease_ends() -> None:
     b, _ = book(1)
     first, _ = b.grant(count=1, ttl_s=60)
-    threading.Timer(0.3, b.release, args=(first.id,)).start()
+    # t0 before the timer starts: the release comes 0.3 s after t0 at the earliest (a reading
+    # taken after the start undercounts by however long a loaded box kept this thread waiting)
     t0 = time.monotonic()
+    threading.Timer(0.3, b.release, args=(first.id,)).start()
     second, _ = b.grant(count=1, ttl_s=60, wait_s=5)
     assert 0.25 < time.monotonic() - t0 < 3 and second.worlds == (0,)
     b.stop()
@@ -105,7 +107,11 @@ def test_an_ending_lease_stops_working_then_resets_then_frees() -> None:
     b, resets = book(2)
     lease, token = b.grant(count=1, ttl_s=0.3)
     assert resets.calls == [([0], {0})]  # reset at the start, the world already held
-    time.sleep(0.6)
+    # The expiry thread ends it 0.3 s on; on a loaded box its turn may come later: wait for the
+    # world to come free (the last step), generously, rather than sleep a fixed 0.6 s.
+    deadline = time.monotonic() + 30
+    while b.held() and time.monotonic() < deadline:
+        time.sleep(0.02)
     assert b.find(token) is None and b.get(lease.id) is None
     assert resets.calls[-1] == ([0], {0})  # reset at the end while still held: nobody else had it
     assert b.held() == set() and b.counts.expired == 1

@@ -166,9 +166,9 @@ def test_foxglove_refuses_another_world_and_never_echoes_the_token(
         client.publish(6, {"name": ["elbow_joint"], "position": [0.7]})
         elbow = JOINTS.index("elbow_joint")
         wait_for(lambda: abs(target(server, MINE)[elbow] - 0.7) < 1e-9, "its own world to move")
-        deadline = time.monotonic() + 3
+        deadline = time.monotonic() + 30
         while time.monotonic() < deadline and len(client.statuses) < 2:
-            frame = ws.recv(timeout=3)
+            frame = ws.recv(timeout=30)
             seen.append(frame)
             if isinstance(frame, str):
                 client._control(json.loads(frame))

@@ -233,7 +233,7 @@ def test_both_ros_faces_refuse_a_bad_message_in_the_same_words(
         lines = srv.log()[logged:].splitlines()
         return next((line.split(prefix, 1)[1] for line in lines if prefix in line), None)
 
-    assert wait_for(node_words, "the node's refusal logged", 15) == words
+    assert wait_for(node_words, "the node's refusal logged", 30) == words
     assert targets(http, 1) == before
 
 

@@ -94,4 +94,4 @@ def test_camera_topics_carry_what_the_camera_draws(tmp_path: Any) -> None:
             images = http.get("/v1/ros").json()["node"]["report"]["images"]
             return images if images.get("wrist") and images.get("overview") else None
 
-        wait_for(counted, "the node's count of images published", 10)
+        wait_for(counted, "the node's count of images published", 30)

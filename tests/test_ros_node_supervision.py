@@ -15,7 +15,7 @@ import os
 import signal
 import subprocess
 import sys
-import time
+import threading
 from typing import Any
 
 import httpx
@@ -74,8 +74,16 @@ def test_node_started_before_armfleet(tmp_path: Any) -> None:
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
     )
+    out: list[bytes] = []
+    assert node.stdout is not None
+    reader = threading.Thread(target=lambda: out.extend(iter(node.stdout.readline, b"")))
+    reader.start()
     try:
-        time.sleep(3)
+        # Armfleet starts once the node says it waits (not after a fixed 3 s: a node still
+        # importing rclpy on a loaded box would find armfleet up and never wait for it).
+        wait_for(
+            lambda: b"waiting for armfleet" in b"".join(out), "the node to wait for armfleet", 120
+        )
         assert node.poll() is None
         args = ["--engine", "mujoco"]
         with (
@@ -91,8 +99,9 @@ def test_node_started_before_armfleet(tmp_path: Any) -> None:
             assert http.get("/v1/info").json()["mode"] == "fast"  # PLAYING: the play_mode
     finally:
         node.send_signal(signal.SIGINT)
-        out, _ = node.communicate(timeout=15)
-    assert b"waiting for armfleet" in out
+        node.wait(timeout=15)
+        reader.join(timeout=15)
+    assert b"waiting for armfleet" in b"".join(out)
 
 
 def ticked(http: httpx.Client) -> int:

@@ -54,7 +54,7 @@ def test_node_presents_the_token_and_commands_leased_worlds(tmp_path: Any) -> No
             n = http.get("/v1/ros").json()["node"]["report"]["accepted"]
             return n if n >= 2 else None
 
-        wait_for(accepted, "the node's report of both commands", 10)
+        wait_for(accepted, "the node's report of both commands", 30)
     log = srv.log_path.read_text()
     assert "ROS 2 node started" in log and "connected to armfleet" in log  # the node's log too
     assert TOKEN not in log

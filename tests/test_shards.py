@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import httpx
 import numpy as np
 import pytest
@@ -11,6 +9,7 @@ import pytest
 from clients.testing import serve
 from service.engines.shards import ShardedBatch, auto_shards
 from service.engines.warp import WorldBatch
+from tests.conftest import wait_for
 
 NWORLD = 6
 
@@ -89,11 +88,16 @@ def test_service_serves_worlds_on_a_worker_shard(tmp_path):
         http = httpx.Client(base_url=srv.url, timeout=10)
         assert http.get("/v1/info").json()["shards"] == 2
         r = http.post("/v1/worlds/3/increments", json={"joint": "elbow_joint", "delta": 0.2})
-        target = r.json()["target"]
-        time.sleep(1.0)
+        target, at = r.json()["target"], r.json()["tick"]
+        # a second of simulated time after the command (not a 1 s sleep: fewer ticks when a
+        # loaded box's real-time loop gives time up)
+        wait_for(lambda: http.get("/v1/info").json()["tick"] >= at + 60, "a second of ticks", 60)
         states = http.get("/v1/worlds/state").json()["worlds"]
         assert states[3]["position"][2] == pytest.approx(target[2], abs=0.01)
         assert states[0]["target"][2] == pytest.approx(1.57)
         http.post("/v1/worlds/3/reset").raise_for_status()
-        time.sleep(0.3)
-        assert http.get("/v1/worlds/3/state").json()["target"][2] == pytest.approx(1.57)
+        wait_for(
+            lambda: http.get("/v1/worlds/3/state").json()["target"][2] == pytest.approx(1.57),
+            "world 3's reset to show",
+            60,
+        )

@@ -32,7 +32,9 @@ RAW = "camera=wrist&worlds=0-3&rate=20&format=raw"
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
     with serve(worlds=4, log_dir=tmp_path_factory.mktemp("s")) as s:
-        wait_for(lambda: httpx.get(f"{s.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         yield s
 
 
@@ -91,7 +93,15 @@ def test_pull_requests_are_read_from_the_taken_over_socket(server: Server) -> No
 def test_a_client_that_leaves_stops_the_drawing(server: Server) -> None:
     with connect(f"{server.ws_url}/v1/ws/cameras?{RAW}") as ws:
         ws.recv(timeout=30)
-    time.sleep(0.5)
+    # Pictures asked before it left may still be drawing (a loaded box draws slowly): wait for
+    # the count to hold still for 0.5 s (not a fixed 0.5 s sleep), then it must stay so.
+    last, since, deadline = -1.0, time.monotonic(), time.monotonic() + 60
+    while time.monotonic() - since < 0.5:
+        now = _metric(server, "armfleet_camera_renders_total")
+        if now != last:
+            last, since = now, time.monotonic()
+        assert time.monotonic() < deadline, "the drawing never stopped after the client left"
+        time.sleep(0.05)
     before = _metric(server, "armfleet_camera_renders_total")
     time.sleep(1.0)
     assert _metric(server, "armfleet_camera_renders_total") == before
@@ -113,7 +123,9 @@ def test_a_client_breaking_the_protocol_is_closed_and_others_go_on(server: Serve
 
 def test_stopping_the_service_closes_the_stream_with_1001(tmp_path) -> None:
     with serve(worlds=2, log_dir=tmp_path) as srv:
-        wait_for(lambda: httpx.get(f"{srv.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{srv.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         url = f"{srv.ws_url}/v1/ws/cameras?camera=wrist&worlds=0-1&rate=30&format=raw"
         with connect(url) as ws:
             ws.recv(timeout=30)
@@ -128,7 +140,9 @@ def test_stopping_the_service_closes_the_stream_with_1001(tmp_path) -> None:
 
 def test_a_paused_service_answers_every_pull_with_the_tick_it_stands_at(tmp_path) -> None:
     with serve(worlds=2, mode="paused", log_dir=tmp_path) as srv:
-        wait_for(lambda: httpx.get(f"{srv.url}/v1/cameras").json()["ready"], "cameras", 300)
+        wait_for(
+            lambda: httpx.get(f"{srv.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
+        )
         url = f"{srv.ws_url}/v1/ws/cameras?camera=wrist&worlds=0&rate=30&pull=true&format=png"
         with connect(url) as ws:
             ticks = _pulled_ticks(ws, 3)
