@@ -358,7 +358,12 @@ def docs(
         typer.echo(f"armfleet docs: http://127.0.0.1:{port}/ (Ctrl-C stops)")
         command = [*mkdocs, "serve", "-f", str(config), "-a", f"127.0.0.1:{port}"]
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
-    raise typer.Exit(subprocess.run(command, cwd=root, env=env).returncode)
+    if build:
+        raise typer.Exit(subprocess.run(command, cwd=root, env=env).returncode)
+    # mkdocs takes this process's place: a signal sent to it (a supervisor's SIGTERM, a test's
+    # SIGINT) reaches the server itself, not a parent that would leave it running orphaned
+    os.chdir(root)
+    os.execve(sys.executable, command, env)
 
 
 if __name__ == "__main__":
