@@ -181,6 +181,16 @@ def hermetic_settings(monkeypatch: pytest.MonkeyPatch) -> None:
             monkeypatch.delenv(name)
 
 
+def cameras_ready(tmp_path_factory: pytest.TempPathFactory, name: str) -> Iterator[Server]:
+    """A 4-world server on the CPU default, handed over once its cameras are ready: the camera
+    tests' module fixtures (`yield from`). A warming server answers slowly on a loaded box:
+    60 s a read, 300 s in all."""
+    with serve(worlds=4, log_dir=tmp_path_factory.mktemp(name)) as s:
+        ready = lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"]  # noqa: E731
+        wait_for(ready, "cameras", 300)
+        yield s
+
+
 def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
     """Poll `pred` until it returns something truthy; fail naming `what` after `timeout` s."""
     deadline = time.monotonic() + timeout

@@ -6,22 +6,17 @@ from __future__ import annotations
 import io
 import time
 
-import httpx
 import numpy as np
 import pytest
 from PIL import Image
 
-from clients.testing import Server, serve
-from tests.conftest import page_of, wait_for
+from clients.testing import Server
+from tests.conftest import cameras_ready, page_of
 
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
-    with serve(worlds=4, log_dir=tmp_path_factory.mktemp("p")) as s:
-        wait_for(
-            lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
-        )
-        yield s
+    yield from cameras_ready(tmp_path_factory, "p")
 
 
 @pytest.fixture

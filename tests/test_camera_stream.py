@@ -14,19 +14,15 @@ import pytest
 from PIL import Image
 from websockets.sync.client import connect
 
-from clients.testing import Server, serve
+from clients.testing import Server
 from clients.wire import unpack_images as unpack
 from service.core.cameras.clock import AHEAD
-from tests.conftest import wait_for
+from tests.conftest import cameras_ready
 
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
-    with serve(worlds=4, log_dir=tmp_path_factory.mktemp("s")) as s:
-        wait_for(
-            lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
-        )
-        yield s
+    yield from cameras_ready(tmp_path_factory, "s")
 
 
 def _metric(server: Server, name: str) -> float:

@@ -8,6 +8,7 @@ the tests run in file order and each gives back what it took.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -251,23 +252,34 @@ def pytest_configure(config):  # as tests/conftest.py: the plugin, installed or 
 """
 
 
-def test_pytest_n4_sixteen_tests_each_on_its_own_world_from_home(
-    lender: Server, tmp_path: Path
-) -> None:
+def pytest_n4(
+    tmp_path: Path, tests: str, url: str, token: str, timeout: float, **fields: Any
+) -> list[dict[str, Any]]:
+    """Run `tests` (a test file's text, formatted with `fields` and `out`, the folder each test
+    writes its JSON record to) under `pytest -n 4` in a pytest of its own, against the server
+    at `url` with the admin `token` and the armfleet plugin; the records, sorted by name."""
     out = tmp_path / "runs"
     out.mkdir()
-    (tmp_path / "test_shared.py").write_text(XDIST_TESTS.format(home=HOME, out=str(out)))
+    (tmp_path / "test_shared.py").write_text(tests.format(out=str(out), **fields))
     (tmp_path / "conftest.py").write_text(XDIST_CONFTEST)
-    env = {**os.environ, "ARMFLEET_URL": lender.url, "ARMFLEET_TOKEN": ADMIN}
+    env = {**os.environ, "ARMFLEET_URL": url, "ARMFLEET_TOKEN": token}
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
     # Five interpreters start (the controller and four workers): without this venv's plugins
-    # that the file does not use, each starts on a third of the CPU (tests/test_ur_leases.py).
+    # that the file does not use, each starts on a third of the CPU.
     unused = ("-p", "no:schemathesis", "-p", "no:hypothesispytest", "-p", "no:anyio")
     cmd = [sys.executable, "-m", "pytest", "-n", "4", "-q", "-p", "no:cacheprovider", *unused,
            "test_shared.py"]  # fmt: skip
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=tmp_path, env=env)
+    proc = subprocess.run(
+        cmd, capture_output=True, text=True, timeout=timeout, cwd=tmp_path, env=env
+    )
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
-    runs = [__import__("json").loads(p.read_text()) for p in out.glob("*.json")]
+    return [json.loads(p.read_text()) for p in sorted(out.glob("*.json"))]
+
+
+def test_pytest_n4_sixteen_tests_each_on_its_own_world_from_home(
+    lender: Server, tmp_path: Path
+) -> None:
+    runs = pytest_n4(tmp_path, XDIST_TESTS, lender.url, ADMIN, timeout=600, home=HOME)
     assert len(runs) == 16 and len({r["lease"] for r in runs}) == 16
     assert len({r["worker"] for r in runs}) == 4
     for r in runs:  # each started from home, whatever the test before it did on that world

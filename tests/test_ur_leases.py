@@ -12,10 +12,8 @@ One 4-world realtime server (native MuJoCo) for the module, `--token` the admini
 
 from __future__ import annotations
 
-import json
 import os
 import socket
-import subprocess
 import sys
 import time
 from collections.abc import Iterator
@@ -27,9 +25,9 @@ import pytest
 
 from service.core.process.engine_priority import COMPANION_STEPS
 from service.core.sim.command_share import REQUESTS_NICE
-from tests.conftest import HOME, ROOT, Server, wait_for
+from tests.conftest import HOME, Server, wait_for
 from tests.test_engine_priority import RAISED_LINE, REFUSED_LINE, may_raise_to, task_nices
-from tests.test_leases import XDIST_CONFTEST
+from tests.test_leases import pytest_n4
 from tests.ur_judge import DASHBOARD, RTDE, RawRtde, ur_server
 
 rtde_receive = pytest.importorskip("rtde_receive")  # the `test` extra: ur-rtde==1.6.5
@@ -222,21 +220,9 @@ def test_pytest_n4_each_worker_drives_its_own_ur_world_through_ur_rtde(ur, tmp_p
     of it through ur-rtde 1.6.5 or a URScript line, and no other world moved that joint;
     afterwards every lease is back, every UR port closed, every world at home."""
     server, addrs = ur
-    out = tmp_path / "runs"
-    out.mkdir()
-    tests = XDIST_UR_TESTS.format(home=HOME, moves=MOVES, out=str(out))
-    (tmp_path / "test_ur_shared.py").write_text(tests)
-    (tmp_path / "conftest.py").write_text(XDIST_CONFTEST)
-    env = {**os.environ, "ARMFLEET_URL": server.url, "ARMFLEET_TOKEN": ADMIN}
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
-    # Five interpreters start (the controller and four workers): without this venv's plugins
-    # that the file does not use, each starts on a third of the CPU.
-    unused = ("-p", "no:schemathesis", "-p", "no:hypothesispytest", "-p", "no:anyio")
-    cmd = [sys.executable, "-m", "pytest", "-n", "4", "-q", "-p", "no:cacheprovider", *unused,
-           "test_ur_shared.py"]  # fmt: skip
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path, env=env)
-    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
-    runs = [json.loads(p.read_text()) for p in sorted(out.glob("*.json"))]
+    runs = pytest_n4(
+        tmp_path, XDIST_UR_TESTS, server.url, ADMIN, timeout=300, home=HOME, moves=MOVES
+    )
     assert len(runs) == 4 and len({r["worker"] for r in runs}) == 4
     assert len({r["world"] for r in runs}) == 4 and len({r["lease"] for r in runs}) == 4
     for r in runs:

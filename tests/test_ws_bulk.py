@@ -24,18 +24,14 @@ from websockets.sync.client import connect
 from clients.testing import Server, serve
 from clients.wire import unpack_images as unpack
 from service.api.ws_bulk import frame_header
-from tests.conftest import wait_for
+from tests.conftest import cameras_ready, wait_for
 
 RAW = "camera=wrist&worlds=0-3&rate=20&format=raw"
 
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Server:
-    with serve(worlds=4, log_dir=tmp_path_factory.mktemp("s")) as s:
-        wait_for(
-            lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"], "cameras", 300
-        )
-        yield s
+    yield from cameras_ready(tmp_path_factory, "s")
 
 
 def _metric(server: Server, name: str) -> float:
