@@ -24,6 +24,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import rclpy
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
@@ -265,9 +266,13 @@ def main(args: list | None = None) -> None:
         node.destroy_node()
         rclpy.shutdown()
         sys.exit(2)
+    executor = fleet.parts.first.topic_executor  # the other executors: threads (parts.py)
     try:
-        fleet.parts.first.topic_executor.spin()  # the other executors: threads (parts.py)
-    except KeyboardInterrupt:
+        # Timed turns, not spin(): now and then SIGINT shut the context down without waking
+        # an idle spin() (armfleet gone, nothing to call back), and the node never exited.
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.5)
+    except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         fleet.close()
