@@ -52,7 +52,6 @@ class ClearanceWatch(SnapshotSink):
         self.control = control
         self.clearance = clearance
         nworld = control.nworld
-        self._all = np.arange(nworld)
         self._last = np.full((nworld, ARM), np.nan)  # arm targets at the last check
         self._depth = np.full(nworld, -np.inf)  # their depth [m]
         self._opening = np.zeros(nworld)  # the gripper's opening then [rad]
@@ -61,7 +60,7 @@ class ClearanceWatch(SnapshotSink):
 
     def on_tick(self, batch: Batch, now: float) -> None:
         loop = self.control.loop
-        arm = loop.commands.pending_targets(self._all)[:, :ARM]
+        arm = loop.commands.pending_targets(slice(None))[:, :ARM]
         changed = (arm != self._last).any(axis=1)
         if not changed.any():
             return
