@@ -11,13 +11,15 @@ JSON after TL_TICKS recorded ticks. Per-thread CPU seconds from /proc over the s
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import time
+from collections import deque
 
 NS = time.perf_counter_ns
-TL_TICKS = int(os.environ.get("TL_TICKS", "3000"))
-SKIP = int(os.environ.get("TL_SKIP", "300"))  # ticks with a subscriber before recording
+TL_TICKS = int(os.environ.get("TL_TICKS", "2000"))
+SKIP = int(os.environ.get("TL_SKIP", "200"))  # ticks with a subscriber before recording
 
 
 class Rec:
@@ -28,9 +30,11 @@ class Rec:
         self.seen = 0
         self.ev = None  # (start, end) events of the last tick
         self.threads0: dict | None = None
+        self.names: dict = {}
 
 
 R = Rec()
+EVENTS: deque = deque()  # two ticks' (start, end) events, reused
 
 
 def _threads() -> dict:
@@ -46,6 +50,12 @@ def _threads() -> dict:
         parts = s[s.rindex(")") + 2 :].split()
         out[tid] = (name, (int(parts[11]) + int(parts[12])) / os.sysconf("SC_CLK_TCK"))
     return out
+
+
+def _names() -> dict:
+    import threading
+
+    return {str(t.native_id): t.name for t in threading.enumerate()}
 
 
 def _spent(name: str, fn):
@@ -71,7 +81,10 @@ def patch_engine() -> None:
         c = R.cur
         if c is None or not self.device.is_cuda or self._graph is None:
             return orig(self)
-        e0, e1 = wp.Event(self.device, enable_timing=True), wp.Event(self.device, enable_timing=True)
+        if not EVENTS:
+            EVENTS.extend(wp.Event(self.device, enable_timing=True) for _ in range(4))
+        EVENTS.rotate(2)
+        e0, e1 = EVENTS[0], EVENTS[1]
         stream = wp.get_stream(self.device)
         c["launch"] = NS()
         stream.record_event(e0)
@@ -101,11 +114,11 @@ def _finish_record(path: str, extra: dict) -> None:
     for tid, (name, s) in t1.items():
         s0 = R.threads0.get(tid, (name, 0.0))[1] if R.threads0 else 0.0
         cpu[f"{name}:{tid}"] = s - s0
-    import threading
-
-    names = {str(t.native_id): t.name for t in threading.enumerate()}
+    names = {**R.names, **_names()}
     cpu = {f"{names.get(k.split(':')[1], k)}": v for k, v in cpu.items()}
     out = {"ticks": R.ticks, "thread_cpu_s": cpu, **extra}
+    if not R.ticks[-1].get("next_start"):
+        R.ticks.pop()
     with open(path, "w") as f:
         json.dump(out, f)
 
@@ -123,6 +136,7 @@ def install(path: str) -> None:
     for name in ("_take_commands", "_finish_tick", "_publish", "_serve_requests"):
         setattr(L.SimLoop, name, _spent(name.strip("_"), getattr(L.SimLoop, name)))
     orig_tick = L.SimLoop._tick_once
+    atexit.register(lambda: R.done or not R.ticks or _finish_record(path, {"where": "service"}))
 
     def _tick_once(self, mode):
         if R.done:
@@ -135,7 +149,7 @@ def install(path: str) -> None:
             R.cur = None
             return orig_tick(self, mode)
         if R.threads0 is None:
-            R.threads0 = _threads()
+            R.threads0, R.names = _threads(), _names()
         prev = R.ticks[-1] if R.ticks else None
         c = R.cur = {"start": NS()}
         if prev is not None:
@@ -173,4 +187,3 @@ def engine_only(n: int, ticks: int, path: str) -> None:
         prev = c
     R.cur = None
     _finish_record(path, {"where": "engine"})
-
