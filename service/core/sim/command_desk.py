@@ -108,12 +108,19 @@ class CommandDesk:
         with self._lock:
             st = self.view()
             yield st
+            self.table.changes += 1  # the tables were lent: they may have been written
             if worlds is not None:
                 self.table.effective[worlds] = st.tick
 
     def view(self) -> Staging:
         """The pending tables for a trajectory runner (lock held)."""
         return self.table.view(self._accept_tick())
+
+    @property
+    def changes(self) -> int:
+        """`CommandTable.changes`: moves whenever the pending targets may have changed (an int,
+        read without the lock: read it before the targets, and a change after is seen next)."""
+        return self.table.changes
 
     def pending_targets(self, world: int | np.ndarray | slice) -> np.ndarray:
         """Targets as of every command accepted so far (some may not be in effect yet).

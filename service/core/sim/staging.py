@@ -78,6 +78,9 @@ class CommandTable:
     dirty / reset: worlds whose targets / reset go to the engine next      (nworld,) bool
     state: qpos/qvel slices and per-world model values, in the order staged
     effective: per world, the tick its latest accepted command takes effect at   (nworld,)
+    changes: a count that moves whenever `pending` may have changed (a command staged, a
+        trajectory's samples taken, a fault, a restore, the tables lent): a reader that saw
+        the same count has nothing new to compare (the clearance watch, after every tick)
     """
 
     def __init__(self, targets: np.ndarray, home: np.ndarray) -> None:
@@ -88,6 +91,7 @@ class CommandTable:
         self.reset = np.zeros(len(targets), dtype=bool)
         self.state: list[StateWrite | ModelWrite] = []
         self.effective = np.zeros(len(targets), dtype=np.int64)
+        self.changes = 0
 
     def view(self, tick: int) -> Staging:
         """The tables a trajectory runner edits in place, for commands taking effect at `tick`."""
@@ -101,6 +105,7 @@ class CommandTable:
     ) -> list[CommandResult]:
         """New target rows, each `update(world, its latest row)` so that commands compose."""
         out = []
+        self.changes += 1
         for world in worlds:
             row = update(world, self.pending[world])
             self.pending[world] = row.target
@@ -115,6 +120,7 @@ class CommandTable:
         writes of the same tick boundary (model values stay: they are not state)."""
         self.reset[worlds] = True
         self.dirty[worlds] = False
+        self.changes += 1
         if self.state:
             gone = set(worlds.tolist())
             self.state = [w for w in self.state if isinstance(w, ModelWrite) or w.world not in gone]
@@ -138,6 +144,7 @@ class CommandTable:
         serial Python work leaves the engine's other cores idle)."""
         if not self.state and not self.dirty.any() and not self.reset.any():
             return TickWrites()
+        self.changes += 1  # rows written through a `Staging` view (trajectories) set `dirty`
         dirty = np.flatnonzero(self.dirty)
         velocity = self.velocity[dirty].copy()
         writes = TickWrites(
@@ -158,10 +165,12 @@ class CommandTable:
         keep = worlds[~self.dirty[worlds]]
         self.pending[keep] = self.home
         self.velocity[keep] = 0.0
+        self.changes += 1
 
     def restored(self, targets: np.ndarray, tick: int) -> None:
         """The batch continues from a saved state: what was staged belonged to the old one."""
         self.pending = np.array(targets, dtype=np.float64)
+        self.changes += 1
         self.velocity[:] = 0.0
         self.dirty[:] = False
         self.reset[:] = False
