@@ -23,6 +23,7 @@ from service.core.access.rates import RateLimiter
 from service.core.cameras.feed import CameraFeed
 from service.core.commands.clearance_watch import watch_clearance
 from service.core.commands.control import Accepted, Control
+from service.core.commands.torque_watch import watch_torque
 from service.core.errors import ArmfleetError, Conflict, NotFound
 from service.core.metrics import Metrics
 from service.core.process import priority
@@ -252,6 +253,7 @@ class Runtime:
         loop.randomizations.replace(self._restored_randomized)
         self.control = Control(loop)
         watch_clearance(self.control)  # protective stops: targets into the cell's fixed obstacles
+        watch_torque(self.control)  # and an arm held at a joint's torque limit (contact)
         # Packed JSON frames say where each world's trajectory is (the manager's briefs) and
         # each world's safety mode (the loop's table), as a snapshot's frame does.
         self.hub = hub = StreamHub(

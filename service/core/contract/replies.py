@@ -102,6 +102,15 @@ class UnlockReply(BaseModel):
     safety_mode: Literal["NORMAL"] = Field(description="the world's safety mode after it")
 
 
+class TriggerReply(BaseModel):
+    world: int
+    tick: int = Field(
+        description="the tick the arm is held from (now, when it was stopped already)"
+    )
+    safety_mode: Literal["PROTECTIVE_STOP"] = Field(description="the world's safety mode after it")
+    why: str = Field(description="the stop's cause: this trigger, or an earlier stop's (kept)")
+
+
 class SimReply(BaseModel):
     mode: Mode
     tick: int
