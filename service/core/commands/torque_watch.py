@@ -54,6 +54,8 @@ class TorqueWatch(SnapshotSink):
     def __init__(self, control: Control, limits: np.ndarray, tick_dt: float) -> None:
         self.control = control
         self.limits = np.asarray(limits, np.float64)[:ARM]
+        # the threshold in the snapshots' float32: compared without converting 7 columns
+        self._cap = (SATURATED * self.limits).astype(np.float32)
         self.hold = max(1, round(HOLD_S / tick_dt))  # ticks
         self._since = np.full(control.nworld, -1, dtype=np.int64)  # tick the hold began
         self._holding = False  # any world at its cap and still at the last snapshot
@@ -65,7 +67,7 @@ class TorqueWatch(SnapshotSink):
     def publish(self, snap: Snapshot) -> None:
         self.checked += 1
         effort = np.abs(snap.effort[:, :ARM])
-        hot = effort >= SATURATED * self.limits
+        hot = effort >= self._cap
         if not hot.any():  # the common case: one comparison of the whole batch
             if self._holding:
                 self._since.fill(-1)
