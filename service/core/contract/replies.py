@@ -60,8 +60,9 @@ class WorldState(BaseModel):
     faults: int = Field(description="times this world was reset for NaN or capacity overflow")
     safety_mode: Literal["NORMAL", "PROTECTIVE_STOP"] = Field(
         description="UR's safety mode: PROTECTIVE_STOP (raised on any world whose commanded "
-        "target goes into a fixed obstacle of the scene, and on worlds served with UR ports "
-        "when a joint is held at its torque limit or the program triggers it) until "
+        "target goes into a fixed obstacle of the scene or whose arm is held at a joint's "
+        "torque limit, or by a trigger: `POST /v1/worlds/{w}/trigger_protective_stop`, "
+        "ur_rtde's triggerProtectiveStop) until "
         "`POST /v1/worlds/{w}/unlock_protective_stop` or the Dashboard's `unlock protective "
         "stop` (5 s after the stop at the earliest), or a reset; commands that move the arm "
         "are refused (409) meanwhile"
