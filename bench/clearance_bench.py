@@ -1,4 +1,4 @@
-"""Section 33: what the protective stop's clearance watch costs beside the physics it guards.
+"""Section 33: what the protective stop's watches cost beside the physics they guard.
 
 The watch (service/core/commands/clearance_watch.py) measures every world whose arm targets
 changed against the scene's fixed obstacles after every tick. Three figures, all CPU time of
@@ -11,11 +11,17 @@ this process (`time.process_time`: robust to other work on a shared box, unlike 
   swing, ±0.3 rad around home, every world at its own phase) at the control rate: how many
   worlds it measures a tick, and the CPU of its tick.
 
+The torque watch (service/core/commands/torque_watch.py) judges every published snapshot: its
+CPU per check of n native worlds at rest (the common case: no joint at its limit, one
+comparison of the batch) and with every world's arm at its limit and still (the worst case:
+every world counting its hold), beside one native tick of the same n worlds.
+
 `armfleet bench --section 33` (off by default: seconds, on the CPU only).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -25,10 +31,14 @@ import numpy as np
 from bench import common
 from bench.registry import Context, Result, section
 from service.core.commands.clearance_watch import due
+from service.core.commands.control import Control
+from service.core.commands.torque_watch import TorqueWatch
 from service.core.kinematics.clearance import Clearance
 from service.core.kinematics.ur import URKinematics
+from service.core.sim.loop import SimLoop
 from service.core.sim.physics import tick_timing
 from service.core.sim.robot import load_robot
+from service.engines.native import NativeBatch
 
 SWING = 0.3  # rad, section 21's "move" trajectory
 SIGN = np.array([1.0, -0.7, 0.7, 1.0, -1.0, 1.0])
@@ -87,9 +97,36 @@ def measure(n: int, ticks: int) -> dict[str, Any]:
     }
 
 
+def measure_torque(n: int, repeat: int) -> dict[str, Any]:
+    """The torque watch's CPU per check of n native worlds: at rest, and every arm at its
+    limit and still (the same snapshot again: every world counts, none reaches its hold)."""
+    batch = NativeBatch(n)
+    try:
+        loop = SimLoop(batch)  # not started: the watch reads its safety table and spec only
+        watch = TorqueWatch(Control(loop), [j.effort_limit for j in batch.spec.joints], 1 / 60)
+        for _ in range(3):
+            batch.step(1)
+        rest = loop.listeners.extend(batch.snapshot(), batch)
+        rest_s = _cpu(lambda: watch.publish(rest), repeat)
+        effort = np.array(rest.effort)
+        effort[:, :6] = watch.limits
+        velocity = np.zeros_like(rest.velocity)
+        pressed = dataclasses.replace(rest, effort=effort, velocity=velocity)
+        pressed_s = _cpu(lambda: watch.publish(pressed), repeat)
+        tick_s = _cpu(lambda: batch.step(1), max(3, repeat // 20))
+    finally:
+        batch.close()
+    return {
+        "rest_us": round(rest_s * 1e6, 1),
+        "pressed_us": round(pressed_s * 1e6, 1),
+        "tick_ms": round(tick_s * 1e3, 3),
+        "stops": watch.control.loop.safety.modes().tolist().count(3),
+    }
+
+
 @section(33, "clearance", default_on=())
 def clearance(ctx: Context) -> Result:
-    """Clearance watch: CPU per check of n worlds vs their physics, and on a swing trajectory"""
+    """Safety watches: clearance and torque, CPU per check of n worlds vs their physics"""
     sizes = ctx.sizes((1024, 4096), quick=(256, 1024))
     ticks = ctx.pick(600, 120)
     rows, results, errors = [], {}, {}
@@ -105,6 +142,15 @@ def clearance(ctx: Context) -> Result:
                 "measure": f"{n} worlds, every target changed: Clearance.depth",
                 "value": f"{r['depth_all_ms']} ms CPU ({r['depth_us_per_world']} µs/world)",
                 "ratio": f"{r['share_of_physics']} of the tick's physics",
+            }
+        )
+        t = r["torque"] = measure_torque(n, ctx.pick(2000, 200))
+        ctx.say(f"  {n} worlds: torque watch {t['rest_us']} / {t['pressed_us']} us a check")
+        rows.append(
+            {
+                "measure": f"{n} native worlds: torque watch, a check (at rest / all pressed)",
+                "value": f"{t['rest_us']} / {t['pressed_us']} µs CPU",
+                "ratio": f"a native tick: {t['tick_ms']} ms CPU",
             }
         )
         rows.append(

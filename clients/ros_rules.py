@@ -14,7 +14,8 @@ modules; the node has nothing else):
   reached / stalled rule (`FingerWatch`);
 - `BadMessage` (a refusal with the counter it goes to) and `RefusalCounter` (counts by kind,
   logs each kind at most once a second);
-- `stamp`: seconds as builtin_interfaces Time.
+- `stamp`: seconds as builtin_interfaces Time;
+- the safety mode's topic (`SAFETY_MODE_TOPIC`, `SAFETY_MODE_TYPE`, `safety_mode_number`).
 
 Plain Python on plain values (no rclpy, no service), so both sides and the tests use it alike.
 """
@@ -30,6 +31,23 @@ from typing import Any
 
 ARM_JOINTS = 6  # the UR arm's joints come first in armfleet's joint order; finger_joint last
 FINGER = "finger_joint"
+
+# -- the safety mode -----------------------------------------------------------------------------
+# Where UR's ROS 2 driver publishes it (its io_and_status_controller, under the robot's
+# namespace), latched (transient local) and only when it changes. The driver's type,
+# ur_dashboard_msgs/msg/SafetyMode, is `uint8 mode` with UR's numbers; it is not part of a ROS
+# distribution's standard messages (ROS users without the UR driver have none), so both faces
+# publish std_msgs/msg/UInt8 carrying the same number in `data`: any ROS 2 installation reads
+# it, and the numbers are UR's (SafetyMode's constants: 1 NORMAL, 3 PROTECTIVE_STOP).
+SAFETY_MODE_TOPIC = "io_and_status_controller/safety_mode"  # under a world's namespace
+SAFETY_MODE_TYPE = "std_msgs/msg/UInt8"
+SAFETY_MODES = {"NORMAL": 1, "PROTECTIVE_STOP": 3}  # armfleet's names → UR's numbers
+
+
+def safety_mode_number(name: str) -> int:
+    """UR's number of a safety mode armfleet names (a state's `safety_mode`)."""
+    return SAFETY_MODES[name]
+
 
 # -- actions ------------------------------------------------------------------------------------
 

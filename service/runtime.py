@@ -21,8 +21,8 @@ from service.core.access.leases import LeaseBook
 from service.core.access.policy import ClientSlots
 from service.core.access.rates import RateLimiter
 from service.core.cameras.feed import CameraFeed
-from service.core.commands.clearance_watch import watch_clearance
 from service.core.commands.control import Accepted, Control
+from service.core.commands.safety_watches import watch_safety
 from service.core.errors import ArmfleetError, Conflict, NotFound
 from service.core.metrics import Metrics
 from service.core.process import priority
@@ -251,7 +251,7 @@ class Runtime:
         loop.share.enabled, loop.share.max_wait_s = s.sim.ticks_first, s.sim.command_wait_s
         loop.randomizations.replace(self._restored_randomized)
         self.control = Control(loop)
-        watch_clearance(self.control)  # protective stops: targets into the cell's fixed obstacles
+        watch_safety(self.control)  # protective stops: into a fixed obstacle, at a torque limit
         # Packed JSON frames say where each world's trajectory is (the manager's briefs) and
         # each world's safety mode (the loop's table), as a snapshot's frame does.
         self.hub = hub = StreamHub(

@@ -264,3 +264,83 @@ def test_a_target_into_any_fixed_obstacle_is_a_protective_stop_on_a_world_withou
         assert _stepped_mode(http, 3) == "NORMAL"
         assert http.get("/v1/worlds/1/state").json()["target"] == other  # never noticed
         assert http.post("/v1/worlds/3/reset").status_code == 200
+
+
+def _stepped_until(http: httpx.Client, world: int, mode: str, bursts: int = 60) -> int:
+    """Step the paused server 10 ticks at a time until `world`'s mode is `mode`; the ticks it
+    took (None after `bursts` bursts)."""
+    for i in range(bursts):
+        assert http.post("/v1/sim/step", json={"ticks": 10}).status_code == 200
+        if http.get(f"/v1/worlds/{world}/state").json()["safety_mode"] == mode:
+            return 10 * (i + 1)
+    raise AssertionError(f"world {world} not {mode} after {10 * bursts} ticks")
+
+
+def test_a_joint_held_at_its_torque_limit_is_a_protective_stop_a_hard_acceleration_is_not(
+    paused,
+) -> None:
+    """The torque watch of every world (no UR ports here): world 2 folded onto itself (the
+    elbow driven to 3.1 rad with the shoulder raised; clear of every fixed obstacle, so the
+    clearance watch lets it through) presses wrist_1 at its torque limit without moving:
+    protective-stopped, said in the log, held, commands refused. World 1's shoulder stepped
+    by 2 rad saturates its servo for about 0.3 s while it accelerates, and stays NORMAL."""
+    arm = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint"] + [
+        f"wrist_{i}_joint" for i in (1, 2, 3)
+    ]
+    folded = [0.0, -0.8, 3.1, -1.57, -1.57, 0.0]
+    swung = [2.0, *HOME[1:]]
+    with httpx.Client(base_url=paused.url, timeout=10) as http:
+        assert http.post("/v1/reset", json={"worlds": [1, 2]}).status_code == 200
+        for world, q in ((1, swung), (2, folded)):
+            put = http.put(f"/v1/worlds/{world}/targets", json={"name": arm, "position": q})
+            assert put.status_code == 200, put.text
+        _stepped_until(http, 2, "PROTECTIVE_STOP")
+        assert "wrist_1_joint held at its torque limit" in paused.log()
+        swung_state = http.get("/v1/worlds/1/state").json()
+        assert swung_state["safety_mode"] == "NORMAL"
+        state = http.get("/v1/worlds/2/state").json()
+        # held where it was stopped: the elbow far short of its 3.1 rad target
+        assert np.abs(np.array(state["target"][:6]) - state["position"][:6]).max() < 0.05
+        bad = http.put("/v1/worlds/2/targets", json={"name": arm, "position": HOME})
+        assert bad.status_code == 409 and "torque limit" in bad.json()["detail"], bad.text
+        for _ in range(6):  # the swing is over by now, and it never stopped
+            assert http.post("/v1/sim/step", json={"ticks": 10}).status_code == 200
+        swung_state = http.get("/v1/worlds/1/state").json()
+        assert swung_state["safety_mode"] == "NORMAL"
+        assert swung_state["position"][0] == pytest.approx(2.0, abs=0.02)
+        assert http.post("/v1/reset", json={"worlds": [1, 2]}).status_code == 200
+
+
+def test_a_protective_stop_is_triggered_over_rest_and_the_websocket(paused) -> None:
+    """ur_rtde's triggerProtectiveStop on any world: REST (world 1) and the WebSocket op
+    (world 3) stop the world where it is, a second trigger keeps the first cause, a bad body
+    is refused naming the field, commands are refused until a reset; world 0 never notices."""
+    with httpx.Client(base_url=paused.url, timeout=10) as http:
+        other = http.get("/v1/worlds/0/state").json()
+        stop = http.post("/v1/worlds/1/trigger_protective_stop")
+        assert stop.status_code == 200, stop.text
+        reply = stop.json()
+        assert reply["safety_mode"] == "PROTECTIVE_STOP" and "REST" in reply["why"]
+        assert _stepped_mode(http, 1) == "PROTECTIVE_STOP"
+        jog = http.post("/v1/worlds/1/jog", json={"axis": "z", "step": 0.01})
+        assert jog.status_code == 409 and "triggered by the user" in jog.json()["detail"]
+        with connect(f"{paused.ws_url}/v1/ws/worlds/3") as ws:
+            ws.send(json.dumps({"op": "trigger_protective_stop", "id": 1, "why": "x"}))
+            while (msg := json.loads(ws.recv(timeout=10)))["op"] not in ("ack", "error"):
+                pass
+            assert msg["op"] == "error" and msg["detail"].startswith("why:"), msg
+            assert _stepped_mode(http, 3) == "NORMAL"  # refused: nothing changed
+            for msg_id in (2, 3):  # the second keeps the first's cause
+                ws.send(json.dumps({"op": "trigger_protective_stop", "id": msg_id}))
+                while (msg := json.loads(ws.recv(timeout=10)))["op"] not in ("ack", "error"):
+                    pass
+                assert msg["op"] == "ack" and msg["id"] == msg_id, msg
+                assert msg["safety_mode"] == "PROTECTIVE_STOP" and "WebSocket" in msg["why"]
+        assert _stepped_mode(http, 3) == "PROTECTIVE_STOP"
+        again = http.post("/v1/worlds/3/trigger_protective_stop").json()
+        assert "WebSocket" in again["why"]  # the first cause is kept
+        assert http.post("/v1/worlds/9/trigger_protective_stop").status_code in (404, 422)
+        assert http.post("/v1/reset", json={"worlds": [1, 3]}).status_code == 200
+        assert _stepped_mode(http, 1) == "NORMAL" and _stepped_mode(http, 3) == "NORMAL"
+        now = http.get("/v1/worlds/0/state").json()
+        assert now["safety_mode"] == "NORMAL" and now["target"] == other["target"]

@@ -144,6 +144,45 @@ def test_roslibpy_clock(ros: roslibpy.Ros) -> None:
         clock.unsubscribe()
 
 
+def test_roslibpy_safety_mode_only_on_change_and_latched(server: Server, ros: roslibpy.Ros) -> None:
+    """World 2's safety mode on UR's driver's topic (std_msgs/UInt8, UR's numbers): NORMAL (1)
+    at once to a subscriber, PROTECTIVE_STOP (3) when the world is stopped (a trigger over
+    REST), the current mode at once to a subscriber that comes late, NORMAL again after a reset,
+    each value once; rosapi names the type; nobody may publish on it."""
+    name = "/world_2/io_and_status_controller/safety_mode"
+    kind = "std_msgs/msg/UInt8"
+    seen: list[int] = []
+    late: list[int] = []
+    topic = roslibpy.Topic(ros, name, kind)
+    topic.subscribe(lambda msg: seen.append(msg["data"]))
+    other = roslibpy.Ros("127.0.0.1", server.port)  # a client that comes late
+    other.run(timeout=20)
+    later = roslibpy.Topic(other, name, kind)
+    try:
+        wait_for(lambda: seen == [1] or None, "NORMAL at once")
+        stop = httpx.post(f"{server.url}/v1/worlds/2/trigger_protective_stop")
+        assert stop.status_code == 200, stop.text
+        wait_for(lambda: seen == [1, 3] or None, "PROTECTIVE_STOP when stopped")
+        later.subscribe(lambda msg: late.append(msg["data"]))
+        wait_for(lambda: late == [3] or None, "the current mode at once to a late subscriber")
+        assert httpx.post(f"{server.url}/v1/worlds/2/reset").status_code == 200
+        wait_for(lambda: (seen == [1, 3, 1] and late == [3, 1]) or None, "NORMAL after a reset")
+        service = roslibpy.Service(ros, "/rosapi/topic_type", "rosapi/TopicType")
+        reply = service.call(roslibpy.ServiceRequest({"topic": name}), timeout=10)
+        assert reply["type"] == kind
+    finally:
+        topic.unsubscribe()
+        later.unsubscribe()
+        other.close()
+        httpx.post(f"{server.url}/v1/worlds/2/reset")
+    assert seen == [1, 3, 1]  # each once, though frames came all the while
+    with connect(f"{server.ws_url}/") as ws:
+        ws.send(json.dumps({"op": "publish", "id": 1, "topic": name, "msg": {"data": 1}}))
+        reply = json.loads(ws.recv(timeout=10))
+        assert reply["op"] == "status" and reply["level"] == "error", reply
+        assert "armfleet takes commands on" in reply["msg"]
+
+
 # -- roslib.js -----------------------------------------------------------------------------
 
 

@@ -20,7 +20,7 @@ from service.api.deps import CommandWorld, Ctl, Loop, World, moves_arm
 from service.core.commands import entities, params, payload, randomize
 from service.core.commands.base import HTTP
 from service.core.commands.control import Control
-from service.core.commands.safety_stop import UnlockProtectiveStop
+from service.core.commands.safety_stop import ProtectiveStop, UnlockProtectiveStop
 from service.core.commands.targets import BatchTargets, IncrementRequest, JointTargets
 from service.core.commands.world import ResetRequest
 from service.core.commands.writes import ManyWrites
@@ -28,6 +28,7 @@ from service.core.contract.replies import (
     BatchCommandReply,
     CommandReply,
     ResetReply,
+    TriggerReply,
     UnlockReply,
     WorldState,
     WorldStates,
@@ -140,6 +141,19 @@ async def reset_world(control: Ctl, world: CommandWorld) -> ResetReply:
 async def unlock_protective_stop(control: Ctl, world: CommandWorld) -> UnlockReply:
     tick = control.run(UnlockProtectiveStop.create(control, world), HTTP)
     return UnlockReply(world=world, tick=tick, safety_mode="NORMAL")
+
+
+@router.post(
+    "/worlds/{world}/trigger_protective_stop",
+    response_model=TriggerReply,
+    summary="Protective-stop the world now, as ur_rtde's `triggerProtectiveStop`: the arm is "
+    "held where it is until the stop is unlocked (5 s later at the earliest) or the world reset",
+)
+async def trigger_protective_stop(control: Ctl, world: CommandWorld) -> TriggerReply:
+    result = control.run(ProtectiveStop.triggered(control, world, "REST"), HTTP)
+    tick = control.loop.tick if result is None else result.tick
+    why = control.loop.safety.why(world) or "protective stop"
+    return TriggerReply(world=world, tick=tick, safety_mode="PROTECTIVE_STOP", why=why)
 
 
 @router.post(

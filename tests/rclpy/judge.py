@@ -2,7 +2,7 @@
 the armfleet_ros node and prints one JSON line of what it saw; the pytest side decides.
 
     python judge.py seed|bad|command|actions|tf|description|graph|opening|isaac|sim|entity|
-                    states|latency|flood [args]
+                    states|latency|flood|safety [args]
 
 Nothing of armfleet is imported here: only rclpy and the distribution's message packages.
 """
@@ -318,6 +318,31 @@ def graph(counts: bool = False, expect: tuple[str, ...] = ()) -> None:
     )
 
 
+def safety(ns: str, wait_s: float) -> None:
+    """A UR user's watch of the robot's safety mode (UR's driver publishes it latched on
+    io_and_status_controller/safety_mode): a line per message as it comes, until it has seen a
+    stop and NORMAL again after it, then what it saw and the topic's type on the graph."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import UInt8
+
+    node = Node("armfleet_safety_judge")
+    topic = f"{ns}/io_and_status_controller/safety_mode"
+    latched = QoSProfile(
+        depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
+    )
+    seen: list = []
+
+    def got(msg) -> None:
+        seen.append(int(msg.data))
+        out(data=int(msg.data))
+
+    node.create_subscription(UInt8, topic, got, latched)
+    spin_until(node, lambda: 3 in seen and seen[-1] == 1, wait_s)
+    spin_until(node, lambda: False, 0.5)  # anything sent twice would come now
+    out(seen=seen, types=dict(node.get_topic_names_and_types()).get(topic))
+    node.destroy_node()
+
+
 def main() -> None:
     rclpy.init()
     cmd, args = sys.argv[1], sys.argv[2:]
@@ -336,6 +361,8 @@ def main() -> None:
             tf(args[0])
         elif cmd == "description":
             description(args[0])
+        elif cmd == "safety":
+            safety(args[0], float(args[1]))
         elif cmd == "sim":
             from sim_judge import sim
 

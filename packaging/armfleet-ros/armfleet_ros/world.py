@@ -4,8 +4,10 @@ In: `joint_commands` (sensor_msgs/JointState, the seed's message), `forward_posi
 commands` (std_msgs/Float64MultiArray, six arm joints), `scaled_joint_trajectory_controller/
 joint_trajectory` and `joint_trajectory_controller/joint_trajectory` (trajectory_msgs/
 JointTrajectory; no points = stop and hold). Out: `joint_states`, `tf`, `tf_static`,
-`robot_description`. A state topic costs nothing until something subscribes to it. Made when
-the namespace opens (namespaces.py: the root at start, `/world_N` at its first use).
+`robot_description`, and `io_and_status_controller/safety_mode` (std_msgs/UInt8, UR's number:
+1 NORMAL, 3 PROTECTIVE_STOP; latched, published when it changes, as UR's driver does; the
+rulebook says why this type). A state topic costs nothing until something subscribes to it.
+Made when the namespace opens (namespaces.py: the root at start, `/world_N` at its first use).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from typing import Any
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, String
+from std_msgs.msg import Float64MultiArray, String, UInt8
 from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
@@ -44,6 +46,9 @@ class WorldTopics:
         self.tf = node.create_publisher(TFMessage, f"{ns}/tf", TF_QOS)
         self.tf_static = node.create_publisher(TFMessage, f"{ns}/tf_static", LATCHED)
         self.description = node.create_publisher(String, f"{ns}/robot_description", LATCHED)
+        topic = f"{ns}/{ros_rules.SAFETY_MODE_TOPIC}"
+        self.safety = node.create_publisher(UInt8, topic, LATCHED)
+        self._safety_mode: int | None = None  # UR's number last published (None: none yet)
         self.tf_static.publish(owner.tree.static_message())
         self.description.publish(String(data=owner.urdf))
         self.subs = [
@@ -151,6 +156,11 @@ class WorldTopics:
             self._published = stamp
             if self.owed_by(stamp[1]):
                 self.owed = None
+            modes = batch.safety_mode  # None: a server before the safety block (all NORMAL)
+            mode = ros_rules.safety_mode_number("NORMAL" if modes is None else modes[row])
+            if mode != self._safety_mode:  # latched: a late subscriber gets the last one
+                self._safety_mode = mode
+                self.safety.publish(UInt8(data=mode))
             if self.listened_states:
                 self.publish_state(batch, row, sec, nanosec)
             if poses is not None:

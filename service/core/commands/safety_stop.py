@@ -7,10 +7,12 @@ of a world its safety system had just stopped; staged together, every later comm
 stopped world and is refused (409, core/sim/safety.py). And like every other command they are
 announced: the recorder keeps them, so a replay stops and unlocks where the run did.
 
-Who raises a stop: the clearance watch (clearance_watch.py: a commanded target into a fixed
-obstacle) on every world, and the UR surface (a joint held at its torque limit,
-`triggerProtectiveStop`). Who unlocks it: `POST /v1/worlds/{w}/unlock_protective_stop`, the
-WebSocket op of that name, the Dashboard; a reset clears it too (world.py).
+Who raises a stop, on every world: the clearance watch (clearance_watch.py: a commanded
+target into a fixed obstacle), the torque watch (torque_watch.py: a joint held at its torque
+limit), and a user: `POST /v1/worlds/{w}/trigger_protective_stop`, the WebSocket op of that
+name, ur_rtde's `triggerProtectiveStop` on a world with UR ports. Who unlocks it:
+`POST /v1/worlds/{w}/unlock_protective_stop`, the WebSocket op of that name, the Dashboard; a
+reset clears it too (world.py).
 """
 
 from __future__ import annotations
@@ -35,10 +37,16 @@ ARM = 6  # the arm's joints come first
 
 
 @dataclass(frozen=True)
-class ProtectiveStop(Command["CommandResult | None"], kind="protective_stop"):
+class ProtectiveStop(
+    Command["CommandResult | None"],
+    kind="protective_stop",
+    op="trigger_protective_stop",
+    http=("trigger_protective_stop",),
+):
     """Hold `world`'s arm at `q` (6,) (where it is now), stop its trajectory, and set its
     safety mode to PROTECTIVE_STOP with the cause `why`; None (nothing staged) when it is
-    stopped already (the first cause is kept)."""
+    stopped already (the first cause is kept). The safety watches raise it, and so may a
+    user (`triggered`: ur_rtde's triggerProtectiveStop on any surface)."""
 
     world: int
     q: tuple[float, ...]
@@ -55,6 +63,24 @@ class ProtectiveStop(Command["CommandResult | None"], kind="protective_stop"):
         if held.shape != (ARM,) or not np.isfinite(held).all():
             raise BadCommand("q", f"a protective stop holds {ARM} finite joint angles, got {q!r}")
         return cls(w, tuple(held.tolist()), str(why))
+
+    @classmethod
+    def triggered(cls, door: Door, world: object, where: str) -> ProtectiveStop:
+        """A user's stop of `world`, sent over `where` (a surface's words): the arm held at its
+        angles of the latest snapshot, as the watches hold it."""
+        w = rules.world_id(world, door.nworld)
+        q = door.loop.latest.position[w, :ARM]
+        return cls.create(door, w, q, f"triggered by the user ({where})")
+
+    @classmethod
+    def from_wire(cls, door: Door, world: int, body: dict[str, Any]) -> ProtectiveStop:
+        no_fields("trigger_protective_stop", body)
+        return cls.triggered(door, world, "the WebSocket op trigger_protective_stop")
+
+    def ack(self, door: Door, msg_id: Any, world: int, result: CommandResult | None) -> dict:
+        tick = door.loop.tick if result is None else result.tick
+        why = door.loop.safety.why(world)
+        return world_ack(msg_id, world, tick=tick, safety_mode="PROTECTIVE_STOP", why=why)
 
     def stage(self, door: Door, source: str) -> CommandResult | None:
         loop = door.loop

@@ -60,8 +60,9 @@ class WorldState(BaseModel):
     faults: int = Field(description="times this world was reset for NaN or capacity overflow")
     safety_mode: Literal["NORMAL", "PROTECTIVE_STOP"] = Field(
         description="UR's safety mode: PROTECTIVE_STOP (raised on any world whose commanded "
-        "target goes into a fixed obstacle of the scene, and on worlds served with UR ports "
-        "when a joint is held at its torque limit or the program triggers it) until "
+        "target goes into a fixed obstacle of the scene or whose arm is held at a joint's "
+        "torque limit, or by a trigger: `POST /v1/worlds/{w}/trigger_protective_stop`, "
+        "ur_rtde's triggerProtectiveStop) until "
         "`POST /v1/worlds/{w}/unlock_protective_stop` or the Dashboard's `unlock protective "
         "stop` (5 s after the stop at the earliest), or a reset; commands that move the arm "
         "are refused (409) meanwhile"
@@ -100,6 +101,15 @@ class UnlockReply(BaseModel):
     world: int
     tick: int = Field(description="the tick the world was unlocked at")
     safety_mode: Literal["NORMAL"] = Field(description="the world's safety mode after it")
+
+
+class TriggerReply(BaseModel):
+    world: int
+    tick: int = Field(
+        description="the tick the arm is held from (now, when it was stopped already)"
+    )
+    safety_mode: Literal["PROTECTIVE_STOP"] = Field(description="the world's safety mode after it")
+    why: str = Field(description="the stop's cause: this trigger, or an earlier stop's (kept)")
 
 
 class SimReply(BaseModel):

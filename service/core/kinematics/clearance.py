@@ -16,7 +16,7 @@ fixed obstacle of the scene. Why the target and not the contact force:
 - it is cheap: 6 joints' DH frames and a few dozen points per world against a few boxes and
   planes, vectorised over the worlds, only for the worlds whose target changed.
 Contact with what moves (the cube, a cell's parts, the arm carrying too much) is the torque
-rule of the UR surface (surfaces/ur/safety.py), which stays beside this one.
+rule (core/commands/torque_watch.py), which stays beside this one.
 
 The obstacles: every geom that stands still (its body welded to the world, not a mocap body)
 and collides with at least one of the arm's geoms (contype / conaffinity): in the served cell

@@ -5,9 +5,10 @@ surface reports it (the world's state and TCP over REST, the WebSocket, RTDE's s
 status bits, the Dashboard's safetystatus, `GET /v1/ur`), and every surface's commands that
 would move the arm are refused while it holds (`Control.run`, 409), so a REST client cannot
 drive an arm that a UR program just had stopped. What raises a stop is the robot's safety
-system: the core's clearance watch on every world (core/commands/clearance_watch.py: a
-commanded target into a fixed obstacle), and on worlds with UR ports the UR surface
-(surfaces/ur/safety.py: a joint at its torque limit; triggerProtectiveStop), each through the
+system, on every world: the core's clearance watch (core/commands/clearance_watch.py: a
+commanded target into a fixed obstacle) and torque watch (core/commands/torque_watch.py: a
+joint held at its torque limit), a user's trigger (`trigger_protective_stop` over REST and the
+WebSocket, ur_rtde's triggerProtectiveStop on a world with UR ports), each through the
 `protective_stop` command (core/commands/safety_stop.py: the arm held in the same step). What
 clears it is an unlock 5 s after the stop at the earliest (the Dashboard's `unlock protective
 stop`, or `unlock_protective_stop` over REST and the WebSocket; the robot's rule: "Cannot

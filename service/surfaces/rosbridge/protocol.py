@@ -46,7 +46,13 @@ from service.surfaces.rosbridge.frames import (
     RobotFrames,
     frame_topic,
 )
-from service.surfaces.rosbridge.topics import CLOCK_TOPIC, CLOCK_TYPE, JOINT_STATE_TYPE, TopicMap
+from service.surfaces.rosbridge.topics import (
+    CLOCK_TOPIC,
+    CLOCK_TYPE,
+    JOINT_STATE_TYPE,
+    SAFETY_MODE_TYPE,
+    TopicMap,
+)
 
 log = logging.getLogger("armfleet.rosbridge")
 
@@ -59,6 +65,10 @@ class _TopicSub:
 
     hub_sub: Subscription
     ids: dict[Any, int] = field(default_factory=dict)  # subscribe id → throttle_rate [ms]
+    # a topic sent only when it changes (the safety mode): what its message says, and the last
+    # value sent (None: nothing yet, so a new subscriber gets the current one, as latched)
+    changes: Callable[[Snapshot], Any] | None = None
+    sent: Any = None
 
 
 class RosbridgeServer:
@@ -258,7 +268,10 @@ class Session:
         fmt = FrameFormat.rosbridge(topic)
         # one writer per socket wakes for replies and any topic: the socket's `ready`
         sub = Subscription(np.array([world]), rate, fmt, render, ready=self.ready)
-        self.subs[topic] = _TopicSub(sub, ids)
+        changes = None
+        if topic in self.server.topic_map.safety_topics():
+            changes = lambda s: topics.safety_mode_dict(s, world)  # noqa: E731
+        self.subs[topic] = _TopicSub(sub, ids, changes)
         self.hub.add(sub)
         if existing is None:
             sub.offer(self.loop.latest, time.monotonic())  # the current state at once
@@ -316,6 +329,14 @@ class Session:
         robot = frame_topic(self.server.topic_map.namespaces(), topic)
         if robot is not None and robot[1] == "tf":
             return self._frames().tf(topic, robot[0], tick_dt), robot[0], TF_TYPE
+        safety = self.server.topic_map.safety_topics().get(topic)
+        if safety is not None:
+
+            def safety_mode(s: Snapshot) -> bytes:
+                body = topics.safety_mode_dict(s, safety)
+                return orjson.dumps({"op": "publish", "topic": topic, "msg": body})
+
+            return safety_mode, safety, SAFETY_MODE_TYPE
         world = self.server.topic_map.state_topics().get(topic)
         if world is None:
             if topic in self.server.topic_map.command_topics():
@@ -341,8 +362,14 @@ class Session:
             for entry in list(self.subs.values()):
                 sub = entry.hub_sub
                 snap, sub.latest = sub.latest, None
-                if snap is not None:
-                    await self.ws.send_text(self.hub.frame(sub, snap).decode())
+                if snap is None:
+                    continue
+                if entry.changes is not None:  # sent when it changes (and first)
+                    now = entry.changes(snap)
+                    if now == entry.sent:
+                        continue
+                    entry.sent = now
+                await self.ws.send_text(self.hub.frame(sub, snap).decode())
 
     def close(self) -> None:
         rosbridge_actions.close(self)

@@ -15,7 +15,13 @@ from service.surfaces.rosbridge import actions as rosbridge_actions
 from service.surfaces.rosbridge import topics
 from service.surfaces.rosbridge.base import topic_name
 from service.surfaces.rosbridge.goal_msgs import action_names
-from service.surfaces.rosbridge.topics import CLOCK_TYPE, JOINT_STATE_TYPE, STRING, TF
+from service.surfaces.rosbridge.topics import (
+    CLOCK_TYPE,
+    JOINT_STATE_TYPE,
+    SAFETY_MODE_TYPE,
+    STRING,
+    TF,
+)
 
 _RULE = "=" * 80
 
@@ -33,6 +39,7 @@ TYPEDEFS = {
         f"builtin_interfaces/Time clock\n\n{_RULE}\nMSG: builtin_interfaces/Time\n{_TIME_DEF}"
     ),
     STRING: "string data\n",
+    SAFETY_MODE_TYPE: "uint8 data\n",
     TF: (
         f"geometry_msgs/TransformStamped[] transforms\n\n{_RULE}\n"
         "MSG: geometry_msgs/TransformStamped\n"

@@ -212,12 +212,6 @@ class Endpoints:
             with contextlib.suppress(Exception):
                 await server.wait_closed()
 
-    def protective_stop(self, world: int, why: str) -> None:
-        """From any thread: protective-stop `world` on the UR event loop."""
-        loop, robot = self._loop, self.robots.get(world)
-        if loop is not None and robot is not None and loop.is_running():
-            loop.call_soon_threadsafe(robot.protective_stop, why)
-
     def _stopped(self, world: int, why: str) -> None:
         """A world was protective-stopped (any thread, any cause): its controller answers
         for it on the UR event loop (`WorldRobot.stopped`)."""

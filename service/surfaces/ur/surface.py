@@ -5,10 +5,10 @@ The sink runs on the sim thread: after every published snapshot it keeps it as t
 `Frame`, with the position target's rate of change since the last one (RTDE's target_qd and
 target_qdd), and it asks the loop for a snapshot at every tick while an RTDE client streams,
 so that a 500 Hz stream of a 500 Hz world carries every tick. The event loop of the UR
-thread reads that one reference. The sink is also the controllers' torque rule (safety.py) on
-every snapshot: a world it stops is handed to the UR thread (`Endpoints.protective_stop`),
-which ends the program, holds the arm and sets the world's safety mode. The targets of every
-world, UR or not, are watched by the core (core/commands/clearance_watch.py).
+thread reads that one reference. The robot's safety rules are the core's, on every world, UR
+or not (core/commands/clearance_watch.py: a target into a fixed obstacle; torque_watch.py: a
+joint held at its torque limit); a world they stop is told to its controller through the
+safety table's `on_stop` (the program ends, the controller says STOPPED).
 """
 
 from __future__ import annotations
@@ -30,7 +30,6 @@ from service.surfaces.ur import addresses
 from service.surfaces.ur.endpoints import Endpoints
 from service.surfaces.ur.motion import Motion
 from service.surfaces.ur.rtde_outputs import Frame
-from service.surfaces.ur.safety import SafetyWatch
 from service.surfaces.ur.settings import UrSettings
 from service.surfaces.ur.tcp_pose import ToolKinematics
 
@@ -45,9 +44,8 @@ class UrSink(SnapshotSink):
         endpoints: Endpoints,
         tick_dt: float,
         first: Snapshot,
-        watch: SafetyWatch,
     ) -> None:
-        self._ep, self._dt, self._watch = endpoints, tick_dt, watch
+        self._ep, self._dt = endpoints, tick_dt
         zero = np.zeros_like(first.target, dtype=np.float64)
         self._last = Frame(first, zero, zero, tick_dt)
         endpoints.frame = self._last
@@ -68,9 +66,6 @@ class UrSink(SnapshotSink):
             qdd = (qd - last.target_qd) / dt
         self._last = Frame(snap, qd, qdd, self._dt)
         self._ep.frame = self._last
-        if ticks > 0:
-            for world, why in self._watch.check(snap):
-                self._ep.protective_stop(world, why)
 
 
 class UrSurface:
@@ -107,9 +102,7 @@ class UrSurface:
         ep.start()
         if ep.thread_id is not None:  # raised with the engine, below it (engine_priority.py)
             loop.priority.add_companion(ep.thread_id)
-        limits = [j.effort_limit for j in loop.spec.joints]
-        watch = SafetyWatch(self.worlds, np.array(limits), loop.batch.tick_dt)
-        self._sink = UrSink(ep, loop.batch.tick_dt, loop.latest, watch)
+        self._sink = UrSink(ep, loop.batch.tick_dt, loop.latest)
         loop.listeners.add_sink(self._sink)
         first, last = self.addresses[self.worlds[0]], self.addresses[self.worlds[-1]]
         log.info(

@@ -174,9 +174,9 @@ class WorldRobot:
             self.speed_loop.end()
 
     def protective_stop(self, why: str) -> None:
-        """The robot's own causes (a joint at its torque limit, triggerProtectiveStop): the
-        program ends, then the core's `protective_stop` command holds the arm where it is and
-        sets the world's safety mode in one step; `stopped` follows, as for any other cause."""
+        """The program's own cause (triggerProtectiveStop): the program ends, then the core's
+        `protective_stop` command holds the arm where it is and sets the world's safety mode
+        in one step; `stopped` follows, as for any other cause."""
         if self.controller.safety_mode.name == "PROTECTIVE_STOP":
             return
         self.end_script(f"protective stop: {why}")
