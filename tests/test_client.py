@@ -120,6 +120,28 @@ def test_client_models_follow_the_server_schemas() -> None:
     assert _fields(models.WorldState) == _fields(schemas.WorldState) - {"flange"} | flange
 
 
+def test_the_async_client_has_the_sync_clients_face() -> None:
+    """Every public call of ArmfleetClient is one of AsyncArmfleetClient with the same
+    parameters and defaults, awaited (a call added to one twin only fails here); the lending
+    block (`lease`, `lent`) is shared from calls.Endpoint."""
+    import inspect
+
+    def face(cls: type) -> dict[str, list[tuple[str, Any, Any]]]:
+        return {
+            name: [(p.name, p.default, p.kind) for p in inspect.signature(f).parameters.values()]
+            for name, f in inspect.getmembers(cls, inspect.isfunction)
+            if not name.startswith("_")
+        }
+
+    sync, asyn = face(ArmfleetClient), face(AsyncArmfleetClient)
+    assert sync == asyn
+    assert {"trigger_protective_stop", "unlock_protective_stop", "reset"} <= set(sync)
+    shared = {"lease", "lent"}  # calls.Endpoint's, for both
+    for name in set(asyn) - shared:
+        f = getattr(AsyncArmfleetClient, name)
+        assert inspect.iscoroutinefunction(f) or inspect.isasyncgenfunction(f), name
+
+
 def test_state_holds_seven_joints_and_the_flange_pose(api: Any) -> None:
     state = state_at(api, 3, api.reset(3).tick)
     assert isinstance(state, WorldState)
