@@ -44,6 +44,7 @@ from clients.models import (
     JointInfo,
     Lease,
     ResetResult,
+    SafetyAck,
     SimStatus,
     WorldState,
 )
@@ -78,6 +79,7 @@ __all__ = [
     "NotReady",
     "PayloadTooLarge",
     "ResetResult",
+    "SafetyAck",
     "SimStatus",
     "TrajectoriesStarted",
     "TrajectoryStarted",

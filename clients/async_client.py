@@ -82,6 +82,12 @@ class AsyncArmfleetClient(_Closes, cartesian.AsyncCalls, calls.Endpoint):
     async def reset(self, world: int | Iterable[int] | None = None) -> models.ResetResult:
         return await self.call(calls.reset_call(world))
 
+    async def trigger_protective_stop(self, world: int) -> models.SafetyAck:
+        return await self.call(calls.trigger_protective_stop_call(world))
+
+    async def unlock_protective_stop(self, world: int) -> models.SafetyAck:
+        return await self.call(calls.unlock_protective_stop_call(world))
+
     # -- entities and physics parameters (as ArmfleetClient's ----------------------------
 
     async def entities(self, world: int) -> dict[str, Any]:

@@ -26,6 +26,7 @@ from clients.models import (
     JointRef,
     Lease,
     ResetResult,
+    SafetyAck,
     SimStatus,
     WorldSpec,
     WorldState,
@@ -170,6 +171,16 @@ def reset_call(world: int | Iterable[int] | None = None) -> Call:
         return Call("POST", f"/v1/worlds/{int(world)}/reset", ResetResult.from_json)
     body = {"worlds": [int(w) for w in world]}
     return Call("POST", "/v1/reset", ResetResult.from_json, json=body)
+
+
+def trigger_protective_stop_call(world: int) -> Call:
+    path = f"/v1/worlds/{int(world)}/trigger_protective_stop"
+    return Call("POST", path, SafetyAck.from_json)
+
+
+def unlock_protective_stop_call(world: int) -> Call:
+    path = f"/v1/worlds/{int(world)}/unlock_protective_stop"
+    return Call("POST", path, SafetyAck.from_json)
 
 
 def pause_call() -> Call:

@@ -97,6 +97,17 @@ class ArmfleetClient(_Closes, cartesian.Calls, calls.Endpoint):
         """Reset one world, a list of worlds, or (None) all worlds to home."""
         return self.call(calls.reset_call(world))
 
+    def trigger_protective_stop(self, world: int) -> models.SafetyAck:
+        """Protective-stop the world now (ur_rtde's triggerProtectiveStop): its arm is held
+        where it is and commands that would move it are refused (Conflict) until
+        `unlock_protective_stop` (5 s after the stop at the earliest) or a reset."""
+        return self.call(calls.trigger_protective_stop_call(world))
+
+    def unlock_protective_stop(self, world: int) -> models.SafetyAck:
+        """Back to NORMAL, as UR's Dashboard `unlock protective stop`: Conflict within 5 s of
+        the stop (the robot's rule); the arm stays where the stop held it."""
+        return self.call(calls.unlock_protective_stop_call(world))
+
     # -- entities and physics parameters (calls: clients.cell) -----------------------------
 
     def entities(self, world: int) -> dict[str, Any]:

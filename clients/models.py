@@ -314,6 +314,22 @@ class ResetResult:
 
 
 @dataclass(frozen=True)
+class SafetyAck:
+    """Reply to `trigger_protective_stop` / `unlock_protective_stop`: the world's safety mode
+    after it, from `tick` on, and (a stop) its cause: the first stop's, which a second keeps."""
+
+    world: int
+    tick: int
+    safety_mode: str  # "PROTECTIVE_STOP" after a trigger, "NORMAL" after an unlock
+    why: str | None = None  # a trigger's: the stop's cause; None after an unlock
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> SafetyAck:
+        why = d.get("why")
+        return cls(int(d["world"]), int(d["tick"]), str(d["safety_mode"]), why)
+
+
+@dataclass(frozen=True)
 class Lease:
     """Worlds lent to this client (`ArmfleetClient.lease`): only they answer to `token`."""
 

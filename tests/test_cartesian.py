@@ -9,6 +9,7 @@ import asyncio
 import json
 import threading
 import time
+from typing import Any
 
 import httpx
 import numpy as np
@@ -18,7 +19,7 @@ from jog_checks import rotvec_matrix
 from websockets.sync.client import connect
 
 from clients import ArmfleetClient, AsyncArmfleetClient
-from clients.errors import ArmfleetError
+from clients.errors import ArmfleetError, Conflict
 from clients.testing import serve
 
 
@@ -344,3 +345,59 @@ def test_a_protective_stop_is_triggered_over_rest_and_the_websocket(paused) -> N
         assert _stepped_mode(http, 1) == "NORMAL" and _stepped_mode(http, 3) == "NORMAL"
         now = http.get("/v1/worlds/0/state").json()
         assert now["safety_mode"] == "NORMAL" and now["target"] == other["target"]
+
+
+def test_the_python_clients_trigger_and_unlock_a_protective_stop(paused) -> None:
+    """The sync client (world 2) and the async one (world 3): a trigger stops the world (the
+    state says so, a move is refused), an unlock within 5 s is refused with the robot's rule,
+    one after it brings the world back to NORMAL and moves are taken again; world 0 never
+    notices. The 5 s are waited once, for both clients at once."""
+
+    async def trigger_and_early_unlock() -> tuple[Any, Any]:
+        async with AsyncArmfleetClient(paused.url, timeout=20) as arm:
+            stop = await arm.trigger_protective_stop(3)
+            try:
+                early = await arm.unlock_protective_stop(3)
+            except Conflict as refused:
+                early = refused
+            return stop, early
+
+    def early_unlock(arm: ArmfleetClient, world: int) -> Any:
+        try:
+            return arm.unlock_protective_stop(world)
+        except Conflict as refused:
+            return refused
+
+    with ArmfleetClient(paused.url, timeout=20) as arm:
+        other = arm.state(0)
+        asked = time.monotonic()  # before the stops: an unlock before asked + 5 s is refused
+        stops = {2: arm.trigger_protective_stop(2)}
+        early = {2: early_unlock(arm, 2)}
+        stops[3], early[3] = asyncio.run(trigger_and_early_unlock())
+        stopped = time.monotonic()  # after both replies: both stops are older than this
+        for world, stop in stops.items():
+            assert (stop.world, stop.safety_mode) == (world, "PROTECTIVE_STOP")
+            assert "triggered by the user (REST)" in stop.why
+            if isinstance(early[world], Conflict):  # within 5 s: the robot's rule, in words
+                assert early[world].status == 409
+                assert "may be unlocked 5 s after it at the earliest" in early[world].detail
+            else:  # only a box so loaded that 5 s passed between two requests gets here
+                assert time.monotonic() - asked >= 5.0, early[world]
+            assert arm.state(world).safety_mode == "PROTECTIVE_STOP"
+            with pytest.raises(Conflict):
+                arm.increment(world, "elbow_joint", 0.05)
+        time.sleep(max(0.0, stopped + 5.0 - time.monotonic()))
+        unlocked = arm.unlock_protective_stop(2)
+        assert (unlocked.world, unlocked.safety_mode, unlocked.why) == (2, "NORMAL", None)
+
+        async def late_unlock() -> Any:
+            async with AsyncArmfleetClient(paused.url, timeout=20) as arm:
+                return await arm.unlock_protective_stop(3)
+
+        assert asyncio.run(late_unlock()).safety_mode == "NORMAL"
+        for world in (2, 3):
+            assert arm.state(world).safety_mode == "NORMAL"
+            assert arm.increment(world, "elbow_joint", 0.05).world == world
+        now = arm.state(0)
+        assert now.safety_mode == "NORMAL" and now.target == pytest.approx(other.target)
+        arm.reset([2, 3])

@@ -110,12 +110,36 @@ def test_client_models_follow_the_server_schemas() -> None:
         (models.BatchAck, schemas.BatchCommandReply, set()),
         (models.ResetResult, schemas.ResetReply, set()),
         (models.SimStatus, schemas.SimReply, set()),
+        (models.SafetyAck, schemas.TriggerReply, set()),
+        (models.SafetyAck, schemas.UnlockReply, {"why"}),  # why: a trigger's only
     ]
     for ours, theirs, extra in pairs:
         assert _fields(ours) - extra == _fields(theirs), ours.__name__
     assert models.JointInfo is schemas.JointSpec  # one joint description, not a copy
     flange = {f"flange_{k}" for k in _fields(schemas.Flange)}
     assert _fields(models.WorldState) == _fields(schemas.WorldState) - {"flange"} | flange
+
+
+def test_the_async_client_has_the_sync_clients_face() -> None:
+    """Every public call of ArmfleetClient is one of AsyncArmfleetClient with the same
+    parameters and defaults, awaited (a call added to one twin only fails here); the lending
+    block (`lease`, `lent`) is shared from calls.Endpoint."""
+    import inspect
+
+    def face(cls: type) -> dict[str, list[tuple[str, Any, Any]]]:
+        return {
+            name: [(p.name, p.default, p.kind) for p in inspect.signature(f).parameters.values()]
+            for name, f in inspect.getmembers(cls, inspect.isfunction)
+            if not name.startswith("_")
+        }
+
+    sync, asyn = face(ArmfleetClient), face(AsyncArmfleetClient)
+    assert sync == asyn
+    assert {"trigger_protective_stop", "unlock_protective_stop", "reset"} <= set(sync)
+    shared = {"lease", "lent"}  # calls.Endpoint's, for both
+    for name in set(asyn) - shared:
+        f = getattr(AsyncArmfleetClient, name)
+        assert inspect.iscoroutinefunction(f) or inspect.isasyncgenfunction(f), name
 
 
 def test_state_holds_seven_joints_and_the_flange_pose(api: Any) -> None:
