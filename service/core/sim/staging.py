@@ -21,7 +21,6 @@ from service.core.sim.batch import ModelWrite, StateWrite, TickWrites
 from service.core.sim.loop_types import CommandResult
 from service.core.sim.types import Snapshot
 
-
 _NOTHING = TickWrites()  # what `take` hands when nothing is staged (never written: it is empty)
 _NOTHING.targets.flags.writeable = False
 

@@ -68,4 +68,5 @@ for _ in range(BLOCKS):
             fn()
         out[name].append((time.thread_time() - t0) / REPS * 1e6)
 for name, v in out.items():
-    print(f"{name:15s} min {min(v):6.2f} us  median {statistics.median(v):6.2f} us  (CPU, {N} worlds)")
+    mid = statistics.median(v)
+    print(f"{name:15s} min {min(v):6.2f} us  median {mid:6.2f} us  (CPU, {N} worlds)")
