@@ -44,13 +44,17 @@ def test_every_change_of_the_pending_targets_moves_the_count_and_an_empty_tick_d
     table.take()
     seen = desk.changes
 
-    # A trajectory writes its samples through a lent view (`Staging`), then the tick takes
-    # them: the take moves the count, as does the lending itself (`staging`).
+    # A trajectory writes its samples through a lent view (`Staging`) and says so (`wrote`),
+    # then the tick takes them: the count moves, as does the lending itself (`staging`).
     st = desk.view()
     st.pending[1] = moved
     st.dirty[1] = True
-    assert table.take() and desk.changes > seen
+    desk.wrote()
+    assert desk.changes > seen
+    writes = table.take()
+    assert list(writes.worlds) == [1] and np.array_equal(writes.targets[0], moved)
     seen = desk.changes
+    assert not table.take() and desk.changes == seen  # taken: nothing left, the count still
     with desk.staging([3]) as st:
         st.pending[3] = moved
     assert desk.changes > seen
@@ -64,3 +68,19 @@ def test_every_change_of_the_pending_targets_moves_the_count_and_an_empty_tick_d
     assert desk.changes > seen
     seen = desk.changes
     assert not table.take() and desk.changes == seen  # and quiet again
+
+
+def test_a_quiet_table_still_hands_every_kind_of_write_to_the_next_take() -> None:
+    """`take` skips its scan while the count stands where its last emptying left it: each way
+    of staging must still reach the engine (state writes are a list, checked every time)."""
+    from service.core.sim.batch import StateWrite
+
+    desk = _desk()
+    table = desk.table
+    assert not table.take() and not table.take()  # quiet: the scan is skipped
+    desk.stage_state([StateWrite("qpos", 1, np.array([0]), np.array([0.2]))])
+    assert table.take().state and not table.take()
+    desk.reset([0])
+    assert list(table.take().resets) == [0] and not table.take()
+    desk.stage_rows([3], _row(SPEC.home + 0.05), [0])
+    assert list(table.take().worlds) == [3] and not table.take()

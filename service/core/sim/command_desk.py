@@ -116,6 +116,11 @@ class CommandDesk:
         """The pending tables for a trajectory runner (lock held)."""
         return self.table.view(self._accept_tick())
 
+    def wrote(self) -> None:
+        """Rows were staged through a `view` (lock held): the change count moves, so the next
+        `take` looks for them and the clearance watch compares (`CommandTable.changes`)."""
+        self.table.changes += 1
+
     @property
     def changes(self) -> int:
         """`CommandTable.changes`: moves whenever the pending targets may have changed (an int,

@@ -245,6 +245,7 @@ class TrajectoryManager:
         st.pending[w] = np.where(driven, s.positions, st.pending[w])
         st.velocity[w] = np.where(driven, s.velocities, st.velocity[w])
         st.dirty[w] = True
+        self.loop.commands.wrote()  # staged through the view: the loop's `take` looks
         self._last, self._last_vel, self._last_tick = s.positions, s.velocities, tick
 
     def after_step(self, tick: int, faulted: np.ndarray, st: Staging) -> bool:
@@ -350,6 +351,7 @@ class TrajectoryManager:
             return
         st.velocity[worlds] = 0.0  # the end is held without feed-forward
         st.dirty[worlds] = True
+        self.loop.commands.wrote()
         self._finish(self.table.slots_of(worlds), TrajectoryState.SUCCEEDED, None, "", tick)
 
     def _abort(
@@ -363,6 +365,7 @@ class TrajectoryManager:
             w = self.table.worlds[slots]
             st.velocity[w] = 0.0
             st.dirty[w] = True
+            self.loop.commands.wrote()
             tick = st.tick - 1  # the last tick it drove
         return self._finish(slots, TrajectoryState.ABORTED, reason, detail, tick)
 
