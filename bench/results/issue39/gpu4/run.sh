@@ -14,14 +14,7 @@
 set -o pipefail
 R=$(pwd) B=$(pwd)/.whl/gpu4/b S=/tmp/site NEW=/tmp/new
 L=$OUT/log.txt T=$OUT/res.tar
-Z=$(command -v zstd); if [ -z "$Z" ]; then cp $B/zstd /tmp/zstd; chmod +x /tmp/zstd; Z=/tmp/zstd; fi
-if [ ! -f $S/warp/bin/warp.so ]; then
-  [ -f /tmp/parts/warp.so.zst.part-00 ] || { echo "NO PART-00: machine went cold" | tee -a $L; exit 3; }
-  mkdir -p $S/warp/bin
-  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target $S $B/*.whl || exit 1
-  python3 -m zipfile -e $B/warp_lite.zip $S || exit 1
-  cat /tmp/parts/warp.so.zst.part-00 $B/warp.so.zst.part-01 | $Z -d --long=27 -q -o $S/warp/bin/warp.so || exit 1
-fi
+. "$R/bench/results/issue39/device_install.sh"  # as it ran then, inline
 rm -rf $NEW && mkdir -p $NEW && tar -xf $B/new.tar -C $NEW
 export PYTHONUNBUFFERED=1 PYTHONPATH=$NEW:$S
 cd $NEW

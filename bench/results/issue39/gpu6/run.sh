@@ -1,37 +1,6 @@
-# Issue 39 item 3 on one H200 (branch gpu6). Call A, carry [".whl/gpu/a"]:
-#   mkdir -p /tmp/parts && cp .whl/gpu/a/* /tmp/parts/
-# then calls carrying [".whl/gpu6/b"]: bash .whl/gpu6/b/run.sh STEP...
-# STEP: tl:TREE:N (timeline probe, bench/results/issue39/gpu6/tl) or s25:TREE:N (section 25);
-# TREE main (git archive of main) or new (of gpu6). Results in $OUT/res.tar, log in $OUT/log.txt.
-set -o pipefail
-R=$(pwd) B=$(pwd)/.whl/gpu6/b S=/tmp/site
-L=$OUT/log.txt T=$OUT/res.tar
-Z=$(command -v zstd); if [ -z "$Z" ]; then cp $B/zstd /tmp/zstd; chmod +x /tmp/zstd; Z=/tmp/zstd; fi
-if [ ! -f $S/warp/bin/warp.so ]; then
-  [ -f /tmp/parts/warp.so.zst.part-00 ] || { echo "NO PART-00: machine went cold" | tee -a $L; exit 3; }
-  mkdir -p $S/warp/bin
-  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target $S $B/*.whl || exit 1
-  python3 -m zipfile -e $B/warp_lite.zip $S || exit 1
-  cat /tmp/parts/warp.so.zst.part-00 $B/warp.so.zst.part-01 | $Z -d --long=27 -q -o $S/warp/bin/warp.so || exit 1
-  rm -rf ~/.cache/warp && mkdir -p ~/.cache && $Z -d -q -c $B/warpcache.tar.zst | tar -xf - -C ~/.cache || exit 1
-fi
-for t in main new; do rm -rf /tmp/$t && mkdir -p /tmp/$t && tar -xzf $B/$t.tar.gz -C /tmp/$t || exit 1; done
-export PYTHONUNBUFFERED=1
-cat $B/VERSIONS | tee -a $L; nvidia-smi -L | tee -a $L; echo "install done at $SECONDS s" | tee -a $L
-keep() { (cd /tmp && tar -rf $T "$@" 2>/dev/null); }
-PROBE=/tmp/new/bench/results/issue39/gpu6/tl/timeline.py
-i=0
-for s in "$@"; do
-  i=$((i+1)); kind=${s%%:*}; rest=${s#*:}; tree=${rest%%:*}; n=${rest#*:}; name=${kind}_${tree}_${n}_$i
-  left=$((585 - SECONDS)); [ $left -lt 40 ] && { echo "$name skipped: no time left" | tee -a $L; continue; }
-  t0=$SECONDS; echo "== $name" >>$L
-  if [ $kind = tl ]; then
-    (cd /tmp/$tree && PYTHONPATH=/tmp/$tree:$S timeout $left python3 $PROBE /tmp/$name $n) >/tmp/$name.log 2>&1
-  else
-    (cd /tmp/$tree && PYTHONPATH=/tmp/$tree:$S timeout $left python3 -m bench.runner --device cuda --section 25 --worlds $n --out /tmp/$name) >/tmp/$name.log 2>&1
-  fi
-  echo "$name rc=$? $((SECONDS-t0)) s" | tee -a $L
-  grep -E "Error|pair|ratio|service|done" /tmp/$name.log | tail -12 >>$L
-  tail -c 200000 /tmp/$name.log >/tmp/$name.tail; keep $name.tail $name
-done
-echo "done at $SECONDS s" | tee -a $L
+# Issue 39 item 3 on one H200 (branch gpu6): the script that ran is ../gpu7/run.sh with the
+# bundle .whl/gpu6/b and no CAP (585 s), i.e. from the repository root on the device machine,
+# after a call carrying [".whl/gpu/a"] that did `mkdir -p /tmp/parts && cp .whl/gpu/a/* /tmp/parts/`:
+#   B=$(pwd)/.whl/gpu6/b bash bench/results/issue39/gpu7/run.sh STEP...
+# (gpu7 added only CAP and the settable bundle.) STEP: tl:TREE:N or s25:TREE:N, see there.
+B=${B:-$(pwd)/.whl/gpu6/b} exec bash "$(pwd)/bench/results/issue39/gpu7/run.sh" "$@"

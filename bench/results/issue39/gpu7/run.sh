@@ -4,17 +4,9 @@
 # STEP: tl:TREE:N (timeline probe, bench/results/issue39/gpu6/tl) or s25:TREE:N (section 25);
 # TREE main (git archive of main) or new (of gpu7). Results in $OUT/res.tar, log in $OUT/log.txt.
 set -o pipefail
-R=$(pwd) B=$(pwd)/.whl/gpu7/b S=/tmp/site
+R=$(pwd) B=${B:-$(pwd)/.whl/gpu7/b} S=/tmp/site
 L=$OUT/log.txt T=$OUT/res.tar
-Z=$(command -v zstd); if [ -z "$Z" ]; then cp $B/zstd /tmp/zstd; chmod +x /tmp/zstd; Z=/tmp/zstd; fi
-if [ ! -f $S/warp/bin/warp.so ]; then
-  [ -f /tmp/parts/warp.so.zst.part-00 ] || { echo "NO PART-00: machine went cold" | tee -a $L; exit 3; }
-  mkdir -p $S/warp/bin
-  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target $S $B/*.whl || exit 1
-  python3 -m zipfile -e $B/warp_lite.zip $S || exit 1
-  cat /tmp/parts/warp.so.zst.part-00 $B/warp.so.zst.part-01 | $Z -d --long=27 -q -o $S/warp/bin/warp.so || exit 1
-  rm -rf ~/.cache/warp && mkdir -p ~/.cache && $Z -d -q -c $B/warpcache.tar.zst | tar -xf - -C ~/.cache || exit 1
-fi
+WARPCACHE=1 . "$R/bench/results/issue39/device_install.sh"  # as it ran then, inline
 for t in main new; do rm -rf /tmp/$t && mkdir -p /tmp/$t && tar -xzf $B/$t.tar.gz -C /tmp/$t || exit 1; done
 export PYTHONUNBUFFERED=1
 cat $B/VERSIONS | tee -a $L; nvidia-smi -L | tee -a $L; echo "install done at $SECONDS s" | tee -a $L
