@@ -365,7 +365,7 @@ class FrameSender:
                 rows = job.data.packed.wait()
                 handed = self._in_process(job, rows)
                 formats = [f for f in job.formats if f not in handed]
-                out = {}
+                out: dict[str, bytes] = {}
                 for f in formats:
                     self._after_tick_python()
                     out[f] = ENCODERS[f](job.data, rows, job.names)
