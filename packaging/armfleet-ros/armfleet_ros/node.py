@@ -35,7 +35,7 @@ from armfleet_ros.frames import TfTree
 from armfleet_ros.link import FleetLink
 from armfleet_ros.namespaces import TOPICS, Namespaces
 from armfleet_ros.params import param
-from armfleet_ros.parts import Parts
+from armfleet_ros.parts import QUIET_PUB, Parts
 from armfleet_ros.world import WorldTopics
 from clients import ArmfleetClient, ros_rules
 from clients.calls import Call
@@ -96,7 +96,7 @@ class ArmfleetNode:
         self._last_generation = 0
         self._reported: dict = {}
         self._reported_at = 0.0
-        self.clock = node.create_publisher(Clock, "/clock", 10)
+        self.clock = node.create_publisher(Clock, "/clock", 10, **QUIET_PUB)
         self.parts = Parts(NODE_NAME, node)
         # what the open namespaces have made (namespaces.py); lists replaced, never changed
         self.spaces: list[WorldTopics] = []
