@@ -24,6 +24,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from websockets.sync.client import connect
 
 from armfleet_ros import auth
+from armfleet_ros.parts import QUIET_PUB
 from clients import ros_rules, stream
 from clients.calls import Call
 from clients.wire import unpack_images as unpack
@@ -65,8 +66,10 @@ class CameraTopics:
 
     def add(self, node: Any, ns: str, world: int) -> None:
         """This camera's topics in a namespace being opened (node.py)."""
-        image = node.create_publisher(Image, f"{ns}/{self.name}/image_raw", QOS_DEPTH)
-        info = node.create_publisher(CameraInfo, f"{ns}/{self.name}/camera_info", QOS_DEPTH)
+        image = node.create_publisher(Image, f"{ns}/{self.name}/image_raw", QOS_DEPTH, **QUIET_PUB)
+        info = node.create_publisher(
+            CameraInfo, f"{ns}/{self.name}/camera_info", QOS_DEPTH, **QUIET_PUB
+        )
         frame = f"{ns.lstrip('/') + '/' if ns else ''}{self.name}_optical_frame"
         self.pubs = {**self.pubs, world: [*self.pubs.get(world, []), (image, info, frame)]}
 

@@ -8,6 +8,14 @@ of nodes: one for the topics, spun by a single thread, and one for the actions a
 whose callbacks block, spun by a small pool. A slice is made, and its threads started, when its
 first namespace opens. Slice 0's topics node is `armfleet` itself (parameters, `/clock`; `main`
 spins its executor); the others are `armfleet_<k>` and `armfleet_actions[_<k>]`.
+
+A topic's publisher or subscription is made without rclpy's default event handlers (`QUIET_PUB`,
+`QUIET_SUB`): each is a waitable of the node (two per endpoint on Jazzy: incompatible QoS and
+incompatible type) that the executor walks on every wake-up, in Python. A slice's 16 namespaces
+made about 200 of them, and its executor spent 3.5 ms of CPU per command message, 1.7 without
+(one subscription of 64 taking 300 messages, 2-core Xeon). Their only work is a log line on this
+side of a mismatch, which the other side's defaults log as well (rclpy and rclcpp warn on an
+incompatible QoS offered or requested by the endpoints they match).
 """
 
 from __future__ import annotations
@@ -19,6 +27,15 @@ from typing import Any
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
+
+try:  # Iron and later
+    from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+except ImportError:  # Humble
+    from rclpy.qos_event import PublisherEventCallbacks, SubscriptionEventCallbacks
+
+# create_publisher / create_subscription keywords: no default event handlers (docstring)
+QUIET_PUB = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
+QUIET_SUB = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
 
 SLICE = 16  # namespaces per slice
 POOL_THREADS = 8  # running goals and service calls of one slice at once

@@ -22,6 +22,7 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory
 
 from armfleet_ros import convert
+from armfleet_ros.parts import QUIET_PUB, QUIET_SUB
 from clients import ros_rules
 from clients import trajectory as tj
 from clients.errors import ArmfleetError
@@ -42,12 +43,14 @@ class WorldTopics:
         node = part.topics
         self.owner, self.world, self.ns = owner, world, ns
         group = part.group
-        self.states = node.create_publisher(JointState, f"{ns}/joint_states", 10)
-        self.tf = node.create_publisher(TFMessage, f"{ns}/tf", TF_QOS)
-        self.tf_static = node.create_publisher(TFMessage, f"{ns}/tf_static", LATCHED)
-        self.description = node.create_publisher(String, f"{ns}/robot_description", LATCHED)
+        self.states = node.create_publisher(JointState, f"{ns}/joint_states", 10, **QUIET_PUB)
+        self.tf = node.create_publisher(TFMessage, f"{ns}/tf", TF_QOS, **QUIET_PUB)
+        self.tf_static = node.create_publisher(TFMessage, f"{ns}/tf_static", LATCHED, **QUIET_PUB)
+        self.description = node.create_publisher(
+            String, f"{ns}/robot_description", LATCHED, **QUIET_PUB
+        )
         topic = f"{ns}/{ros_rules.SAFETY_MODE_TOPIC}"
-        self.safety = node.create_publisher(UInt8, topic, LATCHED)
+        self.safety = node.create_publisher(UInt8, topic, LATCHED, **QUIET_PUB)
         self._safety_mode: int | None = None  # UR's number last published (None: none yet)
         self.tf_static.publish(owner.tree.static_message())
         self.description.publish(String(data=owner.urdf))
@@ -58,6 +61,7 @@ class WorldTopics:
                 self._joint_command,
                 COMMAND_DEPTH,
                 callback_group=group,
+                **QUIET_SUB,
             ),
             node.create_subscription(
                 Float64MultiArray,
@@ -65,6 +69,7 @@ class WorldTopics:
                 self._forward_command,
                 COMMAND_DEPTH,
                 callback_group=group,
+                **QUIET_SUB,
             ),
         ]
         for name in ros_rules.FJT_CONTROLLERS:
@@ -76,6 +81,7 @@ class WorldTopics:
                     lambda msg, topic=topic: self._trajectory(msg, topic),
                     COMMAND_DEPTH,
                     callback_group=group,
+                    **QUIET_SUB,
                 )
             )
         self.listened_states = False
