@@ -9,6 +9,7 @@ Nothing of armfleet is imported here: only rclpy and the distribution's message 
 
 from __future__ import annotations
 
+import importlib
 import json
 import sys
 import threading
@@ -343,58 +344,46 @@ def safety(ns: str, wait_s: float) -> None:
     node.destroy_node()
 
 
+def _ints(args: list[str]) -> tuple[list[int]]:
+    return ([int(a) for a in args],)
+
+
+def _graph_args(args: list[str]) -> tuple[bool, tuple[str, ...]]:
+    return bool(args and args[0] == "counts"), tuple(a for a in args if a != "counts")
+
+
+# judge name: (module, function, how its arguments are read: one type per argument, or a
+# function of all of them). A module is imported only when one of its judges runs.
+JUDGES: dict[str, tuple[str, str, object]] = {
+    "seed": ("judge", "seed", (str, float)),
+    "topics": ("judge", "topics", (str, str)),
+    "bad": ("judge", "bad", (str,)),
+    "command": ("judge", "command", (str, str, str)),
+    "actions": ("judge", "actions", (str,)),
+    "tf": ("judge", "tf", (str,)),
+    "description": ("judge", "description", (str,)),
+    "safety": ("judge", "safety", (str, float)),
+    "graph": ("judge", "graph", _graph_args),
+    "sim": ("sim_judge", "sim", (str, str)),
+    "entity": ("sim_judge", "entity", (str,)),
+    "states": ("sim_judge", "states", _ints),
+    "latency": ("load_judge", "latency", (int,)),
+    "flood": ("load_judge", "flood", (int, float, float)),
+    "isaac": ("load_judge", "isaac", (float, float)),
+    "opening": ("open_judge", "opening", (str,)),
+}
+
+
 def main() -> None:
-    rclpy.init()
     cmd, args = sys.argv[1], sys.argv[2:]
+    if cmd not in JUDGES:
+        raise SystemExit(f"unknown judge {cmd!r}")
+    module, name, read = JUDGES[cmd]
+    run = globals()[name] if module == "judge" else getattr(importlib.import_module(module), name)
+    values = read(args) if callable(read) else tuple(t(a) for t, a in zip(read, args, strict=False))
+    rclpy.init()
     try:
-        if cmd == "seed":
-            seed(args[0], float(args[1]))
-        elif cmd == "topics":
-            topics(args[0], args[1])
-        elif cmd == "bad":
-            bad(args[0])
-        elif cmd == "command":
-            command(args[0], args[1], args[2])
-        elif cmd == "actions":
-            actions(args[0])
-        elif cmd == "tf":
-            tf(args[0])
-        elif cmd == "description":
-            description(args[0])
-        elif cmd == "safety":
-            safety(args[0], float(args[1]))
-        elif cmd == "sim":
-            from sim_judge import sim
-
-            sim(args[0], args[1])
-        elif cmd == "entity":
-            from sim_judge import entity
-
-            entity(args[0])
-        elif cmd == "states":
-            from sim_judge import states
-
-            states([int(a) for a in args])
-        elif cmd == "latency":
-            from load_judge import latency
-
-            latency(int(args[0]))
-        elif cmd == "flood":
-            from load_judge import flood
-
-            flood(int(args[0]), float(args[1]), float(args[2]))
-        elif cmd == "isaac":
-            from load_judge import isaac
-
-            isaac(float(args[0]), float(args[1]))
-        elif cmd == "opening":
-            from open_judge import opening
-
-            opening(args[0])
-        elif cmd == "graph":
-            graph(bool(args and args[0] == "counts"), tuple(a for a in args if a != "counts"))
-        else:
-            raise SystemExit(f"unknown judge {cmd!r}")
+        run(*values)
     finally:
         rclpy.shutdown()
 
