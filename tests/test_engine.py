@@ -99,6 +99,25 @@ def test_grasp_never_overflows_capacity(fresh):
     assert 40 < peak_rows < 128  # the pads really touched, and well inside capacity
 
 
+def test_warp_newton_ends_most_resting_steps_at_the_warm_start(fresh):
+    """service/engines/warp_newton.py: at rest a world whose warm start passes CG's test takes
+    no iteration (no Hessian); a pressed world is still solved (fidelity: the tests below)."""
+    batch, _ = fresh
+    if not isinstance(batch, WorldBatch):
+        pytest.skip("MuJoCo Warp's Newton solve")
+    batch.step(30)
+    niter = []
+    for _ in range(30):
+        batch.step(1)
+        niter.append(batch._d.solver_niter.numpy().copy())  # the tick's last substep
+    assert (np.array(niter) == 0).mean() > 0.2, np.array(niter)
+    target = batch.home_target.copy()
+    target[1] += 0.1
+    batch.apply_targets(np.array([1]), target[None])
+    batch.step(1)
+    assert batch._d.solver_niter.numpy()[1] >= 1
+
+
 def test_float32_warp_tracks_float64_native_mujoco_within_a_milliradian():
     """The warp engine against plain mj_step on one MjData, the same commands."""
     batch = WorldBatch(1)

@@ -32,6 +32,7 @@ from service.core.sim.physics import (
 from service.core.sim.robot import LoadedRobot, load_robot
 from service.core.sim.types import PHYSICS_FIELDS, BatchState
 from service.engines import warp_frames as frames
+from service.engines import warp_newton
 from service.engines.cuda_streams import engine_streams
 from service.engines.mirror import SETCONST_INPUTS, HostMirror
 from service.engines.warp_kernels import gather_bodies, gather_state
@@ -51,6 +52,9 @@ log = logging.getLogger("armfleet.engine")
 # `armfleet setup` (ARMFLEET_WARP_LOG=info) shows them as compile progress.
 _VERBOSE_WARP = os.environ.get("ARMFLEET_WARP_LOG") == "info"
 wp.config.log_level = wp.LOG_INFO if _VERBOSE_WARP else wp.LOG_WARNING
+
+# Newton's solve on the CPU stops worlds whose warm start has converged (warp_newton.py: why).
+warp_newton.install()
 
 # Overflows that mean contacts or constraints were dropped: the world's physics is no longer
 # trustworthy. (Solver iteration limits are not faults: the solution is just less converged.)
