@@ -35,8 +35,8 @@ DEFAULT_PHYSICS_DT = 1.0 / 120.0
 # one 512-world shard (the service at 1,024 worlds on two cores) ticks in 99.6 ms of CPU with Newton
 # against 77.8 with CG (1.28x; captured ticks, best of 5 alternating blocks, load 0.1-0.9), which
 # was section 19's MuJoCo Warp ratio against the CG tree f667f8e (0.857); service/engines/
-# warp_newton.py now stops converged worlds before the Hessian (1.00-1.01x CG's tick at rest,
-# section 19 0.998-1.005). Moving, a 32-world shard: Newton 8.5 ms, CG 36.6 (capped at 20 or 30
+# warp_newton.py now stops converged worlds before the Hessian (1.07x CG's tick at rest; section 19
+# docs/performance.md). Moving, a 32-world shard: Newton 8.5 ms, CG 36.6 (capped at 20 or 30
 # iterations still 15.2 or 20.7 ms);
 # every arm of a 512-world shard retargeted every 0.5 s: Newton 158 ms, CG 834 (load 10-30), so no
 # shard size makes CG the better default. No MuJoCo Warp 4.0 option narrows the rest gap (512
