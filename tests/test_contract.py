@@ -56,7 +56,7 @@ def test_schemathesis_finds_nothing(server, tmp_path):
         "--workers",
         "1",
         "--no-shrink",
-        "--request-timeout",  # a picture of 16 worlds on a loaded 2-core box: 10 s ran out
+        "--request-timeout",  # the first picture (the renderer set up) ran past 10 s at load 10
         "30",
         "--report",
         "junit",

@@ -208,7 +208,8 @@ def test_schemathesis_with_a_lease_token_finds_nothing(
         "run", f"{lender.url}/openapi.json",
         "--header", f"Authorization: Bearer {mine['token']}",
         "--checks", "all", "--seed", "20261125", "--max-examples", "10", "--workers", "1",
-        "--no-shrink", "--request-timeout", "10",
+        # 30 s: the first picture of 32 worlds (the renderer set up) took 15 s at load 10
+        "--no-shrink", "--request-timeout", "30",
         # not the stateful phase: it would find the lease's id in GET /v1/leases and give the
         # lease back (as its holder may), leaving the rest of the run with a dead token
         "--phases", "examples,coverage,fuzzing",
