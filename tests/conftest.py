@@ -23,6 +23,7 @@ import httpx
 import pytest
 import roslibpy
 import server_logs
+import suite_times
 
 from clients import ArmfleetClient, WorldState
 from clients.testing import Server, free_port, headless, serve
@@ -76,6 +77,7 @@ def pytest_configure(config: pytest.Config) -> None:
     clash with the entry point: pytest refuses a module registered under two names.)"""
     if not config.pluginmanager.is_registered(armfleet_plugin):
         config.pluginmanager.register(armfleet_plugin, "armfleet")
+    suite_times.pytest_configure(config)  # with workers: where the time went, by file
     config.addinivalue_line(
         "markers",
         f"{server_logs.MARKER}(reason): this test makes a server of its own (logging under its "
