@@ -68,6 +68,7 @@ def test_schemathesis_finds_nothing(server, tmp_path):
     summary = [line for line in proc.stdout.splitlines() if "generated" in line]
     assert proc.returncode == 0, proc.stdout[-6000:] + proc.stderr[-2000:]
     assert summary and "passed" in summary[-1], proc.stdout[-2000:]
+    assert (tmp_path / "fast_mode_undone.txt").is_file()  # the hook ran (the fuzz sends fast)
     print(summary[-1].strip())  # e.g. "700 generated, 700 passed" (pytest -s shows it)
 
 
