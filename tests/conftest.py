@@ -188,12 +188,21 @@ def hermetic_settings(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def cameras_ready(tmp_path_factory: pytest.TempPathFactory, name: str) -> Iterator[Server]:
     """A 4-world server on the CPU default, handed over once its cameras are ready: the camera
-    tests' module fixtures (`yield from`). A warming server answers slowly on a loaded box:
-    60 s a read, 300 s in all."""
+    tests' module fixtures (`yield from`)."""
     with serve(worlds=4, log_dir=tmp_path_factory.mktemp(name)) as s:
-        ready = lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"]  # noqa: E731
-        wait_for(ready, "cameras", 300)
+        cameras_warmed(s.url)
         yield s
+
+
+def cameras_warmed(url: str, headers: dict[str, str] | None = None) -> None:
+    """Until the server's camera renderer is built and has drawn every camera once (on the CPU
+    the first ask starts the build: 15 s for 32 worlds at load 11). A warming server answers
+    slowly on a loaded box: 60 s a read, 300 s in all."""
+
+    def ready() -> bool:
+        return httpx.get(f"{url}/v1/cameras", headers=headers, timeout=60).json()["ready"]
+
+    wait_for(ready, "cameras", 300)
 
 
 def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
