@@ -23,6 +23,7 @@ import httpx
 import pytest
 import roslibpy
 import server_logs
+import suite_times
 
 from clients import ArmfleetClient, WorldState
 from clients.testing import Server, free_port, headless, serve
@@ -76,6 +77,7 @@ def pytest_configure(config: pytest.Config) -> None:
     clash with the entry point: pytest refuses a module registered under two names.)"""
     if not config.pluginmanager.is_registered(armfleet_plugin):
         config.pluginmanager.register(armfleet_plugin, "armfleet")
+    suite_times.pytest_configure(config)  # with workers: where the time went, by file
     config.addinivalue_line(
         "markers",
         f"{server_logs.MARKER}(reason): this test makes a server of its own (logging under its "
@@ -139,15 +141,18 @@ def pytest_terminal_summary(terminalreporter: Any, config: pytest.Config) -> Non
 # The test files that take longest, longest first: they run before the others, so that with
 # pytest-xdist (`scripts/dev.py test`: --dist loadfile --no-loadscope-reorder hands out files
 # in collection order) no long file starts last and keeps one worker busy while others idle.
+# The two schemathesis files lead: each alone, nice'd at load 8-10, test_leases took 480 s and
+# 153 CPU-s, test_contract 322 s and 117 CPU-s, the next one 198 s (a run's end shows the
+# order's effect: tests/suite_times.py).
 LONGEST_FIRST = (
+    "test_leases.py",
+    "test_contract.py",
     "test_batch_contract.py",
     "test_ray_hosts.py",
     "test_ros_node.py",
     "test_ros_node_supervision.py",
     "test_params.py",
-    "test_contract.py",
     "test_ray_shards.py",
-    "test_leases.py",
     "test_stopping.py",
     "test_page.py",
     "test_docs.py",
@@ -183,12 +188,21 @@ def hermetic_settings(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def cameras_ready(tmp_path_factory: pytest.TempPathFactory, name: str) -> Iterator[Server]:
     """A 4-world server on the CPU default, handed over once its cameras are ready: the camera
-    tests' module fixtures (`yield from`). A warming server answers slowly on a loaded box:
-    60 s a read, 300 s in all."""
+    tests' module fixtures (`yield from`)."""
     with serve(worlds=4, log_dir=tmp_path_factory.mktemp(name)) as s:
-        ready = lambda: httpx.get(f"{s.url}/v1/cameras", timeout=60).json()["ready"]  # noqa: E731
-        wait_for(ready, "cameras", 300)
+        cameras_warmed(s.url)
         yield s
+
+
+def cameras_warmed(url: str, headers: dict[str, str] | None = None) -> None:
+    """Until the server's camera renderer is built and has drawn every camera once (on the CPU
+    the first ask starts the build: 15 s for 32 worlds at load 11). A warming server answers
+    slowly on a loaded box: 60 s a read, 300 s in all."""
+
+    def ready() -> bool:
+        return httpx.get(f"{url}/v1/cameras", headers=headers, timeout=60).json()["ready"]
+
+    wait_for(ready, "cameras", 300)
 
 
 def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
