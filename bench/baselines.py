@@ -10,7 +10,6 @@ functions (the bench imports every module to find its sections).
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 from bench import common
@@ -147,16 +146,6 @@ class Rollout:
         """World-steps/s over one block of about `seconds` (`warm`: after one untimed call)."""
         timing = common.time_calls(self.call, seconds, warmup_reps=int(warm))
         return timing.reps * self.nstep * self.nworld / timing.elapsed
-
-    def block_with_cpu(self, seconds: float) -> tuple[float, float]:
-        """`block` (after one untimed call), and world-steps per CPU-second of this process
-        over the same calls (the caller waits while the pool's threads step)."""
-        self.call()
-        c0 = time.process_time()
-        timing = common.time_calls(self.call, seconds, warmup_reps=0)
-        cpu = time.process_time() - c0
-        steps = timing.reps * self.nstep * self.nworld
-        return steps / timing.elapsed, steps / max(cpu, 1e-9)
 
     def finite(self) -> bool:
         """Every world's state is finite (the run did not blow up)."""

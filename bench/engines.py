@@ -17,7 +17,6 @@ Standalone: ``python -m bench.engines --section 10 --worlds 1024``.
 from __future__ import annotations
 
 import asyncio
-import statistics
 from typing import Any
 
 from bench import common
@@ -82,11 +81,7 @@ async def _served_vs_rollout(
     """Rounds of: service paused → a rollout block → service in fast mode for `window`.
 
     The service streams every world at 30 Hz (`fmt` frames, one client) throughout; pausing it while
-    rollout runs keeps the two from sharing the cores. Best of the rounds for each; beside it, each
-    window over the block just before it (`paired`: the same minute of a drifting box, the same
-    number of samples on both sides), and world-steps per CPU-second of each side (the server's
-    process, all its threads; this process for the rollout), which other processes on a shared
-    box change far less than wall-clock rates.
+    rollout runs keeps the two from sharing the cores. Best of the rounds for each.
     """
     import httpx
 
@@ -94,59 +89,33 @@ async def _served_vs_rollout(
     reader = asyncio.create_task(counter.run(f"{server.ws_url}/v1/ws?rate=30&format={fmt}"))
     served: list[float] = []
     raw: list[float] = []
-    served_cpu: list[float | None] = []
-    raw_cpu: list[float] = []
     try:
         async with httpx.AsyncClient(base_url=server.url, timeout=60) as client:
             await asyncio.sleep(1.0)
             for _ in range(rounds):
                 (await client.post("/v1/sim/pause")).raise_for_status()
-                rate, per_cpu = await asyncio.to_thread(rollout.block_with_cpu, block_s)
-                raw.append(rate)
-                raw_cpu.append(per_cpu)
+                raw.append(await asyncio.to_thread(rollout.block, block_s))
                 (await client.post("/v1/sim/mode", json={"mode": "fast"})).raise_for_status()
                 await asyncio.sleep(0.5)
                 counter.reset()
                 t0, info0 = await timed_info(client, server.url)
-                cpu0 = _process_cpu(server)
                 await asyncio.sleep(window)
                 t1, info1 = await timed_info(client, server.url)
-                cpu1 = _process_cpu(server)
                 steps = common.world_steps(
                     info1["tick"] - info0["tick"], server.nworld, info1["substeps"]
                 )
                 served.append(steps / (t1 - t0))
-                used = None if cpu0 is None or cpu1 is None else cpu1 - cpu0
-                served_cpu.append(steps / used if used else None)
     finally:
         reader.cancel()
         await asyncio.gather(reader, return_exceptions=True)
-    paired = [s / r for s, r in zip(served, raw, strict=True)]
-    cpu_ratio = [s / r for s, r in zip(served_cpu, raw_cpu, strict=True) if s is not None]
     return {
         "world_steps_per_s": max(served),
         "world_steps_per_s_windows": served,
         "rollout_world_steps_per_s": max(raw),
         "rollout_blocks": raw,
-        "paired_ratios": paired,
-        "paired_ratio_median": statistics.median(paired),
-        "world_steps_per_cpu_s_windows": served_cpu,
-        "rollout_world_steps_per_cpu_s_blocks": raw_cpu,
-        "cpu_ratio_median": statistics.median(cpu_ratio) if cpu_ratio else None,
         "frames_last_window": counter.frames,
         "stream_error": counter.error,
     }
-
-
-def _process_cpu(server: common.Served) -> float | None:
-    """CPU seconds the server's process has used (all its threads), None if unreadable."""
-    import psutil
-
-    try:
-        t = psutil.Process(server.server.process.pid).cpu_times()
-    except psutil.Error:
-        return None
-    return t.user + t.system
 
 
 @section(10, "engines")
@@ -214,8 +183,6 @@ def engines(ctx: Context) -> Result:
             "native served": r["mujoco_service"]["world_steps_per_s"],
             "warp served": r["warp_service"]["world_steps_per_s"],
             "native svc/rollout": r["mujoco_service_vs_rollout"],
-            "native svc/rollout paired": r["mujoco_service"]["paired_ratio_median"],
-            "native CPU ratio": r["mujoco_service"]["cpu_ratio_median"],
             "native binary svc/rollout": r["mujoco_service_binary_vs_rollout"],
             "warp svc/rollout": r["warp_service_vs_rollout"],
         }
@@ -233,12 +200,7 @@ def engines(ctx: Context) -> Result:
         "errors": errors,
     }
     notes = [
-        "best of each figure's rounds; target: native served >= 0.95x raw rollout at 1024 worlds",
-        "paired: the median over rounds of a service window / the rollout block just before it "
-        "(best-of compares 2 windows with 6 blocks in --quick); CPU ratio: the median of the "
-        "service's world-steps per CPU-second of its whole process (stepping, frames, event "
-        "loop) over the rollout's: what the service costs beyond the physics, whatever the "
-        "box's load",
+        "best of each figure's rounds; target: native served >= 0.9x raw rollout at 1024 worlds"
     ]
     return Result(rows, data, notes)
 

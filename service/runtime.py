@@ -255,7 +255,7 @@ class Runtime:
         # Packed JSON frames say where each world's trajectory is (the manager's briefs) and
         # each world's safety mode (the loop's table), as a snapshot's frame does.
         self.hub = hub = StreamHub(
-            asyncio.get_running_loop(), self.control.trajectories, loop.safety, loop.turn
+            asyncio.get_running_loop(), self.control.trajectories, loop.safety
         )
         loop.listeners.add_sink(hub)
         loop.listeners.add_restore_listener(lambda _tick, _state, _name: hub.restored())

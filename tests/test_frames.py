@@ -12,7 +12,6 @@ engine is also checked there.
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import replace
 
 import httpx
@@ -255,60 +254,3 @@ def test_the_frame_thread_and_its_helper_process_deliver_the_same_bytes(monkeypa
     snap = batch.snapshot()
     assert out["binary"] == wire.batch_frame_binary(snap, IDS, names)
     assert out["json"] == wire.batch_frame(snap, IDS, names)
-
-
-def test_the_frame_thread_starts_a_frame_outside_the_sim_threads_tick_python(monkeypatch):
-    """A frame's poses and JSON hold the GIL: they wait while the sim thread runs a tick's
-    Python (pace.SimTurn busy), and go on once it steps or waits; the wait is capped, so a
-    sim thread that stays busy never stops the frames."""
-    import queue
-
-    from service.core.sim.pace import SimTurn
-
-    batch = NativeBatch(NWORLD, nthread=1)
-    batch.step(2)
-    names = batch.spec.names
-    turn, got = SimTurn(), queue.Queue()
-    turn.busy()
-    monkeypatch.setattr(frames, "TURN_WAIT_S", 600.0)
-    sender = frames.FrameSender(lambda job, out: got.put(out), turn)
-    try:
-        data = frames.pack(batch, IDS, json=True)
-        sender.submit(frames.Job(data, ["json"], None, names))
-        with pytest.raises(queue.Empty):  # not while the sim thread is in a tick's Python
-            got.get(timeout=0.5)
-        turn.free()
-        assert got.get(timeout=60)["json"] == wire.batch_frame(batch.snapshot(), IDS, names)
-    finally:
-        sender.stop()
-    monkeypatch.setattr(frames, "TURN_WAIT_S", 0.01)
-    turn.busy()
-    sender = frames.FrameSender(lambda job, out: got.put(out), turn)
-    try:
-        sender.submit(frames.Job(frames.pack(batch, IDS, json=False), ["binary"], None, names))
-        frame = got.get(timeout=60)["binary"]  # the wait is capped: sent while still busy
-        assert frame == wire.batch_frame_binary(batch.snapshot(), IDS, names)
-    finally:
-        sender.stop()
-
-
-def test_the_loop_is_out_of_its_tick_python_while_the_engine_steps_and_while_it_waits():
-    from service.core.sim.loop import SimLoop
-    from service.core.sim.types import Mode
-
-    batch = NativeBatch(2, nthread=1)
-    loop = SimLoop(batch, Mode.PAUSED)
-    seen: list[tuple[str, bool]] = []
-    step = batch.step
-    batch.step = lambda ticks: (seen.append(("step", loop.turn.wait(0))), step(ticks))[1]
-    loop.listeners.add_tick_listener(lambda *_: seen.append(("tick", loop.turn.wait(0))))
-    loop.start()
-    try:
-        assert loop.step(3).result(timeout=60) == 3
-        deadline = time.monotonic() + 60
-        while not loop.turn.wait(0.1) and time.monotonic() < deadline:
-            pass  # the burst's last tick is shown, then the loop waits
-        assert loop.turn.wait(0)
-    finally:
-        loop.stop()
-    assert seen == [("step", True), ("tick", False)] * 3

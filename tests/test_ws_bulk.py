@@ -5,9 +5,7 @@ The websockets library's own client judges the protocol: whole messages, pings a
 permessage-deflate negotiated, pull requests read, a client's protocol error closed with the
 library's code; and the service's stop closes the stream with 1001. The frame header is
 judged by the library's own frame parser. On /v1/ws?format=binary, commands sent at once
-after the handshake are acked in order (text messages through the same writer as the frames);
-JSON state streams are taken over too, unless the client negotiated permessage-deflate with a
-service that compresses.
+after the handshake are acked in order (text messages through the same writer as the frames).
 """
 
 from __future__ import annotations
@@ -172,40 +170,3 @@ def test_binary_state_stream_is_written_directly_with_its_acks_in_order(server: 
     assert [r["id"] for r in replies] == [0, 1, 2, 3, 4, None, 5]
     assert "text" in replies[5]["detail"] and "world" in json.dumps(replies[6])
     assert ticks == sorted(ticks) and ticks[-1] > ticks[0]
-
-
-def test_json_state_stream_is_written_directly_with_its_acks_in_order(server: Server) -> None:
-    before = _metric(server, "armfleet_streams_direct_total")
-    with connect(f"{server.ws_url}/v1/ws?worlds=1-3&rate=30") as ws:
-        for i in range(3):  # at once: nothing the client sends before the take-over is lost
-            ws.send(json.dumps({"op": "increment", "world": 2, "joint": "elbow_joint",
-                                "delta": 0.01, "id": i}))  # fmt: skip
-        ws.send(json.dumps({"op": "increment", "world": 9, "joint": "elbow_joint", "id": 3}))
-        replies, ticks = [], []
-        while len(replies) < 4 or len(ticks) < 3:
-            msg = json.loads(ws.recv(timeout=10))
-            if msg["op"] == "states":
-                assert msg["worlds"] == [1, 2, 3] and len(msg["position"]) == 3
-                ticks.append(msg["tick"])
-            else:
-                replies.append(msg)
-        assert ws.ping().wait(10)
-    assert _metric(server, "armfleet_streams_direct_total") == before + 1
-    assert [r["op"] for r in replies] == ["ack"] * 3 + ["error"]
-    assert [r["id"] for r in replies] == [0, 1, 2, 3]
-    assert ticks == sorted(ticks) and ticks[-1] > ticks[0]
-
-
-def test_json_state_stream_that_negotiated_deflate_stays_with_the_server(tmp_path) -> None:
-    args = ("--engine", "mujoco", "--ws-compression")
-    with serve(worlds=2, mode="paused", extra_args=args, log_dir=tmp_path) as srv:
-        with connect(f"{srv.ws_url}/v1/ws?rate=30", compression="deflate") as ws:
-            assert ws.protocol.extensions  # permessage-deflate, negotiated
-            assert json.loads(ws.recv(timeout=30))["op"] == "states"
-            increment = {"op": "increment", "world": 1, "joint": "elbow_joint", "delta": 0.01}
-            ws.send(json.dumps({**increment, "id": 7}))
-            reply = json.loads(ws.recv(timeout=30))
-            while reply["op"] == "states":  # the state the write made may come first
-                reply = json.loads(ws.recv(timeout=30))
-            assert reply["op"] == "ack" and reply["id"] == 7
-        assert _metric(srv, "armfleet_streams_direct_total") == 0

@@ -120,11 +120,7 @@ async def batch_socket(
         def render_json(s: Snapshot) -> bytes:
             return wire.batch_frame(s, ids, names, briefs(ids), with_entities)
 
-        # Written by the socket's own thread too (ws_bulk): a JSON frame of 1,024 worlds is
-        # 0.4 MB, which the ASGI path decoded, encoded and framed on the event loop (0.3 ms
-        # of its CPU a frame, measured), beside the ticks on a 2-core machine.
-        fmt = FrameFormat.batch(tuple(names), with_entities)
-        return Stream(ids, rate, fmt, render_json, direct=True)
+        return Stream(ids, rate, FrameFormat.batch(tuple(names), with_entities), render_json)
 
     await _serve(ws, stream)
 
@@ -258,11 +254,7 @@ async def _serve(ws: WebSocket, read: Callable[[SimLoop, Control], Stream]) -> N
     control = control.acting_for(grant.caller)  # each command checked for its worlds
     await ws.accept(subprotocol=grant.subprotocol)
     # At once after the accept (no await between): what the client sends next is the link's.
-    link = (
-        ws_bulk.link(ws, max_incoming=None, deflate=not stream.format.binary)
-        if stream.direct
-        else ws_bulk.AsgiSocket(ws)
-    )
+    link = ws_bulk.link(ws, max_incoming=None) if stream.direct else ws_bulk.AsgiSocket(ws)
     hub.streams_direct += link.direct
 
     async def close(code: int, reason: str) -> None:

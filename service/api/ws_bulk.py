@@ -22,10 +22,7 @@ How, on uvicorn's websockets (sans-io) protocol, which did the handshake:
 
 The same holds, ten times smaller, for binary state frames of /v1/ws (10 MB a frame at 65,536
 worlds, 30 a second): service/api/ws.py takes those sockets over too, and their acks (text)
-go through the same writer, in order. JSON state frames go the same way (0.4 MB a frame at
-1,024 worlds, decoded, encoded and framed on the event loop through the ASGI `send`), unless
-the client negotiated permessage-deflate with a service started with --ws-compression: the
-server then compresses them, as asked.
+go through the same writer, in order.
 
 Where the server is something else (a test client, another ASGI server), `take_over` returns
 None and `AsgiSocket` makes the same calls on the ASGI socket (`link` picks). Data frames go
@@ -95,22 +92,10 @@ def take_over(scope: Scope, max_incoming: int | None = MAX_INCOMING) -> BulkSock
     return BulkSocket(owner, raw.fileno(), limit)
 
 
-def link(
-    ws: WebSocket, max_incoming: int | None = MAX_INCOMING, deflate: bool = False
-) -> BulkSocket | AsgiSocket:
+def link(ws: WebSocket, max_incoming: int | None = MAX_INCOMING) -> BulkSocket | AsgiSocket:
     """The accepted `ws` taken over where the server allows (`take_over`), else its ASGI
-    stand-in; both make the same calls. `deflate`: a socket that negotiated permessage-deflate
-    stays with the server, which compresses what it sends (text that deflates well, where the
-    service was started with --ws-compression: a taken-over socket sends uncompressed)."""
-    if deflate and negotiated_extensions(ws.scope):
-        return AsgiSocket(ws)
+    stand-in; both make the same calls."""
     return take_over(ws.scope, max_incoming) or AsgiSocket(ws)
-
-
-def negotiated_extensions(scope: Scope) -> bool:
-    """The socket of `scope` negotiated an extension (permessage-deflate) in its handshake."""
-    conn = getattr(scope.get(SCOPE_KEY), "conn", None)
-    return bool(getattr(conn, "extensions", None))
 
 
 def frame_header(length: int, opcode: int = Opcode.BINARY.value) -> bytes:

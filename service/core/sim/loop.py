@@ -32,7 +32,7 @@ from service.core.sim.device_turns import DeviceTurns
 from service.core.sim.listeners import Listeners
 from service.core.sim.loop_state import LoopHooks, StateDoor
 from service.core.sim.loop_types import LoopStats, SnapshotSink, resolve, run_request
-from service.core.sim.pace import Cadence, FailureLog, RateWindow, SimTurn, prompt_gil
+from service.core.sim.pace import Cadence, FailureLog, RateWindow, prompt_gil
 from service.core.sim.safety import SafetyTable
 from service.core.sim.snapshot_beside import BesideSnapshot
 from service.core.sim.staging import CommandTable, TrajectoryHook
@@ -42,7 +42,8 @@ from service.core.sim.waiters import Waiters
 log = logging.getLogger("armfleet.loop")
 T = TypeVar("T")
 
-# Snapshots: when a sink or reader wants one, else this often (`latest` at most this + a tick old)
+# Snapshots are taken when a sink wants one, a reader waits for one, or at least this often so
+# that `latest` is never older than this (+ a tick: snapshot_beside.py); fresh_snapshot waits.
 _IDLE_SNAPSHOT_PERIOD = 0.1
 
 
@@ -88,7 +89,6 @@ class SimLoop:
         self._beside = BesideSnapshot(batch, lambda s: self.listeners.extend(s, batch), self._show)
         self._rate = RateWindow(self._tick, self._mode, batch.tick_dt)
         self._cadence = Cadence(batch.tick_dt)
-        self.turn = SimTurn()  # when a tick's Python runs here (frames start outside it)
         self._rested_at = -1  # the tick the sinks were last told time stopped at (`_at_rest`)
         # launches on a device shared with the camera renderer go in turns (device_turns.py)
         self._turns: DeviceTurns = getattr(batch, "device_turns", None) or DeviceTurns()
@@ -267,7 +267,6 @@ class SimLoop:
         cadence.restart()
         turns = self._turns
         while True:
-            self.turn.busy()  # free while it waits and while the engine steps (pace.SimTurn)
             self.priority.follow(self._mode is Mode.REALTIME)  # a call only when it changes
             with turns.loop_turn():  # the device's launches (service/core/sim/device_turns.py)
                 self._serve_requests()
@@ -280,14 +279,14 @@ class SimLoop:
                 self.share.set_active(mode is Mode.REALTIME)
                 idle = mode is Mode.PAUSED and self._tick >= self._step_goal
                 if idle and self._latest.tick >= self._tick and self._rested_at == self._tick:
-                    self.turn.rest(self._wake)
+                    self._wake.wait()
                     cadence.restart()
                     continue
                 late = False
                 if mode is Mode.REALTIME:
                     delay = cadence.delay()
                     if delay > 0:
-                        self.turn.rest(self._wake, delay)
+                        self._wake.wait(delay)
                         continue
                     late = cadence.late()  # this tick starts late (pace: the one rule)
             if idle:  # paused: show where time stopped, once (a snapshot first if it took none)
@@ -323,7 +322,7 @@ class SimLoop:
         if writes:
             self.batch.write(writes)  # the engines' one door
         t_step = time.perf_counter()
-        faulted = self.turn.beside(self.batch.step, 1)  # the GIL let go: others' turn
+        faulted = self.batch.step(1)
         self.engine_seconds += time.perf_counter() - t_step
         self._beside.finish()  # the last tick's periodic snapshot, copied beside this one
         now = time.monotonic()

@@ -1,25 +1,21 @@
 """How the loop keeps time and reports it: the real-time cadence, the tick rate over a window,
-a failing tick's log line, and its turn (`SimTurn`: when its Python runs, for the frame thread).
+and a failing tick's log line.
 
 Why apart from the loop: each is a small rule with state of its own (a deadline, a window, the
-last failure), read by the loop thread only (the turn: also waited on by the frame thread); the
-loop says when, these say how much.
+last failure), read by the loop thread only; the loop says when, these say how much.
 """
 
 from __future__ import annotations
 
 import logging
 import sys
-import threading
 import time
 from collections.abc import Callable
-from typing import TypeVar
 
 from service.core.sim.loop_types import LoopStats
 from service.core.sim.types import Mode
 
 log = logging.getLogger("armfleet.loop")
-T = TypeVar("T")
 
 MAX_LAG_S = 0.1  # real time catches up after hiccups (a shared core paused) up to this far
 # Further behind than this, the loop is on its way to giving time up: the one measure of "the
@@ -41,49 +37,6 @@ STATS_WINDOW = 1.0  # seconds of wall time over which ticks/s and real-time fact
 def prompt_gil() -> None:
     """Ask for the GIL after `SWITCH_INTERVAL_S` in this process (never a longer wait than set)."""
     sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
-
-
-class SimTurn:
-    """Whether the sim thread is running a tick's Python now, for threads that hold the GIL
-    for long stretches (the frame thread: flange poses, JSON) to start their work outside it.
-
-    A tick's Python (commands in, the fault test, packing frames, listeners) is serial: the
-    engine's other threads wait meanwhile. Each time the sim thread lets the GIL go in it (a
-    lock, a C call), a busy frame thread takes it for a switch interval or until the OS runs
-    it again: with one 30 Hz subscriber of 512 worlds on a loaded 2-core box, a tick's Python
-    took 3.9 ms of wall (2.2-5.5) for 0.5 ms of CPU, 1.6 ms with this turn, 0.34 ms without
-    the subscriber (measured). In the engine's step (the GIL let go for its whole length) and
-    between ticks nothing of the sim thread's needs the GIL, so work started then costs the
-    ticks only its CPU. `busy` and `free` are the sim thread's; `wait` is anyone's.
-    """
-
-    def __init__(self) -> None:
-        self._free = threading.Event()
-        self._free.set()
-
-    def busy(self) -> None:
-        self._free.clear()
-
-    def free(self) -> None:
-        self._free.set()
-
-    def rest(self, cond: threading.Condition, timeout: float | None = None) -> None:
-        """The sim thread waits on `cond` (held), out of a tick's Python meanwhile."""
-        self._free.set()
-        cond.wait(timeout)
-
-    def beside(self, step: Callable[[int], T], ticks: int) -> T:
-        """The sim thread runs the engine's `step(ticks)`, which lets the GIL go, out of a
-        tick's Python; in it again after."""
-        self._free.set()
-        try:
-            return step(ticks)
-        finally:
-            self._free.clear()
-
-    def wait(self, timeout: float) -> bool:
-        """Until the sim thread is out of a tick's Python, at most `timeout` s; False: not yet."""
-        return self._free.wait(timeout)
 
 
 class Cadence:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from service.core.sim.batch import Batch, PacksFrames
-from service.core.sim.pace import SimTurn, prompt_gil
+from service.core.sim.pace import prompt_gil
 from service.core.sim.packed_rows import PackedRows
 from service.core.sim.types import EntityFrame, Snapshot
 from service.core.streams import wire
@@ -40,9 +40,6 @@ log = logging.getLogger("armfleet.frames")
 BIG_JSON_ROWS = 4096
 JSON_PROCESSES = 2  # helpers, so that one frame is serialised while the next is
 JSON_SLICE = 2048  # rows serialised per GIL hold in a JSON frame (~3 ms of orjson on a GPU host)
-# The longest a frame waits for the sim thread to leave a tick's Python (pace.SimTurn): a tick's
-# Python is well under a millisecond; a stuck one must not stop the frames.
-TURN_WAIT_S = 0.02
 _NOOP: Callable[[], None] = lambda: None  # noqa: E731
 
 
@@ -281,11 +278,8 @@ class FrameSender:
     slow consumer costs frames, never memory or the sim thread's time.
     """
 
-    def __init__(
-        self, deliver: Callable[[Job, dict[str, bytes]], None], turn: SimTurn | None = None
-    ) -> None:
+    def __init__(self, deliver: Callable[[Job, dict[str, bytes]], None]) -> None:
         self._deliver = deliver
-        self._turn = turn  # the sim thread's: work starts outside a tick's Python (pace.py)
         prompt_gil()  # the sim thread gets the GIL back between two slices (core/sim/pace.py)
         self._cv = threading.Condition()
         self._jobs: dict[bytes, Job] = {}
@@ -345,13 +339,6 @@ class FrameSender:
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
 
-    def _after_tick_python(self) -> None:
-        """Wait (at most TURN_WAIT_S) while the sim thread runs a tick's Python: the poses and
-        the JSON hold the GIL, which that Python would otherwise wait for, the engine's other
-        threads idle meanwhile."""
-        if self._turn is not None:
-            self._turn.wait(TURN_WAIT_S)
-
     def _run(self) -> None:
         while True:
             with self._cv:
@@ -361,14 +348,10 @@ class FrameSender:
                     return
                 _, job = self._jobs.popitem()
             try:
-                self._after_tick_python()
                 rows = job.data.packed.wait()
                 handed = self._in_process(job, rows)
                 formats = [f for f in job.formats if f not in handed]
-                out: dict[str, bytes] = {}
-                for f in formats:
-                    self._after_tick_python()
-                    out[f] = ENCODERS[f](job.data, rows, job.names)
+                out = {f: ENCODERS[f](job.data, rows, job.names) for f in formats}
             except Exception:
                 log.exception("a frame could not be serialised")
                 continue

@@ -26,7 +26,6 @@ import numpy as np
 from service.core.sim import safety
 from service.core.sim.batch import Batch
 from service.core.sim.loop_types import SnapshotSink
-from service.core.sim.pace import SimTurn
 from service.core.sim.types import Snapshot
 from service.core.streams import entity_frames, frames
 from service.core.streams.formats import WITH_ENTITIES, FrameFormat
@@ -172,10 +171,8 @@ class StreamHub(SnapshotSink):
         aio_loop: asyncio.AbstractEventLoop,
         briefs: TrajectoryBriefs | None = None,
         safety: SafetyModes | None = None,
-        turn: SimTurn | None = None,
     ):
         self._aio = aio_loop
-        self._turn = turn  # the sim thread's (pace.SimTurn): the frame thread works outside it
         self._briefs = briefs  # what packed JSON frames say of the worlds' trajectories
         self._safety = safety  # and of the worlds' safety modes (None: all NORMAL)
         self._subs: tuple[Subscription, ...] = ()  # replaced, never mutated: read from two threads
@@ -190,7 +187,7 @@ class StreamHub(SnapshotSink):
 
     def add(self, sub: Subscription) -> None:
         if sub.packed and self._sender is None:
-            self._sender = frames.FrameSender(self._frames_ready, self._turn)
+            self._sender = frames.FrameSender(self._frames_ready)
         self._subs = (*self._subs, sub)
 
     def stop(self) -> None:
