@@ -11,6 +11,7 @@ started late is the one to move up LONGEST_FIRST.
 
 from __future__ import annotations
 
+import resource
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -18,6 +19,14 @@ from typing import Any
 import pytest
 
 SHOWN = 15  # files listed
+CPU_KEY = "armfleet_cpu_s"
+
+
+def _cpu_seconds() -> float:
+    """This process's CPU time plus that of its children that have been waited for."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 @dataclass
@@ -26,6 +35,21 @@ class FileTimes:
     start: float  # seconds since the session started
     end: float
     tests: set[str] = field(default_factory=set)
+    cpu: float = 0.0
+
+
+class WorkerCpu:
+    """A pytest plugin for an xdist worker: the CPU spent since its previous report, on each."""
+
+    def __init__(self) -> None:
+        self.last = _cpu_seconds()
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_makereport(self, item: pytest.Item, call: Any) -> Any:
+        outcome = yield
+        now = _cpu_seconds()
+        outcome.get_result().user_properties.append((CPU_KEY, now - self.last))
+        self.last = now
 
 
 class SuiteTimes:
@@ -49,6 +73,7 @@ class SuiteTimes:
             times = self.files[path] = FileTimes(worker, start, now)
         times.end = max(times.end, now)
         times.tests.add(report.nodeid)
+        times.cpu += sum(v for k, v in report.user_properties if k == CPU_KEY)
 
     @pytest.hookimpl
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
@@ -57,12 +82,16 @@ class SuiteTimes:
         write = terminalreporter.write_line
         terminalreporter.section("files by wall time (scripts/dev.py test's schedule)")
         ranked = sorted(self.files.items(), key=lambda kv: kv[1].start - kv[1].end)
-        write(f"{'wall s':>7} {'start':>7} {'end':>7}  worker  tests  file")
+        write(f"{'wall s':>7} {'cpu s':>7} {'start':>7} {'end':>7}  worker  tests  file")
         for path, t in ranked[:SHOWN]:
             write(
-                f"{t.end - t.start:7.1f} {t.start:7.1f} {t.end:7.1f}  {t.worker:6}"
+                f"{t.end - t.start:7.1f} {t.cpu:7.1f} {t.start:7.1f} {t.end:7.1f}  {t.worker:6}"
                 f"  {len(t.tests):5}  {path}"
             )
+        total = sum(t.cpu for t in self.files.values())
+        write(f"CPU by file (workers and the processes they reaped; all files: {total:.0f} s):")
+        by_cpu = sorted(self.files.items(), key=lambda kv: -kv[1].cpu)
+        write("  " + ", ".join(f"{p.removeprefix('tests/')} {t.cpu:.0f}" for p, t in by_cpu[:30]))
         last: dict[str, tuple[float, str]] = {}
         for path, t in self.files.items():
             if t.end > last.get(t.worker, (-1.0, ""))[0]:
@@ -74,6 +103,9 @@ class SuiteTimes:
 def pytest_configure(config: pytest.Config) -> None:
     """Only the controller of a run with workers reports (a worker, or a run without
     xdist, has no schedule to show)."""
+    if hasattr(config, "workerinput"):
+        config.pluginmanager.register(WorkerCpu(), "armfleet-worker-cpu")
+        return
     workers = getattr(config.option, "numprocesses", None)
-    if workers and not hasattr(config, "workerinput"):
+    if workers:
         config.pluginmanager.register(SuiteTimes(), "armfleet-suite-times")
