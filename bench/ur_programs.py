@@ -134,6 +134,36 @@ def _collect(out: Any, procs: list[Any], limit_s: float = 600.0) -> list[dict[st
     return results
 
 
+class UrThread:
+    """What the service's UR thread did over a run (GET /v1/ur before and after): its CPU
+    per RTDE package sent (all its work: the sends, the packing, the inputs and commands),
+    and the ticks' gaps while RTDE streamed as the sim thread saw them (the longest since the
+    service started: before the programs nothing streams)."""
+
+    def __init__(self, srv: common.Served) -> None:
+        self.srv = srv
+        self.before = self._read()
+
+    def _read(self) -> dict[str, Any]:
+        return httpx.get(f"{self.srv.url}/v1/ur", timeout=30).json()
+
+    def stop(self) -> dict[str, Any]:
+        a, b = self.before, self._read()
+        if a.get("thread_cpu_s") is None or b.get("thread_cpu_s") is None:
+            return {}
+        cpu = b["thread_cpu_s"] - a["thread_cpu_s"]
+        sent = b["rtde_packages_sent"] - a["rtde_packages_sent"]
+        gaps = b.get("tick_gaps") or {}
+        return {
+            "ur_thread_cpu_s": round(cpu, 3),
+            "rtde_packages_sent": sent,
+            "ur_thread_us_per_package": round(cpu / sent * 1e6, 1) if sent else None,
+            "tick_gap_longest_ms": round(gaps.get("longest_s", 0.0) * 1e3, 1),
+            "tick_gaps_over_100ms": gaps.get("over_100ms", 0)
+            - (a.get("tick_gaps") or {}).get("over_100ms", 0),
+        }
+
+
 def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str, Any]:
     """One ur_rtde program per address, each in a forked process, started together."""
     ctx = mp.get_context("fork")  # 32 interpreters without 32 imports of the bench
@@ -153,9 +183,10 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
         say("    not every program connected in 300 s; the others run")
     connected_s = time.perf_counter() - t_connect
     say(f"    {n} programs connected in {connected_s:.1f} s (load {load}); running")
-    sampler = RtfSampler(srv)
+    sampler, ur_thread = RtfSampler(srv), UrThread(srv)
     results = _collect(out, procs, PROGRAM_DEADLINE_S)
     ticks = sampler.stop()
+    ur = ur_thread.stop()
     for p in procs:
         p.join(timeout=30)
     gaps = {  # the longest each world's RTDE clients went without a package, server-side
@@ -197,6 +228,7 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
         "load_1m_at_start": load,
         "load_1m_at_end": _load(),
         **ticks,
+        **ur,
         "latency_ms": {
             k: {"p50": _ms(v, 50), "p99": _ms(v, 99), "max": _ms(v, 100), "n": len(v)}
             for k, v in calls.items()
@@ -210,11 +242,16 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
 def run_receivers(srv: common.Served, addresses: list[str], window_s: float) -> dict[str, Any]:
     """One raw 500 Hz receiver per address, all in this process, counted over `window_s`."""
     load = _load()
-    sampler: list[RtfSampler] = []
+    sampler: list[Any] = []
     box = ur_clients.receive(
-        addresses, RECEIVE_HZ, 2.0, window_s, at_start=lambda: sampler.append(RtfSampler(srv))
+        addresses,
+        RECEIVE_HZ,
+        2.0,
+        window_s,
+        at_start=lambda: sampler.extend((RtfSampler(srv), UrThread(srv))),
     )
     ticks = sampler[0].stop()
+    ur = sampler[1].stop()
     rxs = box["receivers"]
     t0, t1 = box["window"]
     rates = [rx.packages / (t1 - t0) for rx in rxs if rx.error is None]
@@ -226,6 +263,7 @@ def run_receivers(srv: common.Served, addresses: list[str], window_s: float) -> 
         "load_1m_at_start": load,
         "load_1m_at_end": _load(),
         **ticks,
+        **{k: v for k, v in ur.items() if k != "tick_gap_longest_ms"},  # since the start
         "rate_min": round(min(rates), 1) if rates else None,
         "rate_median": round(statistics.median(rates), 1) if rates else None,
         "rate_max": round(max(rates), 1) if rates else None,
@@ -284,6 +322,8 @@ def _rows(n: int, prog: dict[str, Any], recv: dict[str, Any]) -> list[dict[str, 
                 "command ms": p("command", digits=1),
                 "read µs": p("read", 1e3),
                 "connect s": round(prog["connect_s_max"] or 0.0, 2),
+                "tick gap ms": prog.get("tick_gap_longest_ms", "-"),
+                "UR µs/pkg": prog.get("ur_thread_us_per_package", "-"),
                 "CPU service/clients": f"{prog['service_cpu']:.2f}/{prog['programs_cpu']:.2f}",
             }
         )
@@ -297,6 +337,7 @@ def _rows(n: int, prog: dict[str, Any], recv: dict[str, Any]) -> list[dict[str, 
                 "RTF min 1 s": recv["rtf_min_1s"],
                 "Hz min/median": f"{recv['rate_min']:.0f}/{recv['rate_median']:.0f}",
                 "silence ms": recv["max_silence_ms"],
+                "UR µs/pkg": recv.get("ur_thread_us_per_package", "-"),
                 "CPU service/clients": f"{recv['service_cpu']:.2f}/{recv['bench_cpu']:.2f}",
             }
         )
@@ -361,6 +402,10 @@ def ur_programs(ctx: Context) -> Result:
         "two constructors; server gap = the longest a world's RTDE clients went without a "
         "package, as the service counts it (GET /v1/ur; ur_rtde drops a connection at 2.5 s: "
         "a program that died with a short server gap had its own process starved)",
+        "tick gap = the longest time between two ticks while RTDE streamed, as the "
+        "service's sim thread saw it (GET /v1/ur tick_gaps; tick_gaps_over_100ms counts "
+        "those of 0.1 s or more); UR µs/pkg = the UR thread's CPU over the run (all its work: "
+        "sends, packing, inputs, commands) per RTDE data package it sent",
         "receivers: raw RTDE clients (ur_rtde has no package count), one 500 Hz output recipe "
         f"of {recv.get('package_bytes')} bytes each, all in the bench's process; Hz = packages "
         "delivered per second per client (min/median over clients); silence = the longest "

@@ -77,6 +77,7 @@ class WorldRobot:
         self._view: WorldTick | None = None
         self._view_version = -1
         self._view_at: float | None = None  # the pacer round that last asked (view)
+        self._sent_closed = 0  # RTDE data packages of the connections closed so far
         self.runner: Program | None = None  # ur_rtde's control script, while it runs
         self.speed_loop: Loop | None = None  # script_lines.line_speed makes it
         self.longest_gap = 0.0  # s: the longest a started RTDE stream went without a package
@@ -90,8 +91,15 @@ class WorldRobot:
 
     def closed(self, session: Session) -> None:
         self.sessions.discard(session)
+        self._sent_closed += getattr(session, "sent", 0)
         for name in [n for n, s in self._writers.items() if s is session]:
             del self._writers[name]
+
+    def rtde_sent(self) -> int:
+        """RTDE data packages sent to this world's clients (open and closed connections):
+        counted per connection (RtdeSession.sent), summed only when asked."""
+        open_now = tuple(self.sessions)  # one copy under the GIL (the UR thread adds and drops)
+        return self._sent_closed + sum(getattr(s, "sent", 0) for s in open_now)
 
     def may_write(self, name: str, session: Session) -> bool:
         return self._writers.get(name, session) is session
