@@ -37,10 +37,10 @@ import time
 from typing import Any
 
 import httpx
-import psutil
 
 from bench import common, ur_clients
 from bench.registry import Context, Result, section
+from bench.ur_meters import RtfSampler, UrThread
 
 ENGINE_ENV = "ARMFLEET_UR_BENCH_ENGINE"
 SECONDS_ENV = "ARMFLEET_UR_BENCH_SECONDS"
@@ -56,48 +56,6 @@ def _engine(device: str) -> str:
 
 def _load() -> float:
     return round(os.getloadavg()[0], 2)
-
-
-def _cpu(proc: psutil.Process) -> float:
-    """CPU seconds of a process and its children so far (the service's engine workers)."""
-    t = proc.cpu_times()
-    return t.user + t.system + t.children_user + t.children_system
-
-
-class RtfSampler:
-    """The service's ticks sampled every second (/v1/info) in a thread: each 1 s window's RTF;
-    and the CPU the service and this process used over the whole window."""
-
-    def __init__(self, srv: common.Served) -> None:
-        self.proc = psutil.Process(srv.server.process.pid)
-        self.cpu0, self.own0 = _cpu(self.proc), time.process_time()
-        self.srv, self.samples = srv, [srv.get_info()]
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.wait(1.0):
-            try:
-                self.samples.append(self.srv.get_info())
-            except httpx.HTTPError:
-                continue
-
-    def stop(self) -> dict[str, Any]:
-        self._stop.set()
-        self._thread.join()
-        self.samples.append(self.srv.get_info())
-        pairs = list(zip(self.samples, self.samples[1:], strict=False))
-        per_s = [common.rtf_between(a, b) for a, b in pairs if b[0] - a[0] > 0.5]
-        wall = self.samples[-1][0] - self.samples[0][0]
-        return {
-            "service_cpu": round((_cpu(self.proc) - self.cpu0) / wall, 3),  # cores busy
-            "bench_cpu": round((time.process_time() - self.own0) / wall, 3),
-            "rtf": round(common.rtf_between(self.samples[0], self.samples[-1]), 3),
-            "rtf_min_1s": round(min(per_s), 3) if per_s else None,
-            "ticks": self.samples[-1][1]["tick"] - self.samples[0][1]["tick"],
-            "seconds": round(self.samples[-1][0] - self.samples[0][0], 2),
-        }
 
 
 def _ms(values: list[float], q: float) -> float | None:
@@ -153,9 +111,10 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
         say("    not every program connected in 300 s; the others run")
     connected_s = time.perf_counter() - t_connect
     say(f"    {n} programs connected in {connected_s:.1f} s (load {load}); running")
-    sampler = RtfSampler(srv)
+    sampler, ur_thread = RtfSampler(srv), UrThread(srv)
     results = _collect(out, procs, PROGRAM_DEADLINE_S)
     ticks = sampler.stop()
+    ur = ur_thread.stop()
     for p in procs:
         p.join(timeout=30)
     gaps = {  # the longest each world's RTDE clients went without a package, server-side
@@ -197,6 +156,7 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
         "load_1m_at_start": load,
         "load_1m_at_end": _load(),
         **ticks,
+        **ur,
         "latency_ms": {
             k: {"p50": _ms(v, 50), "p99": _ms(v, 99), "max": _ms(v, 100), "n": len(v)}
             for k, v in calls.items()
@@ -210,11 +170,16 @@ def run_programs(srv: common.Served, addresses: list[str], say: Any) -> dict[str
 def run_receivers(srv: common.Served, addresses: list[str], window_s: float) -> dict[str, Any]:
     """One raw 500 Hz receiver per address, all in this process, counted over `window_s`."""
     load = _load()
-    sampler: list[RtfSampler] = []
+    sampler: list[Any] = []
     box = ur_clients.receive(
-        addresses, RECEIVE_HZ, 2.0, window_s, at_start=lambda: sampler.append(RtfSampler(srv))
+        addresses,
+        RECEIVE_HZ,
+        2.0,
+        window_s,
+        at_start=lambda: sampler.extend((RtfSampler(srv), UrThread(srv))),
     )
     ticks = sampler[0].stop()
+    ur = sampler[1].stop()
     rxs = box["receivers"]
     t0, t1 = box["window"]
     rates = [rx.packages / (t1 - t0) for rx in rxs if rx.error is None]
@@ -226,6 +191,7 @@ def run_receivers(srv: common.Served, addresses: list[str], window_s: float) -> 
         "load_1m_at_start": load,
         "load_1m_at_end": _load(),
         **ticks,
+        **{k: v for k, v in ur.items() if k != "tick_gap_longest_ms"},  # since the start
         "rate_min": round(min(rates), 1) if rates else None,
         "rate_median": round(statistics.median(rates), 1) if rates else None,
         "rate_max": round(max(rates), 1) if rates else None,
@@ -284,6 +250,8 @@ def _rows(n: int, prog: dict[str, Any], recv: dict[str, Any]) -> list[dict[str, 
                 "command ms": p("command", digits=1),
                 "read µs": p("read", 1e3),
                 "connect s": round(prog["connect_s_max"] or 0.0, 2),
+                "tick gap ms": prog.get("tick_gap_longest_ms", "-"),
+                "UR µs/pkg": prog.get("ur_thread_us_per_package", "-"),
                 "CPU service/clients": f"{prog['service_cpu']:.2f}/{prog['programs_cpu']:.2f}",
             }
         )
@@ -297,6 +265,7 @@ def _rows(n: int, prog: dict[str, Any], recv: dict[str, Any]) -> list[dict[str, 
                 "RTF min 1 s": recv["rtf_min_1s"],
                 "Hz min/median": f"{recv['rate_min']:.0f}/{recv['rate_median']:.0f}",
                 "silence ms": recv["max_silence_ms"],
+                "UR µs/pkg": recv.get("ur_thread_us_per_package", "-"),
                 "CPU service/clients": f"{recv['service_cpu']:.2f}/{recv['bench_cpu']:.2f}",
             }
         )
@@ -361,6 +330,10 @@ def ur_programs(ctx: Context) -> Result:
         "two constructors; server gap = the longest a world's RTDE clients went without a "
         "package, as the service counts it (GET /v1/ur; ur_rtde drops a connection at 2.5 s: "
         "a program that died with a short server gap had its own process starved)",
+        "tick gap = the longest time between two ticks while RTDE streamed, as the "
+        "service's sim thread saw it (GET /v1/ur tick_gaps; tick_gaps_over_100ms counts "
+        "those of 0.1 s or more); UR µs/pkg = the UR thread's CPU over the run (all its work: "
+        "sends, packing, inputs, commands) per RTDE data package it sent",
         "receivers: raw RTDE clients (ur_rtde has no package count), one 500 Hz output recipe "
         f"of {recv.get('package_bytes')} bytes each, all in the bench's process; Hz = packages "
         "delivered per second per client (min/median over clients); silence = the longest "

@@ -130,6 +130,7 @@ def test_rtde_keeps_flowing_while_the_ticks_stop(ur) -> None:
     lease = r.json()["id"]
     try:
         wait_for(lambda: _open(server, 2), "the lent world's ports open")
+        before = httpx.get(f"{server.url}/v1/ur").json()
         rx = rtde_receive.RTDEReceiveInterface(addrs[2])
         try:
             httpx.post(f"{server.url}/v1/sim/pause", headers=AUTH).raise_for_status()
@@ -144,8 +145,13 @@ def test_rtde_keeps_flowing_while_the_ticks_stop(ur) -> None:
             assert rx.isConnected() and rx.getTimestamp() == stopped
             httpx.post(f"{server.url}/v1/sim/resume", headers=AUTH).raise_for_status()
             wait_for(lambda: rx.getTimestamp() > stopped, "the stream follows the ticks again")
-            gap = httpx.get(f"{server.url}/v1/ur").json()["worlds"][2]["rtde_longest_gap_s"]
-            assert 0 < gap < 2.5
+            after = httpx.get(f"{server.url}/v1/ur").json()
+            assert 0 < after["worlds"][2]["rtde_longest_gap_s"] < 2.5
+            # the service's own account: the packages it sent over the 3 s (500 Hz), the UR
+            # thread's CPU, and the pause is no gap of the ticks
+            assert after["rtde_packages_sent"] - before["rtde_packages_sent"] > 100
+            assert after["thread_cpu_s"] > before["thread_cpu_s"]
+            assert after["tick_gaps"]["longest_s"] < 3.0
         finally:
             rx.disconnect()
     finally:

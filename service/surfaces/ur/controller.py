@@ -72,6 +72,8 @@ _SAFETY_BIT = {
     SafetyMode.FAULT: 9,
 }
 _EMERGENCY = {SafetyMode.SYSTEM_EMERGENCY_STOP, SafetyMode.ROBOT_EMERGENCY_STOP}
+_MOVING = {SafetyMode.NORMAL, SafetyMode.REDUCED}  # the modes in which the arm may move
+_SAFETY_MODES = {int(m): m for m in SafetyMode}
 _STOPPED_BY_SAFETY = 10  # bit: "stopped due to safety"
 JOINT_RUNNING, JOINT_IDLE, JOINT_POWER_OFF = 253, 255, 239  # joint_mode
 
@@ -105,7 +107,13 @@ class Controller:
 
     @property
     def safety_mode(self) -> SafetyMode:
-        return SafetyMode(self.safety.mode(self.world))
+        # a dict, not SafetyMode(n): RTDE reads it several times a package (enum calls cost
+        # most of packing one); ValueError for a number UR has no mode of, as SafetyMode(n)
+        mode = self.safety.mode(self.world)
+        try:
+            return _SAFETY_MODES[mode]
+        except KeyError:
+            raise ValueError(f"{mode} is not a valid SafetyMode") from None
 
     def reset(self) -> None:
         """Back to a freshly booted, ready controller (a lease started or ended)."""
@@ -120,10 +128,11 @@ class Controller:
 
     @property
     def safety_status_bits(self) -> int:
-        bits = 1 << _SAFETY_BIT.get(self.safety_mode, _STOPPED_BY_SAFETY)
-        if self.safety_mode in _EMERGENCY:
+        mode = self.safety_mode
+        bits = 1 << _SAFETY_BIT.get(mode, _STOPPED_BY_SAFETY)
+        if mode in _EMERGENCY:
             bits |= 1 << 7  # "is emergency stopped"
-        if self.safety_mode not in (SafetyMode.NORMAL, SafetyMode.REDUCED):
+        if mode not in _MOVING:
             bits |= 1 << _STOPPED_BY_SAFETY
         return bits
 
@@ -146,10 +155,7 @@ class Controller:
     @property
     def speed_scaling(self) -> float:
         """What the trajectory runs at: the slider, 0 while stopped by safety or unpowered."""
-        if self.robot_mode is not RobotMode.RUNNING or self.safety_mode not in (
-            SafetyMode.NORMAL,
-            SafetyMode.REDUCED,
-        ):
+        if self.robot_mode is not RobotMode.RUNNING or self.safety_mode not in _MOVING:
             return 0.0
         return self.speed_fraction
 

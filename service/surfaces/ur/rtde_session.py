@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, cast
 from service.surfaces.ur import rtde_variables as rv
 from service.surfaces.ur import rtde_wire as wire
 from service.surfaces.ur.rtde_outputs import OutputRecipe, WorldTick, apply_inputs
+from service.surfaces.ur.world_robot import GAP_WARN_S
 
 if TYPE_CHECKING:
     from service.surfaces.ur.world_robot import WorldRobot
@@ -269,7 +270,8 @@ class _Stream:
         transport = session.transport
         if transport is None or transport.is_closing() or not session.started:
             return False
-        view = session.robot.view()
+        robot = session.robot
+        view = robot.view(now)
         if view is None:
             return True
         if view is not self._view and not self._pack(view):
@@ -280,8 +282,12 @@ class _Stream:
             return True
         transport.write(self._bytes)
         session.sent += 1
-        if self._last is not None:
-            session.robot.rtde_gap(now - self._last, self._skipped)
+        last = self._last
+        if last is not None:
+            gap = now - last
+            # the call only for a new longest gap or one to log: 32,000 sends a second
+            if gap > robot.longest_gap or gap >= GAP_WARN_S:
+                robot.rtde_gap(gap, self._skipped)
         self._last, self._skipped = now, 0
         return True
 

@@ -48,10 +48,27 @@ class UrSink(SnapshotSink):
         self._ep, self._dt = endpoints, tick_dt
         zero = np.zeros_like(first.target, dtype=np.float64)
         self._last = Frame(first, zero, zero, tick_dt)
+        self._at: float | None = None  # the loop's time of the last tick while streaming
         endpoints.frame = self._last
 
     def wants_snapshot(self, now: float) -> bool:
         return self._ep.streaming > 0
+
+    def at_rest(self, batch: Any, now: float) -> None:
+        self._at = None  # time stopped: the wait for the next tick is no gap of the ticks
+
+    def on_tick(self, batch: Any, now: float) -> None:
+        """The time since the last tick while RTDE streams (`TickGaps`: GET /v1/ur), as the
+        sim thread sees it: a tick held up for whatever reason (cores, the GIL, a lock) shows
+        here, where a client's gap also counts the UR thread's own delays. Time stopped
+        (`at_rest`: a pause, the end of a step burst) is no gap."""
+        ep = self._ep
+        if not ep.streaming:
+            self._at = None
+            return
+        if self._at is not None:
+            ep.tick_gaps.add(now - self._at)
+        self._at = now
 
     def publish(self, snap: Snapshot) -> None:
         last = self._last
@@ -137,6 +154,11 @@ class UrSurface:
             "ports": {**addresses.PORTS, "rtde": addresses.RTDE_PORT},
             "leases": self._leases,
             "thread_nice": None if ep is None else ep.thread_nice(),
+            # what the UR thread used, for how many RTDE packages; the ticks' longest gap
+            # while RTDE streamed (bench section 32 reads these before and after a run)
+            "thread_cpu_s": None if ep is None else ep.thread_cpu_s(),
+            "rtde_packages_sent": 0 if ep is None else ep.rtde_sent(),
+            "tick_gaps": None if ep is None else ep.tick_gaps.status(),
             # what the threads that step the worlds run at (core/process/engine_priority.py)
             "engine_priority": None if self._ctx is None else self._ctx.loop.priority.status(),
             "worlds": ep.status()

@@ -76,6 +76,8 @@ class WorldRobot:
         self._writers: dict[str, Session] = {}  # input variable → the session writing it
         self._view: WorldTick | None = None
         self._view_version = -1
+        self._view_at: float | None = None  # the pacer round that last asked (view)
+        self._sent_closed = 0  # RTDE data packages of the connections closed so far
         self.runner: Program | None = None  # ur_rtde's control script, while it runs
         self.speed_loop: Loop | None = None  # script_lines.line_speed makes it
         self.longest_gap = 0.0  # s: the longest a started RTDE stream went without a package
@@ -89,8 +91,15 @@ class WorldRobot:
 
     def closed(self, session: Session) -> None:
         self.sessions.discard(session)
+        self._sent_closed += getattr(session, "sent", 0)
         for name in [n for n, s in self._writers.items() if s is session]:
             del self._writers[name]
+
+    def rtde_sent(self) -> int:
+        """RTDE data packages sent to this world's clients (open and closed connections):
+        counted per connection (RtdeSession.sent), summed only when asked."""
+        open_now = tuple(self.sessions)  # one copy under the GIL (the UR thread adds and drops)
+        return self._sent_closed + sum(getattr(s, "sent", 0) for s in open_now)
 
     def may_write(self, name: str, session: Session) -> bool:
         return self._writers.get(name, session) is session
@@ -107,8 +116,10 @@ class WorldRobot:
         packages skipped meanwhile for a client socket that was full. Kept (GET /v1/ur) and,
         from GAP_WARN_S, logged with the side that was slow."""
         self.longest_gap = max(self.longest_gap, gap)
+        if gap < GAP_WARN_S:
+            return
         now = time.monotonic()
-        if gap >= GAP_WARN_S and now - self._warned_at >= GAP_WARN_EVERY_S:
+        if now - self._warned_at >= GAP_WARN_EVERY_S:
             self._warned_at = now
             why = (
                 f"the client read nothing ({skipped} packages skipped for its full socket)"
@@ -120,9 +131,17 @@ class WorldRobot:
                 "connection after 2.5 s): %s", self.world, gap, why,
             )  # fmt: skip
 
-    def view(self) -> WorldTick | None:
+    def view(self, now: float | None = None) -> WorldTick | None:
         """This world at the latest frame (shared by its sessions until the frame's values,
-        the controller or the payload change)."""
+        the controller or the payload change). `now`: the pacer round asking (the event
+        loop's time of its send); the world's other streams of the same round get the view
+        it answered without looking again. Why: ur_rtde's two interfaces stream 500 Hz each,
+        so every round asked twice per world, and nothing on this thread changes a view
+        within a round (a frame the sim thread hands over meanwhile goes out 2 ms later, at
+        the next round, as one arriving just after the round would)."""
+        if now is not None and now == self._view_at and self._view is not None:
+            return self._view
+        self._view_at = now
         values = self.fleet.values()
         if values is None:
             return None
