@@ -10,6 +10,7 @@ import multiprocessing as mp
 from multiprocessing.connection import Connection
 from typing import Any
 
+from service.core.process.lean_spawn import main_not_reimported
 from service.core.process.stopping import start_worker
 from service.engines.shard_arrays import ArraySender
 from service.engines.sharding import apply_and_step
@@ -84,7 +85,8 @@ def spawn(nworld: int, kwargs: dict[str, Any]) -> tuple[Any, Connection]:
     """Start a worker process building `nworld` worlds; its first message says ready or not."""
     ctx = mp.get_context("spawn")  # fork would copy a live warp runtime
     parent, child = ctx.Pipe()
-    proc = start_worker(ctx, worker, (child, nworld, kwargs))  # stopping is ours: core/stopping
+    with main_not_reimported():  # not service/cli.py again (lean_spawn.py)
+        proc = start_worker(ctx, worker, (child, nworld, kwargs))  # stopping: core/stopping
     child.close()  # so that a dead worker shows up as EOFError, not a hang
     return proc, parent
 
