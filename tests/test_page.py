@@ -16,7 +16,7 @@ import time
 import httpx
 import numpy as np
 import pytest
-from conftest import HOME, JOINTS, free_port, page_of, serve, wait_for
+from conftest import HOME, JOINTS, free_port, page_in, page_of, serve, wait_for
 from jog_checks import assert_tcp_went, jogged_tcp, rotvec_matrix, settled_tcp
 from PIL import Image
 from websockets.exceptions import ConnectionClosed
@@ -180,9 +180,18 @@ def test_view_socket_refuses_what_does_not_exist_with_a_reason(srv, query, needl
 # ------------------------------------------------------------------- the page in Chromium
 
 
+@pytest.fixture(scope="module")
+def context(browser):
+    """The module's browser context: each test's page is a tab of its own in it (the page
+    keeps nothing but its sessionStorage, which is per tab)."""
+    context = browser.new_context(viewport={"width": 1000, "height": 640})
+    yield context
+    context.close()
+
+
 @pytest.fixture
-def page(browser):
-    with page_of(browser, width=1000, height=640) as page:
+def page(context):
+    with page_in(context) as page:
         yield page
 
 
