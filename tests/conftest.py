@@ -312,6 +312,15 @@ def browser() -> Iterator[Any]:
         chromium.close()
 
 
+@pytest.fixture(scope="module")
+def page_context(browser: Any) -> Iterator[Any]:
+    """A browser context with a 1000 x 640 viewport that a module's pages share, each test's a
+    tab of its own (`page_in`: the page keeps nothing but its sessionStorage, per tab)."""
+    context = browser.new_context(viewport={"width": 1000, "height": 640})
+    yield context
+    context.close()
+
+
 @contextlib.contextmanager
 def page_of(browser: Any, width: int, height: int) -> Iterator[Any]:
     """A page in a fresh context of `browser` with a `width` x `height` viewport; a JavaScript

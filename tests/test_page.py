@@ -187,18 +187,9 @@ def test_view_socket_refuses_what_does_not_exist_with_a_reason(srv, query, needl
 # ------------------------------------------------------------------- the page in Chromium
 
 
-@pytest.fixture(scope="module")
-def context(browser):
-    """The module's browser context: each test's page is a tab of its own in it (the page
-    keeps nothing but its sessionStorage, which is per tab)."""
-    context = browser.new_context(viewport={"width": 1000, "height": 640})
-    yield context
-    context.close()
-
-
 @pytest.fixture
-def page(context):
-    with page_in(context) as page:
+def page(page_context):
+    with page_in(page_context) as page:
         yield page
 
 
