@@ -16,7 +16,7 @@ import time
 import httpx
 import numpy as np
 import pytest
-from conftest import HOME, JOINTS, free_port, page_of, serve, wait_for
+from conftest import HOME, JOINTS, free_port, page_in, page_of, serve, wait_for
 from jog_checks import assert_tcp_went, jogged_tcp, rotvec_matrix, settled_tcp
 from PIL import Image
 from websockets.exceptions import ConnectionClosed
@@ -31,6 +31,11 @@ except ImportError:  # the `browser` fixture skips the page tests and says why
     expect = None
 
 NWORLD = 4
+# The page's servers have no cameras: the camera pane, which stays hidden then, is
+# test_camera_page.py's subject. A CPU service builds its camera renderer when the page first
+# asks GET /v1/cameras (importing MuJoCo Warp; SIGINT then waits for the build): 2.5 s of CPU
+# a server, 7-19 s of wall at its stop, and a picture stream while a page shows a world.
+NO_CAMERAS = ("--cameras", "wrist=off,overview=off")
 
 
 class RestartableServer:
@@ -43,7 +48,9 @@ class RestartableServer:
         self.server = None
 
     def start(self) -> None:
-        self._cm = serve(worlds=NWORLD, port=self.port, log_dir=self.tmp_path)
+        self._cm = serve(
+            worlds=NWORLD, port=self.port, extra_args=NO_CAMERAS, log_dir=self.tmp_path
+        )
         self.server = self._cm.__enter__()
 
     def stop(self) -> None:
@@ -181,8 +188,8 @@ def test_view_socket_refuses_what_does_not_exist_with_a_reason(srv, query, needl
 
 
 @pytest.fixture
-def page(browser):
-    with page_of(browser, width=1000, height=640) as page:
+def page(page_context):
+    with page_in(page_context) as page:
         yield page
 
 
@@ -288,7 +295,7 @@ def test_the_fleet_view_shows_at_most_256_worlds(browser, tmp_path):
     """The browser guide's "up to 256 worlds", on 257 (a paused native server of its own: no
     tick runs): the page's grid holds worlds 0-255, and the view socket refuses a 257th,
     naming the limit."""
-    extra = ("--engine", "mujoco")
+    extra = ("--engine", "mujoco", *NO_CAMERAS)
     with serve(worlds=257, mode="paused", extra_args=extra, log_dir=tmp_path) as big:
         with (
             connect(f"{big.ws_url}/v1/ws/view?worlds=0-256") as ws,
