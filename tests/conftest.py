@@ -197,16 +197,18 @@ def cameras_ready(tmp_path_factory: pytest.TempPathFactory, name: str) -> Iterat
 def cameras_warmed(url: str, headers: dict[str, str] | None = None) -> None:
     """Until the server's camera renderer is built and has drawn every camera once (on the CPU
     the first ask starts the build: 15 s for 32 worlds at load 11). A warming server answers
-    slowly on a loaded box: 60 s a read, 300 s in all."""
+    slowly on a loaded box: 60 s a read, 300 s in all. Asked on one connection four times a
+    second: a new connection every 50 ms cost the suite ~2 CPU-s a server (client and server
+    side) over a build of 20-40 s on the 2-core box."""
+    with httpx.Client(base_url=url, headers=headers, timeout=60) as http:
+        wait_for(lambda: http.get("/v1/cameras").json()["ready"], "cameras", 300, interval=0.25)
 
-    def ready() -> bool:
-        return httpx.get(f"{url}/v1/cameras", headers=headers, timeout=60).json()["ready"]
 
-    wait_for(ready, "cameras", 300)
-
-
-def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
-    """Poll `pred` until it returns something truthy; fail naming `what` after `timeout` s."""
+def wait_for(
+    pred: Callable[[], Any], what: str, timeout: float = 15, interval: float = 0.05
+) -> Any:
+    """Poll `pred` every `interval` s until it returns something truthy; fail naming `what`
+    after `timeout` s."""
     deadline = time.monotonic() + timeout
     while True:
         value = pred()
@@ -214,7 +216,7 @@ def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
             return value
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.05)
+        time.sleep(interval)
 
 
 def metric(http: httpx.Client, name: str) -> float:

@@ -19,12 +19,15 @@ import mujoco
 import numpy as np
 import pytest
 from PIL import Image
+from typer.testing import CliRunner
 
+import service.app
+import service.cli
 from clients.testing import Server, serve
 from clients.wire import unpack_images as unpack
 from service.core.cameras.feed import rows_of
 from service.core.sim.robot import load_robot
-from tests.conftest import ROOT, wait_for
+from tests.conftest import ROOT, cameras_warmed
 
 ROBOT = load_robot()
 MJM = ROBOT.mjm
@@ -41,16 +44,9 @@ def warp_server(tmp_path_factory: pytest.TempPathFactory) -> Server:
         yield s
 
 
-def _cameras_ready(url: str) -> None:
-    """Cameras warm up beside a ready service (503 + Retry-After meanwhile): wait for them."""
-    wait_for(
-        lambda: httpx.get(f"{url}/v1/cameras", timeout=60).json()["ready"], "cameras ready", 300
-    )
-
-
 @pytest.fixture(scope="module")
 def http(warp_server: Server) -> httpx.Client:
-    _cameras_ready(warp_server.url)
+    cameras_warmed(warp_server.url)  # they warm up beside a ready service
     with httpx.Client(base_url=warp_server.url, timeout=60) as c:
         yield c
 
@@ -312,14 +308,32 @@ def test_render_metrics_count(http: httpx.Client) -> None:
         (["--cameras", "wrist=64x48:rgb+x"], "cameras.wrist"),
         (["--camera-size", "4096x4096"], "camera_batch"),
         (["--camera-device", "gpu"], "camera_device"),
-        (["--camera-device", "cuda:64"], "no CUDA device 'cuda:64'"),
     ],
 )
-def test_bad_camera_settings_are_refused_at_start(args: list[str], named: str) -> None:
+def test_bad_camera_settings_are_refused_at_start(
+    args: list[str], named: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`armfleet serve`'s own command, run in this process: the settings refuse these before
+    anything is built (a process each cost ~2 CPU-s of imports; the last case below runs the
+    real process). Nothing may be built: building the service here fails the test."""
+
+    def create_app(settings: object) -> None:
+        raise AssertionError(f"{args}: the service was built, the settings let it through")
+
+    monkeypatch.setattr(service.app, "create_app", create_app)
+    done = CliRunner().invoke(service.cli.app, ["serve", "--port", "0", *args])
+    assert done.exit_code == 2 and isinstance(done.exception, SystemExit), done.output
+    assert named in done.stderr and not done.stdout
+
+
+def test_a_missing_cuda_device_for_the_cameras_is_refused_at_start() -> None:
+    """Checked as the service is created (Warp counts the devices), in a real `armfleet serve`
+    process: exit 2, one line naming the setting, no traceback."""
+    args = ["--camera-device", "cuda:64"]
     cmd = [sys.executable, "-m", "service.cli", "serve", "--port", "0", *args]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert done.returncode == 2
-    assert named in done.stderr and "Traceback" not in done.stderr
+    assert "no CUDA device 'cuda:64'" in done.stderr and "Traceback" not in done.stderr
 
 
 def test_cameras_do_not_change_the_physics() -> None:

@@ -106,7 +106,10 @@ def test_the_client_alone_drives_a_real_server(
     venv = tmp_path / "venv"
     check([python, "-m", "venv", "--without-pip", venv], env=outside_env())
     python_arg = ["--python", venv / "bin" / "python"]
-    check([*PIP, *python_arg, "install", "-q", wheel, *constraints], env=outside_env())
+    # --no-compile: pip byte-compiles every installed module (numpy's ~3 CPU-s); the script
+    # below imports the client's public modules, which compiles those on this Python anyway.
+    install = [*PIP, *python_arg, "install", "-q", "--no-compile", wheel, *constraints]
+    check(install, env=outside_env())
 
     probe = "import importlib.util as u, sys; print([m for m in sys.argv[1:] if u.find_spec(m)])"
     env = outside_env()

@@ -95,10 +95,16 @@ def test_the_example_cell_is_in_the_urdf_and_tf():
 
 
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory):
-    log = tmp_path_factory.mktemp("cell")
-    extra = ("--engine", "mujoco", "--scene", str(EXAMPLE))
-    with serve(worlds=4, mode="paused", extra_args=extra, log_dir=log) as srv:
+def cell_dir(tmp_path_factory):
+    """The cell server's log and data (recordings) directory."""
+    return tmp_path_factory.mktemp("cell")
+
+
+@pytest.fixture(scope="module")
+def cell(cell_dir):
+    """The example cell, paused, on native MuJoCo (replay steps it on MuJoCo Warp)."""
+    extra = ("--engine", "mujoco", "--scene", str(EXAMPLE), "--data-dir", str(cell_dir / "data"))
+    with serve(worlds=4, mode="paused", extra_args=extra, log_dir=cell_dir) as srv:
         yield srv
 
 
@@ -120,18 +126,17 @@ def test_the_example_cell_is_served_with_its_parts_as_entities(cell):
         assert ball["position"][2] == pytest.approx(1.0, abs=3e-3)
 
 
-def test_a_recording_of_the_cell_replays_with_its_scene(tmp_path):
-    data = tmp_path / "data"
-    extra = ("--scene", str(EXAMPLE), "--data-dir", str(data))  # replay steps the warp engine
-    with serve(worlds=2, mode="paused", extra_args=extra, log_dir=tmp_path) as srv:
-        http = httpx.Client(base_url=srv.url, timeout=60)
+def test_a_recording_of_the_cell_replays_with_its_scene(cell, cell_dir):
+    # The module's cell server (a server of its own cost ~2 CPU-s): the recording holds the
+    # state it starts from, whatever the tests before this one did to the worlds.
+    with httpx.Client(base_url=cell.url, timeout=60) as http:
         assert http.post("/v1/recordings", json={"name": "cell", "rate": 60}).status_code == 201
         put = {"position": [0.7, 0.17, 1.0], "angular": [0, 0, 3]}
         http.put("/v1/worlds/1/entities/part_box", json=put).raise_for_status()
         http.put("/v1/worlds/0/params", json={"params": {"part_ball.mass": 0.2}})
         http.post("/v1/sim/step", json={"ticks": 60}).raise_for_status()
         assert http.delete("/v1/recordings/current").status_code == 200
-    path = str(data / "recordings" / "cell.mcap")
+    path = str(cell_dir / "data" / "recordings" / "cell.mcap")
     cmd = [sys.executable, "-m", "service.cli", "replay", path]
     r = subprocess.run([*cmd, "--scene", str(EXAMPLE)], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and "identical" in r.stdout, r.stdout + r.stderr

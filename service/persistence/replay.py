@@ -14,6 +14,7 @@ target of a tick wins) apply, instead of a second implementation of them.
 
 from __future__ import annotations
 
+import copy
 import json
 import logging
 import time
@@ -33,6 +34,8 @@ from service.core.commands.control import Control
 from service.core.commands.registry import BY_KIND
 from service.core.metrics import Metrics
 from service.core.sim.loop import SimLoop
+from service.core.sim.physics import configure
+from service.core.sim.robot import LoadedRobot, load_robot
 from service.core.sim.types import BatchState, Mode
 from service.core.surface import SurfaceContext
 from service.persistence.mcap_log import (
@@ -43,7 +46,7 @@ from service.persistence.mcap_log import (
     parse_metadata,
     tick_of,
 )
-from service.persistence.provenance import batch_header, mismatch
+from service.persistence.provenance import batch_header, mismatch, model_hash
 from service.persistence.recorder import Recorder
 from service.persistence.replay_check import (
     TOLERANCE,
@@ -193,16 +196,19 @@ def replay_recording(
     scene: Path | str | None = None,
 ) -> ReplayReport:
     """Replay a parsed recording (tests change one on purpose to see divergence named)."""
-    from service.engines.warp import WorldBatch
-
     path = rec.path
     h = rec.header
+    robot = load_robot() if scene is None else load_robot(scene)
+    _check_model(rec, robot)
+
+    from service.engines.warp import WorldBatch
+
     batch = WorldBatch(
         int(h["nworld"]),
         device=device or "cpu",
         control_hz=float(h["control_hz"]),
         physics_dt=float(h["physics_dt"]),
-        **({} if scene is None else {"model_path": scene}),
+        robot=robot,
     )
     if why := mismatch(h, batch_header(batch)):
         batch.close()
@@ -255,6 +261,19 @@ def replay_recording(
         deviations=compare.rows(),
         largest=compare.largest(),
     )
+
+
+def _check_model(rec: Recording, robot: LoadedRobot) -> None:
+    """ReplayError when the recording was made from another model than `robot`'s (another
+    cell, a changed MJCF or MuJoCo), found from the compiled model before MuJoCo Warp is loaded
+    and built (~5 CPU-s). The model is hashed at the recording's own step; the batch built
+    afterwards is checked against the whole header (worlds, step) as well."""
+    h = rec.header
+    mjm = copy.copy(robot.mjm)
+    configure(mjm, float(h["physics_dt"]))  # the solver: model_hash hashes every one as CG
+    here = {k: h.get(k) for k in ("nworld", "substeps", "physics_dt")}
+    if why := mismatch(h, {**here, "model_hash": model_hash(mjm)}):
+        raise ReplayError(f"{rec.path}: cannot replay here: {why}")
 
 
 def _context(loop: SimLoop, control: Control) -> SurfaceContext:
