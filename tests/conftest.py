@@ -217,6 +217,27 @@ def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
         time.sleep(0.05)
 
 
+@contextlib.contextmanager
+def local_ray(num_cpus: int = 4) -> Iterator[None]:
+    """A private Ray instance on 127.0.0.1 (what `serve --ray local` starts) for one module's
+    tests, every process of it killed at the end. Left running, an idle instance cost its xdist
+    worker about 1.7 CPU-s a minute (GCS, raylet, monitors, idle workers) until the run ended,
+    where starting one costs about 10; an instance already running here is used and left."""
+    import ray
+
+    from service.engines import ray_local
+    from service.engines.ray_actor import connect
+
+    ours = not ray.is_initialized()
+    with ray_local.starting():  # its processes in sessions of their own: all of them stopped
+        connect("local", num_cpus=num_cpus)
+    try:
+        yield
+    finally:
+        if ours:
+            ray_local.stop_local_instance()
+
+
 def metric(http: httpx.Client, name: str) -> float:
     """The value of counter or gauge `name` (with its labels, if any: `x{source="http"}`; a
     bare name takes the first labelled sample) in the server's /metrics."""
