@@ -217,6 +217,9 @@ def wait_for(pred: Callable[[], Any], what: str, timeout: float = 15) -> Any:
         time.sleep(0.05)
 
 
+_PRESTART = "RAY_prestart_worker_first_driver"
+
+
 @contextlib.contextmanager
 def local_ray(num_cpus: int = 4) -> Iterator[None]:
     """A private Ray instance on 127.0.0.1 (what `serve --ray local` starts) for one module's
@@ -229,8 +232,19 @@ def local_ray(num_cpus: int = 4) -> Iterator[None]:
     from service.engines.ray_actor import connect
 
     ours = not ray.is_initialized()
-    with ray_local.starting():  # its processes in sessions of their own: all of them stopped
-        connect("local", num_cpus=num_cpus)
+    # No workers started ahead for this driver: the shard actors started workers of their own
+    # while those idled (ps), each ~0.65 CPU-s to start and ~0.4 a minute idle. Read by the
+    # raylet as it starts, so set for the start only (servers started later keep Ray's default).
+    before = os.environ.get(_PRESTART)
+    os.environ[_PRESTART] = "0"
+    try:
+        with ray_local.starting():  # its processes in sessions of their own: all of them stopped
+            connect("local", num_cpus=num_cpus)
+    finally:
+        if before is None:
+            del os.environ[_PRESTART]
+        else:
+            os.environ[_PRESTART] = before
     try:
         yield
     finally:
