@@ -219,6 +219,41 @@ def wait_for(
         time.sleep(interval)
 
 
+_PRESTART = "RAY_prestart_worker_first_driver"
+
+
+@contextlib.contextmanager
+def local_ray(num_cpus: int = 4) -> Iterator[None]:
+    """A private Ray instance on 127.0.0.1 (what `serve --ray local` starts) for one module's
+    tests, every process of it killed at the end. Left running, an idle instance cost its xdist
+    worker about 1.7 CPU-s a minute (GCS, raylet, monitors, idle workers) until the run ended,
+    where starting one costs about 10; an instance already running here is used and left."""
+    import ray
+
+    from service.engines import ray_local
+    from service.engines.ray_actor import connect
+
+    ours = not ray.is_initialized()
+    # No workers started ahead for this driver: the shard actors started workers of their own
+    # while those idled (ps), each ~0.65 CPU-s to start and ~0.4 a minute idle. Read by the
+    # raylet as it starts, so set for the start only (servers started later keep Ray's default).
+    before = os.environ.get(_PRESTART)
+    os.environ[_PRESTART] = "0"
+    try:
+        with ray_local.starting():  # its processes in sessions of their own: all of them stopped
+            connect("local", num_cpus=num_cpus)
+    finally:
+        if before is None:
+            del os.environ[_PRESTART]
+        else:
+            os.environ[_PRESTART] = before
+    try:
+        yield
+    finally:
+        if ours:
+            ray_local.stop_local_instance()
+
+
 def metric(http: httpx.Client, name: str) -> float:
     """The value of counter or gauge `name` (with its labels, if any: `x{source="http"}`; a
     bare name takes the first labelled sample) in the server's /metrics."""

@@ -7,11 +7,13 @@ and a world that blows up is reset alone while the others carry on bit-identical
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Iterator
 
 import mujoco
 import numpy as np
 import pytest
+from conftest import local_ray
 
 from mjcf import SCENE_XML
 from service.core.errors import Conflict
@@ -25,11 +27,10 @@ NWORLD = 4
 
 
 def _ray_batch(n: int) -> Batch:
-    """One CPU actor on a local Ray instance (shared with tests/test_ray_shards.py, which covers
+    """One CPU actor on the module's local Ray instance (`pair`; tests/test_ray_shards.py covers
     worlds split over several actors); one actor keeps this module's cost down."""
-    from service.engines.ray_shards import RayBatch, connect
+    from service.engines.ray_shards import RayBatch
 
-    connect("local", num_cpus=4)
     return RayBatch(n, shards=1)
 
 
@@ -46,10 +47,12 @@ ENGINES: dict[str, Callable[[int], Batch]] = {
 def pair(request: pytest.FixtureRequest) -> Iterator[tuple[Batch, Batch]]:
     """Two batches of the same engine: one is disturbed, the other is the reference."""
     make = ENGINES[request.param]
-    a, b = make(NWORLD), make(NWORLD)
-    yield a, b
-    a.close()
-    b.close()
+    # warp-ray: a Ray instance for these two batches' tests only, stopped after them
+    with local_ray() if request.param == "warp-ray" else contextlib.nullcontext():
+        a, b = make(NWORLD), make(NWORLD)
+        yield a, b
+        a.close()
+        b.close()
 
 
 @pytest.fixture

@@ -1,8 +1,7 @@
 """RayBatch: shards on Ray actors behave exactly like one WorldBatch, and survive a lost actor.
 
-One local Ray instance (bound to 127.0.0.1, no dashboard; shared with test_batch_contract.py, so
-it stays up until the test process ends), one RayBatch of two CPU actors and one in-process
-WorldBatch of the same worlds as the reference.
+One local Ray instance (bound to 127.0.0.1, no dashboard; stopped after this module's tests), one
+RayBatch of two CPU actors and one in-process WorldBatch of the same worlds as the reference.
 """
 
 from __future__ import annotations
@@ -13,12 +12,13 @@ import time
 
 import numpy as np
 import pytest
+from conftest import local_ray
 
 ray = pytest.importorskip("ray")
 
 from ray.exceptions import RayActorError  # noqa: E402
 
-from service.engines.ray_shards import RayBatch, connect  # noqa: E402
+from service.engines.ray_shards import RayBatch  # noqa: E402
 from service.engines.sharding import join_states, slice_state  # noqa: E402
 from service.engines.warp import WorldBatch  # noqa: E402
 
@@ -30,11 +30,11 @@ REBUILD_DEADLINE_S = 300
 
 @pytest.fixture(scope="module")
 def pair():
-    connect("local", num_cpus=4)
-    sharded = RayBatch(NWORLD, shards=2, checkpoint_s=math.inf)  # the restore test turns it on
-    single = WorldBatch(NWORLD)
-    yield sharded, single
-    sharded.close()
+    with local_ray():
+        sharded = RayBatch(NWORLD, shards=2, checkpoint_s=math.inf)  # the restore test turns it on
+        single = WorldBatch(NWORLD)
+        yield sharded, single
+        sharded.close()
 
 
 def drive(pair, rng, ticks: int) -> None:
