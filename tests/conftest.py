@@ -26,6 +26,7 @@ import server_logs
 import suite_times
 
 from clients import ArmfleetClient, WorldState
+from clients.calls import tls_context
 from clients.testing import Server, free_port, headless, serve
 from clients.testing import pytest_plugin as armfleet_plugin
 from service.core.sim.robot import load_robot
@@ -200,7 +201,8 @@ def cameras_warmed(url: str, headers: dict[str, str] | None = None) -> None:
     slowly on a loaded box: 60 s a read, 300 s in all. Asked on one connection four times a
     second: a new connection every 50 ms cost the suite ~2 CPU-s a server (client and server
     side) over a build of 20-40 s on the 2-core box."""
-    with httpx.Client(base_url=url, headers=headers, timeout=60) as http:
+    tls = tls_context()  # (httpx builds one per client otherwise: ~45 ms of CPU)
+    with httpx.Client(base_url=url, headers=headers, timeout=60, verify=tls) as http:
         wait_for(lambda: http.get("/v1/cameras").json()["ready"], "cameras", 300, interval=0.25)
 
 
@@ -315,7 +317,7 @@ def paused(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
 @pytest.fixture(scope="module")
 def http(server: Server) -> Iterator[httpx.Client]:
     """An HTTP client on the module's server."""
-    with httpx.Client(base_url=server.url, timeout=10) as client:
+    with httpx.Client(base_url=server.url, timeout=10, verify=tls_context()) as client:
         yield client
 
 

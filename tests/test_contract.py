@@ -85,13 +85,13 @@ def test_schemathesis_finds_nothing(server, tmp_path):
         ({"worlds": ["1"]}, 422),
     ],
 )
-def test_world_ids_are_strict_integers(server, body, status):
-    r = httpx.post(f"{server.url}/v1/reset", json=body, timeout=10)
+def test_world_ids_are_strict_integers(http, body, status):
+    r = http.post("/v1/reset", json=body)
     assert r.status_code == status, r.text
 
 
-def test_the_schema_states_the_cross_field_rules(server):
-    spec = httpx.get(f"{server.url}/openapi.json", timeout=10).json()
+def test_the_schema_states_the_cross_field_rules(http):
+    spec = http.get("/openapi.json").json()
     schemas = spec["components"]["schemas"]
     shapes = schemas["IncrementRequest"]["oneOf"]
     assert [sorted(s["required"]) for s in shapes] == [["delta", "joint"], ["deltas"]]

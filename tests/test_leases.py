@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from clients import ArmfleetClient, Forbidden
+from clients.calls import tls_context
 from tests.conftest import HOME, ROOT, Server, cameras_warmed, metric, serve, wait_for
 
 ADMIN = "teacher-" + "x" * 24
@@ -65,8 +66,10 @@ def test_forty_askers_at_once_get_thirty_two_worlds_and_eight_refusals(
     replies: list[httpx.Response] = []
     lock = threading.Lock()
 
-    def ask(i: int) -> None:
-        with httpx.Client(base_url=lender.url, headers=AS_ADMIN, timeout=30) as http:
+    def ask(i: int) -> None:  # a client (and connection) each; one TLS context for all 40
+        with httpx.Client(
+            base_url=lender.url, headers=AS_ADMIN, timeout=30, verify=tls_context()
+        ) as http:
             barrier.wait()
             r = http.post("/v1/leases", json={"count": 1, "ttl_s": 60, "label": f"student {i}"})
         with lock:
@@ -279,7 +282,7 @@ def pytest_n4(
 
 
 def test_pytest_n4_sixteen_tests_each_on_its_own_world_from_home(
-    lender: Server, tmp_path: Path
+    lender: Server, admin: httpx.Client, tmp_path: Path
 ) -> None:
     runs = pytest_n4(tmp_path, XDIST_TESTS, lender.url, ADMIN, timeout=600, home=HOME)
     assert len(runs) == 16 and len({r["lease"] for r in runs}) == 16
@@ -291,8 +294,11 @@ def test_pytest_n4_sixteen_tests_each_on_its_own_world_from_home(
         for b in runs:
             if a is not b and a["world"] == b["world"]:
                 assert a["end"] <= b["start"] or b["end"] <= a["start"], (a, b)
-    assert wait_for(lambda: httpx.get(f"{lender.url}/v1/leases", headers=AS_ADMIN).json()
-                    ["leases"] == [], "every lease given back")  # fmt: skip
+
+    def every_lease_back() -> bool:
+        return admin.get("/v1/leases").json()["leases"] == []
+
+    assert wait_for(every_lease_back, "every lease given back")
 
 
 def test_no_token_is_written_to_logs_recordings_or_snapshots(

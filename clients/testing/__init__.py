@@ -34,6 +34,7 @@ from pathlib import Path
 
 import httpx
 
+from clients.calls import tls_context
 from clients.client import ArmfleetClient
 from clients.models import Lease
 
@@ -91,7 +92,7 @@ def _child_env(env: Mapping[str, str] | None, data_dir: Path) -> dict[str, str]:
 
 def _wait_ready(server: Server, timeout: float) -> None:
     deadline = time.monotonic() + timeout
-    with httpx.Client(timeout=1.0) as http:
+    with httpx.Client(timeout=1.0, verify=tls_context()) as http:  # (a TLS context: ~45 ms)
         while True:
             if server.process.poll() is not None:
                 raise ServerFailed(
