@@ -209,7 +209,11 @@ def test_a_disk_that_cannot_keep_up_stops_the_recording_not_the_simulation(pause
             return status if status["error"] else None
 
         status = wait_for(failed, "the recording to give up", timeout=120)
-        assert not status["active"] and "could not keep up" in status["error"], status
+        # The queue fills first (fast mode ticks far faster than 200 items in 5 s); on a box
+        # loaded enough (17 here once) the writer's own 5 s stall on the FIFO can come first:
+        # both are the disk not keeping up, said as such, and the loop goes on either way
+        said = ("could not keep up", "no data could be written for 5 s")
+        assert not status["active"] and any(s in status["error"] for s in said), status
         tick = http.get("/v1/worlds/0/state").json()["tick"]
         wait_for(lambda: http.get("/v1/worlds/0/state").json()["tick"] > tick + 60, "ticks")
     finally:

@@ -195,7 +195,7 @@ class Recorder(SnapshotSink):
             worlds=[] if self._worlds is None else [int(w) for w in self._worlds],
             every_ticks=self._every,
             start_tick=self._start_tick,
-            active=self._active,
+            active=self._active and self._error is None,  # one answer, whatever thread reads
             written=self._written,
             error=self._error,
         )
@@ -217,10 +217,12 @@ class Recorder(SnapshotSink):
             )
 
     def _fail(self, why: str) -> None:
+        # Inactive before the error shows: a status read from another thread never says
+        # "active" beside an error (the suite caught one in between, under load).
+        self._active = False
         if self._error is None:
             self._error = why
             log.error("recording stopped: %s", why)
-        self._active = False
         self._detach()
 
     def _on_command(self, accepted: Accepted) -> None:
